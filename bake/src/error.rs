@@ -1,0 +1,59 @@
+//! Typed errors of a bake. Each names the file, the item and the offending value.
+
+use std::path::PathBuf;
+
+#[derive(Debug, thiserror::Error)]
+pub enum BakeError {
+    #[error("{path}: cannot read: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{path}: not a valid glTF 2.0 file: {message}")]
+    Gltf { path: PathBuf, message: String },
+    #[error("{path}: buffer {index} ({uri}): {message}")]
+    Buffer {
+        path: PathBuf,
+        index: usize,
+        uri: String,
+        message: String,
+    },
+    #[error("{path}: image {index} ({uri}): {message}")]
+    Image {
+        path: PathBuf,
+        index: usize,
+        uri: String,
+        message: String,
+    },
+    #[error("{path}: mesh {mesh} primitive {primitive}: {message}")]
+    Primitive {
+        path: PathBuf,
+        mesh: String,
+        primitive: usize,
+        message: String,
+    },
+    #[error("{path}: the scene has no triangles (give --bounds to bake an all-sky volume)")]
+    NoTriangles { path: PathBuf },
+    #[error("invalid setting {name} = {value}: {reason}")]
+    Setting {
+        name: &'static str,
+        value: String,
+        reason: &'static str,
+    },
+    #[error("the probe grid {counts:?} at spacing {spacing} m has {count} probes, more than --max-probes {max}; raise --spacing or --max-probes, or give smaller --bounds")]
+    TooManyProbes {
+        counts: [u64; 3],
+        spacing: f32,
+        count: u64,
+        max: u64,
+    },
+    #[error("{path}: {source}")]
+    Format {
+        path: PathBuf,
+        #[source]
+        source: prt_format::FormatError,
+    },
+    #[error("cannot start the thread pool: {0}")]
+    ThreadPool(String),
+}

@@ -1,0 +1,440 @@
+//! Loading a glTF 2.0 scene into flat world-space triangles with their materials and lights.
+//!
+//! - The default scene (else the first; else every root node) with nested node transforms (TRS or
+//!   matrix). A transform with a negative determinant flips triangle winding, so front faces stay
+//!   the faces the author saw as front (glTF 2.0 spec, 3.7.4 "Transformations").
+//! - TRIANGLES, TRIANGLE_STRIP and TRIANGLE_FAN primitives, indexed or not; points and lines are
+//!   skipped with a warning.
+//! - Per material: base colour factor, base colour texture with its UV set and sampler, COLOR_0,
+//!   doubleSided, emissive factor x texture x KHR_materials_emissive_strength. A primitive without
+//!   material gets the glTF default (white, single-sided, no emission).
+//! - KHR_lights_punctual lights, placed by their nodes (light looks along the node's -Z).
+//!
+//! Bad input (unreadable or missing buffers, accessors past their views, indices past the
+//! vertices, non-finite positions) is a [`BakeError`] naming the file, item and value; degenerate
+//! (zero-area) triangles are skipped and counted.
+
+use std::path::Path;
+
+use glam::{Mat4, Vec2, Vec3, Vec4};
+use gltf::mesh::Mode;
+use prt_format::{Light, LightKind};
+
+use crate::error::BakeError;
+use crate::texture::{is_nearest, Image, TextureRef};
+
+/// Surface description used at ray hits (conventions.md section 4).
+#[derive(Clone, Debug)]
+pub struct Material {
+    pub base_color: [f32; 3],
+    pub base_texture: Option<TextureRef>,
+    pub emissive: [f32; 3],
+    pub emissive_texture: Option<TextureRef>,
+    pub double_sided: bool,
+}
+
+impl Default for Material {
+    /// The glTF default material: white, single-sided, not emissive.
+    fn default() -> Self {
+        Material {
+            base_color: [1.0; 3],
+            base_texture: None,
+            emissive: [0.0; 3],
+            emissive_texture: None,
+            double_sided: false,
+        }
+    }
+}
+
+/// Per-vertex attributes of one triangle that shading needs.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct TriangleAttributes {
+    pub uv: [[Vec2; 3]; 2],
+    pub color: [Vec4; 3],
+}
+
+/// A loaded scene: world-space triangles (front face counter-clockwise), their materials and
+/// attributes, the images they sample and the scene's lights.
+#[derive(Debug, Default)]
+pub struct Scene {
+    pub triangles: Vec<[Vec3; 3]>,
+    pub materials_of_triangles: Vec<u32>,
+    pub attributes: Vec<TriangleAttributes>,
+    pub materials: Vec<Material>,
+    pub images: Vec<Image>,
+    pub lights: Vec<Light>,
+    pub degenerate_skipped: u64,
+    pub warnings: Vec<String>,
+}
+
+impl Scene {
+    /// Axis-aligned bounds of all triangles, `None` when there are none.
+    pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
+        let mut it = self.triangles.iter().flatten();
+        let first = *it.next()?;
+        Some(it.fold((first, first), |(lo, hi), &v| (lo.min(v), hi.max(v))))
+    }
+}
+
+struct Loader<'a> {
+    path: &'a Path,
+    buffers: Vec<gltf::buffer::Data>,
+    scene: Scene,
+    /// Index of the default material in `scene.materials`.
+    default_material: u32,
+}
+
+/// Loads `path` (.gltf with embedded or external buffers, or .glb).
+pub fn load(path: &Path) -> Result<Scene, BakeError> {
+    let bytes = std::fs::read(path).map_err(|source| BakeError::Io {
+        path: path.to_owned(),
+        source,
+    })?;
+    let gltf_err = |message: String| BakeError::Gltf {
+        path: path.to_owned(),
+        message,
+    };
+    let gltf = gltf::Gltf::from_slice(&bytes).map_err(|e| gltf_err(e.to_string()))?;
+    let base = path.parent().unwrap_or(Path::new("."));
+    let doc = gltf.document;
+    let buffers = gltf::import_buffers(&doc, Some(base), gltf.blob)
+        .map_err(|e| buffer_error(path, base, &doc, e))?;
+    let images = load_images(path, base, &doc, &buffers)?;
+
+    let mut materials: Vec<Material> = doc.materials().map(|m| material(&m)).collect();
+    let default_material = materials.len() as u32;
+    materials.push(Material::default());
+    let mut loader = Loader {
+        path,
+        buffers,
+        scene: Scene {
+            materials,
+            images,
+            ..Scene::default()
+        },
+        default_material,
+    };
+    let roots: Vec<gltf::Node> = match doc.default_scene().or_else(|| doc.scenes().next()) {
+        Some(scene) => scene.nodes().collect(),
+        None => {
+            let mut is_child = vec![false; doc.nodes().len()];
+            for n in doc.nodes() {
+                for c in n.children() {
+                    is_child[c.index()] = true;
+                }
+            }
+            doc.nodes().filter(|n| !is_child[n.index()]).collect()
+        }
+    };
+    for node in roots {
+        loader.visit(&node, Mat4::IDENTITY, 0)?;
+    }
+    Ok(loader.scene)
+}
+
+fn buffer_error(path: &Path, base: &Path, doc: &gltf::Document, e: gltf::Error) -> BakeError {
+    for b in doc.buffers() {
+        if let gltf::buffer::Source::Uri(uri) = b.source() {
+            if !uri.starts_with("data:") && !base.join(uri).exists() {
+                return BakeError::Buffer {
+                    path: path.to_owned(),
+                    index: b.index(),
+                    uri: uri.to_owned(),
+                    message: format!("file {} not found", base.join(uri).display()),
+                };
+            }
+        }
+    }
+    BakeError::Gltf {
+        path: path.to_owned(),
+        message: format!("buffers: {e}"),
+    }
+}
+
+fn load_images(
+    path: &Path,
+    base: &Path,
+    doc: &gltf::Document,
+    buffers: &[gltf::buffer::Data],
+) -> Result<Vec<Image>, BakeError> {
+    if doc.images().len() == 0 {
+        return Ok(Vec::new());
+    }
+    let data = gltf::import_images(doc, Some(base), buffers).map_err(|e| {
+        let bad = doc.images().find(|img| match img.source() {
+            gltf::image::Source::Uri { uri, .. } => {
+                !uri.starts_with("data:") && !base.join(uri).exists()
+            }
+            _ => false,
+        });
+        match bad {
+            Some(img) => BakeError::Image {
+                path: path.to_owned(),
+                index: img.index(),
+                uri: image_uri(&img),
+                message: "file not found".into(),
+            },
+            None => BakeError::Gltf {
+                path: path.to_owned(),
+                message: format!("images: {e}"),
+            },
+        }
+    })?;
+    data.iter()
+        .zip(doc.images())
+        .map(|(d, img)| {
+            Image::from_gltf(d).map_err(|message| BakeError::Image {
+                path: path.to_owned(),
+                index: img.index(),
+                uri: image_uri(&img),
+                message,
+            })
+        })
+        .collect()
+}
+
+fn image_uri(img: &gltf::Image) -> String {
+    match img.source() {
+        gltf::image::Source::Uri { uri, .. } if !uri.starts_with("data:") => uri.to_owned(),
+        gltf::image::Source::Uri { .. } => "data URI".to_owned(),
+        gltf::image::Source::View { .. } => "buffer view".to_owned(),
+    }
+}
+
+fn texture_ref(tex: gltf::Texture, tex_coord: u32) -> TextureRef {
+    let sampler = tex.sampler();
+    TextureRef {
+        image: tex.source().index(),
+        tex_coord,
+        wrap_s: sampler.wrap_s(),
+        wrap_t: sampler.wrap_t(),
+        nearest: is_nearest(sampler.mag_filter()),
+    }
+}
+
+fn material(m: &gltf::Material) -> Material {
+    let pbr = m.pbr_metallic_roughness();
+    let f = pbr.base_color_factor();
+    let strength = m.emissive_strength().unwrap_or(1.0);
+    Material {
+        base_color: [f[0], f[1], f[2]],
+        base_texture: pbr
+            .base_color_texture()
+            .map(|t| texture_ref(t.texture(), t.tex_coord())),
+        emissive: m.emissive_factor().map(|e| e * strength),
+        emissive_texture: m
+            .emissive_texture()
+            .map(|t| texture_ref(t.texture(), t.tex_coord())),
+        double_sided: m.double_sided(),
+    }
+}
+
+/// Glam matrix of a node's local transform.
+fn local_transform(node: &gltf::Node) -> Mat4 {
+    Mat4::from_cols_array_2d(&node.transform().matrix())
+}
+
+impl Loader<'_> {
+    fn visit(&mut self, node: &gltf::Node, parent: Mat4, depth: u32) -> Result<(), BakeError> {
+        if depth > 256 {
+            return Err(BakeError::Gltf {
+                path: self.path.to_owned(),
+                message: format!("node {} is nested more than 256 deep", node.index()),
+            });
+        }
+        let world = parent * local_transform(node);
+        if let Some(mesh) = node.mesh() {
+            self.mesh(&mesh, world)?;
+        }
+        if let Some(light) = node.light() {
+            self.light(&light, world);
+        }
+        for child in node.children() {
+            self.visit(&child, world, depth + 1)?;
+        }
+        Ok(())
+    }
+
+    fn light(&mut self, light: &gltf::khr_lights_punctual::Light, world: Mat4) {
+        use gltf::khr_lights_punctual::Kind;
+        let position = world.transform_point3(Vec3::ZERO);
+        let direction = world.transform_vector3(Vec3::NEG_Z).normalize_or(Vec3::NEG_Z);
+        let (kind, inner, outer) = match light.kind() {
+            Kind::Directional => (LightKind::Directional, 0.0, std::f32::consts::FRAC_PI_4),
+            Kind::Point => (LightKind::Point, 0.0, std::f32::consts::FRAC_PI_4),
+            Kind::Spot {
+                inner_cone_angle,
+                outer_cone_angle,
+            } => (LightKind::Spot, inner_cone_angle, outer_cone_angle),
+        };
+        let l = Light {
+            kind,
+            position: position.to_array(),
+            direction: direction.to_array(),
+            color: light.color(),
+            intensity: light.intensity(),
+            range: light.range(),
+            inner_cone_angle: inner,
+            outer_cone_angle: outer,
+        };
+        match l.validate(self.scene.lights.len()) {
+            Ok(()) => self.scene.lights.push(l),
+            Err(e) => self.scene.warnings.push(format!(
+                "KHR_lights_punctual light {} skipped: {e}",
+                light.index()
+            )),
+        }
+    }
+
+    fn mesh(&mut self, mesh: &gltf::Mesh, world: Mat4) -> Result<(), BakeError> {
+        let flip = world.determinant() < 0.0;
+        let mesh_name = match mesh.name() {
+            Some(n) => format!("{} ({n:?})", mesh.index()),
+            None => mesh.index().to_string(),
+        };
+        for prim in mesh.primitives() {
+            let err = |message: String| BakeError::Primitive {
+                path: self.path.to_owned(),
+                mesh: mesh_name.clone(),
+                primitive: prim.index(),
+                message,
+            };
+            let mode = prim.mode();
+            if !matches!(mode, Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan) {
+                self.scene.warnings.push(format!(
+                    "mesh {mesh_name} primitive {}: {mode:?} skipped (only triangles are baked)",
+                    prim.index()
+                ));
+                continue;
+            }
+            let buffers = &self.buffers;
+            let reader = prim.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
+            let Some(pos_accessor) = prim.get(&gltf::Semantic::Positions) else {
+                return Err(err("has no POSITION attribute".into()));
+            };
+            let positions: Vec<Vec3> = reader
+                .read_positions()
+                .ok_or_else(|| {
+                    err(format!(
+                        "POSITION accessor {} runs past its buffer view or buffer",
+                        pos_accessor.index()
+                    ))
+                })?
+                .map(|p| world.transform_point3(Vec3::from(p)))
+                .collect();
+            let vertex_count = positions.len();
+            if let Some((v, p)) = positions.iter().enumerate().find(|(_, p)| !p.is_finite()) {
+                return Err(err(format!("vertex {v} has non-finite position {p}")));
+            }
+            let indices: Vec<u32> = match (prim.indices(), reader.read_indices()) {
+                (Some(_), Some(ix)) => ix.into_u32().collect(),
+                (Some(a), None) => {
+                    return Err(err(format!(
+                        "index accessor {} runs past its buffer view or buffer",
+                        a.index()
+                    )))
+                }
+                (None, _) => (0..vertex_count as u32).collect(),
+            };
+            if let Some((i, &ix)) = indices
+                .iter()
+                .enumerate()
+                .find(|(_, &ix)| ix as usize >= vertex_count)
+            {
+                return Err(err(format!(
+                    "index {i} is {ix}, but there are only {vertex_count} vertices"
+                )));
+            }
+            let tris = triangulate(mode, &indices);
+            let material = match prim.material().index() {
+                Some(m) => m as u32,
+                None => self.default_material,
+            };
+            let uvs: [Option<Vec<Vec2>>; 2] = [0, 1].map(|set| {
+                reader
+                    .read_tex_coords(set)
+                    .map(|t| t.into_f32().map(Vec2::from).collect())
+            });
+            let colors: Option<Vec<Vec4>> = reader
+                .read_colors(0)
+                .map(|c| c.into_rgba_f32().map(Vec4::from).collect());
+            for (set, uv) in uvs.iter().enumerate() {
+                if uv.as_ref().is_some_and(|u| u.len() != vertex_count) {
+                    return Err(err(format!("TEXCOORD_{set} count differs from POSITION")));
+                }
+            }
+            if colors.as_ref().is_some_and(|c| c.len() != vertex_count) {
+                return Err(err("COLOR_0 count differs from POSITION".into()));
+            }
+            for mut t in tris {
+                if flip {
+                    t.swap(1, 2);
+                }
+                let v = t.map(|i| positions[i as usize]);
+                if (v[1] - v[0]).cross(v[2] - v[0]).length_squared() <= f32::MIN_POSITIVE {
+                    self.scene.degenerate_skipped += 1;
+                    continue;
+                }
+                let attr = TriangleAttributes {
+                    uv: std::array::from_fn(|set| match &uvs[set] {
+                        Some(u) => t.map(|i| u[i as usize]),
+                        None => [Vec2::ZERO; 3],
+                    }),
+                    color: match &colors {
+                        Some(c) => t.map(|i| c[i as usize]),
+                        None => [Vec4::ONE; 3],
+                    },
+                };
+                self.scene.triangles.push(v);
+                self.scene.materials_of_triangles.push(material);
+                self.scene.attributes.push(attr);
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Triangle list of a primitive in glTF vertex order (spec 3.7.2.1): strips alternate winding so
+/// every triangle keeps the orientation of the first; fans share vertex 0.
+fn triangulate(mode: Mode, ix: &[u32]) -> Vec<[u32; 3]> {
+    match mode {
+        Mode::Triangles => ix.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+        Mode::TriangleStrip => (0..ix.len().saturating_sub(2))
+            .map(|i| {
+                if i % 2 == 0 {
+                    [ix[i], ix[i + 1], ix[i + 2]]
+                } else {
+                    [ix[i + 1], ix[i], ix[i + 2]]
+                }
+            })
+            .collect(),
+        Mode::TriangleFan => (1..ix.len().saturating_sub(1))
+            .map(|i| [ix[i], ix[i + 1], ix[0]])
+            .collect(),
+        _ => Vec::new(),
+    }
+}
+
+/// The scene file's name without directories, for the asset header.
+pub fn source_name(path: &Path) -> String {
+    path.file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn strips_and_fans_follow_gltf_order() {
+        assert_eq!(
+            triangulate(Mode::TriangleStrip, &[0, 1, 2, 3]),
+            vec![[0, 1, 2], [2, 1, 3]]
+        );
+        assert_eq!(
+            triangulate(Mode::TriangleFan, &[0, 1, 2, 3]),
+            vec![[1, 2, 0], [2, 3, 0]]
+        );
+    }
+}

@@ -1,0 +1,155 @@
+//! Probe ray tracing: every probe shoots the same N lattice directions; a hit becomes a surfel
+//! sample, a miss sets the ray's bit in the probe's sky mask.
+
+use glam::Vec3;
+use prt_format::sh::{self, SH_COUNT};
+
+use crate::bvh::SceneBvh;
+use crate::scene::{Material, Scene};
+use crate::texture;
+
+/// What one probe ray hit.
+#[derive(Clone, Copy, Debug)]
+pub struct Hit {
+    /// Index of the ray in the lattice.
+    pub ray: u32,
+    pub position: Vec3,
+    /// Unit geometric normal facing the probe.
+    pub normal: Vec3,
+    pub albedo: [f32; 3],
+    pub emission: [f32; 3],
+    /// A back face of a single-sided surface: black, and evidence of being inside geometry.
+    pub backface: bool,
+}
+
+/// Everything one probe's rays found.
+#[derive(Clone, Debug, Default)]
+pub struct ProbeRays {
+    pub hits: Vec<Hit>,
+    pub sky_mask: Vec<u32>,
+    pub sky_transfer: [f32; SH_COUNT],
+    pub sky_rays: u32,
+    pub backface_rays: u32,
+}
+
+/// Shared, read-only inputs of tracing.
+pub struct Tracer<'a> {
+    pub scene: &'a Scene,
+    pub bvh: &'a SceneBvh,
+    pub directions: &'a [Vec3],
+    pub weight: f32,
+    pub double_sided: bool,
+    pub srgb: [f32; 256],
+}
+
+impl Tracer<'_> {
+    /// Traces all lattice directions from `origin`.
+    pub fn trace_probe(&self, origin: Vec3) -> ProbeRays {
+        let n = self.directions.len();
+        let mut out = ProbeRays {
+            sky_mask: vec![0; n.div_ceil(32)],
+            ..ProbeRays::default()
+        };
+        for (i, &dir) in self.directions.iter().enumerate() {
+            match self.bvh.closest_hit(origin, dir) {
+                Some(h) => {
+                    let hit = self.shade(i as u32, origin, dir, h.triangle as usize, h.t);
+                    out.backface_rays += u32::from(hit.backface);
+                    out.hits.push(hit);
+                }
+                None => {
+                    out.sky_mask[i / 32] |= 1 << (i % 32);
+                    out.sky_rays += 1;
+                    let y = sh::basis(dir.to_array());
+                    for k in 0..SH_COUNT {
+                        out.sky_transfer[k] += self.weight * y[k];
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    fn shade(&self, ray: u32, origin: Vec3, dir: Vec3, tri: usize, t: f32) -> Hit {
+        let v = self.scene.triangles[tri];
+        let material = &self.scene.materials[self.scene.materials_of_triangles[tri] as usize];
+        let ng = (v[1] - v[0]).cross(v[2] - v[0]).normalize_or_zero();
+        let front = ng.dot(dir) < 0.0;
+        let position = origin + dir * t;
+        let facing = if front { ng } else { -ng };
+        if !front && !(material.double_sided || self.double_sided) {
+            return Hit {
+                ray,
+                position,
+                normal: facing,
+                albedo: [0.0; 3],
+                emission: [0.0; 3],
+                backface: true,
+            };
+        }
+        let (albedo, emission) = self.material_at(material, tri, barycentric(&v, position));
+        Hit {
+            ray,
+            position,
+            normal: facing,
+            albedo,
+            emission,
+            backface: false,
+        }
+    }
+
+    /// Albedo (base colour x texture x COLOR_0) and emission (factor x texture) at a point.
+    fn material_at(&self, m: &Material, tri: usize, b: [f32; 3]) -> ([f32; 3], [f32; 3]) {
+        let attr = &self.scene.attributes[tri];
+        let uv = |set: u32| -> [f32; 2] {
+            let uv = attr.uv[(set as usize).min(1)];
+            (uv[0] * b[0] + uv[1] * b[1] + uv[2] * b[2]).to_array()
+        };
+        let color = attr.color[0] * b[0] + attr.color[1] * b[1] + attr.color[2] * b[2];
+        let mut albedo = [
+            m.base_color[0] * color.x,
+            m.base_color[1] * color.y,
+            m.base_color[2] * color.z,
+        ];
+        if let Some(tex) = &m.base_texture {
+            if let Some(img) = self.scene.images.get(tex.image) {
+                let s = texture::sample(img, tex, uv(tex.tex_coord), &self.srgb);
+                albedo = std::array::from_fn(|c| albedo[c] * s[c]);
+            }
+        }
+        let mut emission = m.emissive;
+        if let (Some(tex), true) = (&m.emissive_texture, emission.iter().any(|&e| e > 0.0)) {
+            if let Some(img) = self.scene.images.get(tex.image) {
+                let s = texture::sample(img, tex, uv(tex.tex_coord), &self.srgb);
+                emission = std::array::from_fn(|c| emission[c] * s[c]);
+            }
+        }
+        (albedo.map(|a| a.clamp(0.0, 1.0)), emission)
+    }
+}
+
+/// Barycentric coordinates of `p` (on the triangle's plane).
+fn barycentric(v: &[Vec3; 3], p: Vec3) -> [f32; 3] {
+    let (e1, e2, vp) = (v[1] - v[0], v[2] - v[0], p - v[0]);
+    let (d00, d01, d11) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
+    let (d20, d21) = (vp.dot(e1), vp.dot(e2));
+    let denom = d00 * d11 - d01 * d01;
+    if denom.abs() <= f32::MIN_POSITIVE {
+        return [1.0, 0.0, 0.0];
+    }
+    let b1 = (d11 * d20 - d01 * d21) / denom;
+    let b2 = (d00 * d21 - d01 * d20) / denom;
+    [1.0 - b1 - b2, b1, b2]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn barycentric_recovers_vertices_and_interpolates() {
+        let v = [Vec3::ZERO, Vec3::X, Vec3::Y];
+        let b = barycentric(&v, Vec3::new(0.25, 0.5, 0.0));
+        assert!((b[0] - 0.25).abs() < 1e-6 && (b[1] - 0.25).abs() < 1e-6 && (b[2] - 0.5).abs() < 1e-6);
+    }
+}

@@ -1,0 +1,160 @@
+//! `prt`: the command-line face of prt (conventions.md section 6). Each subcommand turns its
+//! options into a settings struct and calls one library function.
+
+mod progress;
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use clap::{Parser, Subcommand, ValueEnum};
+use prt_bake::BakeSettings;
+use prt_format::TransferPrecision;
+
+#[derive(Parser)]
+#[command(name = "prt", version, about = "Precomputed radiance transfer GI: bake, inspect, relight")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum Quality {
+    /// 512 rays per probe.
+    Default,
+    /// 2048 rays per probe: lower error, 4x the bake time, no extra runtime cost.
+    High,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum Precision {
+    F16,
+    F32,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Bake a glTF 2.0 scene into a PRT asset.
+    Bake {
+        /// The scene (.gltf or .glb).
+        scene: PathBuf,
+        /// Output asset (.prt), written atomically.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Probe spacing in metres [default: about 1,000 probes over the bounds].
+        #[arg(long)]
+        spacing: Option<f32>,
+        /// Bake bounds MINX,MINY,MINZ,MAXX,MAXY,MAXZ [default: the scene's bounds].
+        #[arg(long, value_delimiter = ',', num_args = 6, allow_hyphen_values = true)]
+        bounds: Option<Vec<f32>>,
+        /// Rays per probe [default: 512, or the --quality preset's].
+        #[arg(long)]
+        rays: Option<u32>,
+        /// Accuracy preset.
+        #[arg(long, value_enum, default_value = "default")]
+        quality: Quality,
+        /// Worker threads [default: all cores].
+        #[arg(long)]
+        threads: Option<usize>,
+        /// Refuse grids with more probes than this.
+        #[arg(long, default_value_t = 1 << 20)]
+        max_probes: u64,
+        /// Surfel cell size in metres (bricks are 4x4x4 cells) [default: spacing / 8]; 0 = no merging.
+        #[arg(long)]
+        cell_size: Option<f32>,
+        /// Keep every ray hit as its own surfel and brick (same as --cell-size 0).
+        #[arg(long)]
+        no_merge: bool,
+        /// Treat every material as double-sided (for files with inconsistent winding).
+        #[arg(long)]
+        double_sided: bool,
+        /// Probes with more than this fraction of back-face hits are invalid.
+        #[arg(long, default_value_t = 0.1)]
+        invalid_backface_fraction: f32,
+        /// Storage precision of factor transfers.
+        #[arg(long, value_enum, default_value = "f16")]
+        precision: Precision,
+    },
+    /// Print the summary of an asset.
+    Inspect {
+        asset: PathBuf,
+        /// Print JSON instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+fn main() {
+    if let Err(e) = run(Cli::parse()) {
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Bake {
+            scene,
+            output,
+            spacing,
+            bounds,
+            rays,
+            quality,
+            threads,
+            max_probes,
+            cell_size,
+            no_merge,
+            double_sided,
+            invalid_backface_fraction,
+            precision,
+        } => {
+            let preset = match quality {
+                Quality::Default => BakeSettings::default(),
+                Quality::High => BakeSettings::high_quality(),
+            };
+            let settings = BakeSettings {
+                rays: rays.unwrap_or(preset.rays),
+                spacing,
+                bounds: bounds.map(|b| [b[0], b[1], b[2], b[3], b[4], b[5]]),
+                max_probes,
+                cell_size: if no_merge { Some(0.0) } else { cell_size },
+                double_sided,
+                invalid_backface_fraction,
+                transfer_precision: match precision {
+                    Precision::F16 => TransferPrecision::F16,
+                    Precision::F32 => TransferPrecision::F32,
+                },
+                threads,
+                ..preset
+            };
+            let progress = progress::Bar::new();
+            let (asset, report) =
+                prt_bake::bake_to_file(&scene, &output, &settings, &progress)
+                    .with_context(|| format!("baking {}", scene.display()))?;
+            for w in &report.warnings {
+                eprintln!("warning: {w}");
+            }
+            println!("{}", prt_format::Summary::of(&asset, report.file_bytes));
+            let times: Vec<String> = report
+                .timings
+                .iter()
+                .map(|(stage, d)| format!("{stage} {:.3} s", d.as_secs_f64()))
+                .collect();
+            println!("time             {}", times.join(" | "));
+            println!("wrote            {}", output.display());
+            Ok(())
+        }
+        Command::Inspect { asset, json } => {
+            let bytes = std::fs::read(&asset)
+                .with_context(|| format!("reading {}", asset.display()))?;
+            let loaded = prt_format::decode(&bytes)
+                .with_context(|| format!("loading {}", asset.display()))?;
+            let summary = prt_format::Summary::of(&loaded, bytes.len() as u64);
+            if json {
+                println!("{}", serde_json::to_string_pretty(&summary)?);
+            } else {
+                println!("{summary}");
+            }
+            Ok(())
+        }
+    }
+}

@@ -1,0 +1,359 @@
+//! The asset's types. Big arrays are `#[repr(C)]` `Pod` structs (sizes asserted below) so that
+//! the runtime can upload them to the GPU as they are; the same layouts are declared in WGSL.
+
+use bytemuck::{Pod, Zeroable};
+use serde::{Deserialize, Serialize};
+
+use crate::rig::Light;
+use crate::sh::SH_COUNT;
+
+/// One baked asset: everything an engine needs to relight probes at runtime.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Asset {
+    pub header: Header,
+    /// One per probe, in grid order (x fastest, then y, then z).
+    pub probes: Vec<Probe>,
+    /// Per probe, `header.sky_mask_words()` words: bit i set when lattice ray i escaped to the sky.
+    pub sky_mask: Vec<u32>,
+    /// Per probe, the SH9 projection of its sky directions (`4pi/N sum_{i in sky} Y_k(w_i)`):
+    /// multiply by a constant sky radiance to get the probe's sky term without touching the mask.
+    pub sky_transfer: Vec<[f32; SH_COUNT]>,
+    /// Per-probe factor tables, concatenated; `Probe::first_factor..+factor_count` is a probe's.
+    pub factors: Factors,
+    /// Normal-keyed bricks of surfels; a brick's radiance is the weighted mean of its surfels'.
+    pub bricks: Vec<Brick>,
+    /// Surfels, grouped by brick (`Brick::first_surfel..+surfel_count`).
+    pub surfels: Vec<Surfel>,
+    /// The scene's triangles and a BVH2 over them, for light visibility at surfels.
+    pub geometry: Geometry,
+    /// The scene's KHR_lights_punctual lights: its default light rig.
+    pub lights: Vec<Light>,
+}
+
+/// Counts, grid and provenance. Validated against the sections on load.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Header {
+    /// Name and version of the tool that wrote the asset.
+    pub generator: String,
+    /// File name of the baked scene (no directories: assets move between machines).
+    pub source_name: String,
+    /// xxh3-64 of the scene file's bytes (the .gltf/.glb itself).
+    pub source_hash: u64,
+    pub grid: Grid,
+    /// Rays per probe: the size N of the Fibonacci lattice.
+    pub ray_count: u32,
+    pub settings: BakeSettingsRecord,
+    pub stats: BakeStats,
+}
+
+impl Header {
+    /// Words of sky mask per probe.
+    pub fn sky_mask_words(&self) -> usize {
+        (self.ray_count as usize).div_ceil(32)
+    }
+}
+
+/// The probe grid: probe (i, j, k) sits at `origin + spacing * (i, j, k)`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Grid {
+    pub origin: [f32; 3],
+    pub spacing: f32,
+    pub counts: [u32; 3],
+}
+
+impl Grid {
+    /// Number of probes.
+    pub fn probe_count(&self) -> u64 {
+        self.counts.iter().map(|&c| u64::from(c)).product()
+    }
+
+    /// Linear index of probe (i, j, k): x fastest, then y, then z (3D texture order).
+    pub fn index(&self, i: u32, j: u32, k: u32) -> usize {
+        (i as usize) + self.counts[0] as usize * (j as usize + self.counts[1] as usize * k as usize)
+    }
+
+    /// Position of probe (i, j, k).
+    pub fn position(&self, i: u32, j: u32, k: u32) -> [f32; 3] {
+        [
+            self.origin[0] + self.spacing * i as f32,
+            self.origin[1] + self.spacing * j as f32,
+            self.origin[2] + self.spacing * k as f32,
+        ]
+    }
+}
+
+/// The settings a bake ran with, kept so that an asset tells how it was made.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BakeSettingsRecord {
+    pub spacing: f32,
+    pub bounds: Option<[f32; 6]>,
+    pub cell_size: f32,
+    pub merge_distance: f32,
+    pub merge_normal_cos: f32,
+    pub double_sided_override: bool,
+    pub invalid_backface_fraction: f32,
+    pub transfer_precision: TransferPrecision,
+}
+
+/// Figures of the bake worth keeping with the asset.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct BakeStats {
+    pub triangles: u64,
+    pub degenerate_triangles_skipped: u64,
+    pub rays: u64,
+    pub ray_hits: u64,
+    pub backface_hits: u64,
+    /// Surfels before merging (one per ray hit).
+    pub surfels_unmerged: u64,
+}
+
+/// Probe flag: the probe is valid (not inside geometry).
+pub const PROBE_VALID: u32 = 1;
+
+/// A probe: where it is, whether it may be used, and where its factor table starts.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable, Serialize, Deserialize)]
+#[repr(C)]
+pub struct Probe {
+    pub position: [f32; 3],
+    /// [`PROBE_VALID`] and future flags.
+    pub flags: u32,
+    pub first_factor: u32,
+    pub factor_count: u32,
+    /// Rays that escaped to the sky (their solid angle is `4pi * sky_rays / N`).
+    pub sky_rays: u32,
+    /// Rays that hit a back face of single-sided geometry (evidence of being inside geometry).
+    pub backface_rays: u32,
+}
+const _: () = assert!(std::mem::size_of::<Probe>() == 32);
+
+impl Probe {
+    pub fn is_valid(&self) -> bool {
+        self.flags & PROBE_VALID != 0
+    }
+}
+
+/// How factor transfer coefficients are stored.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum TransferPrecision {
+    /// 8 x f32 per factor (40 bytes with brick index and ray count).
+    F32,
+    /// 8 x IEEE half per factor (24 bytes with brick index and ray count).
+    #[default]
+    F16,
+}
+
+/// One factor, f32 transfer: brick `brick` contributes its radiance times the SH9 transfer
+/// `4pi/N sum_{probe rays i into the brick} Y_k(w_i)` to its probe. `k = 0` is stored exactly as
+/// the ray count (`Y_0` is constant), so a probe's bookkeeping (rays into bricks + sky rays = N)
+/// is exact whatever the precision; `sh[k-1]` holds `k = 1..9`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable, Serialize, Deserialize)]
+#[repr(C)]
+pub struct FactorF32 {
+    pub brick: u32,
+    pub rays: u32,
+    pub sh: [f32; 8],
+}
+const _: () = assert!(std::mem::size_of::<FactorF32>() == 40);
+
+/// One factor, half-float transfer: as [`FactorF32`], `sh` packs the 8 halves two per word
+/// (low half first, WGSL `unpack2x16float` order).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable, Serialize, Deserialize)]
+#[repr(C)]
+pub struct FactorF16 {
+    pub brick: u32,
+    pub rays: u32,
+    pub sh: [u32; 4],
+}
+const _: () = assert!(std::mem::size_of::<FactorF16>() == 24);
+
+/// The factor tables of all probes, concatenated, in one of the [`TransferPrecision`]s.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum Factors {
+    F32(Vec<FactorF32>),
+    F16(Vec<FactorF16>),
+}
+
+impl Default for Factors {
+    fn default() -> Self {
+        Factors::F16(Vec::new())
+    }
+}
+
+impl Factors {
+    pub fn len(&self) -> usize {
+        match self {
+            Factors::F32(f) => f.len(),
+            Factors::F16(f) => f.len(),
+        }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    pub fn precision(&self) -> TransferPrecision {
+        match self {
+            Factors::F32(_) => TransferPrecision::F32,
+            Factors::F16(_) => TransferPrecision::F16,
+        }
+    }
+
+    /// Brick index and ray count of factor `f`.
+    pub fn brick_and_rays(&self, f: usize) -> (u32, u32) {
+        match self {
+            Factors::F32(t) => (t[f].brick, t[f].rays),
+            Factors::F16(t) => (t[f].brick, t[f].rays),
+        }
+    }
+
+    /// Full SH9 transfer of factor `f` for a bake of `ray_count` rays.
+    pub fn transfer(&self, f: usize, ray_count: u32) -> [f32; SH_COUNT] {
+        let (_, rays) = self.brick_and_rays(f);
+        let mut t = [0.0; SH_COUNT];
+        t[0] = rays as f32 * crate::directions::direction_weight(ray_count) * crate::sh::Y00;
+        match self {
+            Factors::F32(v) => t[1..].copy_from_slice(&v[f].sh),
+            Factors::F16(v) => {
+                for (w, &word) in v[f].sh.iter().enumerate() {
+                    t[1 + 2 * w] = f16_to_f32(word as u16);
+                    t[2 + 2 * w] = f16_to_f32((word >> 16) as u16);
+                }
+            }
+        }
+        t
+    }
+
+    /// Builds the table in the requested precision from (brick, rays, transfer k = 1..9).
+    pub fn build(rows: &[(u32, u32, [f32; 8])], precision: TransferPrecision) -> Self {
+        match precision {
+            TransferPrecision::F32 => Factors::F32(
+                rows.iter()
+                    .map(|&(brick, rays, sh)| FactorF32 { brick, rays, sh })
+                    .collect(),
+            ),
+            TransferPrecision::F16 => Factors::F16(
+                rows.iter()
+                    .map(|&(brick, rays, sh)| FactorF16 {
+                        brick,
+                        rays,
+                        sh: std::array::from_fn(|w| {
+                            u32::from(f32_to_f16(sh[2 * w]))
+                                | (u32::from(f32_to_f16(sh[2 * w + 1])) << 16)
+                        }),
+                    })
+                    .collect(),
+            ),
+        }
+    }
+
+    /// Bytes one factor takes.
+    pub fn bytes_per_factor(&self) -> usize {
+        match self {
+            Factors::F32(_) => std::mem::size_of::<FactorF32>(),
+            Factors::F16(_) => std::mem::size_of::<FactorF16>(),
+        }
+    }
+}
+
+/// Brick flag: the brick holds back-face hits of single-sided surfaces, which are black
+/// (conventions.md section 4); relighting skips it.
+pub const BRICK_BACKFACE: u32 = 1 << 3;
+/// Mask of the dominant normal axis in `Brick::flags`: 0..6 for +X, -X, +Y, -Y, +Z, -Z.
+pub const BRICK_AXIS_MASK: u32 = 0x7;
+
+/// A brick: 4x4x4 surfel cells of one world cell and one dominant normal axis.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable, Serialize, Deserialize)]
+#[repr(C)]
+pub struct Brick {
+    /// Bounds of its surfels' positions (for light culling by range and cone).
+    pub min: [f32; 3],
+    pub first_surfel: u32,
+    pub max: [f32; 3],
+    pub surfel_count: u32,
+    /// Weighted mean normal of its surfels (for light culling by facing), not normalised to 1
+    /// when the normals disagree.
+    pub normal: [f32; 3],
+    /// Axis (see [`BRICK_AXIS_MASK`]) and [`BRICK_BACKFACE`].
+    pub flags: u32,
+}
+const _: () = assert!(std::mem::size_of::<Brick>() == 48);
+
+/// A surfel: a sample of a lit surface that probe rays hit.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable, Serialize, Deserialize)]
+#[repr(C)]
+pub struct Surfel {
+    pub position: [f32; 3],
+    /// Brick this surfel belongs to.
+    pub brick: u32,
+    /// Unit geometric normal, turned towards the rays that hit it.
+    pub normal: [f32; 3],
+    /// Number of ray hits merged into it: its weight in the brick's mean radiance.
+    pub weight: f32,
+    /// Diffuse albedo (linear RGB).
+    pub albedo: [f32; 3],
+    /// [`BRICK_BACKFACE`] when it is a back-face hit of a single-sided surface.
+    pub flags: u32,
+    /// Emitted radiance (linear RGB).
+    pub emission: [f32; 3],
+    pub _pad: u32,
+}
+const _: () = assert!(std::mem::size_of::<Surfel>() == 64);
+
+/// Scene geometry for visibility tests: triangles in BVH order and a binary BVH over them.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Geometry {
+    pub nodes: Vec<BvhNode>,
+    pub triangles: Vec<Triangle>,
+}
+
+/// A BVH2 node. `count > 0`: a leaf holding triangles `first..first+count`. `count == 0`: an
+/// inner node whose children are nodes `first` and `first + 1`. Node 0 is the root.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable, Serialize, Deserialize)]
+#[repr(C)]
+pub struct BvhNode {
+    pub min: [f32; 3],
+    pub count: u32,
+    pub max: [f32; 3],
+    pub first: u32,
+}
+const _: () = assert!(std::mem::size_of::<BvhNode>() == 32);
+
+/// A triangle's three vertices, padded to 16-byte rows for WGSL storage buffers.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable, Serialize, Deserialize)]
+#[repr(C)]
+pub struct Triangle {
+    pub v0: [f32; 3],
+    pub _pad0: u32,
+    pub v1: [f32; 3],
+    pub _pad1: u32,
+    pub v2: [f32; 3],
+    pub _pad2: u32,
+}
+const _: () = assert!(std::mem::size_of::<Triangle>() == 48);
+
+/// IEEE 754 binary16 bits from f32, round to nearest even (values beyond the half range become
+/// infinity; transfers stay far inside it: |transfer| <= 4pi * Y00).
+pub fn f32_to_f16(x: f32) -> u16 {
+    half::f16::from_f32(x).to_bits()
+}
+
+/// f32 from IEEE 754 binary16 bits.
+pub fn f16_to_f32(h: u16) -> f32 {
+    half::f16::from_bits(h).to_f32()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn half_round_trip() {
+        for &x in &[0.0f32, 1.0, -2.5, 0.000_061_035_156, 1e-7, 65504.0, 3.544_907_7, -0.123_456] {
+            let y = f16_to_f32(f32_to_f16(x));
+            assert!((x - y).abs() <= x.abs() * 1e-3 + 6e-8, "{x} -> {y}");
+        }
+        assert_eq!(f16_to_f32(f32_to_f16(1e6)), f32::INFINITY);
+        assert_eq!(f32_to_f16(1.0), 0x3c00);
+        assert_eq!(f32_to_f16(-2.0), 0xc000);
+    }
+}

@@ -1,0 +1,39 @@
+//! # prt-format: the baked PRT GI asset
+//!
+//! The types an engine needs to load a prt bake, their binary (de)serialization and their
+//! validation. This crate knows no GPU and no BVH builder: the baker (`prt-bake`) produces an
+//! [`Asset`], the runtime (`prt-runtime`) consumes one, and both depend only on this crate for it.
+//!
+//! ## What a bake stores
+//! For every probe of a regular grid the baker shot `ray_count` rays along a fixed spherical
+//! Fibonacci lattice ([`directions`]). Rays that escaped are sky: they are kept as a per-probe bit
+//! mask over the lattice plus the SH9 projection of those directions, so that any sky can be applied
+//! at runtime. Rays that hit geometry became surfels; surfels were merged into normal-keyed bricks,
+//! and each probe keeps a factor table: for every brick its rays hit, the SH9 projection of those
+//! rays' directions (weight 4pi/N each). At runtime, with `L_b` the relit radiance of brick `b`:
+//!
+//! `c_k(probe) = sum over factors f of transfer_k(f) * L_{brick(f)} + sky term`
+//!
+//! which is exactly the Monte Carlo projection of conventions.md section 2 when every ray hit its
+//! own brick (merging off), and an approximation that shares relighting work between probes
+//! otherwise.
+//!
+//! ## File layout ([`io`])
+//! `magic (8) | format_version u32 | payload length u64 | payload (bincode 2) | xxh3-64 checksum`.
+//! Loading checks magic, version, length and checksum before decoding, then validates every count,
+//! index range and float ([`validate`]). It returns a typed [`FormatError`] and never panics.
+
+pub mod asset;
+pub mod directions;
+pub mod error;
+pub mod io;
+pub mod rig;
+pub mod sh;
+pub mod summary;
+pub mod validate;
+
+pub use asset::*;
+pub use error::FormatError;
+pub use io::{decode, encode, read_asset, write_asset_atomic, FORMAT_VERSION, MAGIC};
+pub use summary::Summary;
+pub use rig::{Light, LightKind, LightRig, Sky};

@@ -1,0 +1,138 @@
+//! A summary of an asset: counts, grid, and the bytes each section takes. `prt inspect` prints
+//! it; `--json` gives the object of conventions.md section 6.
+
+use serde::Serialize;
+
+use crate::asset::*;
+use crate::io::FORMAT_VERSION;
+use crate::sh::SH_COUNT;
+
+/// Counts and sizes of an asset.
+#[derive(Clone, Debug, Serialize)]
+pub struct Summary {
+    pub format_version: u32,
+    pub source_name: String,
+    pub source_hash: String,
+    pub probe_count: usize,
+    pub valid_probe_count: usize,
+    pub ray_count: u32,
+    pub surfel_count: usize,
+    pub surfels_unmerged: u64,
+    pub brick_count: usize,
+    pub factor_count: usize,
+    pub factors_per_probe: f64,
+    pub transfer_precision: TransferPrecision,
+    pub triangle_count: usize,
+    pub light_count: usize,
+    pub file_bytes: u64,
+    pub bytes_per_probe: f64,
+    /// Per-probe transport data: probe record, sky mask, sky transfer and factor table.
+    pub transport_bytes_per_probe: f64,
+    pub section_bytes: SectionBytes,
+    pub grid: Grid,
+}
+
+/// In-memory bytes of each array section (the file adds a few bytes of lengths per section).
+#[derive(Clone, Debug, Serialize)]
+pub struct SectionBytes {
+    pub probes: u64,
+    pub sky_mask: u64,
+    pub sky_transfer: u64,
+    pub factors: u64,
+    pub bricks: u64,
+    pub surfels: u64,
+    pub bvh_nodes: u64,
+    pub triangles: u64,
+}
+
+fn bytes<T>(v: &[T]) -> u64 {
+    std::mem::size_of_val(v) as u64
+}
+
+impl Summary {
+    /// Summarises `asset`, whose file is `file_bytes` long.
+    pub fn of(asset: &Asset, file_bytes: u64) -> Summary {
+        let probes = asset.probes.len();
+        let section_bytes = SectionBytes {
+            probes: bytes(&asset.probes),
+            sky_mask: bytes(&asset.sky_mask),
+            sky_transfer: (asset.sky_transfer.len() * SH_COUNT * 4) as u64,
+            factors: (asset.factors.len() * asset.factors.bytes_per_factor()) as u64,
+            bricks: bytes(&asset.bricks),
+            surfels: bytes(&asset.surfels),
+            bvh_nodes: bytes(&asset.geometry.nodes),
+            triangles: bytes(&asset.geometry.triangles),
+        };
+        let per_probe = |b: u64| if probes == 0 { 0.0 } else { b as f64 / probes as f64 };
+        let s = &section_bytes;
+        Summary {
+            format_version: FORMAT_VERSION,
+            source_name: asset.header.source_name.clone(),
+            source_hash: format!("{:016x}", asset.header.source_hash),
+            probe_count: probes,
+            valid_probe_count: asset.probes.iter().filter(|p| p.is_valid()).count(),
+            ray_count: asset.header.ray_count,
+            surfel_count: asset.surfels.len(),
+            surfels_unmerged: asset.header.stats.surfels_unmerged,
+            brick_count: asset.bricks.len(),
+            factor_count: asset.factors.len(),
+            factors_per_probe: per_probe(asset.factors.len() as u64),
+            transfer_precision: asset.factors.precision(),
+            triangle_count: asset.geometry.triangles.len(),
+            light_count: asset.lights.len(),
+            file_bytes,
+            bytes_per_probe: per_probe(file_bytes),
+            transport_bytes_per_probe: per_probe(s.probes + s.sky_mask + s.sky_transfer + s.factors),
+            section_bytes,
+            grid: asset.header.grid,
+        }
+    }
+}
+
+impl std::fmt::Display for Summary {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let g = &self.grid;
+        writeln!(f, "format version   {}", self.format_version)?;
+        writeln!(f, "source           {} (xxh3 {})", self.source_name, self.source_hash)?;
+        writeln!(
+            f,
+            "grid             {} x {} x {} at {} m, origin {:?}",
+            g.counts[0], g.counts[1], g.counts[2], g.spacing, g.origin
+        )?;
+        writeln!(
+            f,
+            "probes           {} ({} valid, {} invalid), {} rays each",
+            self.probe_count,
+            self.valid_probe_count,
+            self.probe_count - self.valid_probe_count,
+            self.ray_count
+        )?;
+        writeln!(
+            f,
+            "surfels          {} ({} ray hits before merging)",
+            self.surfel_count, self.surfels_unmerged
+        )?;
+        writeln!(f, "bricks           {}", self.brick_count)?;
+        writeln!(
+            f,
+            "factors          {} ({:.1} per probe, {:?} transfer)",
+            self.factor_count, self.factors_per_probe, self.transfer_precision
+        )?;
+        writeln!(
+            f,
+            "geometry         {} triangles, {} lights",
+            self.triangle_count, self.light_count
+        )?;
+        let s = &self.section_bytes;
+        writeln!(
+            f,
+            "section bytes    probes {} | sky mask {} | sky transfer {} | factors {} | bricks {} | surfels {} | bvh {} | triangles {}",
+            s.probes, s.sky_mask, s.sky_transfer, s.factors, s.bricks, s.surfels, s.bvh_nodes, s.triangles
+        )?;
+        write!(
+            f,
+            "file             {} bytes, {:.0} bytes per probe ({:.0} of per-probe transport data)",
+            self.file_bytes, self.bytes_per_probe, self.transport_bytes_per_probe
+        )
+    }
+}

@@ -1,0 +1,196 @@
+//! Structural validation of a decoded asset: every count, every index range, every float.
+//!
+//! A runtime uploads the arrays to the GPU as they are and indexes them without checks, so an
+//! asset is only handed out once all of this holds.
+
+use crate::asset::*;
+use crate::error::FormatError;
+
+/// Largest ray count a bake may use (bit masks and tables are sized by it).
+pub const MAX_RAYS: u32 = 1 << 20;
+
+fn finite(section: &'static str, index: usize, what: &str, v: &[f32]) -> Result<(), FormatError> {
+    if v.iter().all(|x| x.is_finite()) {
+        Ok(())
+    } else {
+        Err(FormatError::invalid(section, index, format!("{what} {v:?} is not finite")))
+    }
+}
+
+fn count(section: &'static str, found: usize, expected: usize) -> Result<(), FormatError> {
+    if found == expected {
+        Ok(())
+    } else {
+        Err(FormatError::Count {
+            section,
+            found,
+            expected,
+        })
+    }
+}
+
+/// Checks that `asset` is internally consistent.
+pub fn validate(asset: &Asset) -> Result<(), FormatError> {
+    let h = &asset.header;
+    let g = &h.grid;
+    finite("header.grid", 0, "origin", &g.origin)?;
+    if !(g.spacing.is_finite() && g.spacing > 0.0) {
+        return Err(FormatError::invalid("header.grid", 0, format!("spacing {}", g.spacing)));
+    }
+    if g.counts.contains(&0) {
+        return Err(FormatError::invalid("header.grid", 0, format!("counts {:?}", g.counts)));
+    }
+    if h.ray_count == 0 || h.ray_count > MAX_RAYS {
+        return Err(FormatError::invalid(
+            "header",
+            0,
+            format!("ray_count {} outside 1..={MAX_RAYS}", h.ray_count),
+        ));
+    }
+    let probes = asset.probes.len();
+    if g.probe_count() != probes as u64 {
+        return Err(FormatError::Count {
+            section: "probes",
+            found: probes,
+            expected: g.probe_count() as usize,
+        });
+    }
+    count("sky_mask", asset.sky_mask.len(), probes * h.sky_mask_words())?;
+    count("sky_transfer", asset.sky_transfer.len(), probes)?;
+    for (i, t) in asset.sky_transfer.iter().enumerate() {
+        finite("sky_transfer", i, "transfer", t)?;
+    }
+
+    let factors = &asset.factors;
+    let mut next_factor = 0u64;
+    for (i, p) in asset.probes.iter().enumerate() {
+        finite("probes", i, "position", &p.position)?;
+        if p.sky_rays > h.ray_count || p.backface_rays > h.ray_count {
+            return Err(FormatError::invalid(
+                "probes",
+                i,
+                format!(
+                    "sky_rays {} / backface_rays {} exceed ray_count {}",
+                    p.sky_rays, p.backface_rays, h.ray_count
+                ),
+            ));
+        }
+        if u64::from(p.first_factor) != next_factor {
+            return Err(FormatError::invalid(
+                "probes",
+                i,
+                format!("first_factor {} (expected {next_factor})", p.first_factor),
+            ));
+        }
+        next_factor += u64::from(p.factor_count);
+    }
+    if next_factor != factors.len() as u64 {
+        return Err(FormatError::Count {
+            section: "factors",
+            found: factors.len(),
+            expected: next_factor as usize,
+        });
+    }
+    let bricks = asset.bricks.len();
+    for f in 0..factors.len() {
+        let (b, rays) = factors.brick_and_rays(f);
+        if b as usize >= bricks {
+            return Err(FormatError::invalid(
+                "factors",
+                f,
+                format!("brick {b} out of range (bricks: {bricks})"),
+            ));
+        }
+        if rays == 0 || rays > h.ray_count {
+            return Err(FormatError::invalid(
+                "factors",
+                f,
+                format!("ray count {rays} outside 1..={}", h.ray_count),
+            ));
+        }
+        finite("factors", f, "transfer", &factors.transfer(f, h.ray_count))?;
+    }
+
+    let mut next_surfel = 0u64;
+    for (i, b) in asset.bricks.iter().enumerate() {
+        finite("bricks", i, "min", &b.min)?;
+        finite("bricks", i, "max", &b.max)?;
+        finite("bricks", i, "normal", &b.normal)?;
+        if b.flags & BRICK_AXIS_MASK >= 6 {
+            return Err(FormatError::invalid("bricks", i, format!("flags {:#x}", b.flags)));
+        }
+        if u64::from(b.first_surfel) != next_surfel {
+            return Err(FormatError::invalid(
+                "bricks",
+                i,
+                format!("first_surfel {} (expected {next_surfel})", b.first_surfel),
+            ));
+        }
+        next_surfel += u64::from(b.surfel_count);
+        if next_surfel > asset.surfels.len() as u64 {
+            return Err(FormatError::invalid(
+                "bricks",
+                i,
+                format!("surfels end at {next_surfel} (surfels: {})", asset.surfels.len()),
+            ));
+        }
+        let range = b.first_surfel as usize..next_surfel as usize;
+        for (s, surfel) in asset.surfels[range.clone()].iter().enumerate() {
+            if surfel.brick as usize != i {
+                return Err(FormatError::invalid(
+                    "surfels",
+                    range.start + s,
+                    format!("brick {} but listed in brick {i}", surfel.brick),
+                ));
+            }
+        }
+    }
+    count("surfels", asset.surfels.len(), next_surfel as usize)?;
+    for (i, s) in asset.surfels.iter().enumerate() {
+        finite("surfels", i, "position", &s.position)?;
+        finite("surfels", i, "normal", &s.normal)?;
+        finite("surfels", i, "albedo", &s.albedo)?;
+        finite("surfels", i, "emission", &s.emission)?;
+        if !(s.weight.is_finite() && s.weight > 0.0) {
+            return Err(FormatError::invalid("surfels", i, format!("weight {}", s.weight)));
+        }
+    }
+
+    let geo = &asset.geometry;
+    let nodes = geo.nodes.len();
+    let tris = geo.triangles.len();
+    if (nodes == 0) != (tris == 0) {
+        return Err(FormatError::invalid(
+            "geometry",
+            0,
+            format!("{nodes} BVH nodes for {tris} triangles"),
+        ));
+    }
+    for (i, n) in geo.nodes.iter().enumerate() {
+        finite("geometry.nodes", i, "min", &n.min)?;
+        finite("geometry.nodes", i, "max", &n.max)?;
+        let ok = if n.count > 0 {
+            u64::from(n.first) + u64::from(n.count) <= tris as u64
+        } else {
+            // Children come after their parent: traversal can never loop.
+            (n.first as usize) > i && (n.first as usize) + 1 < nodes
+        };
+        if !ok {
+            return Err(FormatError::invalid(
+                "geometry.nodes",
+                i,
+                format!("first {} count {} out of range", n.first, n.count),
+            ));
+        }
+    }
+    for (i, t) in geo.triangles.iter().enumerate() {
+        finite("geometry.triangles", i, "v0", &t.v0)?;
+        finite("geometry.triangles", i, "v1", &t.v1)?;
+        finite("geometry.triangles", i, "v2", &t.v2)?;
+    }
+    for (i, l) in asset.lights.iter().enumerate() {
+        l.validate(i)
+            .map_err(|e| FormatError::invalid("lights", i, e.to_string()))?;
+    }
+    Ok(())
+}
