@@ -16,7 +16,7 @@
 //! Everything is ordered by sorted keys and hit indices, so the result does not depend on the
 //! number of threads.
 
-use glam::Vec3;
+use glam::{DMat3, DVec3, Vec3};
 use prt_format::{Brick, Surfel, BRICK_BACKFACE};
 use rayon::prelude::*;
 
@@ -76,7 +76,10 @@ pub fn build(hits: &[Hit], cell_size: f32, merge_normal_cos: f32) -> Bricked {
             let k = order[g.start].0;
             let origin = Vec3::new(k.0 as f32, k.1 as f32, k.2 as f32) * brick_size;
             let members = order[g.clone()].iter().map(|&(_, i)| &hits[i as usize]);
-            (k.3, merge_brick(members, origin, cell_size, merge_normal_cos))
+            (
+                k.3,
+                merge_brick(members, origin, cell_size, merge_normal_cos),
+            )
         })
         .collect();
 
@@ -88,8 +91,8 @@ pub fn build(hits: &[Hit], cell_size: f32, merge_normal_cos: f32) -> Bricked {
     }
     let mut bricks = Vec::with_capacity(merged.len());
     let mut surfels = Vec::with_capacity(merged.iter().map(|m| m.1.len()).sum());
-    for (b, (flags, brick_surfels)) in merged.into_iter().enumerate() {
-        bricks.push(brick_of(&brick_surfels, flags, surfels.len() as u32));
+    for (b, (flags, mut brick_surfels)) in merged.into_iter().enumerate() {
+        bricks.push(brick_of(&mut brick_surfels, flags, surfels.len() as u32));
         surfels.extend(brick_surfels.into_iter().map(|mut s| {
             s.brick = b as u32;
             s
@@ -104,7 +107,7 @@ pub fn build(hits: &[Hit], cell_size: f32, merge_normal_cos: f32) -> Bricked {
 
 /// One brick and one surfel per hit.
 fn unmerged(hits: &[Hit]) -> Bricked {
-    let surfels: Vec<Surfel> = hits
+    let mut surfels: Vec<Surfel> = hits
         .iter()
         .enumerate()
         .map(|(i, h)| Surfel {
@@ -113,12 +116,12 @@ fn unmerged(hits: &[Hit]) -> Bricked {
         })
         .collect();
     let bricks = surfels
-        .iter()
+        .iter_mut()
         .zip(hits)
         .enumerate()
         .map(|(i, (s, h))| {
             let flags = dominant_axis(h.normal) | if h.backface { BRICK_BACKFACE } else { 0 };
-            brick_of(std::slice::from_ref(s), flags, i as u32)
+            brick_of(std::slice::from_mut(s), flags, i as u32)
         })
         .collect();
     Bricked {
@@ -144,28 +147,50 @@ fn surfel_of(
         albedo,
         flags: if backface { BRICK_BACKFACE } else { 0 },
         emission,
-        _pad: 0,
+        ..Surfel::default()
     }
 }
 
-fn brick_of(surfels: &[Surfel], flags: u32, first_surfel: u32) -> Brick {
+/// Finishes one brick: bounds, centroid, and the surfels' gradient weights.
+///
+/// The brick's radiance is modelled as linear, `L(p) = L_mean + G . (p - centroid)`, fitted by
+/// weighted least squares over its surfels: `G = C^-1 sum_s w_s (p_s - centroid) L_s` with
+/// `C = sum_s w_s (p_s - centroid)(p_s - centroid)^T`. `C` depends only on positions, so each
+/// surfel stores `g_s = w_s C^-1 (p_s - centroid)` and the runtime gets `G = sum_s g_s L_s`.
+/// `C` is regularised by a thousandth of its trace: flat bricks get no gradient along their
+/// normal, single-surfel bricks none at all.
+fn brick_of(surfels: &mut [Surfel], flags: u32, first_surfel: u32) -> Brick {
     let mut min = Vec3::INFINITY;
     let mut max = Vec3::NEG_INFINITY;
-    let mut normal = Vec3::ZERO;
-    let mut weight = 0.0;
-    for s in surfels {
+    let mut sum = DVec3::ZERO;
+    let mut weight = 0.0f64;
+    for s in surfels.iter() {
         let p = Vec3::from(s.position);
         min = min.min(p);
         max = max.max(p);
-        normal += Vec3::from(s.normal) * s.weight;
-        weight += s.weight;
+        sum += p.as_dvec3() * f64::from(s.weight);
+        weight += f64::from(s.weight);
+    }
+    let centroid = sum / weight;
+    let mut c = DMat3::ZERO;
+    for s in surfels.iter() {
+        let d = Vec3::from(s.position).as_dvec3() - centroid;
+        c += DMat3::from_cols(d * d.x, d * d.y, d * d.z) * f64::from(s.weight);
+    }
+    let trace = c.x_axis.x + c.y_axis.y + c.z_axis.z;
+    if trace > 0.0 {
+        let inv = (c + DMat3::IDENTITY * (1e-3 * trace)).inverse();
+        for s in surfels.iter_mut() {
+            let d = Vec3::from(s.position).as_dvec3() - centroid;
+            s.gradient = (inv * d * f64::from(s.weight)).as_vec3().to_array();
+        }
     }
     Brick {
         min: min.to_array(),
         first_surfel,
         max: max.to_array(),
         surfel_count: surfels.len() as u32,
-        normal: (normal / weight).to_array(),
+        centroid: centroid.as_vec3().to_array(),
         flags,
     }
 }
@@ -256,7 +281,11 @@ mod tests {
         ];
         let b = build(&hits, 0.1, 0.9);
         assert_eq!(b.bricks.len(), 2, "up and down facing bricks");
-        assert_eq!(b.surfels.len(), 3, "two up-facing cells plus one down-facing");
+        assert_eq!(
+            b.surfels.len(),
+            3,
+            "two up-facing cells plus one down-facing"
+        );
         let total: f32 = b.surfels.iter().map(|s| s.weight).sum();
         assert_eq!(total, 4.0);
         assert_eq!(b.hit_brick[0], b.hit_brick[1]);
@@ -265,7 +294,10 @@ mod tests {
 
     #[test]
     fn zero_cell_size_keeps_every_hit() {
-        let hits = [hit([0.0; 3], [0.0, 1.0, 0.0]), hit([0.0; 3], [0.0, 1.0, 0.0])];
+        let hits = [
+            hit([0.0; 3], [0.0, 1.0, 0.0]),
+            hit([0.0; 3], [0.0, 1.0, 0.0]),
+        ];
         let b = build(&hits, 0.0, 0.9);
         assert_eq!(b.bricks.len(), 2);
         assert_eq!(b.hit_brick, vec![0, 1]);

@@ -4,11 +4,10 @@ use std::path::PathBuf;
 
 #[derive(Debug, thiserror::Error)]
 pub enum BakeError {
-    #[error("{path}: cannot read: {source}")]
+    #[error("{path}: cannot read: {error}")]
     Io {
         path: PathBuf,
-        #[source]
-        source: std::io::Error,
+        error: std::io::Error,
     },
     #[error("{path}: not a valid glTF 2.0 file: {message}")]
     Gltf { path: PathBuf, message: String },
@@ -48,11 +47,10 @@ pub enum BakeError {
         count: u64,
         max: u64,
     },
-    #[error("{path}: {source}")]
+    #[error("{path}: {error}")]
     Format {
         path: PathBuf,
-        #[source]
-        source: prt_format::FormatError,
+        error: prt_format::FormatError,
     },
     #[error("cannot start the thread pool: {0}")]
     ThreadPool(String),

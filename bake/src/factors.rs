@@ -7,34 +7,51 @@
 //! `sum_f transfer_k(f) L_{b(f)}` plus the sky term: the Monte Carlo projection of
 //! conventions.md section 2 with each hit's radiance replaced by its brick's.
 
+use glam::Vec3;
 use prt_format::sh::{self, SH_COUNT};
+use prt_format::{Brick, FactorRow};
 
 use crate::trace::Hit;
 
-/// (brick, rays, transfer k = 1..9) rows of one probe, sorted by brick.
+/// Factor rows of one probe, sorted by brick. The offset of a row is the mean of its rays' hit
+/// points minus the brick's centroid (see `prt_format::FactorF32`).
 pub fn probe_factors(
     hits: &[Hit],
     hit_brick: &[u32],
-    directions: &[glam::Vec3],
+    bricks: &[Brick],
+    directions: &[Vec3],
     weight: f32,
-) -> Vec<(u32, u32, [f32; SH_COUNT - 1])> {
-    let mut order: Vec<(u32, u32)> = hits
+) -> Vec<FactorRow> {
+    let mut order: Vec<(u32, u32, usize)> = hits
         .iter()
         .zip(hit_brick)
-        .map(|(h, &b)| (b, h.ray))
+        .enumerate()
+        .map(|(i, (h, &b))| (b, h.ray, i))
         .collect();
     order.sort_unstable();
-    let mut rows: Vec<(u32, u32, [f32; SH_COUNT - 1])> = Vec::new();
-    for (brick, ray) in order {
+    let mut rows: Vec<FactorRow> = Vec::new();
+    let mut hit_sum = Vec3::ZERO;
+    for (brick, ray, i) in order {
         let y = sh::basis(directions[ray as usize].to_array());
         if rows.last().is_none_or(|r| r.0 != brick) {
-            rows.push((brick, 0, [0.0; SH_COUNT - 1]));
+            finish_offset(rows.last_mut(), hit_sum, bricks);
+            hit_sum = Vec3::ZERO;
+            rows.push((brick, 0, [0.0; SH_COUNT - 1], [0.0; 3]));
         }
         let row = rows.last_mut().expect("a row was just pushed");
         row.1 += 1;
+        hit_sum += hits[i].position;
         for k in 1..SH_COUNT {
             row.2[k - 1] += weight * y[k];
         }
     }
+    finish_offset(rows.last_mut(), hit_sum, bricks);
     rows
+}
+
+fn finish_offset(row: Option<&mut FactorRow>, hit_sum: Vec3, bricks: &[Brick]) {
+    if let Some(row) = row {
+        let centroid = Vec3::from(bricks[row.0 as usize].centroid);
+        row.3 = (hit_sum / row.1 as f32 - centroid).to_array();
+    }
 }

@@ -30,8 +30,8 @@ use std::time::{Duration, Instant};
 
 use glam::Vec3;
 use prt_format::{
-    directions, Asset, BakeSettingsRecord, BakeStats, Factors, Header, Probe, TransferPrecision,
-    PROBE_VALID,
+    directions, Asset, BakeSettingsRecord, BakeStats, FactorRow, Factors, Header, Probe,
+    TransferPrecision, PROBE_VALID,
 };
 use rayon::prelude::*;
 
@@ -51,7 +51,7 @@ pub struct BakeSettings {
     pub bounds: Option<[f32; 6]>,
     /// Refuse grids with more probes than this.
     pub max_probes: u64,
-    /// Surfel cell size in metres (a brick is 4x4x4 cells); `None` is `spacing / 8`; 0 switches
+    /// Surfel cell size in metres (a brick is 4x4x4 cells); `None` is `spacing / 12`; 0 switches
     /// merging off (exact, one brick per ray hit, larger assets and more runtime work).
     pub cell_size: Option<f32>,
     /// Hits merge into one surfel only when the cosine between their normals is at least this.
@@ -116,7 +116,11 @@ impl BakeSettings {
         }
         if let Some(s) = self.spacing {
             if !(s.is_finite() && s > 0.0) {
-                return bad("spacing", s.to_string(), "must be a positive number of metres");
+                return bad(
+                    "spacing",
+                    s.to_string(),
+                    "must be a positive number of metres",
+                );
             }
         }
         if let Some(b) = self.bounds {
@@ -124,7 +128,11 @@ impl BakeSettings {
                 return bad("bounds", format!("{b:?}"), "must be finite");
             }
             if (0..3).any(|a| b[a] > b[a + 3]) {
-                return bad("bounds", format!("{b:?}"), "min is above max (inverted bounds)");
+                return bad(
+                    "bounds",
+                    format!("{b:?}"),
+                    "min is above max (inverted bounds)",
+                );
             }
         }
         if let Some(c) = self.cell_size {
@@ -133,7 +141,11 @@ impl BakeSettings {
             }
         }
         if !(-1.0..=1.0).contains(&self.merge_normal_cos) {
-            return bad("merge_normal_cos", self.merge_normal_cos.to_string(), "must be in [-1, 1]");
+            return bad(
+                "merge_normal_cos",
+                self.merge_normal_cos.to_string(),
+                "must be in [-1, 1]",
+            );
         }
         if !(0.0..=1.0).contains(&self.invalid_backface_fraction) {
             return bad(
@@ -205,9 +217,9 @@ pub fn bake_to_file(
     let (asset, mut report) = bake(scene_path, settings, progress)?;
     let t = Instant::now();
     report.file_bytes =
-        prt_format::write_asset_atomic(out, &asset).map_err(|source| BakeError::Format {
+        prt_format::write_asset_atomic(out, &asset).map_err(|error| BakeError::Format {
             path: out.to_owned(),
-            source,
+            error,
         })?;
     report.timings.push(("write", t.elapsed()));
     Ok((asset, report))
@@ -225,9 +237,9 @@ fn bake_in_pool(
         t = Instant::now();
     };
 
-    let source_bytes = std::fs::read(scene_path).map_err(|source| BakeError::Io {
+    let source_bytes = std::fs::read(scene_path).map_err(|error| BakeError::Io {
         path: scene_path.to_owned(),
-        source,
+        error,
     })?;
     let source_hash = xxhash_rust::xxh3::xxh3_64(&source_bytes);
     drop(source_bytes);
@@ -295,13 +307,19 @@ fn bake_in_pool(
         hit_offsets.push(hit_offsets.last().copied().unwrap_or(0) + r.hits.len());
     }
     let hits: Vec<trace::Hit> = traced.iter().flat_map(|r| r.hits.iter().copied()).collect();
-    let cell_size = settings.cell_size.unwrap_or(spacing / 8.0);
+    let cell_size = settings.cell_size.unwrap_or(spacing / 12.0);
     let bricked = bricks::build(&hits, cell_size, settings.merge_normal_cos);
-    let tables: Vec<Vec<(u32, u32, [f32; 8])>> = (0..traced.len())
+    let tables: Vec<Vec<FactorRow>> = (0..traced.len())
         .into_par_iter()
         .map(|p| {
             let range = hit_offsets[p]..hit_offsets[p + 1];
-            factors::probe_factors(&hits[range.clone()], &bricked.hit_brick[range], &dirs, weight)
+            factors::probe_factors(
+                &hits[range.clone()],
+                &bricked.hit_brick[range],
+                &bricked.bricks,
+                &dirs,
+                weight,
+            )
         })
         .collect();
     lap(&mut report, "merge");
@@ -320,7 +338,7 @@ fn bake_in_pool(
         });
         first_factor += table.len() as u32;
     }
-    let rows: Vec<(u32, u32, [f32; 8])> = tables.into_iter().flatten().collect();
+    let rows: Vec<FactorRow> = tables.into_iter().flatten().collect();
     let stats = BakeStats {
         triangles: scene.triangles.len() as u64,
         degenerate_triangles_skipped: scene.degenerate_skipped,
@@ -349,7 +367,10 @@ fn bake_in_pool(
             stats,
         },
         probes: probes_out,
-        sky_mask: traced.iter().flat_map(|r| r.sky_mask.iter().copied()).collect(),
+        sky_mask: traced
+            .iter()
+            .flat_map(|r| r.sky_mask.iter().copied())
+            .collect(),
         sky_transfer: traced.iter().map(|r| r.sky_transfer).collect(),
         factors: Factors::build(&rows, settings.transfer_precision),
         bricks: bricked.bricks,
@@ -357,9 +378,9 @@ fn bake_in_pool(
         geometry: bvh.geometry,
         lights: scene.lights,
     };
-    prt_format::validate::validate(&asset).map_err(|source| BakeError::Format {
+    prt_format::validate::validate(&asset).map_err(|error| BakeError::Format {
         path: scene_path.to_owned(),
-        source,
+        error,
     })?;
     lap(&mut report, "assemble");
     Ok((asset, report))

@@ -70,7 +70,13 @@ mod tests {
 
     #[test]
     fn reference_cornell_grid() {
-        let g = grid(Vec3::new(-0.9, 0.1, -0.9), Vec3::new(0.9, 1.9, 0.9), 0.6, 100).unwrap();
+        let g = grid(
+            Vec3::new(-0.9, 0.1, -0.9),
+            Vec3::new(0.9, 1.9, 0.9),
+            0.6,
+            100,
+        )
+        .unwrap();
         assert_eq!(g.counts, [3, 3, 3]);
         let p = positions(&g);
         assert!((p[0] - Vec3::new(-0.6, 0.4, -0.6)).length() < 1e-6);

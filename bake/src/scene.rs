@@ -86,9 +86,9 @@ struct Loader<'a> {
 
 /// Loads `path` (.gltf with embedded or external buffers, or .glb).
 pub fn load(path: &Path) -> Result<Scene, BakeError> {
-    let bytes = std::fs::read(path).map_err(|source| BakeError::Io {
+    let bytes = std::fs::read(path).map_err(|error| BakeError::Io {
         path: path.to_owned(),
-        source,
+        error,
     })?;
     let gltf_err = |message: String| BakeError::Gltf {
         path: path.to_owned(),
@@ -258,7 +258,9 @@ impl Loader<'_> {
     fn light(&mut self, light: &gltf::khr_lights_punctual::Light, world: Mat4) {
         use gltf::khr_lights_punctual::Kind;
         let position = world.transform_point3(Vec3::ZERO);
-        let direction = world.transform_vector3(Vec3::NEG_Z).normalize_or(Vec3::NEG_Z);
+        let direction = world
+            .transform_vector3(Vec3::NEG_Z)
+            .normalize_or(Vec3::NEG_Z);
         let (kind, inner, outer) = match light.kind() {
             Kind::Directional => (LightKind::Directional, 0.0, std::f32::consts::FRAC_PI_4),
             Kind::Point => (LightKind::Point, 0.0, std::f32::consts::FRAC_PI_4),
@@ -300,7 +302,10 @@ impl Loader<'_> {
                 message,
             };
             let mode = prim.mode();
-            if !matches!(mode, Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan) {
+            if !matches!(
+                mode,
+                Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
+            ) {
                 self.scene.warnings.push(format!(
                     "mesh {mesh_name} primitive {}: {mode:?} skipped (only triangles are baked)",
                     prim.index()

@@ -150,6 +150,8 @@ mod tests {
     fn barycentric_recovers_vertices_and_interpolates() {
         let v = [Vec3::ZERO, Vec3::X, Vec3::Y];
         let b = barycentric(&v, Vec3::new(0.25, 0.5, 0.0));
-        assert!((b[0] - 0.25).abs() < 1e-6 && (b[1] - 0.25).abs() < 1e-6 && (b[2] - 0.5).abs() < 1e-6);
+        assert!(
+            (b[0] - 0.25).abs() < 1e-6 && (b[1] - 0.25).abs() < 1e-6 && (b[2] - 0.5).abs() < 1e-6
+        );
     }
 }

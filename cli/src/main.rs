@@ -11,7 +11,11 @@ use prt_bake::BakeSettings;
 use prt_format::TransferPrecision;
 
 #[derive(Parser)]
-#[command(name = "prt", version, about = "Precomputed radiance transfer GI: bake, inspect, relight")]
+#[command(
+    name = "prt",
+    version,
+    about = "Precomputed radiance transfer GI: bake, inspect, relight"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -31,6 +35,12 @@ enum Precision {
     F32,
 }
 
+#[derive(Clone, Copy, ValueEnum)]
+enum Backend {
+    Cpu,
+    Gpu,
+}
+
 #[derive(Subcommand)]
 enum Command {
     /// Bake a glTF 2.0 scene into a PRT asset.
@@ -44,8 +54,8 @@ enum Command {
         #[arg(long)]
         spacing: Option<f32>,
         /// Bake bounds MINX,MINY,MINZ,MAXX,MAXY,MAXZ [default: the scene's bounds].
-        #[arg(long, value_delimiter = ',', num_args = 6, allow_hyphen_values = true)]
-        bounds: Option<Vec<f32>>,
+        #[arg(long, value_parser = parse_bounds, allow_hyphen_values = true)]
+        bounds: Option<[f32; 6]>,
         /// Rays per probe [default: 512, or the --quality preset's].
         #[arg(long)]
         rays: Option<u32>,
@@ -58,7 +68,7 @@ enum Command {
         /// Refuse grids with more probes than this.
         #[arg(long, default_value_t = 1 << 20)]
         max_probes: u64,
-        /// Surfel cell size in metres (bricks are 4x4x4 cells) [default: spacing / 8]; 0 = no merging.
+        /// Surfel cell size in metres (bricks are 4x4x4 cells) [default: spacing / 12]; 0 = no merging.
         #[arg(long)]
         cell_size: Option<f32>,
         /// Keep every ray hit as its own surfel and brick (same as --cell-size 0).
@@ -74,6 +84,21 @@ enum Command {
         #[arg(long, value_enum, default_value = "f16")]
         precision: Precision,
     },
+    /// Relight an asset once and write every probe's SH9 as JSON.
+    Relight {
+        asset: PathBuf,
+        /// Light rig JSON [default: the scene's KHR_lights_punctual lights, black sky].
+        #[arg(long)]
+        lights: Option<PathBuf>,
+        #[arg(long, value_enum, default_value = "cpu")]
+        backend: Backend,
+        /// Light bounces (1 = direct light at surfels only: the one-bounce contract).
+        #[arg(long, default_value_t = 1)]
+        bounces: u32,
+        /// Output JSON, written atomically.
+        #[arg(long)]
+        json: PathBuf,
+    },
     /// Print the summary of an asset.
     Inspect {
         asset: PathBuf,
@@ -81,6 +106,16 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+}
+
+/// Parses `MINX,MINY,MINZ,MAXX,MAXY,MAXZ`.
+fn parse_bounds(s: &str) -> Result<[f32; 6], String> {
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|t| t.trim().parse::<f32>().map_err(|e| format!("{t:?}: {e}")))
+        .collect::<Result<_, _>>()?;
+    v.try_into()
+        .map_err(|v: Vec<f32>| format!("expected 6 comma-separated numbers, got {}", v.len()))
 }
 
 fn main() {
@@ -114,7 +149,7 @@ fn run(cli: Cli) -> Result<()> {
             let settings = BakeSettings {
                 rays: rays.unwrap_or(preset.rays),
                 spacing,
-                bounds: bounds.map(|b| [b[0], b[1], b[2], b[3], b[4], b[5]]),
+                bounds,
                 max_probes,
                 cell_size: if no_merge { Some(0.0) } else { cell_size },
                 double_sided,
@@ -127,9 +162,8 @@ fn run(cli: Cli) -> Result<()> {
                 ..preset
             };
             let progress = progress::Bar::new();
-            let (asset, report) =
-                prt_bake::bake_to_file(&scene, &output, &settings, &progress)
-                    .with_context(|| format!("baking {}", scene.display()))?;
+            let (asset, report) = prt_bake::bake_to_file(&scene, &output, &settings, &progress)
+                .with_context(|| format!("baking {}", scene.display()))?;
             for w in &report.warnings {
                 eprintln!("warning: {w}");
             }
@@ -143,9 +177,49 @@ fn run(cli: Cli) -> Result<()> {
             println!("wrote            {}", output.display());
             Ok(())
         }
+        Command::Relight {
+            asset,
+            lights,
+            backend,
+            bounces,
+            json,
+        } => {
+            let loaded = prt_format::read_asset(&asset)
+                .with_context(|| format!("loading {}", asset.display()))?;
+            let lighting = match &lights {
+                Some(rig) => prt_runtime::load_rig(rig)?,
+                None => prt_runtime::Lighting {
+                    rig: prt_format::LightRig {
+                        lights: loaded.lights.clone(),
+                        sky: None,
+                    },
+                    sky: prt_runtime::SkyModel::Black,
+                },
+            };
+            let start = std::time::Instant::now();
+            let (relit, name) = match backend {
+                Backend::Cpu => (
+                    prt_runtime::CpuRelighter::new(&loaded)?.relight(&lighting, bounces)?,
+                    "cpu",
+                ),
+                Backend::Gpu => anyhow::bail!("the gpu backend is not available in this build"),
+            };
+            let seconds = start.elapsed().as_secs_f64();
+            let doc = prt_runtime::output::relight_json(&loaded, &relit.sh, &relit.stats, name);
+            let text = serde_json::to_vec_pretty(&doc)?;
+            prt_format::io::write_bytes_atomic(&json, &text)
+                .with_context(|| format!("writing {}", json.display()))?;
+            println!(
+                "relit {} probes ({name}, {bounces} bounce(s)) in {seconds:.3} s",
+                relit.sh.len()
+            );
+            println!("{}", relit.stats);
+            println!("wrote {}", json.display());
+            Ok(())
+        }
         Command::Inspect { asset, json } => {
-            let bytes = std::fs::read(&asset)
-                .with_context(|| format!("reading {}", asset.display()))?;
+            let bytes =
+                std::fs::read(&asset).with_context(|| format!("reading {}", asset.display()))?;
             let loaded = prt_format::decode(&bytes)
                 .with_context(|| format!("loading {}", asset.display()))?;
             let summary = prt_format::Summary::of(&loaded, bytes.len() as u64);

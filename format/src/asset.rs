@@ -135,9 +135,9 @@ impl Probe {
 /// How factor transfer coefficients are stored.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub enum TransferPrecision {
-    /// 8 x f32 per factor (40 bytes with brick index and ray count).
+    /// 8 x f32 transfer and 3 x f32 offset per factor (56 bytes with brick index and ray count).
     F32,
-    /// 8 x IEEE half per factor (24 bytes with brick index and ray count).
+    /// 8 + 3 IEEE halves per factor (32 bytes with brick index and ray count).
     #[default]
     F16,
 }
@@ -145,26 +145,42 @@ pub enum TransferPrecision {
 /// One factor, f32 transfer: brick `brick` contributes its radiance times the SH9 transfer
 /// `4pi/N sum_{probe rays i into the brick} Y_k(w_i)` to its probe. `k = 0` is stored exactly as
 /// the ray count (`Y_0` is constant), so a probe's bookkeeping (rays into bricks + sky rays = N)
-/// is exact whatever the precision; `sh[k-1]` holds `k = 1..9`.
+/// is exact whatever the precision; `sh[k-1]` holds `k = 1..9`. `offset` is the mean hit point
+/// of those rays relative to the brick's centroid: the radiance the probe sees is the brick's
+/// linear model evaluated there, `max(0, L_mean + G . offset)`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable, Serialize, Deserialize)]
 #[repr(C)]
 pub struct FactorF32 {
     pub brick: u32,
     pub rays: u32,
     pub sh: [f32; 8],
+    pub offset: [f32; 3],
+    pub _pad: u32,
 }
-const _: () = assert!(std::mem::size_of::<FactorF32>() == 40);
+const _: () = assert!(std::mem::size_of::<FactorF32>() == 56);
 
-/// One factor, half-float transfer: as [`FactorF32`], `sh` packs the 8 halves two per word
-/// (low half first, WGSL `unpack2x16float` order).
+/// One factor, half-float transfer: as [`FactorF32`]; `sh` packs the 8 halves two per word and
+/// `offset` the 3 offset halves (and a zero), low half first (WGSL `unpack2x16float` order).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable, Serialize, Deserialize)]
 #[repr(C)]
 pub struct FactorF16 {
     pub brick: u32,
     pub rays: u32,
     pub sh: [u32; 4],
+    pub offset: [u32; 2],
 }
-const _: () = assert!(std::mem::size_of::<FactorF16>() == 24);
+const _: () = assert!(std::mem::size_of::<FactorF16>() == 32);
+
+/// A factor row as the baker produces it: brick, rays, transfer k = 1..9, offset.
+pub type FactorRow = (u32, u32, [f32; 8], [f32; 3]);
+
+fn pack2(a: f32, b: f32) -> u32 {
+    u32::from(f32_to_f16(a)) | (u32::from(f32_to_f16(b)) << 16)
+}
+
+fn unpack2(w: u32) -> (f32, f32) {
+    (f16_to_f32(w as u16), f16_to_f32((w >> 16) as u16))
+}
 
 /// The factor tables of all probes, concatenated, in one of the [`TransferPrecision`]s.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -215,31 +231,46 @@ impl Factors {
             Factors::F32(v) => t[1..].copy_from_slice(&v[f].sh),
             Factors::F16(v) => {
                 for (w, &word) in v[f].sh.iter().enumerate() {
-                    t[1 + 2 * w] = f16_to_f32(word as u16);
-                    t[2 + 2 * w] = f16_to_f32((word >> 16) as u16);
+                    (t[1 + 2 * w], t[2 + 2 * w]) = unpack2(word);
                 }
             }
         }
         t
     }
 
-    /// Builds the table in the requested precision from (brick, rays, transfer k = 1..9).
-    pub fn build(rows: &[(u32, u32, [f32; 8])], precision: TransferPrecision) -> Self {
+    /// Offset of factor `f`'s mean hit point from its brick's centroid.
+    pub fn offset(&self, f: usize) -> [f32; 3] {
+        match self {
+            Factors::F32(v) => v[f].offset,
+            Factors::F16(v) => {
+                let (x, y) = unpack2(v[f].offset[0]);
+                let (z, _) = unpack2(v[f].offset[1]);
+                [x, y, z]
+            }
+        }
+    }
+
+    /// Builds the table in the requested precision.
+    pub fn build(rows: &[FactorRow], precision: TransferPrecision) -> Self {
         match precision {
             TransferPrecision::F32 => Factors::F32(
                 rows.iter()
-                    .map(|&(brick, rays, sh)| FactorF32 { brick, rays, sh })
+                    .map(|&(brick, rays, sh, offset)| FactorF32 {
+                        brick,
+                        rays,
+                        sh,
+                        offset,
+                        _pad: 0,
+                    })
                     .collect(),
             ),
             TransferPrecision::F16 => Factors::F16(
                 rows.iter()
-                    .map(|&(brick, rays, sh)| FactorF16 {
+                    .map(|&(brick, rays, sh, o)| FactorF16 {
                         brick,
                         rays,
-                        sh: std::array::from_fn(|w| {
-                            u32::from(f32_to_f16(sh[2 * w]))
-                                | (u32::from(f32_to_f16(sh[2 * w + 1])) << 16)
-                        }),
+                        sh: std::array::from_fn(|w| pack2(sh[2 * w], sh[2 * w + 1])),
+                        offset: [pack2(o[0], o[1]), pack2(o[2], 0.0)],
                     })
                     .collect(),
             ),
@@ -270,9 +301,8 @@ pub struct Brick {
     pub first_surfel: u32,
     pub max: [f32; 3],
     pub surfel_count: u32,
-    /// Weighted mean normal of its surfels (for light culling by facing), not normalised to 1
-    /// when the normals disagree.
-    pub normal: [f32; 3],
+    /// Weighted mean position of its surfels: the point its mean radiance stands for.
+    pub centroid: [f32; 3],
     /// Axis (see [`BRICK_AXIS_MASK`]) and [`BRICK_BACKFACE`].
     pub flags: u32,
 }
@@ -295,9 +325,14 @@ pub struct Surfel {
     pub flags: u32,
     /// Emitted radiance (linear RGB).
     pub emission: [f32; 3],
-    pub _pad: u32,
+    pub _pad0: u32,
+    /// Gradient weight: the brick's radiance gradient is `sum_s gradient_s * L_s` (per colour
+    /// channel), the weighted least-squares fit of a linear radiance model over the brick's
+    /// surfels, precomputed because it depends only on their positions and weights.
+    pub gradient: [f32; 3],
+    pub _pad1: u32,
 }
-const _: () = assert!(std::mem::size_of::<Surfel>() == 64);
+const _: () = assert!(std::mem::size_of::<Surfel>() == 80);
 
 /// Scene geometry for visibility tests: triangles in BVH order and a binary BVH over them.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -348,7 +383,16 @@ mod tests {
 
     #[test]
     fn half_round_trip() {
-        for &x in &[0.0f32, 1.0, -2.5, 0.000_061_035_156, 1e-7, 65504.0, 3.544_907_7, -0.123_456] {
+        for &x in &[
+            0.0f32,
+            1.0,
+            -2.5,
+            0.000_061_035_156,
+            1e-7,
+            65504.0,
+            3.544_907_7,
+            -0.123_456,
+        ] {
             let y = f16_to_f32(f32_to_f16(x));
             assert!((x - y).abs() <= x.abs() * 1e-3 + 6e-8, "{x} -> {y}");
         }

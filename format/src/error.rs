@@ -5,13 +5,14 @@ use std::path::PathBuf;
 /// Why an asset could not be read, written or accepted.
 #[derive(Debug, thiserror::Error)]
 pub enum FormatError {
-    #[error("{path}: {source}")]
+    #[error("{path}: {error}")]
     Io {
         path: PathBuf,
-        #[source]
-        source: std::io::Error,
+        error: std::io::Error,
     },
-    #[error("not a prt asset: the file is {len} bytes, shorter than the {min}-byte header and checksum")]
+    #[error(
+        "not a prt asset: the file is {len} bytes, shorter than the {min}-byte header and checksum"
+    )]
     TooShort { len: usize, min: usize },
     #[error("not a prt asset: magic bytes are {found:02x?}, expected {expected:02x?}")]
     BadMagic { found: [u8; 8], expected: [u8; 8] },

@@ -28,7 +28,8 @@ pub const FORMAT_VERSION: u32 = 1;
 const PREFIX: usize = 20;
 const SUFFIX: usize = 8;
 
-fn config() -> bincode::config::Configuration<bincode::config::LittleEndian, bincode::config::Fixint> {
+fn config() -> bincode::config::Configuration<bincode::config::LittleEndian, bincode::config::Fixint>
+{
     bincode::config::standard()
         .with_little_endian()
         .with_fixed_int_encoding()
@@ -101,9 +102,9 @@ pub fn decode(bytes: &[u8]) -> Result<Asset, FormatError> {
 
 /// Reads and validates an asset file.
 pub fn read_asset(path: &Path) -> Result<Asset, FormatError> {
-    let bytes = std::fs::read(path).map_err(|source| FormatError::Io {
+    let bytes = std::fs::read(path).map_err(|error| FormatError::Io {
         path: path.to_owned(),
-        source,
+        error,
     })?;
     decode(&bytes)
 }
@@ -120,7 +121,7 @@ pub fn write_asset_atomic(path: &Path, asset: &Asset) -> Result<u64, FormatError
 pub fn write_bytes_atomic(path: &Path, bytes: &[u8]) -> Result<(), FormatError> {
     let io_err = |p: &Path| {
         let p = p.to_owned();
-        move |source| FormatError::Io { path: p, source }
+        move |error| FormatError::Io { path: p, error }
     };
     let tmp = temp_path(path);
     let result = (|| {

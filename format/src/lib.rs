@@ -35,5 +35,5 @@ pub mod validate;
 pub use asset::*;
 pub use error::FormatError;
 pub use io::{decode, encode, read_asset, write_asset_atomic, FORMAT_VERSION, MAGIC};
-pub use summary::Summary;
 pub use rig::{Light, LightKind, LightRig, Sky};
+pub use summary::Summary;

@@ -100,7 +100,11 @@ pub enum RigError {
         value: f32,
     },
     #[error("lights[{index}]: inner_cone_angle {inner} is larger than outer_cone_angle {outer}")]
-    InnerBeyondOuter { index: usize, inner: f32, outer: f32 },
+    InnerBeyondOuter {
+        index: usize,
+        inner: f32,
+        outer: f32,
+    },
     #[error("lights[{index}]: outer_cone_angle {outer} is outside (0, pi/2]")]
     OuterOutOfRange { index: usize, outer: f32 },
     #[error("lights[{index}]: range {range} must be positive")]
@@ -127,7 +131,10 @@ impl Light {
         finite("direction", &self.direction)?;
         finite("color", &self.color)?;
         finite("intensity", &[self.intensity])?;
-        finite("cone angles", &[self.inner_cone_angle, self.outer_cone_angle])?;
+        finite(
+            "cone angles",
+            &[self.inner_cone_angle, self.outer_cone_angle],
+        )?;
         if self.intensity < 0.0 {
             return Err(RigError::Negative {
                 index,

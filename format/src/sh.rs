@@ -142,7 +142,11 @@ mod tests {
         assert!((expect[0][0] - 0.2 * 3.544_907_7).abs() < 1e-5);
         for k in 0..SH_COUNT {
             for ch in 0..3 {
-                assert!((c[k][ch] - expect[k][ch]).abs() < 1e-4, "k {k}: {}", c[k][ch]);
+                assert!(
+                    (c[k][ch] - expect[k][ch]).abs() < 1e-4,
+                    "k {k}: {}",
+                    c[k][ch]
+                );
             }
         }
         // Uniform radiance L gives irradiance pi L whatever the normal.
@@ -168,7 +172,11 @@ mod tests {
         for i in 0..SH_COUNT {
             for j in 0..SH_COUNT {
                 let expect = if i == j { 1.0 } else { 0.0 };
-                assert!((gram[i][j] - expect).abs() < 2e-3, "<Y{i},Y{j}> = {}", gram[i][j]);
+                assert!(
+                    (gram[i][j] - expect).abs() < 2e-3,
+                    "<Y{i},Y{j}> = {}",
+                    gram[i][j]
+                );
             }
         }
     }

@@ -63,7 +63,13 @@ impl Summary {
             bvh_nodes: bytes(&asset.geometry.nodes),
             triangles: bytes(&asset.geometry.triangles),
         };
-        let per_probe = |b: u64| if probes == 0 { 0.0 } else { b as f64 / probes as f64 };
+        let per_probe = |b: u64| {
+            if probes == 0 {
+                0.0
+            } else {
+                b as f64 / probes as f64
+            }
+        };
         let s = &section_bytes;
         Summary {
             format_version: FORMAT_VERSION,
@@ -82,7 +88,9 @@ impl Summary {
             light_count: asset.lights.len(),
             file_bytes,
             bytes_per_probe: per_probe(file_bytes),
-            transport_bytes_per_probe: per_probe(s.probes + s.sky_mask + s.sky_transfer + s.factors),
+            transport_bytes_per_probe: per_probe(
+                s.probes + s.sky_mask + s.sky_transfer + s.factors,
+            ),
             section_bytes,
             grid: asset.header.grid,
         }
@@ -93,7 +101,11 @@ impl std::fmt::Display for Summary {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let g = &self.grid;
         writeln!(f, "format version   {}", self.format_version)?;
-        writeln!(f, "source           {} (xxh3 {})", self.source_name, self.source_hash)?;
+        writeln!(
+            f,
+            "source           {} (xxh3 {})",
+            self.source_name, self.source_hash
+        )?;
         writeln!(
             f,
             "grid             {} x {} x {} at {} m, origin {:?}",

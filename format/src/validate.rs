@@ -13,7 +13,11 @@ fn finite(section: &'static str, index: usize, what: &str, v: &[f32]) -> Result<
     if v.iter().all(|x| x.is_finite()) {
         Ok(())
     } else {
-        Err(FormatError::invalid(section, index, format!("{what} {v:?} is not finite")))
+        Err(FormatError::invalid(
+            section,
+            index,
+            format!("{what} {v:?} is not finite"),
+        ))
     }
 }
 
@@ -35,10 +39,18 @@ pub fn validate(asset: &Asset) -> Result<(), FormatError> {
     let g = &h.grid;
     finite("header.grid", 0, "origin", &g.origin)?;
     if !(g.spacing.is_finite() && g.spacing > 0.0) {
-        return Err(FormatError::invalid("header.grid", 0, format!("spacing {}", g.spacing)));
+        return Err(FormatError::invalid(
+            "header.grid",
+            0,
+            format!("spacing {}", g.spacing),
+        ));
     }
     if g.counts.contains(&0) {
-        return Err(FormatError::invalid("header.grid", 0, format!("counts {:?}", g.counts)));
+        return Err(FormatError::invalid(
+            "header.grid",
+            0,
+            format!("counts {:?}", g.counts),
+        ));
     }
     if h.ray_count == 0 || h.ray_count > MAX_RAYS {
         return Err(FormatError::invalid(
@@ -55,7 +67,11 @@ pub fn validate(asset: &Asset) -> Result<(), FormatError> {
             expected: g.probe_count() as usize,
         });
     }
-    count("sky_mask", asset.sky_mask.len(), probes * h.sky_mask_words())?;
+    count(
+        "sky_mask",
+        asset.sky_mask.len(),
+        probes * h.sky_mask_words(),
+    )?;
     count("sky_transfer", asset.sky_transfer.len(), probes)?;
     for (i, t) in asset.sky_transfer.iter().enumerate() {
         finite("sky_transfer", i, "transfer", t)?;
@@ -109,15 +125,20 @@ pub fn validate(asset: &Asset) -> Result<(), FormatError> {
             ));
         }
         finite("factors", f, "transfer", &factors.transfer(f, h.ray_count))?;
+        finite("factors", f, "offset", &factors.offset(f))?;
     }
 
     let mut next_surfel = 0u64;
     for (i, b) in asset.bricks.iter().enumerate() {
         finite("bricks", i, "min", &b.min)?;
         finite("bricks", i, "max", &b.max)?;
-        finite("bricks", i, "normal", &b.normal)?;
+        finite("bricks", i, "centroid", &b.centroid)?;
         if b.flags & BRICK_AXIS_MASK >= 6 {
-            return Err(FormatError::invalid("bricks", i, format!("flags {:#x}", b.flags)));
+            return Err(FormatError::invalid(
+                "bricks",
+                i,
+                format!("flags {:#x}", b.flags),
+            ));
         }
         if u64::from(b.first_surfel) != next_surfel {
             return Err(FormatError::invalid(
@@ -131,7 +152,10 @@ pub fn validate(asset: &Asset) -> Result<(), FormatError> {
             return Err(FormatError::invalid(
                 "bricks",
                 i,
-                format!("surfels end at {next_surfel} (surfels: {})", asset.surfels.len()),
+                format!(
+                    "surfels end at {next_surfel} (surfels: {})",
+                    asset.surfels.len()
+                ),
             ));
         }
         let range = b.first_surfel as usize..next_surfel as usize;
@@ -151,8 +175,13 @@ pub fn validate(asset: &Asset) -> Result<(), FormatError> {
         finite("surfels", i, "normal", &s.normal)?;
         finite("surfels", i, "albedo", &s.albedo)?;
         finite("surfels", i, "emission", &s.emission)?;
+        finite("surfels", i, "gradient", &s.gradient)?;
         if !(s.weight.is_finite() && s.weight > 0.0) {
-            return Err(FormatError::invalid("surfels", i, format!("weight {}", s.weight)));
+            return Err(FormatError::invalid(
+                "surfels",
+                i,
+                format!("weight {}", s.weight),
+            ));
         }
     }
 

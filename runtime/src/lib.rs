@@ -1,1 +1,16 @@
+//! # prt-runtime: relighting baked prt assets
+//!
+//! An engine loads an asset (`prt-format`), describes its lights and sky ([`rig`], [`sky`]) and
+//! relights the probe volume. This crate holds the CPU reference relight ([`relight`]); every
+//! GPU stage must reproduce its numbers.
 
+pub mod lights;
+pub mod output;
+pub mod relight;
+pub mod rig;
+pub mod sky;
+pub mod visibility;
+
+pub use relight::{CpuRelighter, RelightError, RelightStats, Relit};
+pub use rig::{load_rig, Lighting, RigLoadError};
+pub use sky::SkyModel;

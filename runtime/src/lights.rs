@@ -1,0 +1,219 @@
+//! Direct irradiance from punctual lights (conventions.md section 3, KHR_lights_punctual), and
+//! the conservative per-brick culling tests that skip a light before any shadow ray is traced.
+//!
+//! Every formula here has a twin in `shaders/` that must compute the same numbers; the CPU
+//! versions are the reference the GPU is tested against.
+
+use glam::Vec3;
+use prt_format::{Brick, Light, LightKind};
+
+/// A light prepared for evaluation: unit direction, premultiplied colour, cone constants.
+#[derive(Clone, Copy, Debug)]
+pub struct PreparedLight {
+    pub kind: LightKind,
+    pub position: Vec3,
+    /// Unit direction of propagation.
+    pub direction: Vec3,
+    /// `color * intensity`.
+    pub radiant: Vec3,
+    /// `1 / range^2`, or 0 without a range.
+    pub inv_range_sq: f32,
+    pub range: f32,
+    pub cos_outer: f32,
+    /// `1 / max(1e-3, cos inner - cos outer)` as in the KHR_lights_punctual reference code.
+    pub cone_scale: f32,
+}
+
+impl PreparedLight {
+    pub fn new(l: &Light) -> PreparedLight {
+        let cos_outer = l.outer_cone_angle.cos();
+        let cos_inner = l.inner_cone_angle.cos();
+        PreparedLight {
+            kind: l.kind,
+            position: Vec3::from(l.position),
+            direction: Vec3::from(l.unit_direction()),
+            radiant: Vec3::from(l.radiant()),
+            inv_range_sq: l.range.map_or(0.0, |r| 1.0 / (r * r)),
+            range: l.range.unwrap_or(f32::INFINITY),
+            cos_outer,
+            cone_scale: 1.0 / (cos_inner - cos_outer).max(1e-3),
+        }
+    }
+
+    /// Unshadowed irradiance at `p` with unit normal `n`, and the unit direction and distance
+    /// towards the light (distance infinite for directional lights).
+    #[inline]
+    pub fn irradiance(&self, p: Vec3, n: Vec3) -> (Vec3, Vec3, f32) {
+        match self.kind {
+            LightKind::Directional => {
+                let l = -self.direction;
+                (self.radiant * n.dot(l).max(0.0), l, f32::INFINITY)
+            }
+            LightKind::Point | LightKind::Spot => {
+                let to_light = self.position - p;
+                let d2 = to_light.length_squared();
+                let d = d2.sqrt();
+                let l = if d > 0.0 { to_light / d } else { Vec3::Y };
+                let cos = n.dot(l).max(0.0);
+                let x = d2 * self.inv_range_sq;
+                let window = (1.0 - x * x).clamp(0.0, 1.0);
+                let mut e = cos * window * window / d2.max(1e-5);
+                if self.kind == LightKind::Spot {
+                    let s = ((self.direction.dot(-l) - self.cos_outer) * self.cone_scale)
+                        .clamp(0.0, 1.0);
+                    e *= s * s;
+                }
+                (self.radiant * e, l, d)
+            }
+        }
+    }
+
+    /// Why a light cannot reach any surfel of a brick, tested before any shadow ray.
+    pub fn cull(&self, brick: &Brick, normals: &NormalBounds) -> Option<CullReason> {
+        let (lo, hi) = (Vec3::from(brick.min), Vec3::from(brick.max));
+        if self.radiant.max_element() <= 0.0 {
+            return Some(CullReason::Dark);
+        }
+        match self.kind {
+            LightKind::Directional => {
+                if max_dot(normals, -self.direction, -self.direction) <= 0.0 {
+                    return Some(CullReason::Facing);
+                }
+            }
+            LightKind::Point | LightKind::Spot => {
+                let nearest = self.position.clamp(lo, hi);
+                if nearest.distance(self.position) >= self.range {
+                    return Some(CullReason::Range);
+                }
+                // Directions from the brick's points to the light span this box.
+                if max_dot(normals, self.position - hi, self.position - lo) <= 0.0 {
+                    return Some(CullReason::Facing);
+                }
+                if self.kind == LightKind::Spot {
+                    let centre = (lo + hi) * 0.5;
+                    let radius = (hi - lo).length() * 0.5;
+                    let v = centre - self.position;
+                    let dist = v.length();
+                    if dist > radius {
+                        // Angle between the axis and the centre, minus the sphere's half-angle.
+                        let cos_axis = (self.direction.dot(v) / dist).clamp(-1.0, 1.0);
+                        let half = (radius / dist).clamp(-1.0, 1.0).asin();
+                        if cos_axis.acos() - half >= self.cos_outer.clamp(-1.0, 1.0).acos() {
+                            return Some(CullReason::Cone);
+                        }
+                    }
+                }
+            }
+        }
+        None
+    }
+}
+
+/// Why a light was culled for a brick.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CullReason {
+    Dark,
+    Range,
+    Cone,
+    Facing,
+}
+
+/// Component-wise bounds of a brick's surfel normals.
+#[derive(Clone, Copy, Debug)]
+pub struct NormalBounds {
+    pub min: Vec3,
+    pub max: Vec3,
+}
+
+/// Upper bound of `dot(n, v)` for n in the normal box and v in the box `[vlo, vhi]`
+/// (interval arithmetic per axis).
+fn max_dot(n: &NormalBounds, a: Vec3, b: Vec3) -> f32 {
+    let (vlo, vhi) = (a.min(b), a.max(b));
+    let mut sum = 0.0;
+    for i in 0..3 {
+        let c = [
+            n.min[i] * vlo[i],
+            n.min[i] * vhi[i],
+            n.max[i] * vlo[i],
+            n.max[i] * vhi[i],
+        ];
+        sum += c.into_iter().fold(f32::NEG_INFINITY, f32::max);
+    }
+    sum
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn light(kind: LightKind) -> Light {
+        Light {
+            kind,
+            position: [0.0, 2.0, 0.0],
+            direction: [0.0, -1.0, 0.0],
+            color: [1.0, 0.9, 0.8],
+            intensity: 5.0,
+            range: Some(6.0),
+            inner_cone_angle: 0.3,
+            outer_cone_angle: 0.6,
+        }
+    }
+
+    #[test]
+    fn point_light_matches_fixture_table() {
+        // fixtures/README.md, lights.gltf: point light at (0,2,0), I = 5 (1,0.9,0.8), range 6.
+        let l = PreparedLight::new(&light(LightKind::Point));
+        let (e, _, d) = l.irradiance(Vec3::ZERO, Vec3::Y);
+        assert!((d - 2.0).abs() < 1e-6);
+        assert!((e.x - 1.21933).abs() < 1e-4, "{e}");
+        let (e, _, _) = l.irradiance(Vec3::new(0.0, 0.0, 1.5), Vec3::Y);
+        assert!((e.x - 0.60200).abs() < 1e-4, "{e}");
+    }
+
+    #[test]
+    fn spot_cone_and_directional() {
+        let mut s = light(LightKind::Spot);
+        s.position = [1.0, 2.0, 0.0];
+        s.range = None;
+        s.intensity = 10.0;
+        s.color = [1.0; 3];
+        let l = PreparedLight::new(&s);
+        assert!((l.irradiance(Vec3::new(1.0, 0.0, 0.0), Vec3::Y).0.x - 2.5).abs() < 1e-5);
+        assert!((l.irradiance(Vec3::ZERO, Vec3::Y).0.x - 0.50528).abs() < 1e-4);
+        assert_eq!(l.irradiance(Vec3::new(0.0, 0.0, 1.5), Vec3::Y).0.x, 0.0);
+        let mut d = light(LightKind::Directional);
+        d.intensity = 2.0;
+        d.color = [1.0; 3];
+        let l = PreparedLight::new(&d);
+        assert!((l.irradiance(Vec3::ZERO, Vec3::Y).0.x - 2.0).abs() < 1e-6);
+        assert_eq!(l.irradiance(Vec3::ZERO, -Vec3::Y).0.x, 0.0);
+    }
+
+    #[test]
+    fn culling_is_conservative() {
+        let l = PreparedLight::new(&light(LightKind::Spot));
+        let up = NormalBounds {
+            min: Vec3::Y,
+            max: Vec3::Y,
+        };
+        let brick = |c: Vec3| Brick {
+            min: (c - 0.1).to_array(),
+            max: (c + 0.1).to_array(),
+            ..Brick::default()
+        };
+        assert_eq!(l.cull(&brick(Vec3::ZERO), &up), None);
+        assert_eq!(
+            l.cull(&brick(Vec3::new(0.0, 0.0, 9.0)), &up),
+            Some(CullReason::Range)
+        );
+        assert_eq!(
+            l.cull(&brick(Vec3::new(3.0, 0.0, 0.0)), &up),
+            Some(CullReason::Cone)
+        );
+        let down = NormalBounds {
+            min: -Vec3::Y,
+            max: -Vec3::Y,
+        };
+        assert_eq!(l.cull(&brick(Vec3::ZERO), &down), Some(CullReason::Facing));
+    }
+}

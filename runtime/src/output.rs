@@ -1,0 +1,68 @@
+//! The relight JSON of conventions.md section 6:
+//! `{"probes": [{"index": i, "position": [x,y,z], "valid": true, "sh": [[r,g,b] x 9]}, ...]}`.
+
+use prt_format::sh::ShRgb;
+use prt_format::Asset;
+use serde_json::{json, Value};
+
+use crate::relight::RelightStats;
+
+/// The JSON document for `sh` relit from `asset`, with the relight's counts under `"stats"`.
+pub fn relight_json(asset: &Asset, sh: &[ShRgb], stats: &RelightStats, backend: &str) -> Value {
+    let probes: Vec<Value> = asset
+        .probes
+        .iter()
+        .zip(sh)
+        .enumerate()
+        .map(|(i, (p, c))| {
+            json!({
+                "index": i,
+                "position": p.position,
+                "valid": p.is_valid(),
+                "sh": c,
+            })
+        })
+        .collect();
+    json!({
+        "backend": backend,
+        "stats": {
+            "bricks": stats.bricks,
+            "bricks_skipped_backface": stats.bricks_skipped_backface,
+            "light_brick_pairs": stats.light_brick_pairs,
+            "culled_dark": stats.culled_dark,
+            "culled_range": stats.culled_range,
+            "culled_cone": stats.culled_cone,
+            "culled_facing": stats.culled_facing,
+            "shadow_rays": stats.shadow_rays,
+            "probes_gathered": stats.probes_gathered,
+            "probes_skipped_invalid": stats.probes_skipped_invalid,
+        },
+        "probes": probes,
+    })
+}
+
+/// Reads the `sh` of every probe from a relight or oracle JSON document (the oracle's
+/// `probes[i].sh` has the same layout), with positions.
+pub fn read_probe_sh(doc: &Value) -> Option<Vec<([f32; 3], ShRgb)>> {
+    doc.get("probes")?
+        .as_array()?
+        .iter()
+        .map(|p| {
+            let pos = p.get("position")?.as_array()?;
+            let position: [f32; 3] = [
+                pos.first()?.as_f64()? as f32,
+                pos.get(1)?.as_f64()? as f32,
+                pos.get(2)?.as_f64()? as f32,
+            ];
+            let sh = p.get("sh")?.as_array()?;
+            let mut c = [[0.0f32; 3]; 9];
+            for (k, row) in sh.iter().enumerate().take(9) {
+                let row = row.as_array()?;
+                for ch in 0..3 {
+                    c[k][ch] = row.get(ch)?.as_f64()? as f32;
+                }
+            }
+            Some((position, c))
+        })
+        .collect()
+}

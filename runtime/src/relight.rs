@@ -1,0 +1,374 @@
+//! The CPU relight: the straightforward, parallel reference every GPU kernel is checked against.
+//!
+//! 1. **Direct light at surfels.** Per brick: cull each light by range, cone and facing
+//!    ([`PreparedLight::cull`]); for the lights left, every surfel gets the irradiance of
+//!    conventions.md section 3, with a shadow ray through the asset's BVH
+//!    ([`crate::visibility`]). Back-face bricks are black and skipped.
+//! 2. **Surfel radiance** `L = emission + albedo / pi * E`.
+//! 3. **Brick radiance**: the weighted mean of its surfels'.
+//! 4. **Gather**: probe SH9 = sum over its factors of transfer x brick radiance, plus the sky
+//!    term. Invalid probes are skipped (zero, flagged invalid).
+//! 5. **Bounces** (optional, `bounces > 1`): surfels also receive the irradiance of the probe
+//!    volume from the previous iteration, sampled at the surfel with its normal (trilinear over
+//!    valid probes), and steps 2-4 repeat. `bounces = 1` is the one-bounce contract of
+//!    conventions.md section 5, exactly when the bake did not merge surfels.
+
+use glam::Vec3;
+use prt_format::sh::{self, ShRgb, SH_COUNT};
+use prt_format::{Asset, BRICK_BACKFACE};
+use rayon::prelude::*;
+
+use crate::lights::{CullReason, NormalBounds, PreparedLight};
+use crate::rig::Lighting;
+use crate::visibility::{self, occluded, ray_offset};
+
+/// Why an asset cannot be relit.
+#[derive(Debug, thiserror::Error)]
+pub enum RelightError {
+    #[error("the asset's BVH needs a traversal stack of {needed} entries, more than {max}")]
+    BvhTooDeep { needed: usize, max: usize },
+    #[error("bounces must be at least 1, got {0}")]
+    Bounces(u32),
+}
+
+/// What a relight did and skipped.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RelightStats {
+    pub bricks: u64,
+    pub bricks_skipped_backface: u64,
+    pub light_brick_pairs: u64,
+    pub culled_dark: u64,
+    pub culled_range: u64,
+    pub culled_cone: u64,
+    pub culled_facing: u64,
+    pub shadow_rays: u64,
+    pub probes_gathered: u64,
+    pub probes_skipped_invalid: u64,
+}
+
+impl std::ops::Add for RelightStats {
+    type Output = RelightStats;
+    fn add(self, o: RelightStats) -> RelightStats {
+        RelightStats {
+            bricks: self.bricks + o.bricks,
+            bricks_skipped_backface: self.bricks_skipped_backface + o.bricks_skipped_backface,
+            light_brick_pairs: self.light_brick_pairs + o.light_brick_pairs,
+            culled_dark: self.culled_dark + o.culled_dark,
+            culled_range: self.culled_range + o.culled_range,
+            culled_cone: self.culled_cone + o.culled_cone,
+            culled_facing: self.culled_facing + o.culled_facing,
+            shadow_rays: self.shadow_rays + o.shadow_rays,
+            probes_gathered: self.probes_gathered + o.probes_gathered,
+            probes_skipped_invalid: self.probes_skipped_invalid + o.probes_skipped_invalid,
+        }
+    }
+}
+
+impl std::fmt::Display for RelightStats {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "bricks {} ({} back-face skipped) | light-brick pairs {} (culled: dark {}, range {}, cone {}, facing {}) | shadow rays {} | probes gathered {} ({} invalid skipped)",
+            self.bricks,
+            self.bricks_skipped_backface,
+            self.light_brick_pairs,
+            self.culled_dark,
+            self.culled_range,
+            self.culled_cone,
+            self.culled_facing,
+            self.shadow_rays,
+            self.probes_gathered,
+            self.probes_skipped_invalid
+        )
+    }
+}
+
+/// A relit probe volume.
+#[derive(Clone, Debug)]
+pub struct Relit {
+    /// SH9 of incident radiance per probe (zero for invalid probes).
+    pub sh: Vec<ShRgb>,
+    pub stats: RelightStats,
+}
+
+/// CPU relighting of one asset; holds the per-brick data derived once at load.
+pub struct CpuRelighter<'a> {
+    asset: &'a Asset,
+    normal_bounds: Vec<NormalBounds>,
+}
+
+impl<'a> CpuRelighter<'a> {
+    pub fn new(asset: &'a Asset) -> Result<Self, RelightError> {
+        let needed = visibility::stack_needed(&asset.geometry);
+        if needed > visibility::MAX_STACK {
+            return Err(RelightError::BvhTooDeep {
+                needed,
+                max: visibility::MAX_STACK,
+            });
+        }
+        Ok(CpuRelighter {
+            asset,
+            normal_bounds: brick_normal_bounds(asset),
+        })
+    }
+
+    /// Relights with `lighting`; `bounces` >= 1.
+    pub fn relight(&self, lighting: &Lighting, bounces: u32) -> Result<Relit, RelightError> {
+        if bounces == 0 {
+            return Err(RelightError::Bounces(0));
+        }
+        let lights: Vec<PreparedLight> =
+            lighting.rig.lights.iter().map(PreparedLight::new).collect();
+        let (direct, mut stats) = self.direct_irradiance(&lights);
+        let sky: Vec<ShRgb> = (0..self.asset.probes.len())
+            .into_par_iter()
+            .map(|p| lighting.sky.probe_sky(self.asset, p))
+            .collect();
+        let mut sh = Vec::new();
+        for bounce in 0..bounces {
+            let irradiance: Vec<[f32; 3]> = if bounce == 0 {
+                direct.clone()
+            } else {
+                let volume = Volume::new(self.asset, &sh);
+                self.asset
+                    .surfels
+                    .par_iter()
+                    .zip(&direct)
+                    .map(|(s, e)| {
+                        let ind = volume.irradiance(Vec3::from(s.position), Vec3::from(s.normal));
+                        std::array::from_fn(|c| e[c] + ind[c])
+                    })
+                    .collect()
+            };
+            let radiance = self.brick_radiance(&irradiance);
+            let (g, gather_stats) = self.gather(&radiance, &sky);
+            sh = g;
+            if bounce + 1 == bounces {
+                stats = stats + gather_stats;
+            }
+        }
+        Ok(Relit { sh, stats })
+    }
+
+    /// Step 1: direct irradiance at every surfel (zero on back-face bricks).
+    pub fn direct_irradiance(&self, lights: &[PreparedLight]) -> (Vec<[f32; 3]>, RelightStats) {
+        let asset = self.asset;
+        let per_brick: Vec<(Vec<[f32; 3]>, RelightStats)> = asset
+            .bricks
+            .par_iter()
+            .zip(&self.normal_bounds)
+            .map(|(brick, nb)| {
+                let surfels = &asset.surfels[brick.first_surfel as usize
+                    ..(brick.first_surfel + brick.surfel_count) as usize];
+                let mut e = vec![[0.0f32; 3]; surfels.len()];
+                let mut st = RelightStats {
+                    bricks: 1,
+                    ..RelightStats::default()
+                };
+                if brick.flags & BRICK_BACKFACE != 0 {
+                    st.bricks_skipped_backface = 1;
+                    return (e, st);
+                }
+                for light in lights {
+                    st.light_brick_pairs += 1;
+                    match light.cull(brick, nb) {
+                        Some(CullReason::Dark) => st.culled_dark += 1,
+                        Some(CullReason::Range) => st.culled_range += 1,
+                        Some(CullReason::Cone) => st.culled_cone += 1,
+                        Some(CullReason::Facing) => st.culled_facing += 1,
+                        None => {
+                            for (s, out) in surfels.iter().zip(e.iter_mut()) {
+                                let p = Vec3::from(s.position);
+                                let n = Vec3::from(s.normal);
+                                let (el, l, dist) = light.irradiance(p, n);
+                                if el.max_element() <= 0.0 {
+                                    continue;
+                                }
+                                st.shadow_rays += 1;
+                                let off = ray_offset(p);
+                                let o = p + n * off;
+                                let tmax = if dist.is_finite() {
+                                    (light.position - o).length() - off
+                                } else {
+                                    f32::INFINITY
+                                };
+                                if !occluded(&asset.geometry, o, l, tmax) {
+                                    for c in 0..3 {
+                                        out[c] += el[c];
+                                    }
+                                }
+                            }
+                        }
+                    }
+                }
+                (e, st)
+            })
+            .collect();
+        let mut stats = RelightStats::default();
+        let mut out = Vec::with_capacity(asset.surfels.len());
+        for (e, st) in per_brick {
+            out.extend(e);
+            stats = stats + st;
+        }
+        (out, stats)
+    }
+
+    /// Steps 2 and 3: brick radiance (mean and gradient) from surfel irradiance.
+    pub fn brick_radiance(&self, irradiance: &[[f32; 3]]) -> Vec<BrickRadiance> {
+        let asset = self.asset;
+        asset
+            .bricks
+            .par_iter()
+            .map(|b| {
+                let mut out = BrickRadiance::default();
+                if b.flags & BRICK_BACKFACE != 0 {
+                    return out;
+                }
+                let range = b.first_surfel as usize..(b.first_surfel + b.surfel_count) as usize;
+                let mut weight = 0.0f32;
+                for (s, e) in asset.surfels[range.clone()].iter().zip(&irradiance[range]) {
+                    for c in 0..3 {
+                        let l = s.emission[c] + s.albedo[c] * std::f32::consts::FRAC_1_PI * e[c];
+                        out.mean[c] += s.weight * l;
+                        for a in 0..3 {
+                            out.gradient[c][a] += s.gradient[a] * l;
+                        }
+                    }
+                    weight += s.weight;
+                }
+                out.mean = out.mean.map(|v| v / weight);
+                out
+            })
+            .collect()
+    }
+
+    /// Step 4: probe SH from brick radiance and the probes' sky terms.
+    pub fn gather(
+        &self,
+        brick_radiance: &[BrickRadiance],
+        sky: &[ShRgb],
+    ) -> (Vec<ShRgb>, RelightStats) {
+        let asset = self.asset;
+        let n = asset.header.ray_count;
+        let sh: Vec<ShRgb> = asset
+            .probes
+            .par_iter()
+            .enumerate()
+            .map(|(p, probe)| {
+                if !probe.is_valid() {
+                    return [[0.0; 3]; SH_COUNT];
+                }
+                let mut acc = sky[p];
+                for f in probe.first_factor..probe.first_factor + probe.factor_count {
+                    let (brick, _) = asset.factors.brick_and_rays(f as usize);
+                    let t = asset.factors.transfer(f as usize, n);
+                    let l = brick_radiance[brick as usize].at(asset.factors.offset(f as usize));
+                    for k in 0..SH_COUNT {
+                        for c in 0..3 {
+                            acc[k][c] += t[k] * l[c];
+                        }
+                    }
+                }
+                acc
+            })
+            .collect();
+        let valid = asset.probes.iter().filter(|p| p.is_valid()).count() as u64;
+        let stats = RelightStats {
+            probes_gathered: valid,
+            probes_skipped_invalid: asset.probes.len() as u64 - valid,
+            ..RelightStats::default()
+        };
+        (sh, stats)
+    }
+}
+
+/// A brick's linear radiance model: `max(0, mean + gradient . offset)` per channel.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct BrickRadiance {
+    pub mean: [f32; 3],
+    /// Per colour channel, the radiance gradient (per metre).
+    pub gradient: [[f32; 3]; 3],
+}
+
+impl BrickRadiance {
+    /// Radiance at `offset` from the brick's centroid, clamped at 0.
+    #[inline]
+    pub fn at(&self, offset: [f32; 3]) -> [f32; 3] {
+        std::array::from_fn(|c| {
+            let g = self.gradient[c];
+            (self.mean[c] + g[0] * offset[0] + g[1] * offset[1] + g[2] * offset[2]).max(0.0)
+        })
+    }
+}
+
+/// Per-brick component-wise bounds of surfel normals, for facing culls.
+pub fn brick_normal_bounds(asset: &Asset) -> Vec<NormalBounds> {
+    asset
+        .bricks
+        .iter()
+        .map(|b| {
+            let surfels =
+                &asset.surfels[b.first_surfel as usize..(b.first_surfel + b.surfel_count) as usize];
+            surfels.iter().fold(
+                NormalBounds {
+                    min: Vec3::INFINITY,
+                    max: Vec3::NEG_INFINITY,
+                },
+                |nb, s| NormalBounds {
+                    min: nb.min.min(Vec3::from(s.normal)),
+                    max: nb.max.max(Vec3::from(s.normal)),
+                },
+            )
+        })
+        .collect()
+}
+
+/// The probe volume as a field: trilinear interpolation of SH over the valid probes around a
+/// point (weights renormalised over valid probes; outside the grid, clamped to its border).
+pub struct Volume<'a> {
+    asset: &'a Asset,
+    sh: &'a [ShRgb],
+}
+
+impl<'a> Volume<'a> {
+    pub fn new(asset: &'a Asset, sh: &'a [ShRgb]) -> Self {
+        Volume { asset, sh }
+    }
+
+    /// Interpolated SH at `p`, or `None` when no valid probe surrounds it.
+    pub fn sample(&self, p: Vec3) -> Option<ShRgb> {
+        let g = &self.asset.header.grid;
+        let rel = (p - Vec3::from(g.origin)) / g.spacing;
+        let counts = g.counts.map(|c| c as f32 - 1.0);
+        let rel = rel.clamp(Vec3::ZERO, Vec3::from(counts));
+        let base = rel.floor();
+        let f = rel - base;
+        let mut acc = [[0.0f32; 3]; SH_COUNT];
+        let mut wsum = 0.0;
+        for corner in 0..8u32 {
+            let o = [corner & 1, (corner >> 1) & 1, (corner >> 2) & 1];
+            let idx: [u32; 3] =
+                std::array::from_fn(|a| (base[a] as u32 + o[a]).min(g.counts[a] - 1));
+            let w: f32 = (0..3)
+                .map(|a| if o[a] == 1 { f[a] } else { 1.0 - f[a] })
+                .product();
+            let i = g.index(idx[0], idx[1], idx[2]);
+            if w <= 0.0 || !self.asset.probes[i].is_valid() {
+                continue;
+            }
+            wsum += w;
+            for k in 0..SH_COUNT {
+                for c in 0..3 {
+                    acc[k][c] += w * self.sh[i][k][c];
+                }
+            }
+        }
+        (wsum > 0.0).then(|| acc.map(|k| k.map(|v| v / wsum)))
+    }
+
+    /// Irradiance at `p` with normal `n` (0 where no valid probe is near).
+    pub fn irradiance(&self, p: Vec3, n: Vec3) -> [f32; 3] {
+        self.sample(p)
+            .map_or([0.0; 3], |c| sh::irradiance(&c, n.to_array()))
+    }
+}

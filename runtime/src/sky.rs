@@ -1,0 +1,135 @@
+//! The sky seen by probe rays that escape: black, a constant radiance, or an equirectangular
+//! image (conventions.md section 3: `u = atan2(x, -z) / 2pi mod 1`, `v = acos(y) / pi`, +Y at
+//! the top row, bilinear lookup).
+
+use std::path::Path;
+
+use prt_format::directions::{direction_weight, fibonacci_direction};
+use prt_format::sh::{self, ShRgb, SH_COUNT};
+use prt_format::Asset;
+
+/// A sky model.
+#[derive(Clone, Debug, PartialEq)]
+pub enum SkyModel {
+    Black,
+    /// Radiance (already times intensity).
+    Constant([f32; 3]),
+    /// Equirectangular radiance image (already times intensity), rows top to bottom.
+    Equirect {
+        width: usize,
+        height: usize,
+        texels: Vec<[f32; 3]>,
+    },
+}
+
+impl SkyModel {
+    /// Loads the first RGB(A) layer of an OpenEXR file, scaled by `intensity`.
+    pub fn load_exr(path: &Path, intensity: f32) -> Result<SkyModel, String> {
+        let image = exr::prelude::read_first_rgba_layer_from_file(
+            path,
+            |res, _| (res.width(), vec![[0.0f32; 3]; res.width() * res.height()]),
+            |(w, px): &mut (usize, Vec<[f32; 3]>), pos, (r, g, b, _a): (f32, f32, f32, f32)| {
+                px[pos.y() * *w + pos.x()] = [r, g, b];
+            },
+        )
+        .map_err(|e| e.to_string())?;
+        let size = image.layer_data.size;
+        let (_, texels) = image.layer_data.channel_data.pixels;
+        if size.width() == 0 || size.height() == 0 {
+            return Err("image is empty".into());
+        }
+        if let Some(t) = texels
+            .iter()
+            .find(|t| t.iter().any(|v| !v.is_finite() || *v < 0.0))
+        {
+            return Err(format!("texel {t:?} is negative or not finite"));
+        }
+        Ok(SkyModel::Equirect {
+            width: size.width(),
+            height: size.height(),
+            texels: texels
+                .into_iter()
+                .map(|t| t.map(|v| v * intensity))
+                .collect(),
+        })
+    }
+
+    /// Radiance arriving from direction `d` (unit, pointing towards the sky).
+    pub fn radiance(&self, d: [f32; 3]) -> [f32; 3] {
+        match self {
+            SkyModel::Black => [0.0; 3],
+            SkyModel::Constant(c) => *c,
+            SkyModel::Equirect {
+                width,
+                height,
+                texels,
+            } => {
+                let tau = std::f32::consts::TAU;
+                let u = (d[0].atan2(-d[2]) / tau).rem_euclid(1.0);
+                let v = d[1].clamp(-1.0, 1.0).acos() / std::f32::consts::PI;
+                let x = u * *width as f32 - 0.5;
+                let y = (v * *height as f32 - 0.5).clamp(0.0, (*height - 1) as f32);
+                let (x0, y0) = (x.floor(), y.floor());
+                let (fx, fy) = (x - x0, y - y0);
+                let w = *width as i64;
+                let xi = |i: i64| i.rem_euclid(w) as usize;
+                let y0i = y0 as usize;
+                let y1i = (y0i + 1).min(*height - 1);
+                let at = |xx: usize, yy: usize| texels[yy * *width + xx];
+                let (a, b) = (at(xi(x0 as i64), y0i), at(xi(x0 as i64 + 1), y0i));
+                let (c, e) = (at(xi(x0 as i64), y1i), at(xi(x0 as i64 + 1), y1i));
+                std::array::from_fn(|i| {
+                    let top = a[i] + (b[i] - a[i]) * fx;
+                    let bottom = c[i] + (e[i] - c[i]) * fx;
+                    top + (bottom - top) * fy
+                })
+            }
+        }
+    }
+
+    /// SH9 of the sky radiance a probe sees through its sky rays.
+    pub fn probe_sky(&self, asset: &Asset, probe: usize) -> ShRgb {
+        match self {
+            SkyModel::Black => [[0.0; 3]; SH_COUNT],
+            SkyModel::Constant(c) => {
+                let t = &asset.sky_transfer[probe];
+                std::array::from_fn(|k| c.map(|v| v * t[k]))
+            }
+            SkyModel::Equirect { .. } => {
+                let n = asset.header.ray_count;
+                let words = asset.header.sky_mask_words();
+                let mask = &asset.sky_mask[probe * words..(probe + 1) * words];
+                let w = direction_weight(n);
+                let mut acc = [[0.0; 3]; SH_COUNT];
+                for i in 0..n {
+                    if mask[(i / 32) as usize] & (1 << (i % 32)) != 0 {
+                        let d = fibonacci_direction(i, n);
+                        sh::accumulate(&mut acc, d, w, self.radiance(d));
+                    }
+                }
+                acc
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn equirect_mapping_follows_the_convention() {
+        // 4x2 image: top row (+Y) red, bottom row blue.
+        let mut texels = vec![[1.0, 0.0, 0.0]; 4];
+        texels.extend(vec![[0.0, 0.0, 1.0]; 4]);
+        let sky = SkyModel::Equirect {
+            width: 4,
+            height: 2,
+            texels,
+        };
+        assert_eq!(sky.radiance([0.0, 1.0, 0.0]), [1.0, 0.0, 0.0]);
+        assert_eq!(sky.radiance([0.0, -1.0, 0.0]), [0.0, 0.0, 1.0]);
+        let horizon = sky.radiance([1.0, 0.0, 0.0]);
+        assert!((horizon[0] - 0.5).abs() < 1e-6 && (horizon[2] - 0.5).abs() < 1e-6);
+    }
+}

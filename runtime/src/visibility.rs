@@ -1,0 +1,108 @@
+//! Light visibility at surfels: any-hit rays through the binary BVH the asset carries.
+//!
+//! The traversal is the plain stack loop the WGSL twin runs (`shaders/`), with the same slab
+//! test and the same Moller-Trumbore intersection ("Fast, Minimum Storage Ray/Triangle
+//! Intersection", 1997), so that CPU and GPU agree ray for ray.
+
+use glam::Vec3;
+use prt_format::{BvhNode, Geometry, Triangle};
+
+/// Deepest BVH the traversal stack holds (the GPU kernel has a fixed-size stack).
+pub const MAX_STACK: usize = 64;
+
+/// Stack entries a traversal of `geo` can need: its depth plus one.
+pub fn stack_needed(geo: &Geometry) -> usize {
+    if geo.nodes.is_empty() {
+        return 0;
+    }
+    // Nodes are numbered breadth first with children after parents: one pass gives depths.
+    let mut depth = vec![0u32; geo.nodes.len()];
+    let mut deepest = 0;
+    for (i, n) in geo.nodes.iter().enumerate() {
+        deepest = deepest.max(depth[i]);
+        if n.count == 0 {
+            depth[n.first as usize] = depth[i] + 1;
+            depth[n.first as usize + 1] = depth[i] + 1;
+        }
+    }
+    deepest as usize + 1
+}
+
+#[inline]
+fn safe_inverse(x: f32) -> f32 {
+    if x.abs() < 1e-20 {
+        1e20_f32.copysign(x)
+    } else {
+        1.0 / x
+    }
+}
+
+#[inline]
+fn hits_box(n: &BvhNode, o: Vec3, inv: Vec3, tmax: f32) -> bool {
+    let t0 = (Vec3::from(n.min) - o) * inv;
+    let t1 = (Vec3::from(n.max) - o) * inv;
+    let near = t0.min(t1).max_element().max(0.0);
+    let far = t0.max(t1).min_element().min(tmax);
+    near <= far
+}
+
+/// Moller-Trumbore: distance to the triangle along the ray, if within `(0, tmax)`.
+#[inline]
+pub fn intersect(t: &Triangle, o: Vec3, d: Vec3, tmax: f32) -> bool {
+    let v0 = Vec3::from(t.v0);
+    let e1 = Vec3::from(t.v1) - v0;
+    let e2 = Vec3::from(t.v2) - v0;
+    let p = d.cross(e2);
+    let det = e1.dot(p);
+    if det.abs() < 1e-12 {
+        return false;
+    }
+    let inv_det = 1.0 / det;
+    let s = o - v0;
+    let u = s.dot(p) * inv_det;
+    if !(0.0..=1.0).contains(&u) {
+        return false;
+    }
+    let q = s.cross(e1);
+    let v = d.dot(q) * inv_det;
+    if v < 0.0 || u + v > 1.0 {
+        return false;
+    }
+    let dist = e2.dot(q) * inv_det;
+    dist > 0.0 && dist < tmax
+}
+
+/// True when any triangle lies on the segment `o + t d`, `t` in `(0, tmax)`.
+pub fn occluded(geo: &Geometry, o: Vec3, d: Vec3, tmax: f32) -> bool {
+    if geo.nodes.is_empty() {
+        return false;
+    }
+    let inv = Vec3::new(safe_inverse(d.x), safe_inverse(d.y), safe_inverse(d.z));
+    let mut stack = [0u32; MAX_STACK];
+    let mut top = 1;
+    while top > 0 {
+        top -= 1;
+        let node = &geo.nodes[stack[top] as usize];
+        if !hits_box(node, o, inv, tmax) {
+            continue;
+        }
+        if node.count > 0 {
+            let tris = &geo.triangles[node.first as usize..(node.first + node.count) as usize];
+            if tris.iter().any(|t| intersect(t, o, d, tmax)) {
+                return true;
+            }
+        } else if top + 2 <= MAX_STACK {
+            stack[top] = node.first;
+            stack[top + 1] = node.first + 1;
+            top += 2;
+        }
+    }
+    false
+}
+
+/// Offset of shadow-ray origins along the surface normal, relative to the coordinates'
+/// magnitude (avoids self-intersection in float32 at any scene scale).
+#[inline]
+pub fn ray_offset(p: Vec3) -> f32 {
+    1e-4 * p.abs().max_element().max(1.0)
+}
