@@ -51,9 +51,14 @@ pub struct BakeSettings {
     pub bounds: Option<[f32; 6]>,
     /// Refuse grids with more probes than this.
     pub max_probes: u64,
-    /// Surfel cell size in metres (a brick is 4x4x4 cells); `None` is `spacing / 12`; 0 switches
-    /// merging off (exact, one brick per ray hit, larger assets and more runtime work).
+    /// Surfel cell size in metres (a brick is 4x4x4 cells); `None` is
+    /// `spacing / cells_per_spacing`; 0 switches merging off (exact, one brick per ray hit,
+    /// larger assets and more runtime work).
     pub cell_size: Option<f32>,
+    /// Surfel cells per probe spacing when `cell_size` is `None`. Larger values mean smaller
+    /// bricks: less merging error at the cost of more factors per probe (runtime gather work and
+    /// asset size). 12 keeps the Cornell reference within 25% of the unmerged error.
+    pub cells_per_spacing: f32,
     /// Hits merge into one surfel only when the cosine between their normals is at least this.
     pub merge_normal_cos: f32,
     /// Treat every material as double-sided (for files with inconsistent winding).
@@ -75,6 +80,7 @@ impl Default for BakeSettings {
             bounds: None,
             max_probes: 1 << 20,
             cell_size: None,
+            cells_per_spacing: 12.0,
             merge_normal_cos: 0.9,
             double_sided: false,
             invalid_backface_fraction: 0.1,
@@ -85,10 +91,13 @@ impl Default for BakeSettings {
 }
 
 impl BakeSettings {
-    /// Higher accuracy: 4x the rays (4x the bake time, same runtime cost).
+    /// Higher accuracy: 8x the rays and half-size bricks. On the Cornell reference it brings the
+    /// mean irradiance error from about 3% to 0.5% (p95 1.2%), at about 5x the factors per probe
+    /// (runtime gather work and asset size) and 8x the trace time.
     pub fn high_quality() -> Self {
         BakeSettings {
-            rays: 2048,
+            rays: 4096,
+            cells_per_spacing: 24.0,
             ..Self::default()
         }
     }
@@ -139,6 +148,13 @@ impl BakeSettings {
             if !(c.is_finite() && c >= 0.0) {
                 return bad("cell_size", c.to_string(), "must be >= 0 (0: no merging)");
             }
+        }
+        if !(self.cells_per_spacing.is_finite() && self.cells_per_spacing > 0.0) {
+            return bad(
+                "cells_per_spacing",
+                self.cells_per_spacing.to_string(),
+                "must be positive",
+            );
         }
         if !(-1.0..=1.0).contains(&self.merge_normal_cos) {
             return bad(
@@ -307,7 +323,9 @@ fn bake_in_pool(
         hit_offsets.push(hit_offsets.last().copied().unwrap_or(0) + r.hits.len());
     }
     let hits: Vec<trace::Hit> = traced.iter().flat_map(|r| r.hits.iter().copied()).collect();
-    let cell_size = settings.cell_size.unwrap_or(spacing / 12.0);
+    let cell_size = settings
+        .cell_size
+        .unwrap_or(spacing / settings.cells_per_spacing);
     let bricked = bricks::build(&hits, cell_size, settings.merge_normal_cos);
     let tables: Vec<Vec<FactorRow>> = (0..traced.len())
         .into_par_iter()

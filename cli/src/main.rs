@@ -25,7 +25,8 @@ struct Cli {
 enum Quality {
     /// 512 rays per probe.
     Default,
-    /// 2048 rays per probe: lower error, 4x the bake time, no extra runtime cost.
+    /// 4096 rays per probe and half-size bricks: about 6x lower error, 8x the trace time and
+    /// about 5x the factors per probe.
     High,
 }
 
@@ -68,7 +69,7 @@ enum Command {
         /// Refuse grids with more probes than this.
         #[arg(long, default_value_t = 1 << 20)]
         max_probes: u64,
-        /// Surfel cell size in metres (bricks are 4x4x4 cells) [default: spacing / 12]; 0 = no merging.
+        /// Surfel cell size in metres (bricks are 4x4x4 cells) [default: spacing / 12, or / 24 with --quality high]; 0 = no merging.
         #[arg(long)]
         cell_size: Option<f32>,
         /// Keep every ray hit as its own surfel and brick (same as --cell-size 0).

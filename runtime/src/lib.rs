@@ -4,6 +4,7 @@
 //! relights the probe volume. This crate holds the CPU reference relight ([`relight`]); every
 //! GPU stage must reproduce its numbers.
 
+pub mod accuracy;
 pub mod lights;
 pub mod output;
 pub mod relight;
