@@ -203,7 +203,25 @@ fn run(cli: Cli) -> Result<()> {
                     prt_runtime::CpuRelighter::new(&loaded)?.relight(&lighting, bounces)?,
                     "cpu",
                 ),
-                Backend::Gpu => anyhow::bail!("the gpu backend is not available in this build"),
+                Backend::Gpu => {
+                    anyhow::ensure!(
+                        bounces == 1,
+                        "the gpu backend computes one bounce; use --backend cpu for --bounces {bounces}"
+                    );
+                    let (sh, counters, info) = prt_runtime::gpu::relight_once(
+                        &loaded,
+                        &lighting,
+                        prt_runtime::gpu::RuntimeSettings::default(),
+                    )?;
+                    eprintln!("adapter: {} ({:?})", info.name, info.backend);
+                    let stats = prt_runtime::RelightStats {
+                        bricks: u64::from(counters.bricks_relit),
+                        shadow_rays: u64::from(counters.shadow_rays),
+                        probes_gathered: u64::from(counters.probes_gathered),
+                        ..Default::default()
+                    };
+                    (prt_runtime::Relit { sh, stats }, "gpu")
+                }
             };
             let seconds = start.elapsed().as_secs_f64();
             let doc = prt_runtime::output::relight_json(&loaded, &relit.sh, &relit.stats, name);

@@ -5,6 +5,7 @@
 //! GPU stage must reproduce its numbers.
 
 pub mod accuracy;
+pub mod gpu;
 pub mod lights;
 pub mod output;
 pub mod relight;

@@ -187,10 +187,12 @@ impl<'a> CpuRelighter<'a> {
                                 st.shadow_rays += 1;
                                 let off = ray_offset(p);
                                 let o = p + n * off;
+                                // f32::MAX, not infinity, for directional lights: the
+                                // same slab arithmetic as the WGSL twin.
                                 let tmax = if dist.is_finite() {
                                     (light.position - o).length() - off
                                 } else {
-                                    f32::INFINITY
+                                    f32::MAX
                                 };
                                 if !occluded(&asset.geometry, o, l, tmax) {
                                     for c in 0..3 {

@@ -1,0 +1,167 @@
+//! GPU-side structs of the runtime (the asset's own arrays are uploaded as they are) and the
+//! constants shared with WGSL. `shaders::prelude` injects the constants into every shader, and
+//! a unit test checks every struct's size and field offsets against naga's layout of
+//! `shaders/types.wgsl`, so the two sides cannot drift apart.
+
+use bytemuck::{Pod, Zeroable};
+use prt_format::{LightKind, Surfel, BRICK_BACKFACE, PROBE_VALID};
+
+use crate::lights::{NormalBounds, PreparedLight};
+
+/// Threads per workgroup of the per-brick, per-surfel and per-probe stages.
+pub const WORKGROUP: u32 = 64;
+/// Threads per workgroup of the gather (one workgroup per probe).
+pub const GATHER_WORKGROUP: u32 = 64;
+/// Lights per rig: a brick's light mask and a surfel's visibility cache are one u32 each.
+pub const MAX_LIGHTS: usize = 32;
+/// Workgroups along x of every dispatch; more work continues along y.
+pub const DISPATCH_WIDTH: u32 = 32768;
+/// `Params::sky_mode` values.
+pub const SKY_BLACK: u32 = 0;
+pub const SKY_CONSTANT: u32 = 1;
+pub const SKY_DIRECTIONS: u32 = 2;
+/// Largest finite IEEE half: texels of half-float volumes are clamped to +-this.
+pub const HALF_MAX: f32 = 65504.0;
+
+/// A light as the shaders read it (see `PreparedLight`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+#[repr(C)]
+pub struct GpuLight {
+    pub position: [f32; 3],
+    pub kind: u32,
+    pub direction: [f32; 3],
+    pub inv_range_sq: f32,
+    pub radiant: [f32; 3],
+    pub cos_outer: f32,
+    pub cone_scale: f32,
+    /// Range, `f32::MAX` without one.
+    pub range: f32,
+    pub _pad: [u32; 2],
+}
+const _: () = assert!(std::mem::size_of::<GpuLight>() == 64);
+
+/// WGSL code of a light kind.
+pub fn light_kind_code(kind: LightKind) -> u32 {
+    match kind {
+        LightKind::Directional => 0,
+        LightKind::Point => 1,
+        LightKind::Spot => 2,
+    }
+}
+
+impl From<&PreparedLight> for GpuLight {
+    fn from(l: &PreparedLight) -> Self {
+        GpuLight {
+            position: l.position.to_array(),
+            kind: light_kind_code(l.kind),
+            direction: l.direction.to_array(),
+            inv_range_sq: l.inv_range_sq,
+            radiant: l.radiant.to_array(),
+            cos_outer: l.cos_outer,
+            cone_scale: l.cone_scale,
+            range: l.range.min(f32::MAX),
+            _pad: [0; 2],
+        }
+    }
+}
+
+/// Component-wise bounds of a brick's surfel normals.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+#[repr(C)]
+pub struct GpuNormalBounds {
+    pub min: [f32; 3],
+    pub _pad0: u32,
+    pub max: [f32; 3],
+    pub _pad1: u32,
+}
+const _: () = assert!(std::mem::size_of::<GpuNormalBounds>() == 32);
+
+impl From<&NormalBounds> for GpuNormalBounds {
+    fn from(n: &NormalBounds) -> Self {
+        GpuNormalBounds {
+            min: n.min.to_array(),
+            max: n.max.to_array(),
+            ..Default::default()
+        }
+    }
+}
+
+/// Work counters the stages increment (read back for reports and tests).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+#[repr(C)]
+pub struct Counters {
+    pub bricks_relit: u32,
+    pub surfels_relit: u32,
+    pub shadow_rays: u32,
+    pub probes_gathered: u32,
+}
+const _: () = assert!(std::mem::size_of::<Counters>() == 16);
+
+/// The uniform block of every stage.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+#[repr(C)]
+pub struct Params {
+    pub probe_count: u32,
+    pub brick_count: u32,
+    pub surfel_count: u32,
+    pub ray_count: u32,
+    pub light_count: u32,
+    pub changed_lights: u32,
+    pub sky_mode: u32,
+    pub all_probes_dirty: u32,
+    pub sky_color: [f32; 3],
+    pub ray_weight: f32,
+    pub grid_counts: [u32; 3],
+    pub window_start: u32,
+    pub window_count: u32,
+    pub texel_limit: f32,
+    pub dispatch_width: u32,
+    pub moved_lights: u32,
+}
+const _: () = assert!(std::mem::size_of::<Params>() == 80);
+
+/// `(name, value)` of every constant the WGSL side uses, as WGSL source text.
+pub fn wgsl_constants() -> Vec<(&'static str, String)> {
+    use prt_format::sh::{Y00, Y1, Y20, Y22, Y2_OFF};
+    vec![
+        ("WORKGROUP", format!("{WORKGROUP}u")),
+        ("GATHER_WORKGROUP", format!("{GATHER_WORKGROUP}u")),
+        ("BVH_STACK", format!("{}u", crate::visibility::MAX_STACK)),
+        (
+            "LIGHT_DIRECTIONAL",
+            format!("{}u", light_kind_code(LightKind::Directional)),
+        ),
+        (
+            "LIGHT_POINT",
+            format!("{}u", light_kind_code(LightKind::Point)),
+        ),
+        (
+            "LIGHT_SPOT",
+            format!("{}u", light_kind_code(LightKind::Spot)),
+        ),
+        ("INFINITE_DISTANCE", format!("{:e}", f32::MAX)),
+        ("BRICK_BACKFACE", format!("{BRICK_BACKFACE}u")),
+        ("PROBE_VALID", format!("{PROBE_VALID}u")),
+        ("PROBE_NONE", format!("{}u", u32::MAX)),
+        ("SKY_BLACK", format!("{SKY_BLACK}u")),
+        ("SKY_CONSTANT", format!("{SKY_CONSTANT}u")),
+        ("SKY_DIRECTIONS", format!("{SKY_DIRECTIONS}u")),
+        ("SH_Y00", format!("{Y00:?}")),
+        ("SH_Y1", format!("{Y1:?}")),
+        ("SH_Y2_OFF", format!("{Y2_OFF:?}")),
+        ("SH_Y20", format!("{Y20:?}")),
+        ("SH_Y22", format!("{Y22:?}")),
+    ]
+}
+
+/// Size in u32 words of one factor of each precision.
+pub fn factor_words(f16: bool) -> u32 {
+    let bytes = if f16 {
+        std::mem::size_of::<prt_format::FactorF16>()
+    } else {
+        std::mem::size_of::<prt_format::FactorF32>()
+    };
+    (bytes / 4) as u32
+}
+
+const _: () = assert!(std::mem::size_of::<Surfel>() % 16 == 0);

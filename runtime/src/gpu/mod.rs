@@ -1,0 +1,870 @@
+//! # The GPU runtime: relight bricks and gather probes into a 3D SH volume, in wgpu compute
+//!
+//! [`PrtRuntime::update`] records, into a command encoder the engine owns, one dispatch per
+//! stage (each stage is one WGSL file in `shaders/`, and a CPU twin in [`crate::relight`]):
+//!
+//! 1. **cull_lights** (per brick): which lights reach the brick (range, cone, facing, in world
+//!    space; never through screen-space clusters), and whether a changed light reaches it now or
+//!    did before: only then is the brick *dirty*.
+//! 2. **relight_surfels** (per surfel of a dirty brick): direct irradiance with visibility from
+//!    shadow rays through the asset's BVH; visibility bits are cached per (surfel, light) and
+//!    re-traced only for lights that moved.
+//! 3. **brick_radiance** (per dirty brick): mean and gradient of the brick's radiance.
+//! 4. **mark_probes** (per probe): probes with a factor on a dirty brick (or all, when the sky
+//!    changed) are flagged for gathering.
+//! 5. **gather** (one workgroup per probe of this update's window): the probe's factors and sky
+//!    term reduced into SH9 RGB (subgroup adds where the adapter has them, a shared-memory tree
+//!    otherwise), written with its validity into the seven volume textures at once.
+//!
+//! When nothing changed and no round-robin cycle is pending, `update` records nothing. With a
+//! budget of B probes, the gather visits B probes per update round robin; a probe's texels
+//! always hold one complete gather, and a cycle of `ceil(P / B)` updates converges exactly to the
+//! full update. Only the one-bounce contract runs on the GPU (bounces are CPU-only for now).
+
+pub use wgpu;
+
+pub mod layout;
+pub mod shaders;
+
+use prt_format::sh::{ShRgb, SH_COUNT};
+use prt_format::{directions, Asset, Factors};
+use wgpu::util::DeviceExt;
+
+use crate::lights::PreparedLight;
+use crate::relight::brick_normal_bounds;
+use crate::rig::Lighting;
+use crate::sky::SkyModel;
+use layout::*;
+use shaders::{ShaderConfig, Stage};
+
+/// Why the GPU runtime could not start or update.
+#[derive(Debug, thiserror::Error)]
+pub enum GpuError {
+    #[error("no GPU adapter found ({0}); install a Vulkan driver (e.g. `apt-get install mesa-vulkan-drivers` for the lavapipe software adapter)")]
+    NoAdapter(String),
+    #[error("cannot open the GPU device: {0}")]
+    Device(String),
+    #[error("the rig has {count} lights; the GPU runtime handles at most {MAX_LIGHTS}")]
+    TooManyLights { count: usize },
+    #[error("{what} needs {needed}, beyond the device limit {limit}")]
+    Limit {
+        what: &'static str,
+        needed: u64,
+        limit: u64,
+    },
+    #[error("the asset's BVH needs a traversal stack of {needed} entries, more than {max}")]
+    BvhTooDeep { needed: usize, max: usize },
+    #[error("reading back from the GPU failed: {0}")]
+    Readback(String),
+}
+
+/// Texel format of the SH volume.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum VolumeFormat {
+    /// `Rgba16Float`: half the memory; values beyond +-65504 are clamped to it (scale the
+    /// lights' units if a scene is brighter than that).
+    #[default]
+    F16,
+    /// `Rgba32Float`: exact; sampling with filtering needs `Features::FLOAT32_FILTERABLE`.
+    F32,
+}
+
+impl VolumeFormat {
+    fn texture_format(self) -> wgpu::TextureFormat {
+        match self {
+            VolumeFormat::F16 => wgpu::TextureFormat::Rgba16Float,
+            VolumeFormat::F32 => wgpu::TextureFormat::Rgba32Float,
+        }
+    }
+
+    fn wgsl(self) -> &'static str {
+        match self {
+            VolumeFormat::F16 => "rgba16float",
+            VolumeFormat::F32 => "rgba32float",
+        }
+    }
+}
+
+/// Runtime options.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RuntimeSettings {
+    pub volume_format: VolumeFormat,
+}
+
+/// What one `update` recorded.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct UpdateReport {
+    /// Nothing changed and no cycle was pending: no command was recorded.
+    pub idle: bool,
+    /// Lights whose parameters changed (bit per light index).
+    pub changed_lights: u32,
+    pub sky_changed: bool,
+    /// First probe and probe count of the gather window (it wraps around the probe count).
+    pub window: (u32, u32),
+    /// Updates still needed to visit every probe since the last change.
+    pub pending_windows: u32,
+}
+
+/// The lighting state an update was recorded for (to detect changes).
+#[derive(Clone, Debug, Default, PartialEq)]
+struct State {
+    lights: Vec<GpuLight>,
+    sky_mode: u32,
+    sky_color: [f32; 3],
+    sky_directions: Vec<[f32; 4]>,
+}
+
+/// Opens a headless device on the first adapter (lavapipe where there is no GPU), with subgroup
+/// operations and the highest limits the adapter offers. Fails loudly when there is no adapter.
+pub fn headless_device() -> Result<(wgpu::Device, wgpu::Queue, wgpu::AdapterInfo), GpuError> {
+    let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle());
+    let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+        power_preference: wgpu::PowerPreference::HighPerformance,
+        force_fallback_adapter: false,
+        compatible_surface: None,
+        ..Default::default()
+    }))
+    .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
+    let wanted = wgpu::Features::SUBGROUP | wgpu::Features::FLOAT32_FILTERABLE;
+    let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+        label: Some("prt"),
+        required_features: adapter.features() & wanted,
+        required_limits: adapter.limits(),
+        ..Default::default()
+    }))
+    .map_err(|e| GpuError::Device(e.to_string()))?;
+    Ok((device, queue, adapter.get_info()))
+}
+
+fn storage(
+    device: &wgpu::Device,
+    label: &str,
+    bytes: &[u8],
+    extra: wgpu::BufferUsages,
+) -> wgpu::Buffer {
+    // wgpu cannot bind empty buffers, nor ones smaller than one element: pad empty arrays.
+    let padded;
+    let contents = if bytes.is_empty() {
+        padded = [0u8; MIN_BUFFER as usize];
+        &padded[..]
+    } else {
+        bytes
+    };
+    device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some(label),
+        contents,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | extra,
+    })
+}
+
+/// Smallest buffer the runtime creates: larger than every element type it binds.
+const MIN_BUFFER: u64 = 256;
+
+fn buf(b: &wgpu::Buffer) -> wgpu::BindingResource<'_> {
+    b.as_entire_binding()
+}
+
+fn zeroed(
+    device: &wgpu::Device,
+    label: &str,
+    size: u64,
+    extra: wgpu::BufferUsages,
+) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: size.max(MIN_BUFFER),
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | extra,
+        mapped_at_creation: false,
+    })
+}
+
+/// Workgroup counts `(x, y)` covering `groups` linear workgroups.
+fn dispatch_size(groups: u32) -> (u32, u32) {
+    let x = groups.clamp(1, DISPATCH_WIDTH);
+    (x, groups.div_ceil(x).max(1))
+}
+
+struct Pipeline {
+    pipeline: wgpu::ComputePipeline,
+    bind_groups: Vec<wgpu::BindGroup>,
+}
+
+/// The GPU relighting runtime of one asset.
+pub struct PrtRuntime {
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    probe_count: u32,
+    brick_count: u32,
+    surfel_count: u32,
+    ray_count: u32,
+    grid: prt_format::Grid,
+    settings: RuntimeSettings,
+    directions: Vec<[f32; 3]>,
+    params: wgpu::Buffer,
+    lights: wgpu::Buffer,
+    sky_directions: wgpu::Buffer,
+    probe_sh: wgpu::Buffer,
+    counters: wgpu::Buffer,
+    textures: Vec<wgpu::Texture>,
+    views: Vec<wgpu::TextureView>,
+    sampler: wgpu::Sampler,
+    pipelines: Vec<(Stage, Pipeline)>,
+    state: Option<State>,
+    cursor: u32,
+    pending_windows: u32,
+    pub subgroups: bool,
+}
+
+impl PrtRuntime {
+    /// Uploads `asset` and builds the pipelines. The device should come from
+    /// [`headless_device`] or have comparable limits (storage buffers and textures per stage).
+    pub fn new(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        asset: &Asset,
+        settings: RuntimeSettings,
+    ) -> Result<PrtRuntime, GpuError> {
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let runtime = Self::create(device, queue, asset, settings);
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Device(e.to_string()));
+        }
+        runtime
+    }
+
+    fn create(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        asset: &Asset,
+        settings: RuntimeSettings,
+    ) -> Result<PrtRuntime, GpuError> {
+        let needed = crate::visibility::stack_needed(&asset.geometry);
+        if needed > crate::visibility::MAX_STACK {
+            return Err(GpuError::BvhTooDeep {
+                needed,
+                max: crate::visibility::MAX_STACK,
+            });
+        }
+        let limits = device.limits();
+        let g = asset.header.grid;
+        let dim = u64::from(g.counts.iter().copied().max().unwrap_or(1));
+        if dim > u64::from(limits.max_texture_dimension_3d) {
+            return Err(GpuError::Limit {
+                what: "the probe grid's largest dimension",
+                needed: dim,
+                limit: u64::from(limits.max_texture_dimension_3d),
+            });
+        }
+        let surfel_bytes = std::mem::size_of_val(asset.surfels.as_slice()) as u64;
+        let max_binding =
+            u64::from(limits.max_storage_buffer_binding_size).min(limits.max_buffer_size);
+        for (what, bytes) in [
+            ("the surfel buffer", surfel_bytes),
+            (
+                "the factor buffer",
+                (asset.factors.len() * asset.factors.bytes_per_factor()) as u64,
+            ),
+            (
+                "the BVH triangle buffer",
+                std::mem::size_of_val(asset.geometry.triangles.as_slice()) as u64,
+            ),
+        ] {
+            if bytes > max_binding {
+                return Err(GpuError::Limit {
+                    what,
+                    needed: bytes,
+                    limit: max_binding,
+                });
+            }
+        }
+        let subgroups = device.features().contains(wgpu::Features::SUBGROUP);
+        let config = ShaderConfig {
+            factor_f16: matches!(asset.factors, Factors::F16(_)),
+            volume_format: settings.volume_format.wgsl(),
+            subgroups,
+        };
+        let none = wgpu::BufferUsages::empty();
+        let probes = storage(
+            device,
+            "prt probes",
+            bytemuck::cast_slice(&asset.probes),
+            none,
+        );
+        let factor_bytes: &[u8] = match &asset.factors {
+            Factors::F16(f) => bytemuck::cast_slice(f),
+            Factors::F32(f) => bytemuck::cast_slice(f),
+        };
+        let factors = storage(device, "prt factors", factor_bytes, none);
+        let bricks = storage(
+            device,
+            "prt bricks",
+            bytemuck::cast_slice(&asset.bricks),
+            none,
+        );
+        let surfels = storage(
+            device,
+            "prt surfels",
+            bytemuck::cast_slice(&asset.surfels),
+            none,
+        );
+        let normal_bounds: Vec<GpuNormalBounds> = brick_normal_bounds(asset)
+            .iter()
+            .map(GpuNormalBounds::from)
+            .collect();
+        let normal_bounds = storage(
+            device,
+            "prt normal bounds",
+            bytemuck::cast_slice(&normal_bounds),
+            none,
+        );
+        let (nodes, tris) = if asset.geometry.nodes.is_empty() {
+            // One node with an empty box: no ray enters it.
+            let empty = prt_format::BvhNode {
+                min: [f32::MAX; 3],
+                max: [f32::MIN; 3],
+                count: 1,
+                first: 0,
+            };
+            (vec![empty], vec![prt_format::Triangle::default()])
+        } else {
+            (
+                asset.geometry.nodes.clone(),
+                asset.geometry.triangles.clone(),
+            )
+        };
+        let bvh_nodes = storage(device, "prt bvh nodes", bytemuck::cast_slice(&nodes), none);
+        let triangles = storage(device, "prt triangles", bytemuck::cast_slice(&tris), none);
+        let sky_transfer = storage(
+            device,
+            "prt sky transfer",
+            bytemuck::cast_slice(&asset.sky_transfer),
+            none,
+        );
+        let sky_mask = storage(
+            device,
+            "prt sky mask",
+            bytemuck::cast_slice(&asset.sky_mask),
+            none,
+        );
+        let n_bricks = asset.bricks.len() as u64;
+        let n_surfels = asset.surfels.len() as u64;
+        let n_probes = asset.probes.len() as u64;
+        let brick_light_mask = zeroed(device, "prt brick light mask", 4 * n_bricks, none);
+        let brick_dirty = zeroed(device, "prt brick dirty", 4 * n_bricks, none);
+        let surfel_visibility = zeroed(device, "prt surfel visibility", 4 * n_surfels, none);
+        let surfel_radiance = zeroed(device, "prt surfel radiance", 16 * n_surfels, none);
+        let brick_radiance = zeroed(device, "prt brick radiance", 64 * n_bricks, none);
+        let probe_dirty = zeroed(device, "prt probe dirty", 4 * n_probes, none);
+        let probe_sh = zeroed(
+            device,
+            "prt probe sh",
+            16 * 9 * n_probes,
+            wgpu::BufferUsages::COPY_SRC,
+        );
+        let counters = zeroed(device, "prt counters", 16, wgpu::BufferUsages::COPY_SRC);
+        let lights = zeroed(device, "prt lights", (64 * MAX_LIGHTS) as u64, none);
+        let sky_directions = zeroed(
+            device,
+            "prt sky directions",
+            32 * u64::from(asset.header.ray_count),
+            none,
+        );
+        let params = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("prt params"),
+            size: std::mem::size_of::<Params>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+
+        let size = wgpu::Extent3d {
+            width: g.counts[0],
+            height: g.counts[1],
+            depth_or_array_layers: g.counts[2],
+        };
+        let textures: Vec<wgpu::Texture> = (0..7)
+            .map(|i| {
+                device.create_texture(&wgpu::TextureDescriptor {
+                    label: Some(&format!("prt sh volume {i}")),
+                    size,
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D3,
+                    format: settings.volume_format.texture_format(),
+                    usage: wgpu::TextureUsages::STORAGE_BINDING
+                        | wgpu::TextureUsages::TEXTURE_BINDING
+                        | wgpu::TextureUsages::COPY_SRC,
+                    view_formats: &[],
+                })
+            })
+            .collect();
+        let views: Vec<wgpu::TextureView> = textures
+            .iter()
+            .map(|t| t.create_view(&wgpu::TextureViewDescriptor::default()))
+            .collect();
+        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("prt sh volume sampler"),
+            address_mode_u: wgpu::AddressMode::ClampToEdge,
+            address_mode_v: wgpu::AddressMode::ClampToEdge,
+            address_mode_w: wgpu::AddressMode::ClampToEdge,
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            ..Default::default()
+        });
+
+        let stage_groups = |stage: Stage| -> Vec<Vec<wgpu::BindingResource<'_>>> {
+            match stage {
+                Stage::CullLights => vec![vec![
+                    buf(&params),
+                    buf(&lights),
+                    buf(&bricks),
+                    buf(&normal_bounds),
+                    buf(&brick_light_mask),
+                    buf(&brick_dirty),
+                    buf(&counters),
+                ]],
+                Stage::RelightSurfels => vec![
+                    vec![
+                        buf(&params),
+                        buf(&lights),
+                        buf(&surfels),
+                        buf(&brick_light_mask),
+                        buf(&brick_dirty),
+                        buf(&surfel_visibility),
+                        buf(&surfel_radiance),
+                        buf(&counters),
+                    ],
+                    vec![buf(&bvh_nodes), buf(&triangles)],
+                ],
+                Stage::BrickRadiance => vec![vec![
+                    buf(&params),
+                    buf(&bricks),
+                    buf(&surfels),
+                    buf(&brick_dirty),
+                    buf(&surfel_radiance),
+                    buf(&brick_radiance),
+                ]],
+                Stage::MarkProbes => vec![vec![
+                    buf(&params),
+                    buf(&probes),
+                    buf(&factors),
+                    buf(&brick_dirty),
+                    buf(&probe_dirty),
+                ]],
+                Stage::Gather => vec![
+                    vec![
+                        buf(&params),
+                        buf(&probes),
+                        buf(&factors),
+                        buf(&brick_radiance),
+                        buf(&sky_transfer),
+                        buf(&sky_mask),
+                        buf(&sky_directions),
+                        buf(&probe_dirty),
+                        buf(&probe_sh),
+                        buf(&counters),
+                    ],
+                    views
+                        .iter()
+                        .map(wgpu::BindingResource::TextureView)
+                        .collect(),
+                ],
+            }
+        };
+        let pipelines = Stage::ALL
+            .iter()
+            .map(|&stage| {
+                let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                    label: Some(stage.label()),
+                    source: wgpu::ShaderSource::Wgsl(shaders::source(stage, &config).into()),
+                });
+                let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                    label: Some(stage.label()),
+                    layout: None,
+                    module: &module,
+                    entry_point: Some("main"),
+                    compilation_options: Default::default(),
+                    cache: None,
+                });
+                let bind_groups = stage_groups(stage)
+                    .into_iter()
+                    .enumerate()
+                    .map(|(i, resources)| {
+                        let entries: Vec<wgpu::BindGroupEntry> = resources
+                            .into_iter()
+                            .enumerate()
+                            .map(|(b, resource)| wgpu::BindGroupEntry {
+                                binding: b as u32,
+                                resource,
+                            })
+                            .collect();
+                        device.create_bind_group(&wgpu::BindGroupDescriptor {
+                            label: Some(stage.label()),
+                            layout: &pipeline.get_bind_group_layout(i as u32),
+                            entries: &entries,
+                        })
+                    })
+                    .collect();
+                (
+                    stage,
+                    Pipeline {
+                        pipeline,
+                        bind_groups,
+                    },
+                )
+            })
+            .collect();
+        Ok(PrtRuntime {
+            device: device.clone(),
+            queue: queue.clone(),
+            probe_count: asset.probes.len() as u32,
+            brick_count: asset.bricks.len() as u32,
+            surfel_count: asset.surfels.len() as u32,
+            ray_count: asset.header.ray_count,
+            grid: g,
+            settings,
+            directions: directions::fibonacci_directions(asset.header.ray_count),
+            params,
+            lights,
+            sky_directions,
+            probe_sh,
+            counters,
+            textures,
+            views,
+            sampler,
+            pipelines,
+            state: None,
+            cursor: 0,
+            pending_windows: 0,
+            subgroups,
+        })
+    }
+
+    fn state_for(&self, lighting: &Lighting) -> Result<State, GpuError> {
+        let lights = &lighting.rig.lights;
+        if lights.len() > MAX_LIGHTS {
+            return Err(GpuError::TooManyLights {
+                count: lights.len(),
+            });
+        }
+        let lights = lights
+            .iter()
+            .map(|l| GpuLight::from(&PreparedLight::new(l)))
+            .collect();
+        let (sky_mode, sky_color, sky_directions) = match &lighting.sky {
+            SkyModel::Black => (SKY_BLACK, [0.0; 3], Vec::new()),
+            SkyModel::Constant(c) => (SKY_CONSTANT, *c, Vec::new()),
+            sky @ SkyModel::Equirect { .. } => (
+                SKY_DIRECTIONS,
+                [0.0; 3],
+                self.directions
+                    .iter()
+                    .flat_map(|&d| {
+                        let l = sky.radiance(d);
+                        [[d[0], d[1], d[2], 0.0], [l[0], l[1], l[2], 0.0]]
+                    })
+                    .collect(),
+            ),
+        };
+        Ok(State {
+            lights,
+            sky_mode,
+            sky_color,
+            sky_directions,
+        })
+    }
+
+    /// Records this update's compute work into `encoder`. `budget` is the number of probes
+    /// gathered per update (`None`: all). Submit the encoder before the next `update`.
+    pub fn update(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        lighting: &Lighting,
+        budget: Option<u32>,
+    ) -> Result<UpdateReport, GpuError> {
+        let new = self.state_for(lighting)?;
+        let (changed, moved, sky_changed) = match &self.state {
+            None => (u32::MAX, u32::MAX, true),
+            Some(old) => {
+                let mut changed = 0u32;
+                let mut moved = 0u32;
+                for i in 0..old.lights.len().max(new.lights.len()) {
+                    let (a, b) = (old.lights.get(i), new.lights.get(i));
+                    if a != b {
+                        changed |= 1 << i;
+                        let geometry_same = matches!((a, b), (Some(a), Some(b))
+                            if a.position == b.position && a.direction == b.direction
+                                && a.kind == b.kind);
+                        if !geometry_same {
+                            moved |= 1 << i;
+                        }
+                    }
+                }
+                let sky_changed = old.sky_mode != new.sky_mode
+                    || old.sky_color != new.sky_color
+                    || old.sky_directions != new.sky_directions;
+                (changed, moved, sky_changed)
+            }
+        };
+        let budget = budget
+            .unwrap_or(self.probe_count)
+            .clamp(1, self.probe_count.max(1));
+        let windows = self.probe_count.div_ceil(budget);
+        let lights_changed = changed != 0;
+        if !lights_changed && !sky_changed && self.pending_windows == 0 {
+            return Ok(UpdateReport {
+                idle: true,
+                ..UpdateReport::default()
+            });
+        }
+        if lights_changed || sky_changed {
+            self.pending_windows = windows;
+        }
+        let window = (self.cursor, budget.min(self.probe_count));
+        let params = Params {
+            probe_count: self.probe_count,
+            brick_count: self.brick_count,
+            surfel_count: self.surfel_count,
+            ray_count: self.ray_count,
+            light_count: new.lights.len() as u32,
+            changed_lights: changed,
+            sky_mode: new.sky_mode,
+            all_probes_dirty: u32::from(sky_changed),
+            sky_color: new.sky_color,
+            ray_weight: directions::direction_weight(self.ray_count),
+            grid_counts: self.grid.counts,
+            window_start: window.0,
+            window_count: window.1,
+            texel_limit: match self.settings.volume_format {
+                VolumeFormat::F16 => HALF_MAX,
+                VolumeFormat::F32 => f32::MAX,
+            },
+            dispatch_width: DISPATCH_WIDTH,
+            moved_lights: moved,
+        };
+        let copy = |encoder: &mut wgpu::CommandEncoder, dst: &wgpu::Buffer, bytes: &[u8]| {
+            if bytes.is_empty() {
+                return;
+            }
+            let src = self
+                .device
+                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("prt upload"),
+                    contents: bytes,
+                    usage: wgpu::BufferUsages::COPY_SRC,
+                });
+            encoder.copy_buffer_to_buffer(&src, 0, dst, 0, bytes.len() as u64);
+        };
+        copy(encoder, &self.params, bytemuck::bytes_of(&params));
+        copy(encoder, &self.lights, bytemuck::cast_slice(&new.lights));
+        if sky_changed {
+            copy(
+                encoder,
+                &self.sky_directions,
+                bytemuck::cast_slice(&new.sky_directions),
+            );
+        }
+        encoder.clear_buffer(&self.counters, 0, None);
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("prt update"),
+                timestamp_writes: None,
+            });
+            let groups = |n: u32| n.div_ceil(WORKGROUP);
+            for (stage, p) in &self.pipelines {
+                let work = match stage {
+                    Stage::CullLights | Stage::BrickRadiance if lights_changed => {
+                        groups(self.brick_count)
+                    }
+                    Stage::RelightSurfels if lights_changed => groups(self.surfel_count),
+                    Stage::MarkProbes if lights_changed || sky_changed => groups(self.probe_count),
+                    Stage::Gather => window.1,
+                    _ => 0,
+                };
+                if work == 0 {
+                    continue;
+                }
+                pass.set_pipeline(&p.pipeline);
+                for (i, bg) in p.bind_groups.iter().enumerate() {
+                    pass.set_bind_group(i as u32, bg, &[]);
+                }
+                let (x, y) = dispatch_size(work);
+                pass.dispatch_workgroups(x, y, 1);
+            }
+        }
+        self.cursor = (self.cursor + budget) % self.probe_count.max(1);
+        self.pending_windows = self.pending_windows.saturating_sub(1);
+        self.state = Some(new);
+        Ok(UpdateReport {
+            idle: false,
+            changed_lights: changed,
+            sky_changed,
+            window,
+            pending_windows: self.pending_windows,
+        })
+    }
+
+    /// The seven volume texture views (layout in `shaders/gather.wgsl`).
+    pub fn volume_views(&self) -> &[wgpu::TextureView] {
+        &self.views
+    }
+
+    /// A trilinear, clamp-to-edge sampler for the volume.
+    pub fn sampler(&self) -> &wgpu::Sampler {
+        &self.sampler
+    }
+
+    /// The grid the volume covers (origin, spacing, counts) for the `PrtVolumeInfo` uniform of
+    /// the sampling snippet.
+    pub fn grid(&self) -> prt_format::Grid {
+        self.grid
+    }
+
+    /// WGSL defining `sample_irradiance(world_pos, normal)` with its bindings at `group`.
+    pub fn wgsl_snippet(group: u32) -> String {
+        shaders::sample_irradiance_snippet(group)
+    }
+
+    fn read_buffer(&self, src: &wgpu::Buffer, size: u64) -> Result<Vec<u8>, GpuError> {
+        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("prt readback"),
+            size,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        encoder.copy_buffer_to_buffer(src, 0, &staging, 0, size);
+        self.queue.submit([encoder.finish()]);
+        self.map(&staging, size)
+    }
+
+    fn map(&self, staging: &wgpu::Buffer, size: u64) -> Result<Vec<u8>, GpuError> {
+        let slice = staging.slice(..size);
+        let (tx, rx) = std::sync::mpsc::channel();
+        slice.map_async(wgpu::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        rx.recv()
+            .map_err(|e| GpuError::Readback(e.to_string()))?
+            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        let data = slice
+            .get_mapped_range()
+            .map_err(|e| GpuError::Readback(e.to_string()))?
+            .to_vec();
+        staging.unmap();
+        Ok(data)
+    }
+
+    /// Blocks until the GPU is done and returns every probe's SH as last gathered.
+    pub fn read_probe_sh(&self) -> Result<Vec<ShRgb>, GpuError> {
+        let bytes =
+            self.read_buffer(&self.probe_sh, 16 * 9 * u64::from(self.probe_count.max(1)))?;
+        let v: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
+        Ok((0..self.probe_count as usize)
+            .map(|p| std::array::from_fn(|k| [v[9 * p + k][0], v[9 * p + k][1], v[9 * p + k][2]]))
+            .collect())
+    }
+
+    /// Blocks and returns the work counters of the last submitted update.
+    pub fn read_counters(&self) -> Result<Counters, GpuError> {
+        let bytes = self.read_buffer(&self.counters, 16)?;
+        Ok(*bytemuck::from_bytes(&bytes))
+    }
+
+    /// Blocks and returns the 28 channels of every texel (texture-major then texel order x, y,
+    /// z), as f32.
+    pub fn read_volume(&self) -> Result<Vec<Vec<[f32; 4]>>, GpuError> {
+        let [w, h, d] = self.grid.counts;
+        let texel = match self.settings.volume_format {
+            VolumeFormat::F16 => 8u32,
+            VolumeFormat::F32 => 16,
+        };
+        let row = (w * texel).div_ceil(256) * 256;
+        let size = u64::from(row) * u64::from(h) * u64::from(d);
+        let mut out = Vec::new();
+        for t in &self.textures {
+            let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("prt volume readback"),
+                size,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            let mut encoder = self.device.create_command_encoder(&Default::default());
+            encoder.copy_texture_to_buffer(
+                t.as_image_copy(),
+                wgpu::TexelCopyBufferInfo {
+                    buffer: &staging,
+                    layout: wgpu::TexelCopyBufferLayout {
+                        offset: 0,
+                        bytes_per_row: Some(row),
+                        rows_per_image: Some(h),
+                    },
+                },
+                t.size(),
+            );
+            self.queue.submit([encoder.finish()]);
+            let bytes = self.map(&staging, size)?;
+            let mut texels = Vec::with_capacity((w * h * d) as usize);
+            for z in 0..d {
+                for y in 0..h {
+                    let start = (u64::from(row) * u64::from(y + z * h)) as usize;
+                    for x in 0..w as usize {
+                        let at = start + x * texel as usize;
+                        texels.push(match self.settings.volume_format {
+                            VolumeFormat::F16 => std::array::from_fn(|c| {
+                                prt_format::f16_to_f32(u16::from_le_bytes([
+                                    bytes[at + 2 * c],
+                                    bytes[at + 2 * c + 1],
+                                ]))
+                            }),
+                            VolumeFormat::F32 => {
+                                *bytemuck::from_bytes::<[f32; 4]>(&bytes[at..at + 16])
+                            }
+                        });
+                    }
+                }
+            }
+            out.push(texels);
+        }
+        Ok(out)
+    }
+}
+
+/// Relights `asset` once on the GPU (all probes, blocking) and returns every probe's SH, the
+/// work counters, and whether subgroup operations were used: what `prt relight --backend gpu`
+/// runs.
+pub fn relight_once(
+    asset: &Asset,
+    lighting: &Lighting,
+    settings: RuntimeSettings,
+) -> Result<(Vec<ShRgb>, Counters, wgpu::AdapterInfo), GpuError> {
+    let (device, queue, info) = headless_device()?;
+    let mut runtime = PrtRuntime::new(&device, &queue, asset, settings)?;
+    let mut encoder = device.create_command_encoder(&Default::default());
+    runtime.update(&mut encoder, lighting, None)?;
+    queue.submit([encoder.finish()]);
+    let counters = runtime.read_counters()?;
+    Ok((runtime.read_probe_sh()?, counters, info))
+}
+
+/// Rebuilds SH from the seven texels of one probe (undoing the validity premultiplication);
+/// `None` where the texel's validity is 0.
+pub fn sh_from_texels(t: [[f32; 4]; 7]) -> Option<ShRgb> {
+    let v = t[0][3];
+    if v <= 0.0 {
+        return None;
+    }
+    let flat: Vec<f32> = t[1..].iter().flatten().map(|x| x / v).collect();
+    let mut c = [[0.0f32; 3]; SH_COUNT];
+    c[0] = [t[0][0] / v, t[0][1] / v, t[0][2] / v];
+    for k in 1..SH_COUNT {
+        c[k] = [
+            flat[3 * (k - 1)],
+            flat[3 * (k - 1) + 1],
+            flat[3 * (k - 1) + 2],
+        ];
+    }
+    Some(c)
+}

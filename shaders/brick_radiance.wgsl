@@ -1,0 +1,37 @@
+// Stage 3, one thread per dirty brick: the brick's linear radiance model from its surfels, the
+// weighted mean and the gradient sum_s g_s L_s (twin of CpuRelighter::brick_radiance). Four
+// vec4 per brick: mean, then the gradient of red, green and blue.
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var<storage, read> bricks: array<Brick>;
+@group(0) @binding(2) var<storage, read> surfels: array<Surfel>;
+@group(0) @binding(3) var<storage, read> brick_dirty: array<u32>;
+@group(0) @binding(4) var<storage, read> surfel_radiance: array<vec4<f32>>;
+@group(0) @binding(5) var<storage, read_write> brick_radiance: array<vec4<f32>>;
+
+@compute @workgroup_size(WORKGROUP)
+fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let b = linear_index(wg, lid, WORKGROUP, params.dispatch_width);
+    if b >= params.brick_count || brick_dirty[b] == 0u {
+        return;
+    }
+    let brick = bricks[b];
+    var mean = vec3<f32>(0.0);
+    var gr = vec3<f32>(0.0);
+    var gg = vec3<f32>(0.0);
+    var gb = vec3<f32>(0.0);
+    var weight = 0.0;
+    for (var s = brick.first_surfel; s < brick.first_surfel + brick.surfel_count; s = s + 1u) {
+        let l = surfel_radiance[s].xyz;
+        let surfel = surfels[s];
+        mean = mean + surfel.weight * l;
+        gr = gr + surfel.gradient * l.x;
+        gg = gg + surfel.gradient * l.y;
+        gb = gb + surfel.gradient * l.z;
+        weight = weight + surfel.weight;
+    }
+    brick_radiance[4u * b] = vec4<f32>(mean / weight, 0.0);
+    brick_radiance[4u * b + 1u] = vec4<f32>(gr, 0.0);
+    brick_radiance[4u * b + 2u] = vec4<f32>(gg, 0.0);
+    brick_radiance[4u * b + 3u] = vec4<f32>(gb, 0.0);
+}

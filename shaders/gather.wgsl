@@ -1,0 +1,136 @@
+// Stage 5, one workgroup per probe of the update window: the probe's factors (brick radiance
+// evaluated at the factor's offset, times its SH9 transfer) and its sky term, summed by a
+// parallel reduction (gather_subgroup.wgsl or gather_tree.wgsl, which hold the entry point).
+// Threads stride over the factor table, so a probe with more factors than threads loops and
+// nothing is ever dropped. Thread 0 then writes the probe's SH to `probe_sh` and all seven
+// volume texels of the probe at once: a texel never holds half of an update.
+//
+// Volume layout (premultiplied by validity, so hardware trilinear filtering weights valid
+// probes only): texture 0 = (c0.rgb, validity); textures 1..6 = the 24 values c1.r, c1.g, c1.b,
+// c2.r, ... c8.b in order, four per texel. Invalid probes are never gathered: their texels stay
+// zero, validity included.
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var<storage, read> probes: array<Probe>;
+@group(0) @binding(2) var<storage, read> factors: array<u32>;
+@group(0) @binding(3) var<storage, read> brick_radiance: array<vec4<f32>>;
+@group(0) @binding(4) var<storage, read> sky_transfer: array<f32>;
+@group(0) @binding(5) var<storage, read> sky_mask: array<u32>;
+// Per lattice direction: the direction (xyz), then the sky radiance (xyz).
+@group(0) @binding(6) var<storage, read> sky_directions: array<vec4<f32>>;
+@group(0) @binding(7) var<storage, read_write> probe_dirty: array<u32>;
+@group(0) @binding(8) var<storage, read_write> probe_sh: array<vec4<f32>>;
+@group(0) @binding(9) var<storage, read_write> counters: Counters;
+
+@group(1) @binding(0) var volume0: texture_storage_3d<VOLUME_FORMAT, write>;
+@group(1) @binding(1) var volume1: texture_storage_3d<VOLUME_FORMAT, write>;
+@group(1) @binding(2) var volume2: texture_storage_3d<VOLUME_FORMAT, write>;
+@group(1) @binding(3) var volume3: texture_storage_3d<VOLUME_FORMAT, write>;
+@group(1) @binding(4) var volume4: texture_storage_3d<VOLUME_FORMAT, write>;
+@group(1) @binding(5) var volume5: texture_storage_3d<VOLUME_FORMAT, write>;
+@group(1) @binding(6) var volume6: texture_storage_3d<VOLUME_FORMAT, write>;
+
+var<workgroup> go: u32;
+
+// The probe this workgroup gathers, or PROBE_NONE when it has nothing to do (outside the window,
+// invalid, or clean). Workgroup-uniform, so the reduction's barriers stay in uniform control.
+fn workgroup_probe(wg: vec3<u32>, lid: u32) -> u32 {
+    let slot = wg.x + wg.y * params.dispatch_width;
+    let p = (params.window_start + slot) % max(params.probe_count, 1u);
+    if lid == 0u {
+        var flag = 0u;
+        if slot < params.window_count {
+            if (probes[p].flags & PROBE_VALID) != 0u && probe_dirty[p] != 0u {
+                flag = 1u;
+            }
+        }
+        go = flag;
+    }
+    if workgroupUniformLoad(&go) == 0u {
+        return PROBE_NONE;
+    }
+    return p;
+}
+
+fn factor_radiance(brick: u32, offset: vec3<f32>) -> vec3<f32> {
+    let mean = brick_radiance[4u * brick].xyz;
+    let g = vec3<f32>(
+        dot(brick_radiance[4u * brick + 1u].xyz, offset),
+        dot(brick_radiance[4u * brick + 2u].xyz, offset),
+        dot(brick_radiance[4u * brick + 3u].xyz, offset),
+    );
+    return max(mean + g, vec3<f32>(0.0));
+}
+
+// This thread's share of the probe's SH: factors lid, lid + WORKGROUP, ... and sky rays likewise.
+fn accumulate(p: u32, lid: u32) -> array<vec3<f32>, 9> {
+    var acc: array<vec3<f32>, 9>;
+    let probe = probes[p];
+    for (var f = probe.first_factor + lid; f < probe.first_factor + probe.factor_count; f = f + GATHER_WORKGROUP) {
+        let base = f * FACTOR_WORDS;
+        var t: array<f32, 9>;
+        t[0] = f32(factors[base + 1u]) * params.ray_weight * SH_Y00;
+        var offset: vec3<f32>;
+        if FACTOR_F16 {
+            for (var w = 0u; w < 4u; w = w + 1u) {
+                let h = unpack2x16float(factors[base + 2u + w]);
+                t[1u + 2u * w] = h.x;
+                t[2u + 2u * w] = h.y;
+            }
+            offset = vec3<f32>(unpack2x16float(factors[base + 6u]), unpack2x16float(factors[base + 7u]).x);
+        } else {
+            for (var k = 1u; k < 9u; k = k + 1u) {
+                t[k] = bitcast<f32>(factors[base + 1u + k]);
+            }
+            offset = vec3<f32>(
+                bitcast<f32>(factors[base + 10u]),
+                bitcast<f32>(factors[base + 11u]),
+                bitcast<f32>(factors[base + 12u]),
+            );
+        }
+        let l = factor_radiance(factors[base], offset);
+        for (var k = 0u; k < 9u; k = k + 1u) {
+            acc[k] = acc[k] + t[k] * l;
+        }
+    }
+    if params.sky_mode == SKY_CONSTANT && lid == 0u {
+        for (var k = 0u; k < 9u; k = k + 1u) {
+            acc[k] = acc[k] + sky_transfer[9u * p + k] * params.sky_color;
+        }
+    }
+    if params.sky_mode == SKY_DIRECTIONS {
+        let words = (params.ray_count + 31u) / 32u;
+        for (var i = lid; i < params.ray_count; i = i + GATHER_WORKGROUP) {
+            if (sky_mask[p * words + i / 32u] & (1u << (i % 32u))) != 0u {
+                let y = sh_basis(sky_directions[2u * i].xyz);
+                let l = sky_directions[2u * i + 1u].xyz;
+                for (var k = 0u; k < 9u; k = k + 1u) {
+                    acc[k] = acc[k] + params.ray_weight * y[k] * l;
+                }
+            }
+        }
+    }
+    return acc;
+}
+
+fn texel(v: vec4<f32>) -> vec4<f32> {
+    return clamp(v, vec4<f32>(-params.texel_limit), vec4<f32>(params.texel_limit));
+}
+
+// Thread 0: store the finished probe.
+fn finish(p: u32, c: array<vec3<f32>, 9>) {
+    for (var k = 0u; k < 9u; k = k + 1u) {
+        probe_sh[9u * p + k] = vec4<f32>(c[k], 0.0);
+    }
+    let n = params.grid_counts;
+    let at = vec3<i32>(vec3<u32>(p % n.x, (p / n.x) % n.y, p / (n.x * n.y)));
+    textureStore(volume0, at, texel(vec4<f32>(c[0], 1.0)));
+    textureStore(volume1, at, texel(vec4<f32>(c[1], c[2].x)));
+    textureStore(volume2, at, texel(vec4<f32>(c[2].yz, c[3].xy)));
+    textureStore(volume3, at, texel(vec4<f32>(c[3].z, c[4])));
+    textureStore(volume4, at, texel(vec4<f32>(c[5], c[6].x)));
+    textureStore(volume5, at, texel(vec4<f32>(c[6].yz, c[7].xy)));
+    textureStore(volume6, at, texel(vec4<f32>(c[7].z, c[8])));
+    probe_dirty[p] = 0u;
+    atomicAdd(&counters.probes_gathered, 1u);
+}

@@ -1,0 +1,164 @@
+// Shared by every prt compute stage: the GPU twins of the Rust structs (prt_format::asset and
+// prt_runtime::gpu::layout; a unit test checks that sizes and offsets agree) and the functions
+// whose CPU reference lives in prt_runtime::{lights, visibility, relight}. Constants such as
+// MAX_LIGHTS, WORKGROUP and the flag bits are injected from Rust before this file.
+
+struct Probe {
+    position: vec3<f32>,
+    flags: u32,
+    first_factor: u32,
+    factor_count: u32,
+    sky_rays: u32,
+    backface_rays: u32,
+}
+
+struct Brick {
+    bmin: vec3<f32>,
+    first_surfel: u32,
+    bmax: vec3<f32>,
+    surfel_count: u32,
+    centroid: vec3<f32>,
+    flags: u32,
+}
+
+struct Surfel {
+    position: vec3<f32>,
+    brick: u32,
+    normal: vec3<f32>,
+    weight: f32,
+    albedo: vec3<f32>,
+    flags: u32,
+    emission: vec3<f32>,
+    pad0: u32,
+    gradient: vec3<f32>,
+    pad1: u32,
+}
+
+struct BvhNode {
+    bmin: vec3<f32>,
+    count: u32,
+    bmax: vec3<f32>,
+    first: u32,
+}
+
+struct Triangle {
+    v0: vec3<f32>,
+    pad0: u32,
+    v1: vec3<f32>,
+    pad1: u32,
+    v2: vec3<f32>,
+    pad2: u32,
+}
+
+struct Light {
+    position: vec3<f32>,
+    kind: u32,
+    direction: vec3<f32>,
+    inv_range_sq: f32,
+    radiant: vec3<f32>,
+    cos_outer: f32,
+    cone_scale: f32,
+    range: f32,
+    pad0: u32,
+    pad1: u32,
+}
+
+struct NormalBounds {
+    nmin: vec3<f32>,
+    pad0: u32,
+    nmax: vec3<f32>,
+    pad1: u32,
+}
+
+struct Counters {
+    bricks_relit: atomic<u32>,
+    surfels_relit: atomic<u32>,
+    shadow_rays: atomic<u32>,
+    probes_gathered: atomic<u32>,
+}
+
+struct Params {
+    probe_count: u32,
+    brick_count: u32,
+    surfel_count: u32,
+    ray_count: u32,
+    light_count: u32,
+    // Lights whose parameters changed since the last update (bit i = light i).
+    changed_lights: u32,
+    // 0: black, 1: constant (sky_color), 2: per-direction radiance in sky_radiance.
+    sky_mode: u32,
+    // 1 when every valid probe must be re-gathered (sky changed, first update).
+    all_probes_dirty: u32,
+    sky_color: vec3<f32>,
+    // Solid angle of one lattice direction, 4 pi / N.
+    ray_weight: f32,
+    grid_counts: vec3<u32>,
+    window_start: u32,
+    window_count: u32,
+    // Largest magnitude a texel may hold (65504 for half-float textures).
+    texel_limit: f32,
+    // Workgroups along x of 2D dispatches (linear index = x + y * dispatch_width).
+    dispatch_width: u32,
+    // Lights whose position, direction or cone changed: their cached visibility is stale.
+    moved_lights: u32,
+}
+
+const PI: f32 = 3.14159265358979;
+
+// Real SH up to L2, conventions.md section 2.
+fn sh_basis(d: vec3<f32>) -> array<f32, 9> {
+    return array<f32, 9>(
+        SH_Y00,
+        SH_Y1 * d.y,
+        SH_Y1 * d.z,
+        SH_Y1 * d.x,
+        SH_Y2_OFF * d.x * d.y,
+        SH_Y2_OFF * d.y * d.z,
+        SH_Y20 * (3.0 * d.z * d.z - 1.0),
+        SH_Y2_OFF * d.x * d.z,
+        SH_Y22 * (d.x * d.x - d.y * d.y),
+    );
+}
+
+// Unshadowed irradiance of a light at p with normal n, the unit direction towards the light and
+// its distance (INFINITE_DISTANCE for directional lights). Twin of PreparedLight::irradiance.
+struct LightSample {
+    irradiance: vec3<f32>,
+    to_light: vec3<f32>,
+    distance: f32,
+}
+
+fn light_sample(light: Light, p: vec3<f32>, n: vec3<f32>) -> LightSample {
+    var s: LightSample;
+    if light.kind == LIGHT_DIRECTIONAL {
+        let l = -light.direction;
+        s.irradiance = light.radiant * max(dot(n, l), 0.0);
+        s.to_light = l;
+        s.distance = INFINITE_DISTANCE;
+        return s;
+    }
+    let to_light = light.position - p;
+    let d2 = dot(to_light, to_light);
+    let d = sqrt(d2);
+    var l = vec3<f32>(0.0, 1.0, 0.0);
+    if d > 0.0 {
+        l = to_light / d;
+    }
+    let cosine = max(dot(n, l), 0.0);
+    let x = d2 * light.inv_range_sq;
+    let window = clamp(1.0 - x * x, 0.0, 1.0);
+    var e = cosine * window * window / max(d2, 1e-5);
+    if light.kind == LIGHT_SPOT {
+        let c = clamp((dot(light.direction, -l) - light.cos_outer) * light.cone_scale, 0.0, 1.0);
+        e = e * c * c;
+    }
+    s.irradiance = light.radiant * e;
+    s.to_light = l;
+    s.distance = d;
+    return s;
+}
+
+// Linear index of a 2D dispatch.
+fn linear_index(wg: vec3<u32>, lid: u32, size: u32, width: u32) -> u32 {
+    return (wg.x + wg.y * width) * size + lid;
+}

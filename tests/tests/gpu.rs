@@ -1,0 +1,359 @@
+//! The GPU runtime against the CPU reference relight, on lavapipe in CI. A missing adapter is a
+//! test failure (`headless_device` errors loudly), never a skip.
+
+use std::path::{Path, PathBuf};
+
+use prt_bake::{BakeSettings, NoProgress};
+use prt_format::sh::ShRgb;
+use prt_format::{Asset, Light, LightKind, LightRig, Sky};
+use prt_runtime::gpu::{
+    headless_device, sh_from_texels, wgpu, PrtRuntime, RuntimeSettings, VolumeFormat,
+};
+use prt_runtime::{load_rig, CpuRelighter, Lighting, SkyModel};
+
+fn shared(rel: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../shared")
+        .join(rel)
+}
+
+fn fixture(rel: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../fixtures")
+        .join(rel)
+}
+
+fn bake(scene: &Path, settings: &BakeSettings) -> Asset {
+    prt_bake::bake(scene, settings, &NoProgress)
+        .unwrap_or_else(|e| panic!("bake {}: {e}", scene.display()))
+        .0
+}
+
+fn device() -> (wgpu::Device, wgpu::Queue) {
+    let (device, queue, _) = headless_device().expect("a GPU adapter (lavapipe in CI) is required");
+    (device, queue)
+}
+
+fn cpu(asset: &Asset, lighting: &Lighting) -> Vec<ShRgb> {
+    CpuRelighter::new(asset)
+        .unwrap()
+        .relight(lighting, 1)
+        .unwrap()
+        .sh
+}
+
+/// Runs updates until the round-robin cycle is done; returns the probes' SH.
+fn gpu_update(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    runtime: &mut PrtRuntime,
+    lighting: &Lighting,
+    budget: Option<u32>,
+) -> Vec<ShRgb> {
+    loop {
+        let mut encoder = device.create_command_encoder(&Default::default());
+        let report = runtime.update(&mut encoder, lighting, budget).unwrap();
+        queue.submit([encoder.finish()]);
+        if report.pending_windows == 0 {
+            break;
+        }
+    }
+    runtime.read_probe_sh().unwrap()
+}
+
+/// |gpu - cpu| <= 1e-4 |SH0| per coefficient; an absolute floor of 1e-7 of the volume's largest
+/// SH0 keeps nearly black probes (where float rounding dominates) from failing on noise.
+fn assert_close(label: &str, asset: &Asset, gpu: &[ShRgb], cpu: &[ShRgb], rel: f32) {
+    let peak = cpu
+        .iter()
+        .map(|c| c[0].iter().fold(0.0f32, |m, v| m.max(v.abs())))
+        .fold(0.0, f32::max);
+    let mut compared = 0;
+    for (i, (g, c)) in gpu.iter().zip(cpu).enumerate() {
+        if !asset.probes[i].is_valid() {
+            continue;
+        }
+        compared += 1;
+        let dc = c[0].iter().fold(0.0f32, |m, v| m.max(v.abs()));
+        for k in 0..9 {
+            for ch in 0..3 {
+                let tol = rel * dc + 1e-7 * peak;
+                assert!(
+                    (g[k][ch] - c[k][ch]).abs() <= tol && g[k][ch].is_finite(),
+                    "{label}: probe {i} k {k} ch {ch}: gpu {} cpu {} (tol {tol})",
+                    g[k][ch],
+                    c[k][ch]
+                );
+            }
+        }
+    }
+    assert!(compared > 0, "{label}: no valid probe compared");
+}
+
+/// Reads the volume back and rebuilds each probe's SH from its seven texels.
+fn volume_sh(runtime: &PrtRuntime) -> Vec<Option<ShRgb>> {
+    let v = runtime.read_volume().unwrap();
+    (0..v[0].len())
+        .map(|p| sh_from_texels(std::array::from_fn(|t| v[t][p])))
+        .collect()
+}
+
+/// GPU equals the CPU reference on the Cornell reference scene (unmerged f32 factors and default
+/// merged f16 factors) with point, spot with range, directional and sky; the f32 volume read
+/// back equals the probe SH exactly, the f16 volume within half-float rounding.
+#[test]
+fn gpu_equals_cpu_on_cornell() {
+    let (device, queue) = device();
+    let scene = shared("reference/cornell/cornell.gltf");
+    let reference_grid = BakeSettings {
+        spacing: Some(0.6),
+        bounds: Some([-0.9, 0.1, -0.9, 0.9, 1.9, 0.9]),
+        ..BakeSettings::exact()
+    };
+    for (settings, format) in [
+        (reference_grid, VolumeFormat::F32),
+        (BakeSettings::default(), VolumeFormat::F16),
+    ] {
+        let asset = bake(&scene, &settings);
+        for rig in ["rig.json", "rig_spot.json", "rig_spot_range.json"] {
+            let lighting = load_rig(&shared(&format!("reference/cornell/{rig}"))).unwrap();
+            let mut runtime = PrtRuntime::new(
+                &device,
+                &queue,
+                &asset,
+                RuntimeSettings {
+                    volume_format: format,
+                },
+            )
+            .unwrap();
+            let gpu = gpu_update(&device, &queue, &mut runtime, &lighting, None);
+            let reference = cpu(&asset, &lighting);
+            assert_close(rig, &asset, &gpu, &reference, 1e-4);
+            for (p, texel) in volume_sh(&runtime).iter().enumerate() {
+                let Some(t) = texel else {
+                    assert!(!asset.probes[p].is_valid(), "valid probe {p} has no texel");
+                    continue;
+                };
+                for k in 0..9 {
+                    for ch in 0..3 {
+                        let (a, b) = (t[k][ch], gpu[p][k][ch]);
+                        match format {
+                            VolumeFormat::F32 => assert_eq!(a, b, "texel {p} k {k}"),
+                            VolumeFormat::F16 => assert!(
+                                (a - b).abs() <= b.abs() / 1024.0 + 1e-7,
+                                "texel {p} k {k}: {a} vs {b}"
+                            ),
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// GPU equals CPU on every shared scene with a rig of every light type and a sky.
+#[test]
+fn gpu_equals_cpu_on_shared_scenes() {
+    let (device, queue) = device();
+    let lighting = load_rig(&fixture("rigs/point_spot_sun_sky.json")).unwrap();
+    for scene in [
+        "cornell_box.glb",
+        "room.glb",
+        "sunshadowTest.glb",
+        "sponza_lod4.glb",
+    ] {
+        // sponza_lod4's winding is inconsistent (shared/scenes/README.md): bake it double-sided.
+        let settings = BakeSettings {
+            rays: 256,
+            double_sided: true,
+            ..BakeSettings::default()
+        };
+        let asset = bake(&shared(&format!("scenes/{scene}")), &settings);
+        let mut runtime =
+            PrtRuntime::new(&device, &queue, &asset, RuntimeSettings::default()).unwrap();
+        let gpu = gpu_update(&device, &queue, &mut runtime, &lighting, None);
+        assert_close(scene, &asset, &gpu, &cpu(&asset, &lighting), 1e-4);
+    }
+}
+
+fn rig(intensity: f32, point_x: f32) -> Lighting {
+    let rig = LightRig {
+        lights: vec![
+            Light {
+                kind: LightKind::Point,
+                position: [point_x, 1.5, 0.0],
+                direction: [0.0, -1.0, 0.0],
+                color: [1.0, 0.9, 0.8],
+                intensity,
+                range: Some(4.0),
+                inner_cone_angle: 0.0,
+                outer_cone_angle: 0.7,
+            },
+            Light {
+                kind: LightKind::Directional,
+                position: [0.0; 3],
+                direction: [-0.35, -0.55, -0.76],
+                color: [1.0; 3],
+                intensity: 2.0,
+                range: None,
+                inner_cone_angle: 0.0,
+                outer_cone_angle: 0.7,
+            },
+        ],
+        sky: Some(Sky {
+            color: Some([0.2, 0.3, 0.5]),
+            exr: None,
+            intensity: 1.0,
+        }),
+    };
+    Lighting::from_rig(rig, Path::new("."), Path::new("test rig")).unwrap()
+}
+
+/// Amortised updates converge exactly to the full update, a texel never mixes two updates,
+/// nothing is recomputed when nothing changed, and an intensity change traces no shadow ray.
+#[test]
+fn amortised_updates_and_skipped_work() {
+    let (device, queue) = device();
+    let asset = bake(
+        &shared("reference/cornell/cornell.gltf"),
+        &BakeSettings::default(),
+    );
+    let settings = RuntimeSettings {
+        volume_format: VolumeFormat::F32,
+    };
+    let (a, b) = (rig(3.0, 0.0), rig(6.0, 0.3));
+    let mut full = PrtRuntime::new(&device, &queue, &asset, settings).unwrap();
+    gpu_update(&device, &queue, &mut full, &a, None);
+    let volume_a = volume_sh(&full);
+    let full_b = gpu_update(&device, &queue, &mut full, &b, None);
+    let volume_b = volume_sh(&full);
+
+    let mut amortised = PrtRuntime::new(&device, &queue, &asset, settings).unwrap();
+    gpu_update(&device, &queue, &mut amortised, &a, None);
+    let budget = 97;
+    let mut updates = 0;
+    loop {
+        let mut encoder = device.create_command_encoder(&Default::default());
+        let report = amortised.update(&mut encoder, &b, Some(budget)).unwrap();
+        queue.submit([encoder.finish()]);
+        updates += 1;
+        for (p, texel) in volume_sh(&amortised).iter().enumerate() {
+            assert!(
+                *texel == volume_a[p] || *texel == volume_b[p],
+                "update {updates}: probe {p} mixes two updates"
+            );
+        }
+        if report.pending_windows == 0 {
+            break;
+        }
+    }
+    assert_eq!(updates, asset.probes.len().div_ceil(budget as usize));
+    assert_eq!(
+        amortised.read_probe_sh().unwrap(),
+        full_b,
+        "converged to the full update"
+    );
+    assert_eq!(volume_sh(&amortised), volume_b);
+
+    let mut encoder = device.create_command_encoder(&Default::default());
+    let idle = amortised.update(&mut encoder, &b, Some(budget)).unwrap();
+    queue.submit([encoder.finish()]);
+    assert!(idle.idle, "nothing changed: nothing recorded");
+
+    let brighter = rig(9.0, 0.3);
+    let mut encoder = device.create_command_encoder(&Default::default());
+    amortised.update(&mut encoder, &brighter, None).unwrap();
+    queue.submit([encoder.finish()]);
+    let counters = amortised.read_counters().unwrap();
+    assert_eq!(
+        counters.shadow_rays, 0,
+        "visibility cached for a light that did not move"
+    );
+    assert!(counters.bricks_relit > 0 && (counters.bricks_relit as usize) < asset.bricks.len());
+    assert_close(
+        "after intensity change",
+        &asset,
+        &amortised.read_probe_sh().unwrap(),
+        &cpu(&asset, &brighter),
+        1e-4,
+    );
+}
+
+/// Hostile values: zero lights, sky only, all probes invalid, intensities from 1e-6 to 1e6
+/// (beyond half range: clamped, never infinite), and a long, thin volume at the device's largest
+/// 3D texture dimension.
+#[test]
+fn hostile_values_stay_finite() {
+    let (device, queue) = device();
+    let cornell = bake(
+        &shared("reference/cornell/cornell.gltf"),
+        &BakeSettings::default(),
+    );
+    let no_lights = Lighting {
+        rig: LightRig::default(),
+        sky: SkyModel::Black,
+    };
+    let sky_only = load_rig(&fixture("rigs/sky_only.json")).unwrap();
+    for (label, lighting) in [
+        ("no lights", no_lights),
+        ("sky only", sky_only),
+        ("1e-6", rig(1e-6, 0.0)),
+        ("1e6", rig(1e6, 0.0)),
+    ] {
+        let mut runtime =
+            PrtRuntime::new(&device, &queue, &cornell, RuntimeSettings::default()).unwrap();
+        let gpu = gpu_update(&device, &queue, &mut runtime, &lighting, None);
+        assert_close(label, &cornell, &gpu, &cpu(&cornell, &lighting), 1e-4);
+        for texel in volume_sh(&runtime).into_iter().flatten() {
+            assert!(
+                texel
+                    .iter()
+                    .flatten()
+                    .all(|v| v.is_finite() && v.abs() <= 65504.0),
+                "{label}"
+            );
+        }
+    }
+
+    let inside = BakeSettings {
+        spacing: Some(0.5),
+        bounds: Some([-0.5, -0.5, -0.5, 0.5, 0.5, 0.5]),
+        ..BakeSettings::default()
+    };
+    let invalid = bake(&fixture("closed_box_outward.gltf"), &inside);
+    assert!(invalid.probes.iter().all(|p| !p.is_valid()));
+    let mut runtime =
+        PrtRuntime::new(&device, &queue, &invalid, RuntimeSettings::default()).unwrap();
+    let sh = gpu_update(&device, &queue, &mut runtime, &rig(3.0, 0.0), None);
+    assert!(sh.iter().flatten().flatten().all(|v| *v == 0.0));
+    assert!(
+        volume_sh(&runtime).iter().all(Option::is_none),
+        "invalid probes have validity 0"
+    );
+
+    let max_dim = device.limits().max_texture_dimension_3d;
+    let line = BakeSettings {
+        rays: 64,
+        spacing: Some(1.0),
+        bounds: Some([0.0, 0.0, 0.0, max_dim as f32, 0.0, 0.0]),
+        max_probes: u64::from(max_dim) + 1,
+        ..BakeSettings::default()
+    };
+    let empty = bake(&fixture("empty.gltf"), &line);
+    assert_eq!(empty.header.grid.counts, [max_dim, 1, 1]);
+    let mut runtime = PrtRuntime::new(&device, &queue, &empty, RuntimeSettings::default()).unwrap();
+    let sky = load_rig(&fixture("rigs/sky_only.json")).unwrap();
+    let sh = gpu_update(&device, &queue, &mut runtime, &sky, Some(1000));
+    assert!(sh.iter().all(|c| (c[0][0] - 3.5449).abs() < 1e-3));
+
+    let too_long = BakeSettings {
+        bounds: Some([0.0, 0.0, 0.0, 2.0 * max_dim as f32, 0.0, 0.0]),
+        max_probes: 4 * u64::from(max_dim),
+        ..line
+    };
+    let asset = bake(&fixture("empty.gltf"), &too_long);
+    let err = PrtRuntime::new(&device, &queue, &asset, RuntimeSettings::default())
+        .err()
+        .expect("a grid beyond the 3D texture limit is refused");
+    assert!(err.to_string().contains(&max_dim.to_string()), "{err}");
+}
