@@ -1,6 +1,7 @@
 //! `prt`: the command-line face of prt (conventions.md section 6). Each subcommand turns its
 //! options into a settings struct and calls one library function.
 
+mod bench;
 mod progress;
 
 use std::path::PathBuf;
@@ -40,6 +41,40 @@ enum Precision {
 enum Backend {
     Cpu,
     Gpu,
+}
+
+#[derive(Subcommand)]
+enum BenchKind {
+    /// Bake throughput against bare obvhs tracing of the same rays, and bytes per probe.
+    Bake {
+        scene: PathBuf,
+        #[arg(long)]
+        spacing: Option<f32>,
+        #[arg(long, value_parser = parse_bounds, allow_hyphen_values = true)]
+        bounds: Option<[f32; 6]>,
+        #[arg(long, default_value_t = 512)]
+        rays: u32,
+        #[arg(long)]
+        double_sided: bool,
+    },
+    /// Sweep rays, brick size, factor encoding and precision against a reference SH file.
+    Accuracy {
+        scene: PathBuf,
+        #[arg(long)]
+        lights: PathBuf,
+        /// Reference SH JSON (oracle output: probes[i].position and .sh).
+        #[arg(long)]
+        reference: PathBuf,
+        #[arg(long)]
+        spacing: Option<f32>,
+        #[arg(long, value_parser = parse_bounds, allow_hyphen_values = true)]
+        bounds: Option<[f32; 6]>,
+        #[arg(long, value_delimiter = ',', default_value = "64,128,256,512,1024,2048,4096")]
+        rays: Vec<u32>,
+        /// Directory for accuracy.md and accuracy.svg.
+        #[arg(long, default_value = ".")]
+        out: PathBuf,
+    },
 }
 
 #[derive(Subcommand)]
@@ -99,6 +134,11 @@ enum Command {
         /// Output JSON, written atomically.
         #[arg(long)]
         json: PathBuf,
+    },
+    /// Measure speed and accuracy (not tests; see README for the figures).
+    Bench {
+        #[command(subcommand)]
+        kind: BenchKind,
     },
     /// Print the summary of an asset.
     Inspect {
@@ -236,6 +276,52 @@ fn run(cli: Cli) -> Result<()> {
             println!("wrote {}", json.display());
             Ok(())
         }
+        Command::Bench { kind } => match kind {
+            BenchKind::Bake {
+                scene,
+                spacing,
+                bounds,
+                rays,
+                double_sided,
+            } => {
+                let settings = BakeSettings {
+                    rays,
+                    spacing,
+                    bounds,
+                    double_sided,
+                    ..BakeSettings::default()
+                };
+                println!("{}", bench::bake(&scene, &settings)?);
+                Ok(())
+            }
+            BenchKind::Accuracy {
+                scene,
+                lights,
+                reference,
+                spacing,
+                bounds,
+                rays,
+                out,
+            } => {
+                let lighting = prt_runtime::load_rig(&lights)?;
+                let text = std::fs::read_to_string(&reference)
+                    .with_context(|| format!("reading {}", reference.display()))?;
+                let reference_sh = prt_runtime::output::read_probe_sh(&serde_json::from_str(&text)?)
+                    .with_context(|| format!("{}: no probes[i].position/.sh", reference.display()))?;
+                let base = BakeSettings {
+                    spacing,
+                    bounds,
+                    ..BakeSettings::default()
+                };
+                let (md, svg) = bench::accuracy(&scene, &lighting, &reference_sh, &base, &rays)?;
+                std::fs::create_dir_all(&out)?;
+                prt_format::io::write_bytes_atomic(&out.join("accuracy.md"), md.as_bytes())?;
+                prt_format::io::write_bytes_atomic(&out.join("accuracy.svg"), svg.as_bytes())?;
+                println!("{md}");
+                println!("wrote {} and accuracy.svg", out.join("accuracy.md").display());
+                Ok(())
+            }
+        },
         Command::Inspect { asset, json } => {
             let bytes =
                 std::fs::read(&asset).with_context(|| format!("reading {}", asset.display()))?;

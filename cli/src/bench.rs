@@ -1,0 +1,216 @@
+//! `prt bench`: measurements, never tests. Each function measures its baseline in the same run
+//! and returns a Markdown report (and, for the accuracy sweep, an SVG plot).
+
+use std::fmt::Write as _;
+use std::path::Path;
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use glam::Vec3;
+use prt_bake::{BakeSettings, NoProgress};
+use prt_format::{Asset, Factors, TransferPrecision};
+use prt_runtime::accuracy::{compare, ErrorStats};
+use prt_runtime::{CpuRelighter, Lighting};
+use rayon::prelude::*;
+
+/// Bake throughput against bare obvhs tracing of the same rays, and asset size per probe.
+pub fn bake(scene: &Path, settings: &BakeSettings) -> Result<String> {
+    let start = Instant::now();
+    let (asset, report) = prt_bake::bake(scene, settings, &NoProgress)?;
+    let encoded = prt_format::encode(&asset)?;
+    let bake_s = start.elapsed().as_secs_f64();
+
+    // Bare tracing: the same probes and lattice through the same CWBVH, closest hit only.
+    let loaded = prt_bake::scene::load(scene)?;
+    let bvh = prt_bake::bvh::SceneBvh::build(&loaded.triangles);
+    let dirs: Vec<Vec3> = prt_format::directions::fibonacci_directions(settings.rays)
+        .into_iter()
+        .map(Vec3::from)
+        .collect();
+    let positions = prt_bake::probes::positions(&asset.header.grid);
+    let t = Instant::now();
+    let hits: usize = positions
+        .par_iter()
+        .map(|&p| dirs.iter().filter(|&&d| bvh.closest_hit(p, d).is_some()).count())
+        .sum();
+    let bare_s = t.elapsed().as_secs_f64();
+
+    let probes = asset.probes.len() as f64;
+    let rays = probes * f64::from(settings.rays);
+    let summary = prt_format::Summary::of(&asset, encoded.len() as u64);
+    let trace_s = report
+        .timings
+        .iter()
+        .find(|(s, _)| *s == "trace")
+        .map_or(0.0, |(_, d)| d.as_secs_f64());
+    let mut md = String::new();
+    writeln!(md, "| figure | value |\n|---|---|")?;
+    writeln!(md, "| scene | {} ({} triangles) |", scene.display(), summary.triangle_count)?;
+    writeln!(md, "| probes (valid) | {} ({}) |", summary.probe_count, summary.valid_probe_count)?;
+    writeln!(md, "| rays per probe | {} |", settings.rays)?;
+    writeln!(md, "| threads | {} |", rayon::current_num_threads())?;
+    writeln!(md, "| end-to-end bake (load, BVH, trace, merge, encode) | {bake_s:.3} s |")?;
+    writeln!(md, "| end-to-end throughput | {:.0} probes/s, {:.2} M rays/s |", probes / bake_s, rays / bake_s / 1e6)?;
+    writeln!(md, "| bake trace stage alone | {:.2} M rays/s |", rays / trace_s / 1e6)?;
+    writeln!(md, "| bare obvhs tracing, same rays ({hits} hits) | {bare_s:.3} s, {:.2} M rays/s |", rays / bare_s / 1e6)?;
+    writeln!(md, "| end-to-end / bare tracing throughput | {:.0}% |", 100.0 * bare_s / bake_s)?;
+    writeln!(md, "| stage times | {} |", report.timings.iter().map(|(s, d)| format!("{s} {:.3} s", d.as_secs_f64())).collect::<Vec<_>>().join(", "))?;
+    writeln!(md, "| asset bytes per probe (file) | {:.0} |", summary.bytes_per_probe)?;
+    writeln!(md, "| per-probe transport data (probe, sky mask and transfer, factors) | {:.0} bytes |", summary.transport_bytes_per_probe)?;
+    writeln!(md, "| factors per probe | {:.1} |", summary.factors_per_probe)?;
+    writeln!(md, "| surfels (ray hits before merging) / bricks | {} ({}) / {} |", summary.surfel_count, summary.surfels_unmerged, summary.brick_count)?;
+    Ok(md)
+}
+
+/// One setting of the accuracy sweep.
+struct Row {
+    rays: u32,
+    merge: String,
+    precision: TransferPrecision,
+    encoding: &'static str,
+    bake_s: f64,
+    relight_s: f64,
+    bytes_per_probe: f64,
+    transport_per_probe: f64,
+    factors_per_probe: f64,
+    error: ErrorStats,
+}
+
+/// Sweeps rays, brick cell size, factor encoding and storage precision; reports bake time,
+/// relight time, bytes per probe and the error against `reference`.
+pub fn accuracy(
+    scene: &Path,
+    lighting: &Lighting,
+    reference: &[([f32; 3], prt_format::sh::ShRgb)],
+    base: &BakeSettings,
+    rays: &[u32],
+) -> Result<(String, String)> {
+    let merges: [(&str, Option<f32>, f32); 4] = [
+        ("none", Some(0.0), 12.0),
+        ("spacing/24", None, 24.0),
+        ("spacing/12 (default)", None, 12.0),
+        ("spacing/6", None, 6.0),
+    ];
+    let mut rows = Vec::new();
+    for &n in rays {
+        for (name, cell_size, cells) in merges {
+            for precision in [TransferPrecision::F32, TransferPrecision::F16] {
+                let settings = BakeSettings {
+                    rays: n,
+                    cell_size,
+                    cells_per_spacing: cells,
+                    transfer_precision: precision,
+                    ..base.clone()
+                };
+                let t = Instant::now();
+                let (asset, _) = prt_bake::bake(scene, &settings, &NoProgress)
+                    .with_context(|| format!("bake with {n} rays, cells {name}"))?;
+                let bytes = prt_format::encode(&asset)?.len();
+                let bake_s = t.elapsed().as_secs_f64();
+                let summary = prt_format::Summary::of(&asset, bytes as u64);
+                let mut encodings = vec![("sh9 + gradient", asset.clone())];
+                if cell_size != Some(0.0) && precision == TransferPrecision::F16 {
+                    encodings.push(("sh9, flat brick", without_offsets(asset)));
+                }
+                for (encoding, asset) in encodings {
+                    let relighter = CpuRelighter::new(&asset)?;
+                    let t = Instant::now();
+                    let relit = relighter.relight(lighting, 1)?;
+                    let relight_s = t.elapsed().as_secs_f64();
+                    let ours: Vec<_> = asset
+                        .probes
+                        .iter()
+                        .zip(&relit.sh)
+                        .map(|(p, c)| (p.position, p.is_valid(), *c))
+                        .collect();
+                    let probes = asset.probes.len() as f64;
+                    rows.push(Row {
+                        rays: n,
+                        merge: name.to_owned(),
+                        precision,
+                        encoding,
+                        bake_s,
+                        relight_s,
+                        bytes_per_probe: summary.bytes_per_probe,
+                        transport_per_probe: summary.transport_bytes_per_probe,
+                        factors_per_probe: asset.factors.len() as f64 / probes,
+                        error: compare(&ours, reference, 1e-3),
+                    });
+                }
+            }
+        }
+    }
+    let mut md = String::from("| rays | brick cells | transfer | encoding | bake ms | CPU relight ms | file bytes/probe | transport bytes/probe | factors/probe | mean err | p95 err | max err | max coeff / SH0 |\n|---:|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+    for r in &rows {
+        writeln!(
+            md,
+            "| {} | {} | {:?} | {} | {:.1} | {:.2} | {:.0} | {:.0} | {:.1} | {:.2}% | {:.2}% | {:.2}% | {:.1e} |",
+            r.rays, r.merge, r.precision, r.encoding, r.bake_s * 1e3, r.relight_s * 1e3,
+            r.bytes_per_probe, r.transport_per_probe, r.factors_per_probe, 100.0 * r.error.mean, 100.0 * r.error.p95,
+            100.0 * r.error.max, r.error.max_coeff_rel
+        )?;
+    }
+    Ok((md, plot(&rows)))
+}
+
+/// The same asset with every factor's offset zeroed: each brick seen as its mean radiance.
+fn without_offsets(mut asset: Asset) -> Asset {
+    match &mut asset.factors {
+        Factors::F32(f) => f.iter_mut().for_each(|f| f.offset = [0.0; 3]),
+        Factors::F16(f) => f.iter_mut().for_each(|f| f.offset = [0; 2]),
+    }
+    asset
+}
+
+/// SVG scatter of mean error against bake + relight time, log-log, with the Pareto front.
+fn plot(rows: &[Row]) -> String {
+    let (w, h, m) = (760.0, 480.0, 60.0);
+    let pts: Vec<(f64, f64, &Row)> = rows
+        .iter()
+        .filter(|r| r.error.mean > 0.0)
+        .map(|r| ((r.bake_s + r.relight_s).log10(), (100.0 * r.error.mean).log10(), r))
+        .collect();
+    let (x0, x1) = pts.iter().fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p.0), b.max(p.0)));
+    let (y0, y1) = pts.iter().fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p.1), b.max(p.1)));
+    let sx = |x: f64| m + (x - x0) / (x1 - x0).max(1e-9) * (w - 2.0 * m);
+    let sy = |y: f64| h - m - (y - y0) / (y1 - y0).max(1e-9) * (h - 2.0 * m);
+    let color = |merge: &str| match merge {
+        "none" => "#d62728",
+        "spacing/24" => "#1f77b4",
+        "spacing/6" => "#2ca02c",
+        _ => "#ff7f0e",
+    };
+    let mut s = format!("<svg xmlns='http://www.w3.org/2000/svg' width='{w}' height='{h}' font-family='sans-serif' font-size='12'>\n<rect width='100%' height='100%' fill='white'/>\n");
+    let _ = writeln!(s, "<text x='{}' y='20' text-anchor='middle' font-size='14'>Mean irradiance error vs bake + CPU relight time (log-log)</text>", w / 2.0);
+    let _ = writeln!(s, "<line x1='{m}' y1='{}' x2='{}' y2='{}' stroke='black'/><line x1='{m}' y1='{m}' x2='{m}' y2='{}' stroke='black'/>", h - m, w - m, h - m, h - m);
+    for (x, label) in [(x0, 10f64.powf(x0)), (x1, 10f64.powf(x1))] {
+        let _ = writeln!(s, "<text x='{}' y='{}' text-anchor='middle'>{:.0} ms</text>", sx(x), h - m + 16.0, label * 1e3);
+    }
+    for (y, label) in [(y0, 10f64.powf(y0)), (y1, 10f64.powf(y1))] {
+        let _ = writeln!(s, "<text x='{}' y='{}' text-anchor='end'>{label:.2}%</text>", m - 4.0, sy(y) + 4.0);
+    }
+    let mut front: Vec<&(f64, f64, &Row)> = pts.iter().collect();
+    front.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut best = f64::MAX;
+    let front: Vec<String> = front
+        .into_iter()
+        .filter(|p| {
+            let keep = p.1 < best;
+            best = best.min(p.1);
+            keep
+        })
+        .map(|p| format!("{:.1},{:.1}", sx(p.0), sy(p.1)))
+        .collect();
+    let _ = writeln!(s, "<polyline points='{}' fill='none' stroke='#555' stroke-dasharray='4 3'/>", front.join(" "));
+    for (x, y, r) in &pts {
+        let shape = if r.encoding == "sh9, flat brick" { "fill='none' stroke-width='1.5' stroke" } else { "fill" };
+        let _ = writeln!(s, "<circle cx='{:.1}' cy='{:.1}' r='4' {shape}='{}'><title>{} rays, {}, {:?}, {}: {:.2}%</title></circle>", sx(*x), sy(*y), color(&r.merge), r.rays, r.merge, r.precision, r.encoding, 100.0 * r.error.mean);
+    }
+    for (i, merge) in ["none", "spacing/24", "spacing/12 (default)", "spacing/6"].iter().enumerate() {
+        let y = m + 16.0 * i as f64;
+        let _ = writeln!(s, "<circle cx='{}' cy='{}' r='4' fill='{}'/><text x='{}' y='{}'>bricks: {merge}</text>", w - 200.0, y, color(merge), w - 190.0, y + 4.0);
+    }
+    let _ = writeln!(s, "<text x='{}' y='{}'>hollow: flat brick radiance; dashed: Pareto front</text>", w - 330.0, m + 70.0);
+    s.push_str("</svg>\n");
+    s
+}
