@@ -10,6 +10,7 @@ use glam::Vec3;
 use prt_bake::{BakeSettings, NoProgress};
 use prt_format::{Asset, Factors, TransferPrecision};
 use prt_runtime::accuracy::{compare, ErrorStats};
+use prt_runtime::gpu::{headless_device, wgpu, PrtRuntime, RuntimeSettings};
 use prt_runtime::{CpuRelighter, Lighting};
 use rayon::prelude::*;
 
@@ -213,4 +214,96 @@ fn plot(rows: &[Row]) -> String {
     let _ = writeln!(s, "<text x='{}' y='{}'>hollow: flat brick radiance; dashed: Pareto front</text>", w - 330.0, m + 70.0);
     s.push_str("</svg>\n");
     s
+}
+
+/// Wall time of `iterations` recorded-and-submitted updates, each waited for, in seconds per
+/// update; `lighting(i)` gives the lighting of update i.
+fn time_updates<'a>(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    runtime: &mut PrtRuntime,
+    iterations: u32,
+    lighting: impl Fn(u32) -> &'a Lighting,
+) -> Result<f64> {
+    let t = Instant::now();
+    for i in 0..iterations {
+        let mut encoder = device.create_command_encoder(&Default::default());
+        runtime.update(&mut encoder, lighting(i), None)?;
+        queue.submit([encoder.finish()]);
+        runtime.wait()?;
+    }
+    Ok(t.elapsed().as_secs_f64() / f64::from(iterations))
+}
+
+/// GPU runtime costs, all measured in one run on one adapter: full update per probe at several
+/// probe counts, gather against integer atomic accumulation, the update against the prior art's
+/// scheme (every probe relights its own unmerged surfels), and an update when nothing changed.
+pub fn gpu(scene: &Path, a: &Lighting, spacings: &[f32], rays: u32, cell: f32) -> Result<String> {
+    let (device, queue, info) = headless_device()?;
+    let sky = |c: f32| Lighting {
+        rig: a.rig.clone(),
+        sky: prt_runtime::SkyModel::Constant([c, c, c]),
+    };
+    let (sky1, sky2) = (sky(0.3), sky(0.4));
+    let mut b = a.clone();
+    for l in &mut b.rig.lights {
+        l.position[0] += 0.05;
+        l.direction[0] += 0.05;
+    }
+    let mut md = format!(
+        "Adapter: {} ({:?}), subgroups: {}. Scene {}, {rays} rays per probe, cell size {cell} m. \
+         Times are wall-clock per update (record, submit, wait); lavapipe runs on the CPU, so \
+         compare ratios, not absolute times.\n\n",
+        info.name,
+        info.backend,
+        device.features().contains(wgpu::Features::SUBGROUP),
+        scene.display()
+    );
+    md.push_str("| probes | factors/probe | full update (lights moved) | per probe | gather only (sky changed) | integer-atomic gather | gather speed-up | nothing changed | prior art: own surfels per probe | speed-up vs prior art |\n|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+    for &spacing in spacings {
+        let settings = BakeSettings {
+            rays,
+            spacing: Some(spacing),
+            cell_size: Some(cell),
+            ..BakeSettings::default()
+        };
+        let (asset, _) = prt_bake::bake(scene, &settings, &NoProgress)?;
+        let probes = asset.probes.len();
+        let mut runtime = PrtRuntime::new(&device, &queue, &asset, RuntimeSettings::default())?;
+        let iterations = 4;
+        time_updates(&device, &queue, &mut runtime, 1, |_| a)?;
+        let full = time_updates(&device, &queue, &mut runtime, iterations, |i| if i % 2 == 0 { &b } else { a })?;
+        let gather = time_updates(&device, &queue, &mut runtime, iterations, |i| if i % 2 == 0 { &sky1 } else { &sky2 })?;
+        runtime.use_atomic_gather(true);
+        let atomic = time_updates(&device, &queue, &mut runtime, iterations, |i| if i % 2 == 0 { &sky1 } else { &sky2 })?;
+        runtime.use_atomic_gather(false);
+        let idle = time_updates(&device, &queue, &mut runtime, iterations, |_| &sky2)?;
+        drop(runtime);
+        let prior = if probes <= 20_000 {
+            let unmerged = BakeSettings {
+                cell_size: Some(0.0),
+                ..settings.clone()
+            };
+            let (asset, _) = prt_bake::bake(scene, &unmerged, &NoProgress)?;
+            let mut runtime = PrtRuntime::new(&device, &queue, &asset, RuntimeSettings::default())?;
+            time_updates(&device, &queue, &mut runtime, 1, |_| a)?;
+            Some(time_updates(&device, &queue, &mut runtime, iterations, |i| if i % 2 == 0 { &b } else { a })?)
+        } else {
+            None
+        };
+        writeln!(
+            md,
+            "| {probes} | {:.0} | {:.1} ms | {:.2} µs | {:.1} ms | {:.1} ms | {:.2}x | {:.3} ms | {} | {} |",
+            asset.factors.len() as f64 / probes as f64,
+            full * 1e3,
+            full * 1e6 / probes as f64,
+            gather * 1e3,
+            atomic * 1e3,
+            atomic / gather,
+            idle * 1e3,
+            prior.map_or("not run".into(), |p| format!("{:.1} ms", p * 1e3)),
+            prior.map_or("-".into(), |p| format!("{:.1}x", p / full)),
+        )?;
+    }
+    Ok(md)
 }

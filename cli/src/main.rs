@@ -75,6 +75,21 @@ enum BenchKind {
         #[arg(long, default_value = ".")]
         out: PathBuf,
     },
+    /// GPU runtime costs: update per probe at several probe counts, gather vs integer atomics,
+    /// vs the prior art's per-probe surfels, and an update when nothing changed.
+    Gpu {
+        scene: PathBuf,
+        #[arg(long)]
+        lights: PathBuf,
+        /// Probe spacings to bake the scene at (one table row each).
+        #[arg(long, value_delimiter = ',', default_value = "0.2,0.0857,0.04")]
+        spacings: Vec<f32>,
+        #[arg(long, default_value_t = 256)]
+        rays: u32,
+        /// Surfel cell size, fixed so that only the probe count changes between rows.
+        #[arg(long, default_value_t = 0.05)]
+        cell_size: f32,
+    },
 }
 
 #[derive(Subcommand)]
@@ -319,6 +334,17 @@ fn run(cli: Cli) -> Result<()> {
                 prt_format::io::write_bytes_atomic(&out.join("accuracy.svg"), svg.as_bytes())?;
                 println!("{md}");
                 println!("wrote {} and accuracy.svg", out.join("accuracy.md").display());
+                Ok(())
+            }
+            BenchKind::Gpu {
+                scene,
+                lights,
+                spacings,
+                rays,
+                cell_size,
+            } => {
+                let lighting = prt_runtime::load_rig(&lights)?;
+                println!("{}", bench::gpu(&scene, &lighting, &spacings, rays, cell_size)?);
                 Ok(())
             }
         },

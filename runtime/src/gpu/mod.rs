@@ -209,6 +209,9 @@ pub struct PrtRuntime {
     views: Vec<wgpu::TextureView>,
     sampler: wgpu::Sampler,
     pipelines: Vec<(Stage, Pipeline)>,
+    /// The integer-atomic gather, built only for benchmarks ([`PrtRuntime::use_atomic_gather`]).
+    atomic_gather: Option<Pipeline>,
+    use_atomic: bool,
     state: Option<State>,
     cursor: u32,
     pending_windows: u32,
@@ -411,6 +414,27 @@ impl PrtRuntime {
             ..Default::default()
         });
 
+        let fixed_accum = zeroed(device, "prt fixed-point accumulators", 4 * 27 * n_probes, none);
+        let gather_groups = || -> Vec<Vec<wgpu::BindingResource<'_>>> {
+            vec![
+                    vec![
+                        buf(&params),
+                        buf(&probes),
+                        buf(&factors),
+                        buf(&brick_radiance),
+                        buf(&sky_transfer),
+                        buf(&sky_mask),
+                        buf(&sky_directions),
+                        buf(&probe_dirty),
+                        buf(&probe_sh),
+                        buf(&counters),
+                    ],
+                    views
+                        .iter()
+                        .map(wgpu::BindingResource::TextureView)
+                        .collect(),
+                ]
+        };
         let stage_groups = |stage: Stage| -> Vec<Vec<wgpu::BindingResource<'_>>> {
             match stage {
                 Stage::CullLights => vec![vec![
@@ -450,28 +474,17 @@ impl PrtRuntime {
                     buf(&brick_dirty),
                     buf(&probe_dirty),
                 ]],
-                Stage::Gather => vec![
-                    vec![
-                        buf(&params),
-                        buf(&probes),
-                        buf(&factors),
-                        buf(&brick_radiance),
-                        buf(&sky_transfer),
-                        buf(&sky_mask),
-                        buf(&sky_directions),
-                        buf(&probe_dirty),
-                        buf(&probe_sh),
-                        buf(&counters),
-                    ],
-                    views
-                        .iter()
-                        .map(wgpu::BindingResource::TextureView)
-                        .collect(),
-                ],
+                Stage::Gather => gather_groups(),
+                Stage::GatherAtomic => {
+                    let mut groups = gather_groups();
+                    groups.push(vec![buf(&fixed_accum)]);
+                    groups
+                }
             }
         };
-        let pipelines = Stage::ALL
+        let pipelines: Vec<(Stage, Pipeline)> = Stage::ALL
             .iter()
+            .chain([Stage::GatherAtomic].iter())
             .map(|&stage| {
                 let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
                     label: Some(stage.label()),
@@ -513,6 +526,8 @@ impl PrtRuntime {
                 )
             })
             .collect();
+        let mut pipelines = pipelines;
+        let atomic_gather = pipelines.pop().map(|(_, p)| p);
         Ok(PrtRuntime {
             device: device.clone(),
             queue: queue.clone(),
@@ -532,6 +547,8 @@ impl PrtRuntime {
             views,
             sampler,
             pipelines,
+            atomic_gather,
+            use_atomic: false,
             state: None,
             cursor: 0,
             pending_windows: 0,
@@ -671,6 +688,10 @@ impl PrtRuntime {
             });
             let groups = |n: u32| n.div_ceil(WORKGROUP);
             for (stage, p) in &self.pipelines {
+                let p = match (stage, &self.atomic_gather) {
+                    (Stage::Gather, Some(atomic)) if self.use_atomic => atomic,
+                    _ => p,
+                };
                 let work = match stage {
                     Stage::CullLights | Stage::BrickRadiance if lights_changed => {
                         groups(self.brick_count)
@@ -701,6 +722,20 @@ impl PrtRuntime {
             window,
             pending_windows: self.pending_windows,
         })
+    }
+
+    /// Benchmarks only: gather with the prior art's integer atomic accumulation (16.16 fixed
+    /// point: it loses precision and overflows beyond 32768) instead of the parallel reduction.
+    pub fn use_atomic_gather(&mut self, atomic: bool) {
+        self.use_atomic = atomic;
+    }
+
+    /// Blocks until all submitted work is done.
+    pub fn wait(&self) -> Result<(), GpuError> {
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map(|_| ())
+            .map_err(|e| GpuError::Readback(e.to_string()))
     }
 
     /// The seven volume texture views (layout in `shaders/gather.wgsl`).

@@ -12,6 +12,8 @@ pub enum Stage {
     BrickRadiance,
     MarkProbes,
     Gather,
+    /// Benchmark baseline: the gather with integer atomic accumulation.
+    GatherAtomic,
 }
 
 impl Stage {
@@ -30,6 +32,7 @@ impl Stage {
             Stage::BrickRadiance => "prt brick_radiance",
             Stage::MarkProbes => "prt mark_probes",
             Stage::Gather => "prt gather",
+            Stage::GatherAtomic => "prt gather (atomic baseline)",
         }
     }
 }
@@ -43,6 +46,7 @@ const MARK_PROBES: &str = include_str!("../../../shaders/mark_probes.wgsl");
 const GATHER: &str = include_str!("../../../shaders/gather.wgsl");
 const GATHER_SUBGROUP: &str = include_str!("../../../shaders/gather_subgroup.wgsl");
 const GATHER_TREE: &str = include_str!("../../../shaders/gather_tree.wgsl");
+const GATHER_ATOMIC: &str = include_str!("../../../shaders/gather_atomic.wgsl");
 const SAMPLE_IRRADIANCE: &str = include_str!("../../../shaders/sample_irradiance.wgsl");
 
 /// Choices that change shader source.
@@ -85,6 +89,7 @@ pub fn source(stage: Stage, config: &ShaderConfig) -> String {
                 GATHER_TREE
             },
         ],
+        Stage::GatherAtomic => vec![GATHER, GATHER_ATOMIC],
     };
     let mut s = prelude(config);
     s.push_str(TYPES);
@@ -149,7 +154,7 @@ mod tests {
     #[test]
     fn every_shader_validates() {
         for config in configs() {
-            for stage in Stage::ALL {
+            for stage in Stage::ALL.into_iter().chain([Stage::GatherAtomic]) {
                 validate(&source(stage, &config), &format!("{stage:?} {config:?}"));
             }
         }
