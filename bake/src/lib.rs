@@ -16,6 +16,9 @@
 //! Every stage orders its output by probe, ray, key or index, never by thread timing: the same
 //! scene and settings give byte-identical assets whatever the thread count.
 
+// SH and colour maths index several parallel arrays with one index; range loops read best.
+#![allow(clippy::needless_range_loop)]
+
 pub mod bricks;
 pub mod bvh;
 pub mod error;

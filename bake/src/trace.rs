@@ -77,7 +77,7 @@ impl Tracer<'_> {
         let front = ng.dot(dir) < 0.0;
         let position = origin + dir * t;
         let facing = if front { ng } else { -ng };
-        if !front && !(material.double_sided || self.double_sided) {
+        if !(front || material.double_sided || self.double_sided) {
             return Hit {
                 ray,
                 position,

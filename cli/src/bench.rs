@@ -32,7 +32,11 @@ pub fn bake(scene: &Path, settings: &BakeSettings) -> Result<String> {
     let t = Instant::now();
     let hits: usize = positions
         .par_iter()
-        .map(|&p| dirs.iter().filter(|&&d| bvh.closest_hit(p, d).is_some()).count())
+        .map(|&p| {
+            dirs.iter()
+                .filter(|&&d| bvh.closest_hit(p, d).is_some())
+                .count()
+        })
         .sum();
     let bare_s = t.elapsed().as_secs_f64();
 
@@ -46,20 +50,74 @@ pub fn bake(scene: &Path, settings: &BakeSettings) -> Result<String> {
         .map_or(0.0, |(_, d)| d.as_secs_f64());
     let mut md = String::new();
     writeln!(md, "| figure | value |\n|---|---|")?;
-    writeln!(md, "| scene | {} ({} triangles) |", scene.display(), summary.triangle_count)?;
-    writeln!(md, "| probes (valid) | {} ({}) |", summary.probe_count, summary.valid_probe_count)?;
+    writeln!(
+        md,
+        "| scene | {} ({} triangles) |",
+        scene.display(),
+        summary.triangle_count
+    )?;
+    writeln!(
+        md,
+        "| probes (valid) | {} ({}) |",
+        summary.probe_count, summary.valid_probe_count
+    )?;
     writeln!(md, "| rays per probe | {} |", settings.rays)?;
     writeln!(md, "| threads | {} |", rayon::current_num_threads())?;
-    writeln!(md, "| end-to-end bake (load, BVH, trace, merge, encode) | {bake_s:.3} s |")?;
-    writeln!(md, "| end-to-end throughput | {:.0} probes/s, {:.2} M rays/s |", probes / bake_s, rays / bake_s / 1e6)?;
-    writeln!(md, "| bake trace stage alone | {:.2} M rays/s |", rays / trace_s / 1e6)?;
-    writeln!(md, "| bare obvhs tracing, same rays ({hits} hits) | {bare_s:.3} s, {:.2} M rays/s |", rays / bare_s / 1e6)?;
-    writeln!(md, "| end-to-end / bare tracing throughput | {:.0}% |", 100.0 * bare_s / bake_s)?;
-    writeln!(md, "| stage times | {} |", report.timings.iter().map(|(s, d)| format!("{s} {:.3} s", d.as_secs_f64())).collect::<Vec<_>>().join(", "))?;
-    writeln!(md, "| asset bytes per probe (file) | {:.0} |", summary.bytes_per_probe)?;
-    writeln!(md, "| per-probe transport data (probe, sky mask and transfer, factors) | {:.0} bytes |", summary.transport_bytes_per_probe)?;
-    writeln!(md, "| factors per probe | {:.1} |", summary.factors_per_probe)?;
-    writeln!(md, "| surfels (ray hits before merging) / bricks | {} ({}) / {} |", summary.surfel_count, summary.surfels_unmerged, summary.brick_count)?;
+    writeln!(
+        md,
+        "| end-to-end bake (load, BVH, trace, merge, encode) | {bake_s:.3} s |"
+    )?;
+    writeln!(
+        md,
+        "| end-to-end throughput | {:.0} probes/s, {:.2} M rays/s |",
+        probes / bake_s,
+        rays / bake_s / 1e6
+    )?;
+    writeln!(
+        md,
+        "| bake trace stage alone | {:.2} M rays/s |",
+        rays / trace_s / 1e6
+    )?;
+    writeln!(
+        md,
+        "| bare obvhs tracing, same rays ({hits} hits) | {bare_s:.3} s, {:.2} M rays/s |",
+        rays / bare_s / 1e6
+    )?;
+    writeln!(
+        md,
+        "| end-to-end / bare tracing throughput | {:.0}% |",
+        100.0 * bare_s / bake_s
+    )?;
+    writeln!(
+        md,
+        "| stage times | {} |",
+        report
+            .timings
+            .iter()
+            .map(|(s, d)| format!("{s} {:.3} s", d.as_secs_f64()))
+            .collect::<Vec<_>>()
+            .join(", ")
+    )?;
+    writeln!(
+        md,
+        "| asset bytes per probe (file) | {:.0} |",
+        summary.bytes_per_probe
+    )?;
+    writeln!(
+        md,
+        "| per-probe transport data (probe, sky mask and transfer, factors) | {:.0} bytes |",
+        summary.transport_bytes_per_probe
+    )?;
+    writeln!(
+        md,
+        "| factors per probe | {:.1} |",
+        summary.factors_per_probe
+    )?;
+    writeln!(
+        md,
+        "| surfels (ray hits before merging) / bricks | {} ({}) / {} |",
+        summary.surfel_count, summary.surfels_unmerged, summary.brick_count
+    )?;
     Ok(md)
 }
 
@@ -75,6 +133,8 @@ struct Row {
     transport_per_probe: f64,
     factors_per_probe: f64,
     error: ErrorStats,
+    /// Error after Hanning-window deringing of the relit SH (width 4).
+    deringed: ErrorStats,
 }
 
 /// Sweeps rays, brick cell size, factor encoding and storage precision; reports bake time,
@@ -136,22 +196,32 @@ pub fn accuracy(
                         transport_per_probe: summary.transport_bytes_per_probe,
                         factors_per_probe: asset.factors.len() as f64 / probes,
                         error: compare(&ours, reference, 1e-3),
+                        deringed: compare(&windowed(&ours), reference, 1e-3),
                     });
                 }
             }
         }
     }
-    let mut md = String::from("| rays | brick cells | transfer | encoding | bake ms | CPU relight ms | file bytes/probe | transport bytes/probe | factors/probe | mean err | p95 err | max err | max coeff / SH0 |\n|---:|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+    let mut md = String::from("| rays | brick cells | transfer | encoding | bake ms | CPU relight ms | file bytes/probe | transport bytes/probe | factors/probe | mean err | p95 err | max err | max coeff / SH0 | mean err deringed |\n|---:|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
     for r in &rows {
         writeln!(
             md,
-            "| {} | {} | {:?} | {} | {:.1} | {:.2} | {:.0} | {:.0} | {:.1} | {:.2}% | {:.2}% | {:.2}% | {:.1e} |",
+            "| {} | {} | {:?} | {} | {:.1} | {:.2} | {:.0} | {:.0} | {:.1} | {:.2}% | {:.2}% | {:.2}% | {:.1e} | {:.2}% |",
             r.rays, r.merge, r.precision, r.encoding, r.bake_s * 1e3, r.relight_s * 1e3,
             r.bytes_per_probe, r.transport_per_probe, r.factors_per_probe, 100.0 * r.error.mean, 100.0 * r.error.p95,
-            100.0 * r.error.max, r.error.max_coeff_rel
+            100.0 * r.error.max, r.error.max_coeff_rel, 100.0 * r.deringed.mean
         )?;
     }
     Ok((md, plot(&rows)))
+}
+
+/// Probe SH with Hanning-window deringing applied (`prt_format::sh::hanning_window`, width 4).
+fn windowed(
+    ours: &[([f32; 3], bool, prt_format::sh::ShRgb)],
+) -> Vec<([f32; 3], bool, prt_format::sh::ShRgb)> {
+    ours.iter()
+        .map(|(p, v, c)| (*p, *v, prt_format::sh::hanning_window(c, 4.0)))
+        .collect()
 }
 
 /// The same asset with every factor's offset zeroed: each brick seen as its mean radiance.
@@ -169,10 +239,20 @@ fn plot(rows: &[Row]) -> String {
     let pts: Vec<(f64, f64, &Row)> = rows
         .iter()
         .filter(|r| r.error.mean > 0.0)
-        .map(|r| ((r.bake_s + r.relight_s).log10(), (100.0 * r.error.mean).log10(), r))
+        .map(|r| {
+            (
+                (r.bake_s + r.relight_s).log10(),
+                (100.0 * r.error.mean).log10(),
+                r,
+            )
+        })
         .collect();
-    let (x0, x1) = pts.iter().fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p.0), b.max(p.0)));
-    let (y0, y1) = pts.iter().fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p.1), b.max(p.1)));
+    let (x0, x1) = pts
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p.0), b.max(p.0)));
+    let (y0, y1) = pts
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p.1), b.max(p.1)));
     let sx = |x: f64| m + (x - x0) / (x1 - x0).max(1e-9) * (w - 2.0 * m);
     let sy = |y: f64| h - m - (y - y0) / (y1 - y0).max(1e-9) * (h - 2.0 * m);
     let color = |merge: &str| match merge {
@@ -185,10 +265,21 @@ fn plot(rows: &[Row]) -> String {
     let _ = writeln!(s, "<text x='{}' y='20' text-anchor='middle' font-size='14'>Mean irradiance error vs bake + CPU relight time (log-log)</text>", w / 2.0);
     let _ = writeln!(s, "<line x1='{m}' y1='{}' x2='{}' y2='{}' stroke='black'/><line x1='{m}' y1='{m}' x2='{m}' y2='{}' stroke='black'/>", h - m, w - m, h - m, h - m);
     for (x, label) in [(x0, 10f64.powf(x0)), (x1, 10f64.powf(x1))] {
-        let _ = writeln!(s, "<text x='{}' y='{}' text-anchor='middle'>{:.0} ms</text>", sx(x), h - m + 16.0, label * 1e3);
+        let _ = writeln!(
+            s,
+            "<text x='{}' y='{}' text-anchor='middle'>{:.0} ms</text>",
+            sx(x),
+            h - m + 16.0,
+            label * 1e3
+        );
     }
     for (y, label) in [(y0, 10f64.powf(y0)), (y1, 10f64.powf(y1))] {
-        let _ = writeln!(s, "<text x='{}' y='{}' text-anchor='end'>{label:.2}%</text>", m - 4.0, sy(y) + 4.0);
+        let _ = writeln!(
+            s,
+            "<text x='{}' y='{}' text-anchor='end'>{label:.2}%</text>",
+            m - 4.0,
+            sy(y) + 4.0
+        );
     }
     let mut front: Vec<&(f64, f64, &Row)> = pts.iter().collect();
     front.sort_by(|a, b| a.0.total_cmp(&b.0));
@@ -202,16 +293,40 @@ fn plot(rows: &[Row]) -> String {
         })
         .map(|p| format!("{:.1},{:.1}", sx(p.0), sy(p.1)))
         .collect();
-    let _ = writeln!(s, "<polyline points='{}' fill='none' stroke='#555' stroke-dasharray='4 3'/>", front.join(" "));
+    let _ = writeln!(
+        s,
+        "<polyline points='{}' fill='none' stroke='#555' stroke-dasharray='4 3'/>",
+        front.join(" ")
+    );
     for (x, y, r) in &pts {
-        let shape = if r.encoding == "sh9, flat brick" { "fill='none' stroke-width='1.5' stroke" } else { "fill" };
+        let shape = if r.encoding == "sh9, flat brick" {
+            "fill='none' stroke-width='1.5' stroke"
+        } else {
+            "fill"
+        };
         let _ = writeln!(s, "<circle cx='{:.1}' cy='{:.1}' r='4' {shape}='{}'><title>{} rays, {}, {:?}, {}: {:.2}%</title></circle>", sx(*x), sy(*y), color(&r.merge), r.rays, r.merge, r.precision, r.encoding, 100.0 * r.error.mean);
     }
-    for (i, merge) in ["none", "spacing/24", "spacing/12 (default)", "spacing/6"].iter().enumerate() {
+    for (i, merge) in ["none", "spacing/24", "spacing/12 (default)", "spacing/6"]
+        .iter()
+        .enumerate()
+    {
         let y = m + 16.0 * i as f64;
-        let _ = writeln!(s, "<circle cx='{}' cy='{}' r='4' fill='{}'/><text x='{}' y='{}'>bricks: {merge}</text>", w - 200.0, y, color(merge), w - 190.0, y + 4.0);
+        let _ = writeln!(
+            s,
+            "<circle cx='{}' cy='{}' r='4' fill='{}'/><text x='{}' y='{}'>bricks: {merge}</text>",
+            w - 200.0,
+            y,
+            color(merge),
+            w - 190.0,
+            y + 4.0
+        );
     }
-    let _ = writeln!(s, "<text x='{}' y='{}'>hollow: flat brick radiance; dashed: Pareto front</text>", w - 330.0, m + 70.0);
+    let _ = writeln!(
+        s,
+        "<text x='{}' y='{}'>hollow: flat brick radiance; dashed: Pareto front</text>",
+        w - 330.0,
+        m + 70.0
+    );
     s.push_str("</svg>\n");
     s
 }
@@ -272,14 +387,32 @@ pub fn gpu(scene: &Path, a: &Lighting, spacings: &[f32], rays: u32, cell: f32) -
         let mut runtime = PrtRuntime::new(&device, &queue, &asset, RuntimeSettings::default())?;
         let iterations = 4;
         time_updates(&device, &queue, &mut runtime, 1, |_| a)?;
-        let full = time_updates(&device, &queue, &mut runtime, iterations, |i| if i % 2 == 0 { &b } else { a })?;
-        let gather = time_updates(&device, &queue, &mut runtime, iterations, |i| if i % 2 == 0 { &sky1 } else { &sky2 })?;
+        let full = time_updates(&device, &queue, &mut runtime, iterations, |i| {
+            if i % 2 == 0 {
+                &b
+            } else {
+                a
+            }
+        })?;
+        let gather = time_updates(&device, &queue, &mut runtime, iterations, |i| {
+            if i % 2 == 0 {
+                &sky1
+            } else {
+                &sky2
+            }
+        })?;
         runtime.use_atomic_gather(true);
-        let atomic = time_updates(&device, &queue, &mut runtime, iterations, |i| if i % 2 == 0 { &sky1 } else { &sky2 })?;
+        let atomic = time_updates(&device, &queue, &mut runtime, iterations, |i| {
+            if i % 2 == 0 {
+                &sky1
+            } else {
+                &sky2
+            }
+        })?;
         runtime.use_atomic_gather(false);
         let idle = time_updates(&device, &queue, &mut runtime, iterations, |_| &sky2)?;
         drop(runtime);
-        let prior = if probes <= 20_000 {
+        let prior = if probes <= 2_000 {
             let unmerged = BakeSettings {
                 cell_size: Some(0.0),
                 ..settings.clone()
@@ -287,7 +420,13 @@ pub fn gpu(scene: &Path, a: &Lighting, spacings: &[f32], rays: u32, cell: f32) -
             let (asset, _) = prt_bake::bake(scene, &unmerged, &NoProgress)?;
             let mut runtime = PrtRuntime::new(&device, &queue, &asset, RuntimeSettings::default())?;
             time_updates(&device, &queue, &mut runtime, 1, |_| a)?;
-            Some(time_updates(&device, &queue, &mut runtime, iterations, |i| if i % 2 == 0 { &b } else { a })?)
+            Some(time_updates(
+                &device,
+                &queue,
+                &mut runtime,
+                iterations,
+                |i| if i % 2 == 0 { &b } else { a },
+            )?)
         } else {
             None
         };

@@ -69,7 +69,11 @@ enum BenchKind {
         spacing: Option<f32>,
         #[arg(long, value_parser = parse_bounds, allow_hyphen_values = true)]
         bounds: Option<[f32; 6]>,
-        #[arg(long, value_delimiter = ',', default_value = "64,128,256,512,1024,2048,4096")]
+        #[arg(
+            long,
+            value_delimiter = ',',
+            default_value = "64,128,256,512,1024,2048,4096"
+        )]
         rays: Vec<u32>,
         /// Directory for accuracy.md and accuracy.svg.
         #[arg(long, default_value = ".")]
@@ -321,8 +325,11 @@ fn run(cli: Cli) -> Result<()> {
                 let lighting = prt_runtime::load_rig(&lights)?;
                 let text = std::fs::read_to_string(&reference)
                     .with_context(|| format!("reading {}", reference.display()))?;
-                let reference_sh = prt_runtime::output::read_probe_sh(&serde_json::from_str(&text)?)
-                    .with_context(|| format!("{}: no probes[i].position/.sh", reference.display()))?;
+                let reference_sh =
+                    prt_runtime::output::read_probe_sh(&serde_json::from_str(&text)?)
+                        .with_context(|| {
+                            format!("{}: no probes[i].position/.sh", reference.display())
+                        })?;
                 let base = BakeSettings {
                     spacing,
                     bounds,
@@ -333,7 +340,10 @@ fn run(cli: Cli) -> Result<()> {
                 prt_format::io::write_bytes_atomic(&out.join("accuracy.md"), md.as_bytes())?;
                 prt_format::io::write_bytes_atomic(&out.join("accuracy.svg"), svg.as_bytes())?;
                 println!("{md}");
-                println!("wrote {} and accuracy.svg", out.join("accuracy.md").display());
+                println!(
+                    "wrote {} and accuracy.svg",
+                    out.join("accuracy.md").display()
+                );
                 Ok(())
             }
             BenchKind::Gpu {
@@ -344,7 +354,10 @@ fn run(cli: Cli) -> Result<()> {
                 cell_size,
             } => {
                 let lighting = prt_runtime::load_rig(&lights)?;
-                println!("{}", bench::gpu(&scene, &lighting, &spacings, rays, cell_size)?);
+                println!(
+                    "{}",
+                    bench::gpu(&scene, &lighting, &spacings, rays, cell_size)?
+                );
                 Ok(())
             }
         },

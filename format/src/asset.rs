@@ -34,8 +34,10 @@ pub struct Asset {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Header {
     /// Name and version of the tool that wrote the asset.
+    #[serde(deserialize_with = "string_from_input")]
     pub generator: String,
     /// File name of the baked scene (no directories: assets move between machines).
+    #[serde(deserialize_with = "string_from_input")]
     pub source_name: String,
     /// xxh3-64 of the scene file's bytes (the .gltf/.glb itself).
     pub source_hash: u64,
@@ -44,6 +46,27 @@ pub struct Header {
     pub ray_count: u32,
     pub settings: BakeSettingsRecord,
     pub stats: BakeStats,
+}
+
+/// Deserializes a `String` through `deserialize_str`, which bincode serves by borrowing the bytes
+/// from the input slice after checking that they are there. Plain `String` deserialization makes
+/// bincode allocate the declared length first, so a corrupt length (with a valid checksum) of
+/// tens of GiB aborted the process on allocation failure instead of returning an error.
+fn string_from_input<'de, D: serde::Deserializer<'de>>(d: D) -> Result<String, D::Error> {
+    struct Visitor;
+    impl serde::de::Visitor<'_> for Visitor {
+        type Value = String;
+        fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+            f.write_str("a string")
+        }
+        fn visit_str<E: serde::de::Error>(self, s: &str) -> Result<String, E> {
+            Ok(s.to_owned())
+        }
+        fn visit_string<E: serde::de::Error>(self, s: String) -> Result<String, E> {
+            Ok(s)
+        }
+    }
+    d.deserialize_str(Visitor)
 }
 
 impl Header {

@@ -23,6 +23,9 @@
 //! Loading checks magic, version, length and checksum before decoding, then validates every count,
 //! index range and float ([`validate`]). It returns a typed [`FormatError`] and never panics.
 
+// SH and colour maths index several parallel arrays with one index; range loops read best.
+#![allow(clippy::needless_range_loop)]
+
 pub mod asset;
 pub mod directions;
 pub mod error;

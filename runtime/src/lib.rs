@@ -4,6 +4,9 @@
 //! relights the probe volume. This crate holds the CPU reference relight ([`relight`]); every
 //! GPU stage must reproduce its numbers.
 
+// SH and colour maths index several parallel arrays with one index; range loops read best.
+#![allow(clippy::needless_range_loop)]
+
 pub mod accuracy;
 pub mod gpu;
 pub mod lights;

@@ -117,6 +117,28 @@ impl SkyModel {
 mod tests {
     use super::*;
 
+    /// An EXR sky of constant radiance projects like the constant sky, and unreadable files are
+    /// typed errors.
+    #[test]
+    fn exr_sky_loads_and_matches_a_constant_sky() {
+        let dir = std::env::temp_dir().join(format!("prt-sky-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("sky.exr");
+        exr::prelude::write_rgb_file(&path, 16, 8, |_, _| (0.2f32, 0.3f32, 0.5f32)).unwrap();
+        let sky = SkyModel::load_exr(&path, 2.0).unwrap();
+        for d in [[0.0, 1.0, 0.0], [0.6, 0.0, 0.8], [0.0, -1.0, 0.0]] {
+            let l = sky.radiance(d);
+            assert!(
+                (l[0] - 0.4).abs() < 1e-6 && (l[2] - 1.0).abs() < 1e-6,
+                "{l:?}"
+            );
+        }
+        assert!(SkyModel::load_exr(&dir.join("missing.exr"), 1.0).is_err());
+        std::fs::write(dir.join("bad.exr"), b"not an exr").unwrap();
+        assert!(SkyModel::load_exr(&dir.join("bad.exr"), 1.0).is_err());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
     #[test]
     fn equirect_mapping_follows_the_convention() {
         // 4x2 image: top row (+Y) red, bottom row blue.

@@ -1,1 +1,94 @@
+//! Helpers shared by the cross-crate tests in `tests/`: paths to fixtures and shared scenes,
+//! scratch directories, and small bake shortcuts.
 
+use std::path::{Path, PathBuf};
+
+use prt_bake::{BakeSettings, NoProgress};
+use prt_format::Asset;
+
+/// `fixtures/<rel>` of this repository.
+pub fn fixture(rel: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../fixtures")
+        .join(rel)
+}
+
+/// `shared/<rel>`: the shared scenes and reference data that live beside the repository.
+pub fn shared(rel: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../shared")
+        .join(rel)
+}
+
+/// The reference Cornell box (`shared/reference/cornell/cornell.gltf`).
+pub fn cornell() -> PathBuf {
+    shared("reference/cornell/cornell.gltf")
+}
+
+/// Settings with `rays` rays and otherwise the defaults.
+pub fn rays(rays: u32) -> BakeSettings {
+    BakeSettings {
+        rays,
+        ..BakeSettings::default()
+    }
+}
+
+/// Bakes in memory and panics with the error's message on failure.
+pub fn bake_ok(path: &Path, settings: &BakeSettings) -> Asset {
+    match prt_bake::bake(path, settings, &NoProgress) {
+        Ok((asset, _)) => asset,
+        Err(e) => panic!("baking {} failed: {e}", path.display()),
+    }
+}
+
+/// Bakes in memory and returns the error, panicking if the bake succeeds.
+pub fn bake_err(path: &Path, settings: &BakeSettings) -> prt_bake::BakeError {
+    match prt_bake::bake(path, settings, &NoProgress) {
+        Ok(_) => panic!("baking {} succeeded, expected an error", path.display()),
+        Err(e) => e,
+    }
+}
+
+/// Bounds that hold exactly one probe, at `p` (a zero-extent grid has one probe per axis,
+/// placed at the centre of the bounds).
+pub fn point_bounds(p: [f32; 3]) -> Option<[f32; 6]> {
+    Some([p[0], p[1], p[2], p[0], p[1], p[2]])
+}
+
+/// A scratch directory, unique per process and test name, removed when dropped.
+pub struct ScratchDir(PathBuf);
+
+impl ScratchDir {
+    pub fn new(test_name: &str) -> ScratchDir {
+        let dir =
+            std::env::temp_dir().join(format!("prt-tests-{}-{test_name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).expect("create scratch dir");
+        ScratchDir(dir)
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.0
+    }
+
+    /// Names of the entries in the directory, sorted.
+    pub fn entries(&self) -> Vec<String> {
+        let mut names: Vec<String> = std::fs::read_dir(&self.0)
+            .expect("list scratch dir")
+            .map(|e| {
+                e.expect("dir entry")
+                    .file_name()
+                    .to_string_lossy()
+                    .into_owned()
+            })
+            .collect();
+        names.sort();
+        names
+    }
+}
+
+impl Drop for ScratchDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}

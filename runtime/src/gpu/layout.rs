@@ -4,7 +4,7 @@
 //! `shaders/types.wgsl`, so the two sides cannot drift apart.
 
 use bytemuck::{Pod, Zeroable};
-use prt_format::{LightKind, Surfel, BRICK_BACKFACE, PROBE_VALID};
+use prt_format::{LightKind, BRICK_BACKFACE, PROBE_VALID};
 
 use crate::lights::{NormalBounds, PreparedLight};
 
@@ -163,5 +163,3 @@ pub fn factor_words(f16: bool) -> u32 {
     };
     (bytes / 4) as u32
 }
-
-const _: () = assert!(std::mem::size_of::<Surfel>() % 16 == 0);

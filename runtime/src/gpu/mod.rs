@@ -259,8 +259,9 @@ impl PrtRuntime {
             });
         }
         let surfel_bytes = std::mem::size_of_val(asset.surfels.as_slice()) as u64;
-        let max_binding =
-            u64::from(limits.max_storage_buffer_binding_size).min(limits.max_buffer_size);
+        let max_binding = limits
+            .max_storage_buffer_binding_size
+            .min(limits.max_buffer_size);
         for (what, bytes) in [
             ("the surfel buffer", surfel_bytes),
             (
@@ -414,26 +415,31 @@ impl PrtRuntime {
             ..Default::default()
         });
 
-        let fixed_accum = zeroed(device, "prt fixed-point accumulators", 4 * 27 * n_probes, none);
+        let fixed_accum = zeroed(
+            device,
+            "prt fixed-point accumulators",
+            4 * 27 * n_probes,
+            none,
+        );
         let gather_groups = || -> Vec<Vec<wgpu::BindingResource<'_>>> {
             vec![
-                    vec![
-                        buf(&params),
-                        buf(&probes),
-                        buf(&factors),
-                        buf(&brick_radiance),
-                        buf(&sky_transfer),
-                        buf(&sky_mask),
-                        buf(&sky_directions),
-                        buf(&probe_dirty),
-                        buf(&probe_sh),
-                        buf(&counters),
-                    ],
-                    views
-                        .iter()
-                        .map(wgpu::BindingResource::TextureView)
-                        .collect(),
-                ]
+                vec![
+                    buf(&params),
+                    buf(&probes),
+                    buf(&factors),
+                    buf(&brick_radiance),
+                    buf(&sky_transfer),
+                    buf(&sky_mask),
+                    buf(&sky_directions),
+                    buf(&probe_dirty),
+                    buf(&probe_sh),
+                    buf(&counters),
+                ],
+                views
+                    .iter()
+                    .map(wgpu::BindingResource::TextureView)
+                    .collect(),
+            ]
         };
         let stage_groups = |stage: Stage| -> Vec<Vec<wgpu::BindingResource<'_>>> {
             match stage {

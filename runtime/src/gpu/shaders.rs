@@ -171,7 +171,9 @@ mod tests {
         let module = validate(&source(Stage::Gather, &config), "layout");
         let mut layouter = naga::proc::Layouter::default();
         layouter.update(module.to_ctx()).expect("layout");
-        let expect: Vec<(&str, usize, Vec<(&str, usize)>)> = vec![
+        // (struct, size, [(field, offset)])
+        type Expected<'a> = Vec<(&'a str, usize, Vec<(&'a str, usize)>)>;
+        let expect: Expected = vec![
             (
                 "Probe",
                 size_of::<prt_format::Probe>(),

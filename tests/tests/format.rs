@@ -1,0 +1,430 @@
+//! Asset file robustness: exact round trips, and every kind of damage (flipped bytes,
+//! truncation, wrong magic/version/checksum, structurally broken assets with a valid checksum)
+//! gives a typed error, never a panic.
+
+use std::sync::OnceLock;
+
+use prt_bake::BakeSettings;
+use prt_format::{decode, encode, Asset, Factors, FormatError, TransferPrecision, FORMAT_VERSION};
+use prt_tests::{bake_ok, cornell, rays};
+
+/// Bytes before the payload: magic (8), version (4), payload length (8).
+const PREFIX: usize = 20;
+/// Bytes after the payload: the checksum.
+const SUFFIX: usize = 8;
+
+/// A small real asset: the Cornell box at 64 rays and 0.5 m spacing (baked once per process).
+fn small_asset(precision: TransferPrecision) -> &'static Asset {
+    static F16: OnceLock<Asset> = OnceLock::new();
+    static F32: OnceLock<Asset> = OnceLock::new();
+    let cell = match precision {
+        TransferPrecision::F16 => &F16,
+        TransferPrecision::F32 => &F32,
+    };
+    cell.get_or_init(|| {
+        let settings = BakeSettings {
+            spacing: Some(0.5),
+            transfer_precision: precision,
+            ..rays(64)
+        };
+        bake_ok(&cornell(), &settings)
+    })
+}
+
+fn small_file() -> Vec<u8> {
+    encode(small_asset(TransferPrecision::F16)).expect("encode")
+}
+
+/// Recomputes the length field and checksum after the payload was edited, so that decoding
+/// gets past the integrity checks and exercises the payload decoder and validation.
+fn reseal(bytes: &mut [u8]) {
+    let payload = (bytes.len() - PREFIX - SUFFIX) as u64;
+    bytes[12..20].copy_from_slice(&payload.to_le_bytes());
+    let end = bytes.len() - SUFFIX;
+    let sum = xxhash_rust::xxh3::xxh3_64(&bytes[..end]);
+    bytes[end..].copy_from_slice(&sum.to_le_bytes());
+}
+
+/// Offsets to damage: every one of the first 64 bytes, then about 300 spread over the file
+/// (always including the last byte).
+fn damage_offsets(len: usize) -> Vec<usize> {
+    let mut v: Vec<usize> = (0..64.min(len)).collect();
+    let step = (len / 300).max(1);
+    v.extend((64..len).step_by(step));
+    v.push(len - 1);
+    v.dedup();
+    v
+}
+
+// ---------------------------------------------------------------------------------------------
+// Round trips
+
+/// encode -> decode gives back an equal asset, for half and full precision transfers, and the
+/// two precisions really store different factor tables.
+#[test]
+fn round_trip_is_exact_in_both_precisions() {
+    for precision in [TransferPrecision::F16, TransferPrecision::F32] {
+        let asset = small_asset(precision);
+        assert_eq!(asset.factors.precision(), precision);
+        assert!(!asset.factors.is_empty());
+        let bytes = encode(asset).expect("encode");
+        let back = decode(&bytes).expect("decode");
+        assert!(
+            back == *asset,
+            "{precision:?}: round trip changed the asset"
+        );
+        assert_eq!(
+            encode(&back).expect("re-encode"),
+            bytes,
+            "{precision:?}: re-encode differs"
+        );
+    }
+    assert!(matches!(
+        small_asset(TransferPrecision::F16).factors,
+        Factors::F16(_)
+    ));
+    assert!(matches!(
+        small_asset(TransferPrecision::F32).factors,
+        Factors::F32(_)
+    ));
+}
+
+/// Assets round-trip through files too (atomic write, read back).
+#[test]
+fn round_trip_through_a_file() {
+    let dir = prt_tests::ScratchDir::new("round_trip_through_a_file");
+    let path = dir.path().join("a.prt");
+    let asset = small_asset(TransferPrecision::F32);
+    let n = prt_format::write_asset_atomic(&path, asset).expect("write");
+    assert_eq!(std::fs::metadata(&path).unwrap().len(), n);
+    assert!(prt_format::read_asset(&path).expect("read") == *asset);
+    assert_eq!(dir.entries(), ["a.prt"], "no temporary file left");
+}
+
+// ---------------------------------------------------------------------------------------------
+// Damaged files
+
+/// A byte flipped anywhere is caught, by the check that covers that byte: the magic, the
+/// version, the length field, or else the checksum.
+#[test]
+fn flipped_bytes_are_rejected() {
+    let good = small_file();
+    for offset in damage_offsets(good.len()) {
+        for mask in [0x01u8, 0xff] {
+            let mut bad = good.clone();
+            bad[offset] ^= mask;
+            let e = decode(&bad).expect_err("flipped byte accepted");
+            let ok = match offset {
+                0..8 => matches!(e, FormatError::BadMagic { .. }),
+                8..12 => matches!(e, FormatError::UnsupportedVersion { .. }),
+                12..20 => matches!(e, FormatError::LengthMismatch { .. }),
+                _ => matches!(e, FormatError::Checksum { .. }),
+            };
+            assert!(ok, "byte {offset} ^ {mask:#x}: unexpected error {e:?}");
+        }
+    }
+}
+
+/// A truncated (or extended) file is rejected, whatever the length.
+#[test]
+fn truncated_files_are_rejected() {
+    let good = small_file();
+    for len in damage_offsets(good.len()) {
+        let e = decode(&good[..len]).expect_err("truncated file accepted");
+        let ok = if len < PREFIX + SUFFIX {
+            matches!(
+                e,
+                FormatError::TooShort { .. } | FormatError::BadMagic { .. }
+            )
+        } else {
+            matches!(e, FormatError::LengthMismatch { .. })
+        };
+        assert!(ok, "length {len}: unexpected error {e:?}");
+    }
+    let mut longer = good.clone();
+    longer.push(0);
+    assert!(matches!(
+        decode(&longer),
+        Err(FormatError::LengthMismatch { .. })
+    ));
+}
+
+/// Another format version is refused with the version found and the one supported.
+#[test]
+fn wrong_version_is_unsupported() {
+    for version in [0, FORMAT_VERSION + 1, u32::MAX] {
+        let mut bad = small_file();
+        bad[8..12].copy_from_slice(&version.to_le_bytes());
+        match decode(&bad) {
+            Err(e @ FormatError::UnsupportedVersion { found, supported }) => {
+                assert_eq!((found, supported), (version, FORMAT_VERSION));
+                assert!(e.to_string().contains(&version.to_string()), "{e}");
+            }
+            other => panic!("version {version}: {other:?}"),
+        }
+    }
+}
+
+/// A wrong stored checksum is a checksum error carrying both values.
+#[test]
+fn wrong_checksum_is_checksum_error() {
+    let mut bad = small_file();
+    let end = bad.len() - SUFFIX;
+    let stored = u64::from_le_bytes(bad[end..].try_into().unwrap());
+    bad[end..].copy_from_slice(&(stored ^ 1).to_le_bytes());
+    match decode(&bad) {
+        Err(FormatError::Checksum {
+            stored: s,
+            computed,
+        }) => {
+            assert_eq!((s, computed), (stored ^ 1, stored));
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
+/// Files that are not prt assets (a glTF, a text-mode mangled asset, zeros) are BadMagic or
+/// TooShort.
+#[test]
+fn bad_magic_is_rejected() {
+    let glb = std::fs::read(prt_tests::shared("reference/cornell/cornell.glb")).unwrap();
+    assert!(matches!(decode(&glb), Err(FormatError::BadMagic { .. })));
+    let mut mangled = small_file();
+    mangled[6] = b'\n'; // CR LF -> LF LF
+    assert!(matches!(
+        decode(&mangled),
+        Err(FormatError::BadMagic { .. })
+    ));
+    assert!(matches!(
+        decode(&[0u8; 64]),
+        Err(FormatError::BadMagic { .. })
+    ));
+    assert!(matches!(decode(&[]), Err(FormatError::TooShort { .. })));
+    assert!(matches!(
+        decode(b"PRTGI\0\r\n"),
+        Err(FormatError::TooShort { .. })
+    ));
+}
+
+/// With a valid checksum, a payload that is cut short does not decode, and one with extra bytes
+/// is refused as trailing data.
+#[test]
+fn resealed_short_or_long_payload_is_rejected() {
+    let good = small_file();
+    let mut short = good.clone();
+    short.remove(good.len() - SUFFIX - 1);
+    reseal(&mut short);
+    assert!(
+        matches!(decode(&short), Err(FormatError::Decode(_))),
+        "{:?}",
+        decode(&short).err()
+    );
+
+    let mut long = good.clone();
+    long.insert(good.len() - SUFFIX, 0);
+    reseal(&mut long);
+    assert!(
+        matches!(
+            decode(&long),
+            Err(FormatError::TrailingBytes { payload_bytes: 1 })
+        ),
+        "{:?}",
+        decode(&long).err()
+    );
+}
+
+/// With a valid checksum, a flipped payload byte at any of ~360 offsets either decodes into an
+/// asset that passed validation or is an error: never a panic.
+#[test]
+fn resealed_payload_damage_never_panics() {
+    let good = small_file();
+    let payload = PREFIX..good.len() - SUFFIX;
+    let (mut ok, mut err) = (0, 0);
+    for offset in damage_offsets(payload.len()) {
+        for mask in [0x01u8, 0x80, 0xff] {
+            let mut bad = good.clone();
+            bad[PREFIX + offset] ^= mask;
+            reseal(&mut bad);
+            match decode(&bad) {
+                Ok(asset) => {
+                    prt_format::validate::validate(&asset)
+                        .expect("decode returned an invalid asset");
+                    ok += 1;
+                }
+                Err(_) => err += 1,
+            }
+        }
+    }
+    assert!(err > 0 && ok + err > 1000, "ok {ok}, err {err}");
+}
+
+/// With a valid checksum, a string length far beyond the payload (the generator and source names
+/// are the first payload fields) is an error, not an attempt to allocate it: lengths of tens of
+/// GiB used to abort the process with "memory allocation failed".
+#[test]
+fn resealed_huge_string_lengths_are_errors() {
+    let good = small_file();
+    let generator_len = small_asset(TransferPrecision::F16).header.generator.len();
+    let source_name_at = PREFIX + 8 + generator_len;
+    for at in [PREFIX, source_name_at] {
+        let stored = u64::from_le_bytes(good[at..at + 8].try_into().unwrap());
+        assert!(
+            stored < 100,
+            "offset {at} does not hold a string length ({stored})"
+        );
+        for len in [
+            u64::MAX,
+            1 << 40,
+            (1 << 36) - 1,
+            (1 << 36) - 4096,
+            1 << 35,
+            1 << 31,
+            1000,
+        ] {
+            let mut bad = good.clone();
+            bad[at..at + 8].copy_from_slice(&len.to_le_bytes());
+            reseal(&mut bad);
+            let e = decode(&bad).expect_err("huge string length accepted");
+            assert!(
+                matches!(e, FormatError::Decode(_)),
+                "length {len} at {at}: {e:?}"
+            );
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Structurally broken assets with a valid checksum
+
+/// Encodes a damaged copy of the small asset (with a valid checksum) and decodes it.
+fn decode_damaged(damage: impl FnOnce(&mut Asset)) -> Result<Asset, FormatError> {
+    let mut asset = small_asset(TransferPrecision::F16).clone();
+    damage(&mut asset);
+    decode(&encode(&asset).expect("encode damaged asset"))
+}
+
+fn assert_invalid(what: &str, section: &str, damage: impl FnOnce(&mut Asset)) {
+    match decode_damaged(damage) {
+        Err(FormatError::Invalid { section: s, .. }) if s == section => {}
+        other => panic!("{what}: expected Invalid in {section}, got {other:?}"),
+    }
+}
+
+fn assert_count(what: &str, section: &str, damage: impl FnOnce(&mut Asset)) {
+    match decode_damaged(damage) {
+        Err(FormatError::Count { section: s, .. }) if s == section => {}
+        other => panic!("{what}: expected Count of {section}, got {other:?}"),
+    }
+}
+
+/// Sets the brick index of factor `f` in either precision.
+fn set_factor_brick(factors: &mut Factors, f: usize, brick: u32) {
+    match factors {
+        Factors::F16(v) => v[f].brick = brick,
+        Factors::F32(v) => v[f].brick = brick,
+    }
+}
+
+/// Every index, count and float that the runtime relies on is checked on load: damaged assets
+/// re-encoded with a valid checksum are Invalid (naming the section) or Count errors.
+#[test]
+fn structurally_broken_assets_are_invalid() {
+    let asset = small_asset(TransferPrecision::F16);
+    assert!(asset.probes.len() >= 2 && asset.bricks.len() >= 2 && asset.surfels.len() >= 4);
+    let bricks = asset.bricks.len() as u32;
+
+    assert_invalid("factor brick out of range", "factors", |a| {
+        set_factor_brick(&mut a.factors, 0, bricks)
+    });
+    assert_invalid("factor with 0 rays", "factors", |a| match &mut a.factors {
+        Factors::F16(v) => v[0].rays = 0,
+        Factors::F32(v) => v[0].rays = 0,
+    });
+    assert_invalid("factor with NaN transfer", "factors", |a| {
+        match &mut a.factors {
+            Factors::F16(v) => v[0].sh[1] = 0x7e00, // a half NaN in the low half
+            Factors::F32(v) => v[0].sh[2] = f32::NAN,
+        }
+    });
+    assert_invalid("probe first_factor off by one", "probes", |a| {
+        a.probes[1].first_factor += 1
+    });
+    assert_invalid("probe with NaN position", "probes", |a| {
+        a.probes[0].position[1] = f32::NAN
+    });
+    assert_invalid("sky rays beyond ray count", "probes", |a| {
+        a.probes[0].sky_rays = a.header.ray_count + 1
+    });
+    assert_count("last probe claims an extra factor", "factors", |a| {
+        a.probes.last_mut().unwrap().factor_count += 1
+    });
+    assert_count("missing sky transfer", "sky_transfer", |a| {
+        a.sky_transfer.pop();
+    });
+    assert_count("missing sky mask word", "sky_mask", |a| {
+        a.sky_mask.pop();
+    });
+    assert_count("grid larger than the probe list", "probes", |a| {
+        a.header.grid.counts[0] += 1
+    });
+    assert_invalid("zero ray count", "header", |a| a.header.ray_count = 0);
+    assert_invalid("zero spacing", "header.grid", |a| {
+        a.header.grid.spacing = 0.0
+    });
+    assert_invalid("NaN surfel albedo", "surfels", |a| {
+        a.surfels[3].albedo[0] = f32::NAN
+    });
+    assert_invalid("infinite surfel emission", "surfels", |a| {
+        a.surfels[2].emission[2] = f32::INFINITY
+    });
+    assert_invalid("zero surfel weight", "surfels", |a| {
+        a.surfels[1].weight = 0.0
+    });
+    assert_invalid("surfel listed in the wrong brick", "surfels", |a| {
+        let first = a.bricks[0].first_surfel as usize;
+        a.surfels[first].brick = 1;
+    });
+    assert_invalid("surfel list cut short", "bricks", |a| {
+        a.surfels.pop();
+    });
+    assert_invalid("brick axis out of range", "bricks", |a| {
+        a.bricks[0].flags |= 7
+    });
+    assert_invalid("brick first_surfel wrong", "bricks", |a| {
+        a.bricks[1].first_surfel += 1
+    });
+    assert_invalid("BVH node pointing at itself", "geometry.nodes", |a| {
+        a.geometry.nodes[0].count = 0;
+        a.geometry.nodes[0].first = 0;
+    });
+    assert_invalid("BVH leaf past the triangles", "geometry.nodes", |a| {
+        let leaf = a.geometry.nodes.iter().position(|n| n.count > 0).unwrap();
+        a.geometry.nodes[leaf].first = a.geometry.triangles.len() as u32;
+    });
+    assert_invalid("NaN triangle vertex", "geometry.triangles", |a| {
+        a.geometry.triangles[0].v1[0] = f32::NAN
+    });
+    assert_invalid("light with negative intensity", "lights", |a| {
+        let light: prt_format::Light =
+            serde_json::from_str(r#"{"type": "point", "intensity": -5}"#).unwrap();
+        a.lights.push(light);
+    });
+}
+
+/// The error messages of a broken asset name the section, index and value.
+#[test]
+fn invalid_asset_messages_name_the_item() {
+    let e = decode_damaged(|a| a.probes[1].first_factor += 1000).unwrap_err();
+    let msg = e.to_string();
+    assert!(
+        msg.contains("probes[1]") && msg.contains("first_factor"),
+        "{msg}"
+    );
+    let bricks = small_asset(TransferPrecision::F16).bricks.len();
+    let e = decode_damaged(|a| set_factor_brick(&mut a.factors, 2, 99_999)).unwrap_err();
+    let msg = e.to_string();
+    assert!(
+        msg.contains("factors[2]") && msg.contains("99999") && msg.contains(&bricks.to_string()),
+        "{msg}"
+    );
+}
