@@ -1,33 +1,16 @@
 //! The GPU runtime against the CPU reference relight, on lavapipe in CI. A missing adapter is a
 //! test failure (`headless_device` errors loudly), never a skip.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use prt_bake::{BakeSettings, NoProgress};
+use prt_bake::BakeSettings;
 use prt_format::sh::ShRgb;
 use prt_format::{Asset, Light, LightKind, LightRig, Sky};
 use prt_runtime::gpu::{
     headless_device, sh_from_texels, wgpu, PrtRuntime, RuntimeSettings, VolumeFormat,
 };
 use prt_runtime::{load_rig, CpuRelighter, Lighting, SkyModel};
-
-fn shared(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared")
-        .join(rel)
-}
-
-fn fixture(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../fixtures")
-        .join(rel)
-}
-
-fn bake(scene: &Path, settings: &BakeSettings) -> Asset {
-    prt_bake::bake(scene, settings, &NoProgress)
-        .unwrap_or_else(|e| panic!("bake {}: {e}", scene.display()))
-        .0
-}
+use prt_tests::{bake_ok as bake, fixture, shared};
 
 fn device() -> (wgpu::Device, wgpu::Queue) {
     let (device, queue, _) = headless_device().expect("a GPU adapter (lavapipe in CI) is required");
@@ -288,6 +271,16 @@ fn hostile_values_stay_finite() {
     let cornell = bake(
         &shared("reference/cornell/cornell.gltf"),
         &BakeSettings::default(),
+    );
+    let most = cornell
+        .probes
+        .iter()
+        .map(|p| p.factor_count)
+        .max()
+        .unwrap_or(0);
+    assert!(
+        most > prt_runtime::gpu::layout::GATHER_WORKGROUP,
+        "a probe has more factors ({most}) than gather threads"
     );
     let no_lights = Lighting {
         rig: LightRig::default(),

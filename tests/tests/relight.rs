@@ -1,26 +1,15 @@
 //! CPU relight against the independent renderer (Mitsuba 3 oracle data in
 //! `shared/reference/cornell/`), analytic furnace and sky cases, and rig validation.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use prt_bake::{BakeSettings, NoProgress};
+use prt_bake::BakeSettings;
 use prt_format::sh::{self, ShRgb};
 use prt_format::Asset;
 use prt_runtime::accuracy::{compare, ErrorStats};
 use prt_runtime::output::read_probe_sh;
 use prt_runtime::{load_rig, CpuRelighter};
-
-fn shared(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared")
-        .join(rel)
-}
-
-fn fixture(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../fixtures")
-        .join(rel)
-}
+use prt_tests::{bake_ok as bake, fixture, shared};
 
 /// The reference probes: a 3x3x3 grid at x, z in {-0.6, 0, 0.6}, y in {0.4, 1, 1.6}.
 fn cornell_settings(rays: u32, exact: bool) -> BakeSettings {
@@ -35,12 +24,6 @@ fn cornell_settings(rays: u32, exact: bool) -> BakeSettings {
         bounds: Some([-0.9, 0.1, -0.9, 0.9, 1.9, 0.9]),
         ..base
     }
-}
-
-fn bake(scene: &Path, settings: &BakeSettings) -> Asset {
-    prt_bake::bake(scene, settings, &NoProgress)
-        .unwrap_or_else(|e| panic!("bake {}: {e}", scene.display()))
-        .0
 }
 
 fn relight(asset: &Asset, rig: &Path, bounces: u32) -> Vec<ShRgb> {
