@@ -273,6 +273,13 @@ fn run(cli: Cli) -> Result<()> {
                         prt_runtime::gpu::RuntimeSettings::default(),
                     )?;
                     eprintln!("adapter: {} ({:?})", info.name, info.backend);
+                    println!(
+                        "gpu work: {} bricks relit, {} surfels relit, {} shadow rays, {} probes gathered",
+                        counters.bricks_relit,
+                        counters.surfels_relit,
+                        counters.shadow_rays,
+                        counters.probes_gathered
+                    );
                     let stats = prt_runtime::RelightStats {
                         bricks: u64::from(counters.bricks_relit),
                         shadow_rays: u64::from(counters.shadow_rays),
@@ -291,7 +298,9 @@ fn run(cli: Cli) -> Result<()> {
                 "relit {} probes ({name}, {bounces} bounce(s)) in {seconds:.3} s",
                 relit.sh.len()
             );
-            println!("{}", relit.stats);
+            if name == "cpu" {
+                println!("{}", relit.stats);
+            }
             println!("wrote {}", json.display());
             Ok(())
         }
