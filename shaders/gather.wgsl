@@ -69,9 +69,21 @@ fn accumulate(p: u32, lid: u32) -> array<vec3<f32>, 9> {
     for (var f = probe.first_factor + lid; f < probe.first_factor + probe.factor_count; f = f + GATHER_WORKGROUP) {
         let base = f * FACTOR_WORDS;
         var t: array<f32, 9>;
-        t[0] = f32(factors[base + 1u]) * params.ray_weight * SH_Y00;
+        var brick = factors[base];
         var offset: vec3<f32>;
-        if FACTOR_F16 {
+        if FACTOR_FORMAT == FACTOR_U8 {
+            brick = brick >> 8u;
+            t[0] = f32(factors[base] & 0xffu) * params.ray_weight * SH_Y00;
+            let p0 = unpack4x8snorm(factors[base + 1u]);
+            let p1 = unpack4x8snorm(factors[base + 2u]);
+            let p2 = unpack4x8snorm(factors[base + 3u]);
+            offset = p0.xyz * params.offset_scale;
+            let q = array<f32, 8>(p0.w, p1.x, p1.y, p1.z, p1.w, p2.x, p2.y, p2.z);
+            for (var k = 1u; k < 9u; k = k + 1u) {
+                t[k] = q[k - 1u] * U8_SH_RANGE * t[0];
+            }
+        } else if FACTOR_FORMAT == FACTOR_F16 {
+            t[0] = f32(factors[base + 1u]) * params.ray_weight * SH_Y00;
             for (var w = 0u; w < 4u; w = w + 1u) {
                 let h = unpack2x16float(factors[base + 2u + w]);
                 t[1u + 2u * w] = h.x;
@@ -79,6 +91,7 @@ fn accumulate(p: u32, lid: u32) -> array<vec3<f32>, 9> {
             }
             offset = vec3<f32>(unpack2x16float(factors[base + 6u]), unpack2x16float(factors[base + 7u]).x);
         } else {
+            t[0] = f32(factors[base + 1u]) * params.ray_weight * SH_Y00;
             for (var k = 1u; k < 9u; k = k + 1u) {
                 t[k] = bitcast<f32>(factors[base + 1u + k]);
             }
@@ -88,7 +101,7 @@ fn accumulate(p: u32, lid: u32) -> array<vec3<f32>, 9> {
                 bitcast<f32>(factors[base + 12u]),
             );
         }
-        let l = factor_radiance(factors[base], offset);
+        let l = factor_radiance(brick, offset);
         for (var k = 0u; k < 9u; k = k + 1u) {
             acc[k] = acc[k] + t[k] * l;
         }

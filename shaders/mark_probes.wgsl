@@ -20,7 +20,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     }
     var dirty = params.all_probes_dirty != 0u;
     for (var f = probe.first_factor; f < probe.first_factor + probe.factor_count && !dirty; f = f + 1u) {
-        dirty = brick_dirty[factors[f * FACTOR_WORDS]] != 0u;
+        let word = factors[f * FACTOR_WORDS];
+        dirty = brick_dirty[select(word, word >> 8u, FACTOR_FORMAT == FACTOR_U8)] != 0u;
     }
     if dirty {
         probe_dirty[p] = 1u;

@@ -101,6 +101,11 @@ struct Params {
     dispatch_width: u32,
     // Lights whose position, direction or cone changed: their cached visibility is stale.
     moved_lights: u32,
+    // Metres per unit of 8-bit factor offsets (FACTOR_U8 only).
+    offset_scale: f32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
 }
 
 const PI: f32 = 3.14159265358979;

@@ -33,8 +33,8 @@ use std::time::{Duration, Instant};
 
 use glam::Vec3;
 use prt_format::{
-    directions, Asset, BakeSettingsRecord, BakeStats, FactorRow, Factors, Header, Probe,
-    TransferPrecision, PROBE_VALID,
+    directions, split_rows_for_u8, Asset, BakeSettingsRecord, BakeStats, FactorRow, Factors,
+    Header, Probe, TransferPrecision, PROBE_VALID, U8_MAX_BRICK,
 };
 use rayon::prelude::*;
 
@@ -87,7 +87,7 @@ impl Default for BakeSettings {
             merge_normal_cos: 0.9,
             double_sided: false,
             invalid_backface_fraction: 0.1,
-            transfer_precision: TransferPrecision::F16,
+            transfer_precision: TransferPrecision::U8,
             threads: None,
         }
     }
@@ -343,6 +343,18 @@ fn bake_in_pool(
             )
         })
         .collect();
+    let tables: Vec<Vec<FactorRow>> = if settings.transfer_precision == TransferPrecision::U8 {
+        if bricked.bricks.len() > U8_MAX_BRICK as usize + 1 {
+            return Err(BakeError::Setting {
+                name: "precision",
+                value: format!("u8 with {} bricks", bricked.bricks.len()),
+                reason: "the 8-bit factor encoding addresses at most 16,777,216 bricks; use f16",
+            });
+        }
+        tables.into_iter().map(split_rows_for_u8).collect()
+    } else {
+        tables
+    };
     lap(&mut report, "merge");
 
     let mut probes_out = Vec::with_capacity(traced.len());
@@ -393,7 +405,7 @@ fn bake_in_pool(
             .flat_map(|r| r.sky_mask.iter().copied())
             .collect(),
         sky_transfer: traced.iter().map(|r| r.sky_transfer).collect(),
-        factors: Factors::build(&rows, settings.transfer_precision),
+        factors: Factors::build(&rows, settings.transfer_precision, n, 4.0 * cell_size),
         bricks: bricked.bricks,
         surfels: bricked.surfels,
         geometry: bvh.geometry,

@@ -155,7 +155,11 @@ pub fn accuracy(
     let mut rows = Vec::new();
     for &n in rays {
         for (name, cell_size, cells) in merges {
-            for precision in [TransferPrecision::F32, TransferPrecision::F16] {
+            for precision in [
+                TransferPrecision::F32,
+                TransferPrecision::F16,
+                TransferPrecision::U8,
+            ] {
                 let settings = BakeSettings {
                     rays: n,
                     cell_size,
@@ -229,6 +233,7 @@ fn without_offsets(mut asset: Asset) -> Asset {
     match &mut asset.factors {
         Factors::F32(f) => f.iter_mut().for_each(|f| f.offset = [0.0; 3]),
         Factors::F16(f) => f.iter_mut().for_each(|f| f.offset = [0; 2]),
+        Factors::U8 { factors, .. } => factors.iter_mut().for_each(|f| f.packed[0] &= 0xff00_0000),
     }
     asset
 }

@@ -35,6 +35,8 @@ enum Quality {
 enum Precision {
     F16,
     F32,
+    /// 16-byte factors: 8-bit SH terms and offsets (half the size of f16).
+    U8,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -136,7 +138,7 @@ enum Command {
         #[arg(long, default_value_t = 0.1)]
         invalid_backface_fraction: f32,
         /// Storage precision of factor transfers.
-        #[arg(long, value_enum, default_value = "f16")]
+        #[arg(long, value_enum, default_value = "u8")]
         precision: Precision,
     },
     /// Relight an asset once and write every probe's SH9 as JSON.
@@ -217,6 +219,7 @@ fn run(cli: Cli) -> Result<()> {
                 transfer_precision: match precision {
                     Precision::F16 => TransferPrecision::F16,
                     Precision::F32 => TransferPrecision::F32,
+                    Precision::U8 => TransferPrecision::U8,
                 },
                 threads,
                 ..preset

@@ -107,6 +107,15 @@ pub fn validate(asset: &Asset) -> Result<(), FormatError> {
             expected: next_factor as usize,
         });
     }
+    if let Factors::U8 { offset_scale, .. } = factors {
+        if !(offset_scale.is_finite() && *offset_scale > 0.0) {
+            return Err(FormatError::invalid(
+                "factors",
+                0,
+                format!("offset_scale {offset_scale}"),
+            ));
+        }
+    }
     let bricks = asset.bricks.len();
     for f in 0..factors.len() {
         let (b, rays) = factors.brick_and_rays(f);

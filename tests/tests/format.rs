@@ -17,9 +17,11 @@ const SUFFIX: usize = 8;
 fn small_asset(precision: TransferPrecision) -> &'static Asset {
     static F16: OnceLock<Asset> = OnceLock::new();
     static F32: OnceLock<Asset> = OnceLock::new();
+    static U8: OnceLock<Asset> = OnceLock::new();
     let cell = match precision {
         TransferPrecision::F16 => &F16,
         TransferPrecision::F32 => &F32,
+        TransferPrecision::U8 => &U8,
     };
     cell.get_or_init(|| {
         let settings = BakeSettings {
@@ -63,7 +65,11 @@ fn damage_offsets(len: usize) -> Vec<usize> {
 /// two precisions really store different factor tables.
 #[test]
 fn round_trip_is_exact_in_both_precisions() {
-    for precision in [TransferPrecision::F16, TransferPrecision::F32] {
+    for precision in [
+        TransferPrecision::F16,
+        TransferPrecision::F32,
+        TransferPrecision::U8,
+    ] {
         let asset = small_asset(precision);
         assert_eq!(asset.factors.precision(), precision);
         assert!(!asset.factors.is_empty());
@@ -86,6 +92,10 @@ fn round_trip_is_exact_in_both_precisions() {
     assert!(matches!(
         small_asset(TransferPrecision::F32).factors,
         Factors::F32(_)
+    ));
+    assert!(matches!(
+        small_asset(TransferPrecision::U8).factors,
+        Factors::U8 { .. }
     ));
 }
 
@@ -322,6 +332,9 @@ fn set_factor_brick(factors: &mut Factors, f: usize, brick: u32) {
     match factors {
         Factors::F16(v) => v[f].brick = brick,
         Factors::F32(v) => v[f].brick = brick,
+        Factors::U8 { factors, .. } => {
+            factors[f].brick_rays = (brick << 8) | (factors[f].brick_rays & 0xff)
+        }
     }
 }
 
@@ -339,11 +352,13 @@ fn structurally_broken_assets_are_invalid() {
     assert_invalid("factor with 0 rays", "factors", |a| match &mut a.factors {
         Factors::F16(v) => v[0].rays = 0,
         Factors::F32(v) => v[0].rays = 0,
+        Factors::U8 { factors, .. } => factors[0].brick_rays &= !0xff,
     });
     assert_invalid("factor with NaN transfer", "factors", |a| {
         match &mut a.factors {
             Factors::F16(v) => v[0].sh[1] = 0x7e00, // a half NaN in the low half
             Factors::F32(v) => v[0].sh[2] = f32::NAN,
+            Factors::U8 { offset_scale, .. } => *offset_scale = f32::NAN,
         }
     });
     assert_invalid("probe first_factor off by one", "probes", |a| {

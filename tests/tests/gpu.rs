@@ -96,6 +96,13 @@ fn gpu_equals_cpu_on_cornell() {
     for (settings, format) in [
         (reference_grid, VolumeFormat::F32),
         (BakeSettings::default(), VolumeFormat::F16),
+        (
+            BakeSettings {
+                transfer_precision: prt_format::TransferPrecision::F16,
+                ..BakeSettings::default()
+            },
+            VolumeFormat::F32,
+        ),
     ] {
         let asset = bake(&scene, &settings);
         for rig in ["rig.json", "rig_spot.json", "rig_spot_range.json"] {

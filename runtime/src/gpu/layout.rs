@@ -4,7 +4,7 @@
 //! `shaders/types.wgsl`, so the two sides cannot drift apart.
 
 use bytemuck::{Pod, Zeroable};
-use prt_format::{LightKind, BRICK_BACKFACE, PROBE_VALID};
+use prt_format::{LightKind, TransferPrecision, BRICK_BACKFACE, PROBE_VALID, U8_SH_RANGE};
 
 use crate::lights::{NormalBounds, PreparedLight};
 
@@ -117,8 +117,10 @@ pub struct Params {
     pub texel_limit: f32,
     pub dispatch_width: u32,
     pub moved_lights: u32,
+    pub offset_scale: f32,
+    pub _pad: [u32; 3],
 }
-const _: () = assert!(std::mem::size_of::<Params>() == 80);
+const _: () = assert!(std::mem::size_of::<Params>() == 96);
 
 /// `(name, value)` of every constant the WGSL side uses, as WGSL source text.
 pub fn wgsl_constants() -> Vec<(&'static str, String)> {
@@ -146,6 +148,19 @@ pub fn wgsl_constants() -> Vec<(&'static str, String)> {
         ("SKY_BLACK", format!("{SKY_BLACK}u")),
         ("SKY_CONSTANT", format!("{SKY_CONSTANT}u")),
         ("SKY_DIRECTIONS", format!("{SKY_DIRECTIONS}u")),
+        (
+            "FACTOR_F32",
+            format!("{}u", factor_format_code(TransferPrecision::F32)),
+        ),
+        (
+            "FACTOR_F16",
+            format!("{}u", factor_format_code(TransferPrecision::F16)),
+        ),
+        (
+            "FACTOR_U8",
+            format!("{}u", factor_format_code(TransferPrecision::U8)),
+        ),
+        ("U8_SH_RANGE", format!("{U8_SH_RANGE:?}")),
         ("SH_Y00", format!("{Y00:?}")),
         ("SH_Y1", format!("{Y1:?}")),
         ("SH_Y2_OFF", format!("{Y2_OFF:?}")),
@@ -155,11 +170,20 @@ pub fn wgsl_constants() -> Vec<(&'static str, String)> {
 }
 
 /// Size in u32 words of one factor of each precision.
-pub fn factor_words(f16: bool) -> u32 {
-    let bytes = if f16 {
-        std::mem::size_of::<prt_format::FactorF16>()
-    } else {
-        std::mem::size_of::<prt_format::FactorF32>()
+pub fn factor_words(precision: TransferPrecision) -> u32 {
+    let bytes = match precision {
+        TransferPrecision::F32 => std::mem::size_of::<prt_format::FactorF32>(),
+        TransferPrecision::F16 => std::mem::size_of::<prt_format::FactorF16>(),
+        TransferPrecision::U8 => std::mem::size_of::<prt_format::FactorU8>(),
     };
     (bytes / 4) as u32
+}
+
+/// WGSL `FACTOR_FORMAT` code of each precision (`FACTOR_F32`, `FACTOR_F16`, `FACTOR_U8`).
+pub fn factor_format_code(precision: TransferPrecision) -> u32 {
+    match precision {
+        TransferPrecision::F32 => 0,
+        TransferPrecision::F16 => 1,
+        TransferPrecision::U8 => 2,
+    }
 }

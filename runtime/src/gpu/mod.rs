@@ -198,6 +198,7 @@ pub struct PrtRuntime {
     surfel_count: u32,
     ray_count: u32,
     grid: prt_format::Grid,
+    offset_scale: f32,
     settings: RuntimeSettings,
     directions: Vec<[f32; 3]>,
     params: wgpu::Buffer,
@@ -283,7 +284,7 @@ impl PrtRuntime {
         }
         let subgroups = device.features().contains(wgpu::Features::SUBGROUP);
         let config = ShaderConfig {
-            factor_f16: matches!(asset.factors, Factors::F16(_)),
+            factors: asset.factors.precision(),
             volume_format: settings.volume_format.wgsl(),
             subgroups,
         };
@@ -297,6 +298,7 @@ impl PrtRuntime {
         let factor_bytes: &[u8] = match &asset.factors {
             Factors::F16(f) => bytemuck::cast_slice(f),
             Factors::F32(f) => bytemuck::cast_slice(f),
+            Factors::U8 { factors, .. } => bytemuck::cast_slice(factors),
         };
         let factors = storage(device, "prt factors", factor_bytes, none);
         let bricks = storage(
@@ -542,6 +544,10 @@ impl PrtRuntime {
             surfel_count: asset.surfels.len() as u32,
             ray_count: asset.header.ray_count,
             grid: g,
+            offset_scale: match &asset.factors {
+                Factors::U8 { offset_scale, .. } => *offset_scale,
+                _ => 1.0,
+            },
             settings,
             directions: directions::fibonacci_directions(asset.header.ray_count),
             params,
@@ -663,6 +669,8 @@ impl PrtRuntime {
             },
             dispatch_width: DISPATCH_WIDTH,
             moved_lights: moved,
+            offset_scale: self.offset_scale,
+            _pad: [0; 3],
         };
         let copy = |encoder: &mut wgpu::CommandEncoder, dst: &wgpu::Buffer, bytes: &[u8]| {
             if bytes.is_empty() {

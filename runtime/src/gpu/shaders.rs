@@ -52,8 +52,8 @@ const SAMPLE_IRRADIANCE: &str = include_str!("../../../shaders/sample_irradiance
 /// Choices that change shader source.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct ShaderConfig {
-    /// Factors are [`prt_format::FactorF16`] (else `FactorF32`).
-    pub factor_f16: bool,
+    /// Storage of the asset's factors.
+    pub factors: prt_format::TransferPrecision,
     /// Volume texel format: `rgba16float` or `rgba32float`.
     pub volume_format: &'static str,
     /// Reduce with subgroup operations (the adapter has `Features::SUBGROUP`).
@@ -67,9 +67,9 @@ pub fn prelude(config: &ShaderConfig) -> String {
         s.push_str(&format!("const {name} = {value};\n"));
     }
     s.push_str(&format!(
-        "const FACTOR_WORDS = {}u;\nconst FACTOR_F16 = {};\n",
-        layout::factor_words(config.factor_f16),
-        config.factor_f16
+        "const FACTOR_WORDS = {}u;\nconst FACTOR_FORMAT = {}u;\n",
+        layout::factor_words(config.factors),
+        layout::factor_format_code(config.factors)
     ));
     s
 }
@@ -124,11 +124,15 @@ mod tests {
 
     fn configs() -> Vec<ShaderConfig> {
         let mut out = Vec::new();
-        for factor_f16 in [false, true] {
+        for factors in [
+            prt_format::TransferPrecision::F32,
+            prt_format::TransferPrecision::F16,
+            prt_format::TransferPrecision::U8,
+        ] {
             for volume_format in ["rgba16float", "rgba32float"] {
                 for subgroups in [false, true] {
                     out.push(ShaderConfig {
-                        factor_f16,
+                        factors,
                         volume_format,
                         subgroups,
                     });
@@ -262,6 +266,7 @@ mod tests {
                     ("window_start", offset_of!(layout::Params, window_start)),
                     ("texel_limit", offset_of!(layout::Params, texel_limit)),
                     ("moved_lights", offset_of!(layout::Params, moved_lights)),
+                    ("offset_scale", offset_of!(layout::Params, offset_scale)),
                 ],
             ),
         ];
