@@ -9,14 +9,16 @@
 //! Fibonacci lattice ([`directions`]). Rays that escaped are sky: they are kept as a per-probe bit
 //! mask over the lattice plus the SH9 projection of those directions, so that any sky can be applied
 //! at runtime. Rays that hit geometry became surfels; surfels were merged into normal-keyed bricks,
-//! and each probe keeps a factor table: for every brick its rays hit, the SH9 projection of those
-//! rays' directions (weight 4pi/N each). At runtime, with `L_b` the relit radiance of brick `b`:
+//! and each probe keeps a factor table: for every brick its rays hit, the number of those rays,
+//! the SH9 projection of their directions (weight 4pi/N each) and their mean hit point relative
+//! to the brick's centroid. A brick's radiance is a linear model (mean and gradient, fitted over
+//! its surfels); at runtime, with `L_b(x)` that model evaluated at offset `x`:
 //!
-//! `c_k(probe) = sum over factors f of transfer_k(f) * L_{brick(f)} + sky term`
+//! `c_k(probe) = sum over factors f of transfer_k(f) * L_{brick(f)}(offset(f)) + sky term`
 //!
 //! which is exactly the Monte Carlo projection of conventions.md section 2 when every ray hit its
 //! own brick (merging off), and an approximation that shares relighting work between probes
-//! otherwise.
+//! otherwise. Factors are stored in f32, f16 or (default) 8-bit form ([`TransferPrecision`]).
 //!
 //! ## File layout ([`io`])
 //! `magic (8) | format_version u32 | payload length u64 | payload (bincode 2) | xxh3-64 checksum`.
