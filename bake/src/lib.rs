@@ -34,7 +34,7 @@ use std::time::{Duration, Instant};
 use glam::Vec3;
 use prt_format::{
     directions, split_rows_for_u8, Asset, BakeSettingsRecord, BakeStats, FactorRow, Factors,
-    Header, Probe, TransferPrecision, PROBE_VALID, U8_MAX_BRICK,
+    Header, Probe, TransferPrecision, PROBE_OFFSET, PROBE_VALID, U8_MAX_BRICK,
 };
 use rayon::prelude::*;
 
@@ -71,6 +71,9 @@ pub struct BakeSettings {
     pub invalid_backface_fraction: f32,
     /// Storage precision of factor transfers.
     pub transfer_precision: TransferPrecision,
+    /// Move probes that are inside geometry out of it (virtual offset): through the nearest back
+    /// face their rays hit, if it is within half a spacing and the probe is valid there.
+    pub virtual_offset: bool,
     /// Worker threads; `None` uses all cores.
     pub threads: Option<usize>,
 }
@@ -88,6 +91,7 @@ impl Default for BakeSettings {
             double_sided: false,
             invalid_backface_fraction: 0.1,
             transfer_precision: TransferPrecision::U8,
+            virtual_offset: false,
             threads: None,
         }
     }
@@ -309,14 +313,26 @@ fn bake_in_pool(
         srgb: texture::srgb_to_linear_table(),
     };
     progress.start("trace", positions.len() as u64);
-    let traced: Vec<trace::ProbeRays> = positions
+    let is_inside = |r: &trace::ProbeRays| {
+        r.backface_rays as f32 > settings.invalid_backface_fraction * n as f32
+    };
+    let traced: Vec<(Vec3, trace::ProbeRays, bool)> = positions
         .par_iter()
         .map(|&p| {
             let r = tracer.trace_probe(p);
             progress.advance(1);
-            r
+            if settings.virtual_offset && is_inside(&r) {
+                if let Some(moved) = virtual_offset(&tracer, p, &r, spacing, &is_inside) {
+                    return moved;
+                }
+            }
+            (p, r, false)
         })
         .collect();
+    let (positions, traced): (Vec<(Vec3, bool)>, Vec<trace::ProbeRays>) = traced
+        .into_iter()
+        .map(|(p, r, moved)| ((p, moved), r))
+        .unzip();
     progress.finish();
     lap(&mut report, "trace");
 
@@ -359,11 +375,11 @@ fn bake_in_pool(
 
     let mut probes_out = Vec::with_capacity(traced.len());
     let mut first_factor = 0u32;
-    for ((r, &pos), table) in traced.iter().zip(&positions).zip(&tables) {
-        let inside = r.backface_rays as f32 > settings.invalid_backface_fraction * n as f32;
+    for ((r, &(pos, moved)), table) in traced.iter().zip(&positions).zip(&tables) {
+        let valid = if is_inside(r) { 0 } else { PROBE_VALID };
         probes_out.push(Probe {
             position: pos.to_array(),
-            flags: if inside { 0 } else { PROBE_VALID },
+            flags: valid | if moved { PROBE_OFFSET } else { 0 },
             first_factor,
             factor_count: table.len() as u32,
             sky_rays: r.sky_rays,
@@ -417,4 +433,29 @@ fn bake_in_pool(
     })?;
     lap(&mut report, "assemble");
     Ok((asset, report))
+}
+
+/// Virtual offset of a probe inside geometry: the nearest back face its rays hit is the wall it
+/// is behind; the probe moves just past it along that ray (at most half a spacing) and is traced
+/// again. Returns the new position and rays when the probe is valid there.
+fn virtual_offset(
+    tracer: &trace::Tracer,
+    origin: Vec3,
+    rays: &trace::ProbeRays,
+    spacing: f32,
+    is_inside: &dyn Fn(&trace::ProbeRays) -> bool,
+) -> Option<(Vec3, trace::ProbeRays, bool)> {
+    let nearest = rays.hits.iter().filter(|h| h.backface).min_by(|a, b| {
+        (a.position - origin)
+            .length_squared()
+            .total_cmp(&(b.position - origin).length_squared())
+            .then(a.ray.cmp(&b.ray))
+    })?;
+    let dir = tracer.directions[nearest.ray as usize];
+    let moved = nearest.position + dir * (1e-3 * spacing).max(1e-4);
+    if (moved - origin).length() > 0.5 * spacing {
+        return None;
+    }
+    let again = tracer.trace_probe(moved);
+    (!is_inside(&again)).then_some((moved, again, true))
 }

@@ -134,6 +134,9 @@ enum Command {
         /// Treat every material as double-sided (for files with inconsistent winding).
         #[arg(long)]
         double_sided: bool,
+        /// Move probes inside geometry out through the nearest back face (within half a spacing).
+        #[arg(long)]
+        virtual_offset: bool,
         /// Probes with more than this fraction of back-face hits are invalid.
         #[arg(long, default_value_t = 0.1)]
         invalid_backface_fraction: f32,
@@ -201,6 +204,7 @@ fn run(cli: Cli) -> Result<()> {
             cell_size,
             no_merge,
             double_sided,
+            virtual_offset,
             invalid_backface_fraction,
             precision,
         } => {
@@ -215,6 +219,7 @@ fn run(cli: Cli) -> Result<()> {
                 max_probes,
                 cell_size: if no_merge { Some(0.0) } else { cell_size },
                 double_sided,
+                virtual_offset,
                 invalid_backface_fraction,
                 transfer_precision: match precision {
                     Precision::F16 => TransferPrecision::F16,

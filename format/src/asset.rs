@@ -132,13 +132,18 @@ pub struct BakeStats {
 
 /// Probe flag: the probe is valid (not inside geometry).
 pub const PROBE_VALID: u32 = 1;
+/// Probe flag: the probe was inside geometry at its grid position and was moved out of it
+/// (virtual offset); `Probe::position` is where its rays start, its texel stays at the grid
+/// position.
+pub const PROBE_OFFSET: u32 = 2;
 
 /// A probe: where it is, whether it may be used, and where its factor table starts.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable, Serialize, Deserialize)]
 #[repr(C)]
 pub struct Probe {
+    /// Where the probe's rays start: its grid position, unless [`PROBE_OFFSET`] is set.
     pub position: [f32; 3],
-    /// [`PROBE_VALID`] and future flags.
+    /// [`PROBE_VALID`], [`PROBE_OFFSET`].
     pub flags: u32,
     pub first_factor: u32,
     pub factor_count: u32,

@@ -15,6 +15,8 @@ pub struct Summary {
     pub source_hash: String,
     pub probe_count: usize,
     pub valid_probe_count: usize,
+    /// Probes moved out of geometry by the virtual offset.
+    pub offset_probe_count: usize,
     pub ray_count: u32,
     pub surfel_count: usize,
     pub surfels_unmerged: u64,
@@ -77,6 +79,11 @@ impl Summary {
             source_hash: format!("{:016x}", asset.header.source_hash),
             probe_count: probes,
             valid_probe_count: asset.probes.iter().filter(|p| p.is_valid()).count(),
+            offset_probe_count: asset
+                .probes
+                .iter()
+                .filter(|p| p.flags & PROBE_OFFSET != 0)
+                .count(),
             ray_count: asset.header.ray_count,
             surfel_count: asset.surfels.len(),
             surfels_unmerged: asset.header.stats.surfels_unmerged,
@@ -113,10 +120,11 @@ impl std::fmt::Display for Summary {
         )?;
         writeln!(
             f,
-            "probes           {} ({} valid, {} invalid), {} rays each",
+            "probes           {} ({} valid, {} invalid, {} moved by virtual offset), {} rays each",
             self.probe_count,
             self.valid_probe_count,
             self.probe_count - self.valid_probe_count,
+            self.offset_probe_count,
             self.ray_count
         )?;
         writeln!(

@@ -771,3 +771,29 @@ fn bake_to_file_is_atomic() {
     assert!(prt_bake::bake_to_file(&cornell(), &nowhere, &rays(64), &NoProgress).is_err());
     assert_eq!(dir.entries(), ["cornell.prt"]);
 }
+
+/// Virtual offset: a probe just inside the outward box (0.05 m below its top face) moves through
+/// the nearest back face, is valid there, and says so; one deep inside stays put and invalid.
+#[test]
+fn virtual_offset_moves_probes_out_of_geometry() {
+    let scene = fixture("closed_box_outward.gltf");
+    let near_top = BakeSettings {
+        spacing: Some(1.0),
+        bounds: point_bounds([0.0, 0.95, 0.0]),
+        virtual_offset: true,
+        ..rays(256)
+    };
+    let asset = bake_ok(&scene, &near_top);
+    let p = asset.probes[0];
+    assert!(p.is_valid(), "moved probe is valid: {p:?}");
+    assert_ne!(p.flags & prt_format::PROBE_OFFSET, 0);
+    assert!(p.position[1] > 1.0 && p.position[1] < 1.01, "{p:?}");
+    let deep = BakeSettings {
+        bounds: point_bounds([0.0, 0.0, 0.0]),
+        ..near_top
+    };
+    let asset = bake_ok(&scene, &deep);
+    assert!(!asset.probes[0].is_valid());
+    assert_eq!(asset.probes[0].flags & prt_format::PROBE_OFFSET, 0);
+    assert_eq!(asset.probes[0].position, [0.0, 0.0, 0.0]);
+}
