@@ -65,6 +65,8 @@ pub struct Scene {
     pub lights: Vec<Light>,
     pub degenerate_skipped: u64,
     pub warnings: Vec<String>,
+    /// Some primitive has COLOR_0 (else per-hit attributes matter only for textured materials).
+    pub has_vertex_colors: bool,
 }
 
 impl Scene {
@@ -371,6 +373,7 @@ impl Loader<'_> {
             if colors.as_ref().is_some_and(|c| c.len() != vertex_count) {
                 return Err(err("COLOR_0 count differs from POSITION".into()));
             }
+            self.scene.has_vertex_colors |= colors.is_some();
             for mut t in tris {
                 if flip {
                     t.swap(1, 2);

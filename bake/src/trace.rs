@@ -47,6 +47,7 @@ impl Tracer<'_> {
     pub fn trace_probe(&self, origin: Vec3) -> ProbeRays {
         let n = self.directions.len();
         let mut out = ProbeRays {
+            hits: Vec::with_capacity(n),
             sky_mask: vec![0; n.div_ceil(32)],
             ..ProbeRays::default()
         };
@@ -100,6 +101,10 @@ impl Tracer<'_> {
 
     /// Albedo (base colour x texture x COLOR_0) and emission (factor x texture) at a point.
     fn material_at(&self, m: &Material, tri: usize, b: [f32; 3]) -> ([f32; 3], [f32; 3]) {
+        if !self.scene.has_vertex_colors && m.base_texture.is_none() && m.emissive_texture.is_none()
+        {
+            return (m.base_color.map(|a| a.clamp(0.0, 1.0)), m.emissive);
+        }
         let attr = &self.scene.attributes[tri];
         let uv = |set: u32| -> [f32; 2] {
             let uv = attr.uv[(set as usize).min(1)];
