@@ -1,6 +1,7 @@
 // Stage 1, one thread per brick: which lights can reach the brick (range, cone and facing tests
 // in world space against the brick's bounds and normal bounds, twin of PreparedLight::cull), and
-// whether a changed light reaches it now or reached it before (then the brick must be relit).
+// whether a changed light reaches it now or reached it before (then the brick must be relit; on
+// the first update every brick is, so that emissive bricks no light reaches get their radiance).
 // Back-face bricks are black: they cost nothing and are never dirty.
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -69,7 +70,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     }
     let old = brick_light_mask[b];
     brick_light_mask[b] = mask;
-    let dirty = ((old | mask) & params.changed_lights) != 0u;
+    let dirty = ((old | mask) & params.changed_lights) != 0u || params.all_bricks_dirty != 0u;
     brick_dirty[b] = select(0u, 1u, dirty);
     if dirty {
         atomicAdd(&counters.bricks_relit, 1u);

@@ -99,13 +99,15 @@ struct Params {
     texel_limit: f32,
     // Workgroups along x of 2D dispatches (linear index = x + y * dispatch_width).
     dispatch_width: u32,
-    // Lights whose position, direction or cone changed: their cached visibility is stale.
+    // Lights whose cached visibility is stale: anything but their colour or intensity changed,
+    // or they were dark before.
     moved_lights: u32,
     // Metres per unit of 8-bit factor offsets (FACTOR_U8 only).
     offset_scale: f32,
+    // 1 on the first update: every brick is relit (emissive bricks no light reaches too).
+    all_bricks_dirty: u32,
     pad0: u32,
     pad1: u32,
-    pad2: u32,
 }
 
 const PI: f32 = 3.14159265358979;

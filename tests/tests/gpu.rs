@@ -357,3 +357,49 @@ fn hostile_values_stay_finite() {
         .expect("a grid beyond the 3D texture limit is refused");
     assert!(err.to_string().contains(&max_dim.to_string()), "{err}");
 }
+
+/// Emissive bricks no light reaches are relit on the first update (GPU furnace: c0 = 4pi Y00 e
+/// with no lights at all), and the visibility cache is re-traced whenever a change can light
+/// new surfels: a dark light turned on, a longer range.
+#[test]
+fn emission_and_visibility_cache_follow_every_change() {
+    let (device, queue) = device();
+    let settings = BakeSettings {
+        spacing: Some(0.6),
+        bounds: Some([-0.9, -0.9, -0.9, 0.9, 0.9, 0.9]),
+        ..BakeSettings::default()
+    };
+    let furnace = bake(&fixture("closed_box_inward.gltf"), &settings);
+    let no_lights = load_rig(&fixture("rigs/no_lights.json")).unwrap();
+    let mut runtime =
+        PrtRuntime::new(&device, &queue, &furnace, RuntimeSettings::default()).unwrap();
+    let gpu = gpu_update(&device, &queue, &mut runtime, &no_lights, None);
+    let expected = 4.0 * std::f32::consts::PI * prt_format::sh::Y00 * 0.5;
+    assert!(
+        gpu.iter()
+            .all(|c| (c[0][0] - expected).abs() < 1e-3 * expected),
+        "{:?}",
+        gpu[0]
+    );
+    assert_close("furnace", &furnace, &gpu, &cpu(&furnace, &no_lights), 1e-4);
+
+    let cornell = bake(
+        &shared("reference/cornell/cornell.gltf"),
+        &BakeSettings::default(),
+    );
+    let mut runtime =
+        PrtRuntime::new(&device, &queue, &cornell, RuntimeSettings::default()).unwrap();
+    let mut lighting = rig(0.0, 0.0);
+    lighting.rig.lights[0].range = Some(0.5);
+    for step in ["dark", "lit", "longer range"] {
+        match step {
+            "lit" => lighting.rig.lights[0].intensity = 3.0,
+            "longer range" => lighting.rig.lights[0].range = Some(4.0),
+            _ => {}
+        }
+        let lighting =
+            Lighting::from_rig(lighting.rig.clone(), Path::new("."), Path::new(step)).unwrap();
+        let gpu = gpu_update(&device, &queue, &mut runtime, &lighting, None);
+        assert_close(step, &cornell, &gpu, &cpu(&cornell, &lighting), 1e-4);
+    }
+}

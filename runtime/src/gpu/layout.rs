@@ -118,7 +118,8 @@ pub struct Params {
     pub dispatch_width: u32,
     pub moved_lights: u32,
     pub offset_scale: f32,
-    pub _pad: [u32; 3],
+    pub all_bricks_dirty: u32,
+    pub _pad: [u32; 2],
 }
 const _: () = assert!(std::mem::size_of::<Params>() == 96);
 

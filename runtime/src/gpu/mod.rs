@@ -611,6 +611,7 @@ impl PrtRuntime {
         budget: Option<u32>,
     ) -> Result<UpdateReport, GpuError> {
         let new = self.state_for(lighting)?;
+        let first = self.state.is_none();
         let (changed, moved, sky_changed) = match &self.state {
             None => (u32::MAX, u32::MAX, true),
             Some(old) => {
@@ -620,10 +621,12 @@ impl PrtRuntime {
                     let (a, b) = (old.lights.get(i), new.lights.get(i));
                     if a != b {
                         changed |= 1 << i;
-                        let geometry_same = matches!((a, b), (Some(a), Some(b))
-                            if a.position == b.position && a.direction == b.direction
-                                && a.kind == b.kind);
-                        if !geometry_same {
+                        // Only a change of colour or intensity of a light that was lit keeps
+                        // its visibility: anything else can light surfels never traced for it.
+                        let only_brightness = matches!((a, b), (Some(a), Some(b))
+                            if a.radiant.iter().any(|&c| c > 0.0)
+                                && GpuLight { radiant: b.radiant, ..*a } == *b);
+                        if !only_brightness {
                             moved |= 1 << i;
                         }
                     }
@@ -638,7 +641,7 @@ impl PrtRuntime {
             .unwrap_or(self.probe_count)
             .clamp(1, self.probe_count.max(1));
         let windows = self.probe_count.div_ceil(budget);
-        let lights_changed = changed != 0;
+        let lights_changed = changed != 0 || first;
         if !lights_changed && !sky_changed && self.pending_windows == 0 {
             return Ok(UpdateReport {
                 idle: true,
@@ -670,7 +673,8 @@ impl PrtRuntime {
             dispatch_width: DISPATCH_WIDTH,
             moved_lights: moved,
             offset_scale: self.offset_scale,
-            _pad: [0; 3],
+            all_bricks_dirty: u32::from(first),
+            _pad: [0; 2],
         };
         let copy = |encoder: &mut wgpu::CommandEncoder, dst: &wgpu::Buffer, bytes: &[u8]| {
             if bytes.is_empty() {

@@ -267,6 +267,10 @@ mod tests {
                     ("texel_limit", offset_of!(layout::Params, texel_limit)),
                     ("moved_lights", offset_of!(layout::Params, moved_lights)),
                     ("offset_scale", offset_of!(layout::Params, offset_scale)),
+                    (
+                        "all_bricks_dirty",
+                        offset_of!(layout::Params, all_bricks_dirty),
+                    ),
                 ],
             ),
         ];
