@@ -360,6 +360,10 @@ fn time_updates<'a>(
 /// scheme (every probe relights its own unmerged surfels), and an update when nothing changed.
 pub fn gpu(scene: &Path, a: &Lighting, spacings: &[f32], rays: u32, cell: f32) -> Result<String> {
     let (device, queue, info) = headless_device()?;
+    let baselines = RuntimeSettings {
+        benchmark_baselines: true,
+        ..RuntimeSettings::default()
+    };
     let sky = |c: f32| Lighting {
         rig: a.rig.clone(),
         sky: prt_runtime::SkyModel::Constant([c, c, c]),
@@ -389,7 +393,7 @@ pub fn gpu(scene: &Path, a: &Lighting, spacings: &[f32], rays: u32, cell: f32) -
         };
         let (asset, _) = prt_bake::bake(scene, &settings, &NoProgress)?;
         let probes = asset.probes.len();
-        let mut runtime = PrtRuntime::new(&device, &queue, &asset, RuntimeSettings::default())?;
+        let mut runtime = PrtRuntime::new(&device, &queue, &asset, baselines)?;
         let iterations = 4;
         time_updates(&device, &queue, &mut runtime, 1, |_| a)?;
         let full = time_updates(&device, &queue, &mut runtime, iterations, |i| {
@@ -423,7 +427,7 @@ pub fn gpu(scene: &Path, a: &Lighting, spacings: &[f32], rays: u32, cell: f32) -
                 ..settings.clone()
             };
             let (asset, _) = prt_bake::bake(scene, &unmerged, &NoProgress)?;
-            let mut runtime = PrtRuntime::new(&device, &queue, &asset, RuntimeSettings::default())?;
+            let mut runtime = PrtRuntime::new(&device, &queue, &asset, baselines)?;
             time_updates(&device, &queue, &mut runtime, 1, |_| a)?;
             Some(time_updates(
                 &device,

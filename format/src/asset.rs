@@ -481,6 +481,30 @@ pub struct Geometry {
     pub triangles: Vec<Triangle>,
 }
 
+impl Geometry {
+    /// Stack entries a depth-first traversal needs: the BVH's depth plus one (nodes are numbered
+    /// with children after parents, so one pass gives every depth).
+    pub fn stack_needed(&self) -> usize {
+        if self.nodes.is_empty() {
+            return 0;
+        }
+        let mut depth = vec![0u32; self.nodes.len()];
+        let mut deepest = 0;
+        for (i, n) in self.nodes.iter().enumerate() {
+            deepest = deepest.max(depth[i]);
+            if n.count == 0 {
+                let next = depth[i] + 1;
+                for child in [n.first as usize, n.first as usize + 1] {
+                    if let Some(d) = depth.get_mut(child) {
+                        *d = next;
+                    }
+                }
+            }
+        }
+        deepest as usize + 1
+    }
+}
+
 /// A BVH2 node. `count > 0`: a leaf holding triangles `first..first+count`. `count == 0`: an
 /// inner node whose children are nodes `first` and `first + 1`. Node 0 is the root.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable, Serialize, Deserialize)]

@@ -8,6 +8,9 @@ use crate::error::FormatError;
 
 /// Largest ray count a bake may use (bit masks and tables are sized by it).
 pub const MAX_RAYS: u32 = 1 << 20;
+/// Largest traversal stack a BVH may need (its depth plus one): runtimes trace shadow rays with
+/// a fixed-size stack of this many entries.
+pub const MAX_BVH_STACK: usize = 64;
 
 fn finite(section: &'static str, index: usize, what: &str, v: &[f32]) -> Result<(), FormatError> {
     if v.iter().all(|x| x.is_finite()) {
@@ -142,6 +145,9 @@ pub fn validate(asset: &Asset) -> Result<(), FormatError> {
         finite("bricks", i, "min", &b.min)?;
         finite("bricks", i, "max", &b.max)?;
         finite("bricks", i, "centroid", &b.centroid)?;
+        if b.surfel_count == 0 {
+            return Err(FormatError::invalid("bricks", i, "no surfels"));
+        }
         if b.flags & BRICK_AXIS_MASK >= 6 {
             return Err(FormatError::invalid(
                 "bricks",
@@ -169,6 +175,18 @@ pub fn validate(asset: &Asset) -> Result<(), FormatError> {
         }
         let range = b.first_surfel as usize..next_surfel as usize;
         for (s, surfel) in asset.surfels[range.clone()].iter().enumerate() {
+            let inside =
+                (0..3).all(|a| surfel.position[a] >= b.min[a] && surfel.position[a] <= b.max[a]);
+            if !inside {
+                return Err(FormatError::invalid(
+                    "surfels",
+                    range.start + s,
+                    format!(
+                        "position {:?} outside its brick's bounds {:?}..{:?}",
+                        surfel.position, b.min, b.max
+                    ),
+                ));
+            }
             if surfel.brick as usize != i {
                 return Err(FormatError::invalid(
                     "surfels",
@@ -220,6 +238,14 @@ pub fn validate(asset: &Asset) -> Result<(), FormatError> {
                 format!("first {} count {} out of range", n.first, n.count),
             ));
         }
+    }
+    let stack = geo.stack_needed();
+    if stack > MAX_BVH_STACK {
+        return Err(FormatError::invalid(
+            "geometry.nodes",
+            0,
+            format!("the BVH needs a traversal stack of {stack}, more than {MAX_BVH_STACK}"),
+        ));
     }
     for (i, t) in geo.triangles.iter().enumerate() {
         finite("geometry.triangles", i, "v0", &t.v0)?;

@@ -99,7 +99,7 @@ pub struct CpuRelighter<'a> {
 
 impl<'a> CpuRelighter<'a> {
     pub fn new(asset: &'a Asset) -> Result<Self, RelightError> {
-        let needed = visibility::stack_needed(&asset.geometry);
+        let needed = asset.geometry.stack_needed();
         if needed > visibility::MAX_STACK {
             return Err(RelightError::BvhTooDeep {
                 needed,

@@ -7,26 +7,9 @@
 use glam::Vec3;
 use prt_format::{BvhNode, Geometry, Triangle};
 
-/// Deepest BVH the traversal stack holds (the GPU kernel has a fixed-size stack).
-pub const MAX_STACK: usize = 64;
-
-/// Stack entries a traversal of `geo` can need: its depth plus one.
-pub fn stack_needed(geo: &Geometry) -> usize {
-    if geo.nodes.is_empty() {
-        return 0;
-    }
-    // Nodes are numbered breadth first with children after parents: one pass gives depths.
-    let mut depth = vec![0u32; geo.nodes.len()];
-    let mut deepest = 0;
-    for (i, n) in geo.nodes.iter().enumerate() {
-        deepest = deepest.max(depth[i]);
-        if n.count == 0 {
-            depth[n.first as usize] = depth[i] + 1;
-            depth[n.first as usize + 1] = depth[i] + 1;
-        }
-    }
-    deepest as usize + 1
-}
+/// Deepest BVH the traversal stack holds (the GPU kernel has a fixed-size stack); the asset
+/// format guarantees it (`prt_format::validate::MAX_BVH_STACK`).
+pub const MAX_STACK: usize = prt_format::validate::MAX_BVH_STACK;
 
 #[inline]
 fn safe_inverse(x: f32) -> f32 {

@@ -89,6 +89,9 @@ impl VolumeFormat {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct RuntimeSettings {
     pub volume_format: VolumeFormat,
+    /// Also build the benchmark baselines (the integer-atomic gather and its 108 bytes per
+    /// probe of accumulators); see [`PrtRuntime::use_atomic_gather`].
+    pub benchmark_baselines: bool,
 }
 
 /// What one `update` recorded.
@@ -220,8 +223,9 @@ pub struct PrtRuntime {
 }
 
 impl PrtRuntime {
-    /// Uploads `asset` and builds the pipelines. The device should come from
-    /// [`headless_device`] or have comparable limits (storage buffers and textures per stage).
+    /// Uploads `asset` and builds the pipelines. The device needs 9 storage buffers and 7 storage
+    /// textures per shader stage (above WebGPU's defaults: request the adapter's limits, as
+    /// [`headless_device`] does); a device or asset beyond its limits is a [`GpuError::Limit`].
     pub fn new(
         device: &wgpu::Device,
         queue: &wgpu::Queue,
@@ -242,7 +246,7 @@ impl PrtRuntime {
         asset: &Asset,
         settings: RuntimeSettings,
     ) -> Result<PrtRuntime, GpuError> {
-        let needed = crate::visibility::stack_needed(&asset.geometry);
+        let needed = asset.geometry.stack_needed();
         if needed > crate::visibility::MAX_STACK {
             return Err(GpuError::BvhTooDeep {
                 needed,
@@ -263,8 +267,14 @@ impl PrtRuntime {
         let max_binding = limits
             .max_storage_buffer_binding_size
             .min(limits.max_buffer_size);
+        let (p, b, s) = (
+            asset.probes.len() as u64,
+            asset.bricks.len() as u64,
+            asset.surfels.len() as u64,
+        );
         for (what, bytes) in [
             ("the surfel buffer", surfel_bytes),
+            ("the surfel radiance buffer", 16 * s),
             (
                 "the factor buffer",
                 (asset.factors.len() * asset.factors.bytes_per_factor()) as u64,
@@ -273,12 +283,42 @@ impl PrtRuntime {
                 "the BVH triangle buffer",
                 std::mem::size_of_val(asset.geometry.triangles.as_slice()) as u64,
             ),
+            (
+                "the BVH node buffer",
+                std::mem::size_of_val(asset.geometry.nodes.as_slice()) as u64,
+            ),
+            ("the probe SH buffer", 144 * p),
+            ("the sky transfer buffer", 36 * p),
+            ("the sky mask buffer", 4 * asset.sky_mask.len() as u64),
+            ("the brick radiance buffer", 64 * b),
+            ("the brick buffer", 48 * b),
         ] {
             if bytes > max_binding {
                 return Err(GpuError::Limit {
                     what,
                     needed: bytes,
                     limit: max_binding,
+                });
+            }
+        }
+        for (what, needed, limit) in [
+            (
+                "storage buffers per shader stage",
+                9,
+                limits.max_storage_buffers_per_shader_stage,
+            ),
+            (
+                "storage textures per shader stage",
+                7,
+                limits.max_storage_textures_per_shader_stage,
+            ),
+            ("bind groups", 3, limits.max_bind_groups),
+        ] {
+            if needed > limit {
+                return Err(GpuError::Limit {
+                    what,
+                    needed: u64::from(needed),
+                    limit: u64::from(limit),
                 });
             }
         }
@@ -420,7 +460,11 @@ impl PrtRuntime {
         let fixed_accum = zeroed(
             device,
             "prt fixed-point accumulators",
-            4 * 27 * n_probes,
+            if settings.benchmark_baselines {
+                4 * 27 * n_probes
+            } else {
+                0
+            },
             none,
         );
         let gather_groups = || -> Vec<Vec<wgpu::BindingResource<'_>>> {
@@ -492,7 +536,11 @@ impl PrtRuntime {
         };
         let pipelines: Vec<(Stage, Pipeline)> = Stage::ALL
             .iter()
-            .chain([Stage::GatherAtomic].iter())
+            .chain(
+                [Stage::GatherAtomic]
+                    .iter()
+                    .filter(|_| settings.benchmark_baselines),
+            )
             .map(|&stage| {
                 let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
                     label: Some(stage.label()),
@@ -535,7 +583,11 @@ impl PrtRuntime {
             })
             .collect();
         let mut pipelines = pipelines;
-        let atomic_gather = pipelines.pop().map(|(_, p)| p);
+        let atomic_gather = if settings.benchmark_baselines {
+            pipelines.pop().map(|(_, p)| p)
+        } else {
+            None
+        };
         Ok(PrtRuntime {
             device: device.clone(),
             queue: queue.clone(),
@@ -744,6 +796,7 @@ impl PrtRuntime {
 
     /// Benchmarks only: gather with the prior art's integer atomic accumulation (16.16 fixed
     /// point: it loses precision and overflows beyond 32768) instead of the parallel reduction.
+    /// Has no effect unless the runtime was built with `benchmark_baselines`.
     pub fn use_atomic_gather(&mut self, atomic: bool) {
         self.use_atomic = atomic;
     }
