@@ -9,7 +9,8 @@ fn main(
     @builtin(workgroup_id) wg: vec3<u32>,
     @builtin(local_invocation_index) lid: u32,
     @builtin(subgroup_invocation_id) lane: u32,
-    @builtin(subgroup_size) width: u32,
+    @builtin(subgroup_id) subgroup: u32,
+    @builtin(num_subgroups) subgroups: u32,
 ) {
     let p = workgroup_probe(wg, lid);
     if p == PROBE_NONE {
@@ -21,12 +22,12 @@ fn main(
         sum[k] = subgroupAdd(acc[k]);
     }
     if lane == 0u {
-        partials[lid / width] = sum;
+        partials[subgroup] = sum;
     }
     workgroupBarrier();
     if lid == 0u {
         var total: array<vec3<f32>, 9>;
-        for (var s = 0u; s < (GATHER_WORKGROUP + width - 1u) / width; s = s + 1u) {
+        for (var s = 0u; s < subgroups; s = s + 1u) {
             for (var k = 0u; k < 9u; k = k + 1u) {
                 total[k] = total[k] + partials[s][k];
             }

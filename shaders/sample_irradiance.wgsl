@@ -49,14 +49,11 @@ fn sample_irradiance(world_pos: vec3<f32>, normal: vec3<f32>) -> vec3<f32> {
         t6.yzw,
     );
     let n = normal;
-    // Clamped-cosine factors pi, 2pi/3, pi/4 folded into the basis constants.
-    let a0 = 3.14159265 * 0.282095;
-    let a1 = 2.09439510 * 0.488603;
-    let a2 = 0.78539816 * 1.092548;
-    var e = a0 * c[0]
-        + a1 * (n.y * c[1] + n.z * c[2] + n.x * c[3])
-        + a2 * (n.x * n.y * c[4] + n.y * n.z * c[5] + n.x * n.z * c[7])
-        + 0.78539816 * 0.315392 * (3.0 * n.z * n.z - 1.0) * c[6]
-        + 0.78539816 * 0.546274 * (n.x * n.x - n.y * n.y) * c[8];
+    // Clamped-cosine factors A_l (pi, 2pi/3, pi/4) times the basis of conventions.md section 2.
+    let e = PRT_A0 * PRT_SH_Y00 * c[0]
+        + PRT_A1 * PRT_SH_Y1 * (n.y * c[1] + n.z * c[2] + n.x * c[3])
+        + PRT_A2 * PRT_SH_Y2_OFF * (n.x * n.y * c[4] + n.y * n.z * c[5] + n.x * n.z * c[7])
+        + PRT_A2 * PRT_SH_Y20 * (3.0 * n.z * n.z - 1.0) * c[6]
+        + PRT_A2 * PRT_SH_Y22 * (n.x * n.x - n.y * n.y) * c[8];
     return max(e, vec3<f32>(0.0));
 }

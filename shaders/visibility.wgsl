@@ -1,6 +1,7 @@
 // Any-hit shadow rays through the asset's BVH2: the plain stack traversal, slab test and
 // Moller-Trumbore intersection of prt_runtime::visibility, operation for operation. A scene
-// without triangles is uploaded as one node with an empty box, which no ray enters.
+// without triangles is uploaded as one leaf holding a degenerate (all-zero) triangle, which no
+// ray hits.
 
 @group(1) @binding(0) var<storage, read> bvh_nodes: array<BvhNode>;
 @group(1) @binding(1) var<storage, read> triangles: array<Triangle>;

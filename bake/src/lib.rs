@@ -342,6 +342,13 @@ fn bake_in_pool(
         hit_offsets.push(hit_offsets.last().copied().unwrap_or(0) + r.hits.len());
     }
     let hits: Vec<trace::Hit> = traced.iter().flat_map(|r| r.hits.iter().copied()).collect();
+    if hits.len() > u32::MAX as usize {
+        return Err(BakeError::Setting {
+            name: "rays",
+            value: format!("{} ray hits", hits.len()),
+            reason: "more than 2^32 ray hits: use fewer probes or rays",
+        });
+    }
     let cell_size = settings
         .cell_size
         .unwrap_or(spacing / settings.cells_per_spacing);

@@ -32,7 +32,10 @@ pub fn grid(min: Vec3, max: Vec3, spacing: f32, max_probes: u64) -> Result<Grid,
     let counts = extent
         .to_array()
         .map(|e| ((f64::from(e) / f64::from(spacing) - 1e-4).ceil()).max(1.0) as u64);
-    let count = counts.iter().product::<u64>();
+    let count = counts
+        .iter()
+        .try_fold(1u64, |a, &c| a.checked_mul(c))
+        .unwrap_or(u64::MAX);
     if count > max_probes || counts.iter().any(|&c| c > u64::from(u32::MAX)) {
         return Err(BakeError::TooManyProbes {
             counts,

@@ -104,6 +104,17 @@ pub fn load(path: &Path) -> Result<Scene, BakeError> {
     let images = load_images(path, base, &doc, &buffers)?;
 
     let mut materials: Vec<Material> = doc.materials().map(|m| material(&m)).collect();
+    let mut warnings = Vec::new();
+    for (i, m) in materials.iter().enumerate() {
+        for tex in [&m.base_texture, &m.emissive_texture].into_iter().flatten() {
+            if tex.tex_coord > 1 {
+                warnings.push(format!(
+                    "material {i}: TEXCOORD_{} is not read; TEXCOORD_1 is used instead",
+                    tex.tex_coord
+                ));
+            }
+        }
+    }
     let default_material = materials.len() as u32;
     materials.push(Material::default());
     let mut loader = Loader {
@@ -112,6 +123,7 @@ pub fn load(path: &Path) -> Result<Scene, BakeError> {
         scene: Scene {
             materials,
             images,
+            warnings,
             ..Scene::default()
         },
         default_material,

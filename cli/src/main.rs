@@ -265,11 +265,17 @@ fn run(cli: Cli) -> Result<()> {
                 },
             };
             let start = std::time::Instant::now();
-            let (relit, name) = match backend {
-                Backend::Cpu => (
-                    prt_runtime::CpuRelighter::new(&loaded)?.relight(&lighting, bounces)?,
-                    "cpu",
-                ),
+            let (sh, stats, name) = match backend {
+                Backend::Cpu => {
+                    let relit =
+                        prt_runtime::CpuRelighter::new(&loaded)?.relight(&lighting, bounces)?;
+                    println!("{}", relit.stats);
+                    (
+                        relit.sh,
+                        prt_runtime::output::cpu_stats(&relit.stats),
+                        "cpu",
+                    )
+                }
                 Backend::Gpu => {
                     anyhow::ensure!(
                         bounces == 1,
@@ -288,27 +294,18 @@ fn run(cli: Cli) -> Result<()> {
                         counters.shadow_rays,
                         counters.probes_gathered
                     );
-                    let stats = prt_runtime::RelightStats {
-                        bricks: u64::from(counters.bricks_relit),
-                        shadow_rays: u64::from(counters.shadow_rays),
-                        probes_gathered: u64::from(counters.probes_gathered),
-                        ..Default::default()
-                    };
-                    (prt_runtime::Relit { sh, stats }, "gpu")
+                    (sh, prt_runtime::output::gpu_stats(&counters), "gpu")
                 }
             };
             let seconds = start.elapsed().as_secs_f64();
-            let doc = prt_runtime::output::relight_json(&loaded, &relit.sh, &relit.stats, name);
+            let doc = prt_runtime::output::relight_json(&loaded, &sh, name, stats);
             let text = serde_json::to_vec_pretty(&doc)?;
             prt_format::io::write_bytes_atomic(&json, &text)
                 .with_context(|| format!("writing {}", json.display()))?;
             println!(
                 "relit {} probes ({name}, {bounces} bounce(s)) in {seconds:.3} s",
-                relit.sh.len()
+                sh.len()
             );
-            if name == "cpu" {
-                println!("{}", relit.stats);
-            }
             println!("wrote {}", json.display());
             Ok(())
         }

@@ -5,10 +5,12 @@ use prt_format::sh::ShRgb;
 use prt_format::Asset;
 use serde_json::{json, Value};
 
+use crate::gpu::layout::Counters;
 use crate::relight::RelightStats;
 
-/// The JSON document for `sh` relit from `asset`, with the relight's counts under `"stats"`.
-pub fn relight_json(asset: &Asset, sh: &[ShRgb], stats: &RelightStats, backend: &str) -> Value {
+/// The JSON document for `sh` relit from `asset` by `backend`, with that backend's work counts
+/// ([`cpu_stats`], [`gpu_stats`]) under `"stats"`.
+pub fn relight_json(asset: &Asset, sh: &[ShRgb], backend: &str, stats: Value) -> Value {
     let probes: Vec<Value> = asset
         .probes
         .iter()
@@ -25,19 +27,34 @@ pub fn relight_json(asset: &Asset, sh: &[ShRgb], stats: &RelightStats, backend: 
         .collect();
     json!({
         "backend": backend,
-        "stats": {
-            "bricks": stats.bricks,
-            "bricks_skipped_backface": stats.bricks_skipped_backface,
-            "light_brick_pairs": stats.light_brick_pairs,
-            "culled_dark": stats.culled_dark,
-            "culled_range": stats.culled_range,
-            "culled_cone": stats.culled_cone,
-            "culled_facing": stats.culled_facing,
-            "shadow_rays": stats.shadow_rays,
-            "probes_gathered": stats.probes_gathered,
-            "probes_skipped_invalid": stats.probes_skipped_invalid,
-        },
+        "stats": stats,
         "probes": probes,
+    })
+}
+
+/// What the CPU relight did and skipped.
+pub fn cpu_stats(stats: &RelightStats) -> Value {
+    json!({
+        "bricks": stats.bricks,
+        "bricks_skipped_backface": stats.bricks_skipped_backface,
+        "light_brick_pairs": stats.light_brick_pairs,
+        "culled_dark": stats.culled_dark,
+        "culled_range": stats.culled_range,
+        "culled_cone": stats.culled_cone,
+        "culled_facing": stats.culled_facing,
+        "shadow_rays": stats.shadow_rays,
+        "probes_gathered": stats.probes_gathered,
+        "probes_skipped_invalid": stats.probes_skipped_invalid,
+    })
+}
+
+/// What the GPU update did (its work counters).
+pub fn gpu_stats(counters: &Counters) -> Value {
+    json!({
+        "bricks_relit": counters.bricks_relit,
+        "surfels_relit": counters.surfels_relit,
+        "shadow_rays": counters.shadow_rays,
+        "probes_gathered": counters.probes_gathered,
     })
 }
 

@@ -123,6 +123,30 @@ pub struct Params {
 }
 const _: () = assert!(std::mem::size_of::<Params>() == 96);
 
+/// The uniform of the engine-side sampling snippet (`PrtVolumeInfo` in
+/// `shaders/sample_irradiance.wgsl`): the grid the volume covers.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+#[repr(C)]
+pub struct VolumeInfo {
+    pub origin: [f32; 3],
+    pub spacing: f32,
+    /// Probe counts along x, y, z, as floats.
+    pub counts: [f32; 3],
+    pub _pad: f32,
+}
+const _: () = assert!(std::mem::size_of::<VolumeInfo>() == 32);
+
+impl From<&prt_format::Grid> for VolumeInfo {
+    fn from(g: &prt_format::Grid) -> Self {
+        VolumeInfo {
+            origin: g.origin,
+            spacing: g.spacing,
+            counts: g.counts.map(|c| c as f32),
+            _pad: 0.0,
+        }
+    }
+}
+
 /// `(name, value)` of every constant the WGSL side uses, as WGSL source text.
 pub fn wgsl_constants() -> Vec<(&'static str, String)> {
     use prt_format::sh::{Y00, Y1, Y20, Y22, Y2_OFF};

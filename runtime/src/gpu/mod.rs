@@ -364,7 +364,7 @@ impl PrtRuntime {
             none,
         );
         let (nodes, tris) = if asset.geometry.nodes.is_empty() {
-            // One node with an empty box: no ray enters it.
+            // One leaf holding a degenerate triangle: no ray hits it.
             let empty = prt_format::BvhNode {
                 min: [f32::MAX; 3],
                 max: [f32::MIN; 3],
@@ -819,10 +819,14 @@ impl PrtRuntime {
         &self.sampler
     }
 
-    /// The grid the volume covers (origin, spacing, counts) for the `PrtVolumeInfo` uniform of
-    /// the sampling snippet.
+    /// The grid the volume covers (origin, spacing, counts).
     pub fn grid(&self) -> prt_format::Grid {
         self.grid
+    }
+
+    /// The contents of the sampling snippet's `PrtVolumeInfo` uniform (binding 8 of its group).
+    pub fn volume_info(&self) -> VolumeInfo {
+        VolumeInfo::from(&self.grid)
     }
 
     /// WGSL defining `sample_irradiance(world_pos, normal)` with its bindings at `group`.
