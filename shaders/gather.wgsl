@@ -2,7 +2,9 @@
 // evaluated at the factor's offset, times its SH9 transfer) and its sky term, summed by a
 // parallel reduction (gather_subgroup.wgsl or gather_tree.wgsl, which hold the entry point).
 // Threads stride over the factor table, so a probe with more factors than threads loops and
-// nothing is ever dropped. Thread 0 then writes the probe's SH to `probe_sh` and all seven
+// nothing is ever dropped. Factor tables larger than one storage binding are split into chunks of
+// whole probes; the window is dispatched once per chunk, and each workgroup gathers only a probe
+// of its chunk. Thread 0 then writes the probe's SH to `probe_sh` and all seven
 // volume texels of the probe at once: a texel never holds half of an update.
 //
 // Volume layout (premultiplied by validity, so hardware trilinear filtering weights valid
@@ -21,6 +23,7 @@
 @group(0) @binding(7) var<storage, read_write> probe_dirty: array<u32>;
 @group(0) @binding(8) var<storage, read_write> probe_sh: array<vec4<f32>>;
 @group(0) @binding(9) var<storage, read_write> counters: Counters;
+@group(0) @binding(10) var<uniform> chunk: FactorChunk;
 
 @group(1) @binding(0) var volume0: texture_storage_3d<VOLUME_FORMAT, write>;
 @group(1) @binding(1) var volume1: texture_storage_3d<VOLUME_FORMAT, write>;
@@ -39,7 +42,7 @@ fn workgroup_probe(wg: vec3<u32>, lid: u32) -> u32 {
     let p = (params.window_start + slot) % max(params.probe_count, 1u);
     if lid == 0u {
         var flag = 0u;
-        if slot < params.window_count {
+        if slot < params.window_count && p >= chunk.probe_begin && p < chunk.probe_end {
             if (probes[p].flags & PROBE_VALID) != 0u && probe_dirty[p] != 0u {
                 flag = 1u;
             }
@@ -67,7 +70,7 @@ fn accumulate(p: u32, lid: u32) -> array<vec3<f32>, 9> {
     var acc: array<vec3<f32>, 9>;
     let probe = probes[p];
     for (var f = probe.first_factor + lid; f < probe.first_factor + probe.factor_count; f = f + GATHER_WORKGROUP) {
-        let base = f * FACTOR_WORDS;
+        let base = (f - chunk.first_factor) * FACTOR_WORDS;
         var t: array<f32, 9>;
         var brick = factors[base];
         var offset: vec3<f32>;

@@ -63,6 +63,15 @@ struct Light {
     pad1: u32,
 }
 
+// One binding's worth of factor tables: probes probe_begin..probe_end, whose factors start at
+// first_factor (factor f of the asset is element f - first_factor of the chunk's buffer).
+struct FactorChunk {
+    first_factor: u32,
+    probe_begin: u32,
+    probe_end: u32,
+    pad0: u32,
+}
+
 struct NormalBounds {
     nmin: vec3<f32>,
     pad0: u32,

@@ -212,6 +212,7 @@ fn amortised_updates_and_skipped_work() {
     let settings = RuntimeSettings {
         volume_format: VolumeFormat::F32,
         benchmark_baselines: true,
+        ..RuntimeSettings::default()
     };
     let (a, b) = (rig(3.0, 0.0), rig(6.0, 0.3));
     let mut full = PrtRuntime::new(&device, &queue, &asset, settings).unwrap();
@@ -417,4 +418,41 @@ fn emission_and_visibility_cache_follow_every_change() {
         let gpu = gpu_update(&device, &queue, &mut runtime, &lighting, None);
         assert_close(step, &cornell, &gpu, &cpu(&cornell, &lighting), 1e-4);
     }
+}
+
+/// Factor tables larger than one storage binding are split into chunks of whole probes: a
+/// runtime limited to 64 KiB per binding (dozens of chunks) gives exactly the unsplit result,
+/// and a probe whose own table exceeds the limit is a typed error.
+#[test]
+fn chunked_factor_tables_match_the_unsplit_result() {
+    let (device, queue) = device();
+    let asset = bake(
+        &shared("reference/cornell/cornell.gltf"),
+        &BakeSettings::default(),
+    );
+    let lighting = load_rig(&shared("reference/cornell/rig_spot_range.json")).unwrap();
+    let bytes = asset.factors.len() * asset.factors.bytes_per_factor();
+    assert!(
+        bytes > 16 * 64 * 1024,
+        "the asset needs many chunks ({bytes} bytes)"
+    );
+    let mut whole = PrtRuntime::new(&device, &queue, &asset, RuntimeSettings::default()).unwrap();
+    let expect = gpu_update(&device, &queue, &mut whole, &lighting, None);
+    let small = RuntimeSettings {
+        max_factor_chunk_bytes: Some(64 * 1024),
+        ..RuntimeSettings::default()
+    };
+    let mut chunked = PrtRuntime::new(&device, &queue, &asset, small).unwrap();
+    assert_eq!(
+        gpu_update(&device, &queue, &mut chunked, &lighting, Some(300)),
+        expect
+    );
+    let tiny = RuntimeSettings {
+        max_factor_chunk_bytes: Some(64),
+        ..RuntimeSettings::default()
+    };
+    let err = PrtRuntime::new(&device, &queue, &asset, tiny)
+        .err()
+        .expect("a probe exceeds 64 bytes");
+    assert!(err.to_string().contains("factor table"), "{err}");
 }

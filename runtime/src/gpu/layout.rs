@@ -65,6 +65,17 @@ impl From<&PreparedLight> for GpuLight {
     }
 }
 
+/// One storage binding's worth of factor tables (`FactorChunk` in WGSL).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+#[repr(C)]
+pub struct FactorChunk {
+    pub first_factor: u32,
+    pub probe_begin: u32,
+    pub probe_end: u32,
+    pub _pad: u32,
+}
+const _: () = assert!(std::mem::size_of::<FactorChunk>() == 16);
+
 /// Component-wise bounds of a brick's surfel normals.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 #[repr(C)]

@@ -86,12 +86,16 @@ impl VolumeFormat {
 }
 
 /// Runtime options.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct RuntimeSettings {
     pub volume_format: VolumeFormat,
     /// Also build the benchmark baselines (the integer-atomic gather and its 108 bytes per
     /// probe of accumulators); see [`PrtRuntime::use_atomic_gather`].
     pub benchmark_baselines: bool,
+    /// Split the factor tables into storage bindings of at most this many bytes (default: the
+    /// device's storage binding limit). Lower values trade one extra mark and gather dispatch
+    /// per chunk for smaller buffers.
+    pub max_factor_chunk_bytes: Option<u64>,
 }
 
 /// What one `update` recorded.
@@ -163,6 +167,36 @@ fn storage(
 /// Smallest buffer the runtime creates: larger than every element type it binds.
 const MIN_BUFFER: u64 = 256;
 
+/// Splits the probes into runs whose factor tables fit `limit` bytes each (at least one chunk).
+fn factor_chunks(asset: &Asset, limit: u64) -> Result<Vec<FactorChunk>, GpuError> {
+    let per_factor = asset.factors.bytes_per_factor() as u64;
+    let mut chunks = Vec::new();
+    let mut current = FactorChunk::default();
+    for (i, p) in asset.probes.iter().enumerate() {
+        let own = u64::from(p.factor_count) * per_factor;
+        if own > limit {
+            return Err(GpuError::Limit {
+                what: "one probe's factor table",
+                needed: own,
+                limit,
+            });
+        }
+        let end = u64::from(p.first_factor) + u64::from(p.factor_count);
+        if (end - u64::from(current.first_factor)) * per_factor > limit {
+            current.probe_end = i as u32;
+            chunks.push(current);
+            current = FactorChunk {
+                first_factor: p.first_factor,
+                probe_begin: i as u32,
+                ..FactorChunk::default()
+            };
+        }
+    }
+    current.probe_end = asset.probes.len() as u32;
+    chunks.push(current);
+    Ok(chunks)
+}
+
 fn buf(b: &wgpu::Buffer) -> wgpu::BindingResource<'_> {
     b.as_entire_binding()
 }
@@ -187,9 +221,11 @@ fn dispatch_size(groups: u32) -> (u32, u32) {
     (x, groups.div_ceil(x).max(1))
 }
 
+/// A stage's pipeline and its bind groups: one set, or one per factor chunk for the stages that
+/// read factors (each set is dispatched in turn).
 struct Pipeline {
     pipeline: wgpu::ComputePipeline,
-    bind_groups: Vec<wgpu::BindGroup>,
+    bind_group_sets: Vec<Vec<wgpu::BindGroup>>,
 }
 
 /// The GPU relighting runtime of one asset.
@@ -276,10 +312,6 @@ impl PrtRuntime {
             ("the surfel buffer", surfel_bytes),
             ("the surfel radiance buffer", 16 * s),
             (
-                "the factor buffer",
-                (asset.factors.len() * asset.factors.bytes_per_factor()) as u64,
-            ),
-            (
                 "the BVH triangle buffer",
                 std::mem::size_of_val(asset.geometry.triangles.as_slice()) as u64,
             ),
@@ -340,7 +372,39 @@ impl PrtRuntime {
             Factors::F32(f) => bytemuck::cast_slice(f),
             Factors::U8 { factors, .. } => bytemuck::cast_slice(factors),
         };
-        let factors = storage(device, "prt factors", factor_bytes, none);
+        let chunks = factor_chunks(
+            asset,
+            settings
+                .max_factor_chunk_bytes
+                .unwrap_or(max_binding)
+                .min(max_binding),
+        )?;
+        let per_factor = asset.factors.bytes_per_factor();
+        let chunk_factors: Vec<wgpu::Buffer> = chunks
+            .iter()
+            .map(|c| {
+                let first = c.first_factor as usize;
+                let end = asset.probes[c.probe_begin as usize..c.probe_end as usize]
+                    .last()
+                    .map_or(first, |p| (p.first_factor + p.factor_count) as usize);
+                storage(
+                    device,
+                    "prt factors",
+                    &factor_bytes[first * per_factor..end * per_factor],
+                    none,
+                )
+            })
+            .collect();
+        let chunk_uniforms: Vec<wgpu::Buffer> = chunks
+            .iter()
+            .map(|c| {
+                device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("prt factor chunk"),
+                    contents: bytemuck::bytes_of(c),
+                    usage: wgpu::BufferUsages::UNIFORM,
+                })
+            })
+            .collect();
         let bricks = storage(
             device,
             "prt bricks",
@@ -467,12 +531,12 @@ impl PrtRuntime {
             },
             none,
         );
-        let gather_groups = || -> Vec<Vec<wgpu::BindingResource<'_>>> {
+        let gather_groups = |c: usize| -> Vec<Vec<wgpu::BindingResource<'_>>> {
             vec![
                 vec![
                     buf(&params),
                     buf(&probes),
-                    buf(&factors),
+                    buf(&chunk_factors[c]),
                     buf(&brick_radiance),
                     buf(&sky_transfer),
                     buf(&sky_mask),
@@ -480,6 +544,7 @@ impl PrtRuntime {
                     buf(&probe_dirty),
                     buf(&probe_sh),
                     buf(&counters),
+                    buf(&chunk_uniforms[c]),
                 ],
                 views
                     .iter()
@@ -487,7 +552,7 @@ impl PrtRuntime {
                     .collect(),
             ]
         };
-        let stage_groups = |stage: Stage| -> Vec<Vec<wgpu::BindingResource<'_>>> {
+        let stage_groups = |stage: Stage, c: usize| -> Vec<Vec<wgpu::BindingResource<'_>>> {
             match stage {
                 Stage::CullLights => vec![vec![
                     buf(&params),
@@ -522,13 +587,14 @@ impl PrtRuntime {
                 Stage::MarkProbes => vec![vec![
                     buf(&params),
                     buf(&probes),
-                    buf(&factors),
+                    buf(&chunk_factors[c]),
                     buf(&brick_dirty),
                     buf(&probe_dirty),
+                    buf(&chunk_uniforms[c]),
                 ]],
-                Stage::Gather => gather_groups(),
+                Stage::Gather => gather_groups(c),
                 Stage::GatherAtomic => {
-                    let mut groups = gather_groups();
+                    let mut groups = gather_groups(c);
                     groups.push(vec![buf(&fixed_accum)]);
                     groups
                 }
@@ -554,30 +620,39 @@ impl PrtRuntime {
                     compilation_options: Default::default(),
                     cache: None,
                 });
-                let bind_groups = stage_groups(stage)
-                    .into_iter()
-                    .enumerate()
-                    .map(|(i, resources)| {
-                        let entries: Vec<wgpu::BindGroupEntry> = resources
+                let uses_factors = matches!(
+                    stage,
+                    Stage::MarkProbes | Stage::Gather | Stage::GatherAtomic
+                );
+                let sets = if uses_factors { chunks.len() } else { 1 };
+                let bind_group_sets = (0..sets)
+                    .map(|c| {
+                        stage_groups(stage, c)
                             .into_iter()
                             .enumerate()
-                            .map(|(b, resource)| wgpu::BindGroupEntry {
-                                binding: b as u32,
-                                resource,
+                            .map(|(i, resources)| {
+                                let entries: Vec<wgpu::BindGroupEntry> = resources
+                                    .into_iter()
+                                    .enumerate()
+                                    .map(|(b, resource)| wgpu::BindGroupEntry {
+                                        binding: b as u32,
+                                        resource,
+                                    })
+                                    .collect();
+                                device.create_bind_group(&wgpu::BindGroupDescriptor {
+                                    label: Some(stage.label()),
+                                    layout: &pipeline.get_bind_group_layout(i as u32),
+                                    entries: &entries,
+                                })
                             })
-                            .collect();
-                        device.create_bind_group(&wgpu::BindGroupDescriptor {
-                            label: Some(stage.label()),
-                            layout: &pipeline.get_bind_group_layout(i as u32),
-                            entries: &entries,
-                        })
+                            .collect()
                     })
                     .collect();
                 (
                     stage,
                     Pipeline {
                         pipeline,
-                        bind_groups,
+                        bind_group_sets,
                     },
                 )
             })
@@ -775,11 +850,13 @@ impl PrtRuntime {
                     continue;
                 }
                 pass.set_pipeline(&p.pipeline);
-                for (i, bg) in p.bind_groups.iter().enumerate() {
-                    pass.set_bind_group(i as u32, bg, &[]);
-                }
                 let (x, y) = dispatch_size(work);
-                pass.dispatch_workgroups(x, y, 1);
+                for set in &p.bind_group_sets {
+                    for (i, bg) in set.iter().enumerate() {
+                        pass.set_bind_group(i as u32, bg, &[]);
+                    }
+                    pass.dispatch_workgroups(x, y, 1);
+                }
             }
         }
         self.cursor = (self.cursor + budget) % self.probe_count.max(1);

@@ -260,6 +260,14 @@ mod tests {
                 )],
             ),
             (
+                "FactorChunk",
+                size_of::<layout::FactorChunk>(),
+                vec![
+                    ("probe_begin", offset_of!(layout::FactorChunk, probe_begin)),
+                    ("probe_end", offset_of!(layout::FactorChunk, probe_end)),
+                ],
+            ),
+            (
                 "PrtVolumeInfo",
                 size_of::<layout::VolumeInfo>(),
                 vec![
