@@ -10,8 +10,10 @@ use crate::lights::{NormalBounds, PreparedLight};
 
 /// Threads per workgroup of the per-brick, per-surfel and per-probe stages.
 pub const WORKGROUP: u32 = 64;
-/// Threads per workgroup of the gather (one workgroup per probe).
-pub const GATHER_WORKGROUP: u32 = 64;
+/// Threads per workgroup of the gather (one workgroup per probe): one NVIDIA warp. Measured on
+/// lavapipe at 13.8k probes, 74 factors each: 64 threads 243 ms, 32 threads 151 ms, 16 threads
+/// 133 ms per gather; 32 keeps hardware GPUs busy.
+pub const GATHER_WORKGROUP: u32 = 32;
 /// Lights per rig: a brick's light mask and a surfel's visibility cache are one u32 each.
 pub const MAX_LIGHTS: usize = 32;
 /// Workgroups along x of every dispatch; more work continues along y.
