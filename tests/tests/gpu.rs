@@ -456,3 +456,156 @@ fn chunked_factor_tables_match_the_unsplit_result() {
         .expect("a probe exceeds 64 bytes");
     assert!(err.to_string().contains("factor table"), "{err}");
 }
+
+/// The engine-side snippet, run for real in a compute shader: at a probe's texel centre,
+/// `sample_irradiance` equals the CPU irradiance of that probe's SH (half-float rounding); between
+/// a valid probe and an invalid neighbour, hardware trilinear filtering over the
+/// validity-premultiplied texels gives the valid probe alone.
+#[test]
+fn sample_irradiance_snippet_matches_the_cpu() {
+    use prt_runtime::gpu::wgpu::util::DeviceExt;
+    let (device, queue) = device();
+    let asset = bake(
+        &shared("reference/cornell/cornell.gltf"),
+        &BakeSettings::default(),
+    );
+    let lighting = load_rig(&shared("reference/cornell/rig.json")).unwrap();
+    let mut runtime = PrtRuntime::new(&device, &queue, &asset, RuntimeSettings::default()).unwrap();
+    let sh = gpu_update(&device, &queue, &mut runtime, &lighting, None);
+    let g = asset.header.grid;
+    let normals = [
+        [0.0, 1.0, 0.0],
+        [-1.0, 0.0, 0.0],
+        [0.0, 0.0, 1.0],
+        [0.48, -0.6, 0.64],
+    ];
+
+    // (position, normal, expected irradiance)
+    let mut queries: Vec<([f32; 3], [f32; 3], [f32; 3])> = Vec::new();
+    let mut mixed = 0;
+    for k in 0..g.counts[2] {
+        for j in 0..g.counts[1] {
+            for i in 0..g.counts[0] {
+                let p = g.index(i, j, k);
+                if !asset.probes[p].is_valid() {
+                    continue;
+                }
+                let n = normals[p % normals.len()];
+                let e = prt_format::sh::irradiance(&sh[p], n);
+                queries.push((g.position(i, j, k), n, e));
+                if i + 1 < g.counts[0] && !asset.probes[g.index(i + 1, j, k)].is_valid() {
+                    let mut mid = g.position(i, j, k);
+                    mid[0] += 0.5 * g.spacing;
+                    queries.push((mid, n, e));
+                    mixed += 1;
+                }
+            }
+        }
+    }
+    assert!(
+        mixed > 0,
+        "the grid has a valid probe beside an invalid one"
+    );
+
+    let wgsl = PrtRuntime::wgsl_snippet(1)
+        + "@group(0) @binding(0) var<storage, read> queries: array<vec4<f32>>;\n\
+           @group(0) @binding(1) var<storage, read_write> results: array<vec4<f32>>;\n\
+           @compute @workgroup_size(64) fn main(@builtin(global_invocation_id) id: vec3<u32>) {\n\
+               let i = id.x;\n\
+               if i >= arrayLength(&results) { return; }\n\
+               results[i] = vec4<f32>(sample_irradiance(queries[2u * i].xyz, queries[2u * i + 1u].xyz), 0.0);\n\
+           }\n";
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some("sample_irradiance test"),
+        source: wgpu::ShaderSource::Wgsl(wgsl.into()),
+    });
+    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: None,
+        layout: None,
+        module: &module,
+        entry_point: Some("main"),
+        compilation_options: Default::default(),
+        cache: None,
+    });
+    let packed: Vec<[f32; 4]> = queries
+        .iter()
+        .flat_map(|(p, n, _)| [[p[0], p[1], p[2], 0.0], [n[0], n[1], n[2], 0.0]])
+        .collect();
+    let storage = |contents: &[u8], extra| {
+        device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: None,
+            contents,
+            usage: wgpu::BufferUsages::STORAGE | extra,
+        })
+    };
+    let query_buf = storage(bytemuck::cast_slice(&packed), wgpu::BufferUsages::empty());
+    let result_buf = storage(&vec![0u8; 16 * queries.len()], wgpu::BufferUsages::COPY_SRC);
+    let info = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: None,
+        contents: bytemuck::bytes_of(&runtime.volume_info()),
+        usage: wgpu::BufferUsages::UNIFORM,
+    });
+    let mut volume: Vec<wgpu::BindGroupEntry> = runtime
+        .volume_views()
+        .iter()
+        .enumerate()
+        .map(|(b, v)| wgpu::BindGroupEntry {
+            binding: b as u32,
+            resource: wgpu::BindingResource::TextureView(v),
+        })
+        .collect();
+    volume.push(wgpu::BindGroupEntry {
+        binding: 7,
+        resource: wgpu::BindingResource::Sampler(runtime.sampler()),
+    });
+    volume.push(wgpu::BindGroupEntry {
+        binding: 8,
+        resource: info.as_entire_binding(),
+    });
+    let io = [
+        wgpu::BindGroupEntry {
+            binding: 0,
+            resource: query_buf.as_entire_binding(),
+        },
+        wgpu::BindGroupEntry {
+            binding: 1,
+            resource: result_buf.as_entire_binding(),
+        },
+    ];
+    let groups = [&io[..], &volume[..]].map(|entries| {
+        device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: None,
+            layout: &pipeline.get_bind_group_layout(if entries.len() == 2 { 0 } else { 1 }),
+            entries,
+        })
+    });
+    let mut encoder = device.create_command_encoder(&Default::default());
+    {
+        let mut pass = encoder.begin_compute_pass(&Default::default());
+        pass.set_pipeline(&pipeline);
+        pass.set_bind_group(0, &groups[0], &[]);
+        pass.set_bind_group(1, &groups[1], &[]);
+        pass.dispatch_workgroups((queries.len() as u32).div_ceil(64), 1, 1);
+    }
+    queue.submit([encoder.finish()]);
+    let bytes =
+        prt_runtime::gpu::read_buffer(&device, &queue, &result_buf, 16 * queries.len() as u64)
+            .unwrap();
+    let results: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
+    let peak = queries
+        .iter()
+        .map(|q| q.2[0].max(q.2[1]).max(q.2[2]))
+        .fold(0.0, f32::max);
+    for (q, r) in queries.iter().zip(results) {
+        for c in 0..3 {
+            let tol = 4e-3 * q.2[c].abs() + 1e-4 * peak;
+            assert!(
+                (r[c] - q.2[c]).abs() <= tol,
+                "at {:?} n {:?}: gpu {r:?} cpu {:?}",
+                q.0,
+                q.1,
+                q.2
+            );
+        }
+    }
+}

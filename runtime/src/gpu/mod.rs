@@ -912,36 +912,7 @@ impl PrtRuntime {
     }
 
     fn read_buffer(&self, src: &wgpu::Buffer, size: u64) -> Result<Vec<u8>, GpuError> {
-        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("prt readback"),
-            size,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let mut encoder = self.device.create_command_encoder(&Default::default());
-        encoder.copy_buffer_to_buffer(src, 0, &staging, 0, size);
-        self.queue.submit([encoder.finish()]);
-        self.map(&staging, size)
-    }
-
-    fn map(&self, staging: &wgpu::Buffer, size: u64) -> Result<Vec<u8>, GpuError> {
-        let slice = staging.slice(..size);
-        let (tx, rx) = std::sync::mpsc::channel();
-        slice.map_async(wgpu::MapMode::Read, move |r| {
-            let _ = tx.send(r);
-        });
-        self.device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| GpuError::Readback(e.to_string()))?;
-        rx.recv()
-            .map_err(|e| GpuError::Readback(e.to_string()))?
-            .map_err(|e| GpuError::Readback(e.to_string()))?;
-        let data = slice
-            .get_mapped_range()
-            .map_err(|e| GpuError::Readback(e.to_string()))?
-            .to_vec();
-        staging.unmap();
-        Ok(data)
+        read_buffer(&self.device, &self.queue, src, size)
     }
 
     /// Blocks until the GPU is done and returns every probe's SH as last gathered.
@@ -992,7 +963,7 @@ impl PrtRuntime {
                 t.size(),
             );
             self.queue.submit([encoder.finish()]);
-            let bytes = self.map(&staging, size)?;
+            let bytes = map_read(&self.device, &staging, size)?;
             let mut texels = Vec::with_capacity((w * h * d) as usize);
             for z in 0..d {
                 for y in 0..h {
@@ -1017,6 +988,46 @@ impl PrtRuntime {
         }
         Ok(out)
     }
+}
+
+/// Blocks until the GPU is done and returns the first `size` bytes of `src` (which needs
+/// `COPY_SRC` usage).
+pub fn read_buffer(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    src: &wgpu::Buffer,
+    size: u64,
+) -> Result<Vec<u8>, GpuError> {
+    let staging = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("prt readback"),
+        size,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let mut encoder = device.create_command_encoder(&Default::default());
+    encoder.copy_buffer_to_buffer(src, 0, &staging, 0, size);
+    queue.submit([encoder.finish()]);
+    map_read(device, &staging, size)
+}
+
+fn map_read(device: &wgpu::Device, staging: &wgpu::Buffer, size: u64) -> Result<Vec<u8>, GpuError> {
+    let slice = staging.slice(..size);
+    let (tx, rx) = std::sync::mpsc::channel();
+    slice.map_async(wgpu::MapMode::Read, move |r| {
+        let _ = tx.send(r);
+    });
+    device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .map_err(|e| GpuError::Readback(e.to_string()))?;
+    rx.recv()
+        .map_err(|e| GpuError::Readback(e.to_string()))?
+        .map_err(|e| GpuError::Readback(e.to_string()))?;
+    let data = slice
+        .get_mapped_range()
+        .map_err(|e| GpuError::Readback(e.to_string()))?
+        .to_vec();
+    staging.unmap();
+    Ok(data)
 }
 
 /// Relights `asset` once on the GPU (all probes, blocking) and returns every probe's SH, the
