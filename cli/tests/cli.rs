@@ -163,3 +163,77 @@ fn bake_resolves_external_buffers_from_another_directory() {
     assert!(o.status.success(), "bake failed: {}", text(&o.stderr));
     assert!(out.is_file());
 }
+
+/// `prt relight --backend gpu` writes the same JSON as `--backend cpu` (conventions.md section
+/// 6): same probes, positions and validity, SH within 1e-4 of each probe's SH0 (plus 1e-7 of the
+/// brightest probe's, for near-black probes).
+#[test]
+fn relight_json_is_the_same_on_cpu_and_gpu() {
+    let dir = Scratch::new("relight_json");
+    let asset = dir.0.join("cornell.prt");
+    let rig = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/cornell/rig_spot_range.json");
+    let out = prt(
+        &[
+            "bake".as_ref(),
+            cornell().as_os_str(),
+            "-o".as_ref(),
+            asset.as_os_str(),
+            "--rays".as_ref(),
+            "128".as_ref(),
+        ],
+        None,
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let mut docs = Vec::new();
+    for backend in ["cpu", "gpu"] {
+        let json = dir.0.join(format!("{backend}.json"));
+        let out = prt(
+            &[
+                "relight".as_ref(),
+                asset.as_os_str(),
+                "--lights".as_ref(),
+                rig.as_os_str(),
+                "--backend".as_ref(),
+                backend.as_ref(),
+                "--json".as_ref(),
+                json.as_os_str(),
+            ],
+            None,
+        );
+        assert!(out.status.success(), "{backend}: {}", text(&out.stderr));
+        let doc: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+        docs.push(doc);
+    }
+    let probes = |d: &serde_json::Value| d["probes"].as_array().unwrap().clone();
+    let (cpu, gpu) = (probes(&docs[0]), probes(&docs[1]));
+    assert_eq!(cpu.len(), gpu.len());
+    let dc = |p: &serde_json::Value| {
+        p["sh"][0]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap().abs())
+            .fold(0.0, f64::max)
+    };
+    let peak = cpu.iter().map(dc).fold(0.0, f64::max);
+    for (c, g) in cpu.iter().zip(&gpu) {
+        assert_eq!(c["index"], g["index"]);
+        assert_eq!(c["position"], g["position"]);
+        assert_eq!(c["valid"], g["valid"]);
+        let tol = 1e-4 * dc(c) + 1e-7 * peak;
+        for k in 0..9 {
+            for ch in 0..3 {
+                let (a, b) = (
+                    c["sh"][k][ch].as_f64().unwrap(),
+                    g["sh"][k][ch].as_f64().unwrap(),
+                );
+                assert!(
+                    (a - b).abs() <= tol,
+                    "probe {} k {k}: cpu {a} gpu {b}",
+                    c["index"]
+                );
+            }
+        }
+    }
+}
