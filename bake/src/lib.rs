@@ -186,7 +186,7 @@ impl BakeSettings {
 
 /// Reports progress of long stages (the CLI draws a bar; libraries pass [`NoProgress`]).
 pub trait Progress: Sync {
-    /// A stage with `total` units of work begins.
+    /// A stage with `total` units of work begins (0: unknown, show that it is running).
     fn start(&self, stage: &str, total: u64);
     /// `n` more units are done.
     fn advance(&self, n: u64);
@@ -255,10 +255,16 @@ fn bake_in_pool(
 ) -> Result<(Asset, BakeReport), BakeError> {
     let mut report = BakeReport::default();
     let mut t = Instant::now();
-    let mut lap = |report: &mut BakeReport, stage| {
+    // Ends the stage under way (its bar or spinner, its time) and starts the next, if any.
+    let mut lap = |report: &mut BakeReport, stage, next: Option<&str>| {
+        progress.finish();
         report.timings.push((stage, t.elapsed()));
         t = Instant::now();
+        if let Some(next) = next {
+            progress.start(next, 0);
+        }
     };
+    progress.start("load", 0);
 
     let source_bytes = std::fs::read(scene_path).map_err(|error| BakeError::Io {
         path: scene_path.to_owned(),
@@ -288,10 +294,10 @@ fn bake_in_pool(
             .warnings
             .push("the scene has no triangles: every probe sees only sky".into());
     }
-    lap(&mut report, "load");
+    lap(&mut report, "load", Some("bvh"));
 
     let bvh = bvh::SceneBvh::build(&scene.triangles);
-    lap(&mut report, "bvh");
+    lap(&mut report, "bvh", None);
 
     let spacing = settings
         .spacing
@@ -333,8 +339,7 @@ fn bake_in_pool(
         .into_iter()
         .map(|(p, r, moved)| ((p, moved), r))
         .unzip();
-    progress.finish();
-    lap(&mut report, "trace");
+    lap(&mut report, "trace", Some("merge"));
 
     let mut hit_offsets = Vec::with_capacity(traced.len() + 1);
     hit_offsets.push(0usize);
@@ -378,7 +383,7 @@ fn bake_in_pool(
     } else {
         tables
     };
-    lap(&mut report, "merge");
+    lap(&mut report, "merge", Some("assemble"));
 
     let mut probes_out = Vec::with_capacity(traced.len());
     let mut first_factor = 0u32;
@@ -438,7 +443,7 @@ fn bake_in_pool(
         path: scene_path.to_owned(),
         error,
     })?;
-    lap(&mut report, "assemble");
+    lap(&mut report, "assemble", None);
     Ok((asset, report))
 }
 

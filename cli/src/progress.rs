@@ -31,12 +31,22 @@ impl prt_bake::Progress for Bar {
         if !self.enabled {
             return;
         }
-        let bar = ProgressBar::new(total).with_message(stage.to_owned());
-        if let Ok(style) =
-            ProgressStyle::with_template("{msg:>8} [{bar:40}] {pos}/{len} ({per_sec}, eta {eta})")
-        {
-            bar.set_style(style.progress_chars("=> "));
-        }
+        let bar = if total == 0 {
+            let spinner = ProgressBar::new_spinner().with_message(stage.to_owned());
+            if let Ok(style) = ProgressStyle::with_template("{msg:>8} {spinner} {elapsed}") {
+                spinner.set_style(style);
+            }
+            spinner.enable_steady_tick(std::time::Duration::from_millis(100));
+            spinner
+        } else {
+            let bar = ProgressBar::new(total).with_message(stage.to_owned());
+            if let Ok(style) = ProgressStyle::with_template(
+                "{msg:>8} [{bar:40}] {pos}/{len} probes, eta {eta}",
+            ) {
+                bar.set_style(style.progress_chars("=> "));
+            }
+            bar
+        };
         self.with(|b| *b = Some(bar));
     }
 
