@@ -70,16 +70,19 @@ pub fn build(hits: &[Hit], cell_size: f32, merge_normal_cos: f32) -> Bricked {
             start = i;
         }
     }
-    let merged: Vec<(u32, Vec<Surfel>)> = groups
+    // Merge and finish each brick in parallel (`first_surfel` is set below, in order).
+    let merged: Vec<(Brick, Vec<Surfel>)> = groups
         .par_iter()
-        .map(|g| {
+        .enumerate()
+        .map(|(b, g)| {
             let k = order[g.start].0;
             let origin = Vec3::new(k.0 as f32, k.1 as f32, k.2 as f32) * brick_size;
             let members = order[g.clone()].iter().map(|&(_, i)| &hits[i as usize]);
-            (
-                k.3,
-                merge_brick(members, origin, cell_size, merge_normal_cos),
-            )
+            let mut surfels = merge_brick(members, origin, cell_size, merge_normal_cos);
+            for s in &mut surfels {
+                s.brick = b as u32;
+            }
+            (brick_of(&mut surfels, k.3, 0), surfels)
         })
         .collect();
 
@@ -91,12 +94,10 @@ pub fn build(hits: &[Hit], cell_size: f32, merge_normal_cos: f32) -> Bricked {
     }
     let mut bricks = Vec::with_capacity(merged.len());
     let mut surfels = Vec::with_capacity(merged.iter().map(|m| m.1.len()).sum());
-    for (b, (flags, mut brick_surfels)) in merged.into_iter().enumerate() {
-        bricks.push(brick_of(&mut brick_surfels, flags, surfels.len() as u32));
-        surfels.extend(brick_surfels.into_iter().map(|mut s| {
-            s.brick = b as u32;
-            s
-        }));
+    for (mut brick, brick_surfels) in merged {
+        brick.first_surfel = surfels.len() as u32;
+        bricks.push(brick);
+        surfels.extend(brick_surfels);
     }
     Bricked {
         bricks,
@@ -197,10 +198,11 @@ fn brick_of(surfels: &mut [Surfel], flags: u32, first_surfel: u32) -> Brick {
 
 /// Running sums of one surfel being merged.
 struct Cluster {
-    cell: u32,
     count: f32,
     position: Vec3,
     normal: Vec3,
+    /// Normal of the cluster's first hit: later hits join when they agree with it.
+    direction: Vec3,
     albedo: Vec3,
     emission: Vec3,
     backface: bool,
@@ -212,15 +214,26 @@ fn merge_brick<'a>(
     cell_size: f32,
     merge_normal_cos: f32,
 ) -> Vec<Surfel> {
+    // Visit hits cell by cell (stable: hit order within a cell), so that a hit is only compared
+    // with the clusters of its own cell.
+    let mut members: Vec<(u32, &Hit)> = hits
+        .map(|h| {
+            let c = ((h.position - origin) / cell_size)
+                .floor()
+                .clamp(Vec3::ZERO, Vec3::splat(3.0));
+            (c.x as u32 + 4 * (c.y as u32 + 4 * c.z as u32), h)
+        })
+        .collect();
+    members.sort_by_key(|&(cell, _)| cell);
     let mut clusters: Vec<Cluster> = Vec::new();
-    for h in hits {
-        let c = ((h.position - origin) / cell_size)
-            .floor()
-            .clamp(Vec3::ZERO, Vec3::splat(3.0));
-        let cell = c.x as u32 + 4 * (c.y as u32 + 4 * c.z as u32);
-        let found = clusters.iter_mut().find(|cl| {
-            cl.cell == cell && cl.normal.normalize_or_zero().dot(h.normal) >= merge_normal_cos
-        });
+    let mut cell_start = 0;
+    for (i, &(cell, h)) in members.iter().enumerate() {
+        if i == 0 || members[i - 1].0 != cell {
+            cell_start = clusters.len();
+        }
+        let found = clusters[cell_start..]
+            .iter_mut()
+            .find(|cl| cl.direction.dot(h.normal) >= merge_normal_cos);
         match found {
             Some(cl) => {
                 cl.count += 1.0;
@@ -230,10 +243,10 @@ fn merge_brick<'a>(
                 cl.emission += Vec3::from(h.emission);
             }
             None => clusters.push(Cluster {
-                cell,
                 count: 1.0,
                 position: h.position,
                 normal: h.normal,
+                direction: h.normal,
                 albedo: Vec3::from(h.albedo),
                 emission: Vec3::from(h.emission),
                 backface: h.backface,

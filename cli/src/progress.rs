@@ -40,9 +40,9 @@ impl prt_bake::Progress for Bar {
             spinner
         } else {
             let bar = ProgressBar::new(total).with_message(stage.to_owned());
-            if let Ok(style) = ProgressStyle::with_template(
-                "{msg:>8} [{bar:40}] {pos}/{len} probes, eta {eta}",
-            ) {
+            if let Ok(style) =
+                ProgressStyle::with_template("{msg:>8} [{bar:40}] {pos}/{len} probes, eta {eta}")
+            {
                 bar.set_style(style.progress_chars("=> "));
             }
             bar
