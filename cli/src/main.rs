@@ -184,6 +184,12 @@ fn parse_bounds(s: &str) -> Result<[f32; 6], String> {
 }
 
 fn main() {
+    // Mesa's Vulkan drivers print "error: XDG_RUNTIME_DIR is invalid or not set" on every device
+    // they open when the variable is unset (headless machines, CI); point it at the temp dir.
+    // Done first thing, before any thread exists.
+    if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
+        std::env::set_var("XDG_RUNTIME_DIR", std::env::temp_dir());
+    }
     if let Err(e) = run(Cli::parse()) {
         eprintln!("error: {e:#}");
         std::process::exit(1);
