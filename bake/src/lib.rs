@@ -328,8 +328,8 @@ fn bake_in_pool(
             let r = tracer.trace_probe(p);
             progress.advance(1);
             if settings.virtual_offset && is_inside(&r) {
-                if let Some(moved) = virtual_offset(&tracer, p, &r, spacing, &is_inside) {
-                    return moved;
+                if let Some((moved, again)) = virtual_offset(&tracer, p, &r, spacing, &is_inside) {
+                    return (moved, again, true);
                 }
             }
             (p, r, false)
@@ -456,7 +456,7 @@ fn virtual_offset(
     rays: &trace::ProbeRays,
     spacing: f32,
     is_inside: &dyn Fn(&trace::ProbeRays) -> bool,
-) -> Option<(Vec3, trace::ProbeRays, bool)> {
+) -> Option<(Vec3, trace::ProbeRays)> {
     let nearest = rays.hits.iter().filter(|h| h.backface).min_by(|a, b| {
         (a.position - origin)
             .length_squared()
@@ -469,5 +469,5 @@ fn virtual_offset(
         return None;
     }
     let again = tracer.trace_probe(moved);
-    (!is_inside(&again)).then_some((moved, again, true))
+    (!is_inside(&again)).then_some((moved, again))
 }

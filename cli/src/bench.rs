@@ -355,6 +355,11 @@ fn time_updates<'a>(
     Ok(t.elapsed().as_secs_f64() / f64::from(iterations))
 }
 
+/// Lighting for update i: `even` on even updates, `odd` on odd ones (every update a change).
+fn alternate<'a>(even: &'a Lighting, odd: &'a Lighting) -> impl Fn(u32) -> &'a Lighting {
+    move |i| if i % 2 == 0 { even } else { odd }
+}
+
 /// GPU runtime costs, all measured in one run on one adapter: full update per probe at several
 /// probe counts, gather against integer atomic accumulation, the update against the prior art's
 /// scheme (every probe relights its own unmerged surfels), and an update when nothing changed.
@@ -396,28 +401,22 @@ pub fn gpu(scene: &Path, a: &Lighting, spacings: &[f32], rays: u32, cell: f32) -
         let mut runtime = PrtRuntime::new(&device, &queue, &asset, baselines)?;
         let iterations = 4;
         time_updates(&device, &queue, &mut runtime, 1, |_| a)?;
-        let full = time_updates(&device, &queue, &mut runtime, iterations, |i| {
-            if i % 2 == 0 {
-                &b
-            } else {
-                a
-            }
-        })?;
-        let gather = time_updates(&device, &queue, &mut runtime, iterations, |i| {
-            if i % 2 == 0 {
-                &sky1
-            } else {
-                &sky2
-            }
-        })?;
+        let full = time_updates(&device, &queue, &mut runtime, iterations, alternate(&b, a))?;
+        let gather = time_updates(
+            &device,
+            &queue,
+            &mut runtime,
+            iterations,
+            alternate(&sky1, &sky2),
+        )?;
         runtime.use_atomic_gather(true);
-        let atomic = time_updates(&device, &queue, &mut runtime, iterations, |i| {
-            if i % 2 == 0 {
-                &sky1
-            } else {
-                &sky2
-            }
-        })?;
+        let atomic = time_updates(
+            &device,
+            &queue,
+            &mut runtime,
+            iterations,
+            alternate(&sky1, &sky2),
+        )?;
         runtime.use_atomic_gather(false);
         let idle = time_updates(&device, &queue, &mut runtime, iterations, |_| &sky2)?;
         drop(runtime);
@@ -434,7 +433,7 @@ pub fn gpu(scene: &Path, a: &Lighting, spacings: &[f32], rays: u32, cell: f32) -
                 &queue,
                 &mut runtime,
                 iterations,
-                |i| if i % 2 == 0 { &b } else { a },
+                alternate(&b, a),
             )?)
         } else {
             None

@@ -120,9 +120,10 @@ impl<'a> CpuRelighter<'a> {
         let lights: Vec<PreparedLight> =
             lighting.rig.lights.iter().map(PreparedLight::new).collect();
         let (direct, mut stats) = self.direct_irradiance(&lights);
+        let lattice = lighting.sky.lattice(self.asset.header.ray_count);
         let sky: Vec<ShRgb> = (0..self.asset.probes.len())
             .into_par_iter()
-            .map(|p| lighting.sky.probe_sky(self.asset, p))
+            .map(|p| lighting.sky.probe_sky(self.asset, p, &lattice))
             .collect();
         let mut sh = Vec::new();
         for bounce in 0..bounces {

@@ -87,8 +87,28 @@ impl SkyModel {
         }
     }
 
-    /// SH9 of the sky radiance a probe sees through its sky rays.
-    pub fn probe_sky(&self, asset: &Asset, probe: usize) -> ShRgb {
+    /// Direction and radiance of every direction of the `n`-ray lattice, for skies that vary
+    /// with direction (empty for black and constant skies, which need no lookup).
+    pub fn lattice(&self, n: u32) -> Vec<([f32; 3], [f32; 3])> {
+        match self {
+            SkyModel::Black | SkyModel::Constant(_) => Vec::new(),
+            SkyModel::Equirect { .. } => (0..n)
+                .map(|i| {
+                    let d = fibonacci_direction(i, n);
+                    (d, self.radiance(d))
+                })
+                .collect(),
+        }
+    }
+
+    /// SH9 of the sky radiance a probe sees through its sky rays; `lattice` is
+    /// [`SkyModel::lattice`] for the asset's ray count, computed once for all probes.
+    pub fn probe_sky(
+        &self,
+        asset: &Asset,
+        probe: usize,
+        lattice: &[([f32; 3], [f32; 3])],
+    ) -> ShRgb {
         match self {
             SkyModel::Black => [[0.0; 3]; SH_COUNT],
             SkyModel::Constant(c) => {
@@ -101,10 +121,9 @@ impl SkyModel {
                 let mask = &asset.sky_mask[probe * words..(probe + 1) * words];
                 let w = direction_weight(n);
                 let mut acc = [[0.0; 3]; SH_COUNT];
-                for i in 0..n {
-                    if mask[(i / 32) as usize] & (1 << (i % 32)) != 0 {
-                        let d = fibonacci_direction(i, n);
-                        sh::accumulate(&mut acc, d, w, self.radiance(d));
+                for (i, &(d, l)) in lattice.iter().enumerate() {
+                    if mask[i / 32] & (1 << (i % 32)) != 0 {
+                        sh::accumulate(&mut acc, d, w, l);
                     }
                 }
                 acc

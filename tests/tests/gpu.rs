@@ -315,6 +315,21 @@ fn hostile_values_stay_finite() {
         ("sky only", sky_only),
         ("1e-6", rig(1e-6, 0.0)),
         ("1e6", rig(1e6, 0.0)),
+        (
+            "equirect sky",
+            Lighting {
+                rig: LightRig::default(),
+                // 4x2 image: warm top row, cool bottom row (conventions.md section 3 mapping).
+                sky: SkyModel::Equirect {
+                    width: 4,
+                    height: 2,
+                    texels: [[1.0, 0.8, 0.6]; 4]
+                        .into_iter()
+                        .chain([[0.1, 0.2, 0.4]; 4])
+                        .collect(),
+                },
+            },
+        ),
     ] {
         let mut runtime =
             PrtRuntime::new(&device, &queue, &cornell, RuntimeSettings::default()).unwrap();

@@ -143,27 +143,6 @@ pub fn headless_device() -> Result<(wgpu::Device, wgpu::Queue, wgpu::AdapterInfo
     Ok((device, queue, adapter.get_info()))
 }
 
-fn storage(
-    device: &wgpu::Device,
-    label: &str,
-    bytes: &[u8],
-    extra: wgpu::BufferUsages,
-) -> wgpu::Buffer {
-    // wgpu cannot bind empty buffers, nor ones smaller than one element: pad empty arrays.
-    let padded;
-    let contents = if bytes.is_empty() {
-        padded = [0u8; MIN_BUFFER as usize];
-        &padded[..]
-    } else {
-        bytes
-    };
-    device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some(label),
-        contents,
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | extra,
-    })
-}
-
 /// Smallest buffer the runtime creates: larger than every element type it binds.
 const MIN_BUFFER: u64 = 256;
 
@@ -201,18 +180,64 @@ fn buf(b: &wgpu::Buffer) -> wgpu::BindingResource<'_> {
     b.as_entire_binding()
 }
 
-fn zeroed(
-    device: &wgpu::Device,
-    label: &str,
-    size: u64,
-    extra: wgpu::BufferUsages,
-) -> wgpu::Buffer {
-    device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some(label),
-        size: size.max(MIN_BUFFER),
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | extra,
-        mapped_at_creation: false,
-    })
+/// Creates the runtime's storage buffers, refusing any larger than one storage binding.
+struct Alloc<'a> {
+    device: &'a wgpu::Device,
+    max_binding: u64,
+}
+
+impl Alloc<'_> {
+    fn check(&self, label: &'static str, size: u64) -> Result<(), GpuError> {
+        if size > self.max_binding {
+            return Err(GpuError::Limit {
+                what: label,
+                needed: size,
+                limit: self.max_binding,
+            });
+        }
+        Ok(())
+    }
+
+    /// A storage buffer holding `bytes`.
+    fn storage(
+        &self,
+        label: &'static str,
+        bytes: &[u8],
+        extra: wgpu::BufferUsages,
+    ) -> Result<wgpu::Buffer, GpuError> {
+        self.check(label, bytes.len() as u64)?;
+        // wgpu cannot bind empty buffers, nor ones smaller than one element: pad empty arrays.
+        let padded;
+        let contents = if bytes.is_empty() {
+            padded = [0u8; MIN_BUFFER as usize];
+            &padded[..]
+        } else {
+            bytes
+        };
+        Ok(self
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | extra,
+            }))
+    }
+
+    /// A zero-initialised storage buffer of `size` bytes.
+    fn zeroed(
+        &self,
+        label: &'static str,
+        size: u64,
+        extra: wgpu::BufferUsages,
+    ) -> Result<wgpu::Buffer, GpuError> {
+        self.check(label, size)?;
+        Ok(self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: size.max(MIN_BUFFER),
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | extra,
+            mapped_at_creation: false,
+        }))
+    }
 }
 
 /// Workgroup counts `(x, y)` covering `groups` linear workgroups.
@@ -239,7 +264,6 @@ pub struct PrtRuntime {
     grid: prt_format::Grid,
     offset_scale: f32,
     settings: RuntimeSettings,
-    directions: Vec<[f32; 3]>,
     params: wgpu::Buffer,
     lights: wgpu::Buffer,
     sky_directions: wgpu::Buffer,
@@ -299,40 +323,13 @@ impl PrtRuntime {
                 limit: u64::from(limits.max_texture_dimension_3d),
             });
         }
-        let surfel_bytes = std::mem::size_of_val(asset.surfels.as_slice()) as u64;
         let max_binding = limits
             .max_storage_buffer_binding_size
             .min(limits.max_buffer_size);
-        let (p, b, s) = (
-            asset.probes.len() as u64,
-            asset.bricks.len() as u64,
-            asset.surfels.len() as u64,
-        );
-        for (what, bytes) in [
-            ("the surfel buffer", surfel_bytes),
-            ("the surfel radiance buffer", 16 * s),
-            (
-                "the BVH triangle buffer",
-                std::mem::size_of_val(asset.geometry.triangles.as_slice()) as u64,
-            ),
-            (
-                "the BVH node buffer",
-                std::mem::size_of_val(asset.geometry.nodes.as_slice()) as u64,
-            ),
-            ("the probe SH buffer", 144 * p),
-            ("the sky transfer buffer", 36 * p),
-            ("the sky mask buffer", 4 * asset.sky_mask.len() as u64),
-            ("the brick radiance buffer", 64 * b),
-            ("the brick buffer", 48 * b),
-        ] {
-            if bytes > max_binding {
-                return Err(GpuError::Limit {
-                    what,
-                    needed: bytes,
-                    limit: max_binding,
-                });
-            }
-        }
+        let alloc = Alloc {
+            device,
+            max_binding,
+        };
         for (what, needed, limit) in [
             (
                 "storage buffers per shader stage",
@@ -361,12 +358,7 @@ impl PrtRuntime {
             subgroups,
         };
         let none = wgpu::BufferUsages::empty();
-        let probes = storage(
-            device,
-            "prt probes",
-            bytemuck::cast_slice(&asset.probes),
-            none,
-        );
+        let probes = alloc.storage("prt probes", bytemuck::cast_slice(&asset.probes), none)?;
         let factor_bytes: &[u8] = match &asset.factors {
             Factors::F16(f) => bytemuck::cast_slice(f),
             Factors::F32(f) => bytemuck::cast_slice(f),
@@ -387,14 +379,13 @@ impl PrtRuntime {
                 let end = asset.probes[c.probe_begin as usize..c.probe_end as usize]
                     .last()
                     .map_or(first, |p| (p.first_factor + p.factor_count) as usize);
-                storage(
-                    device,
+                alloc.storage(
                     "prt factors",
                     &factor_bytes[first * per_factor..end * per_factor],
                     none,
                 )
             })
-            .collect();
+            .collect::<Result<_, _>>()?;
         let chunk_uniforms: Vec<wgpu::Buffer> = chunks
             .iter()
             .map(|c| {
@@ -405,80 +396,60 @@ impl PrtRuntime {
                 })
             })
             .collect();
-        let bricks = storage(
-            device,
-            "prt bricks",
-            bytemuck::cast_slice(&asset.bricks),
-            none,
-        );
-        let surfels = storage(
-            device,
-            "prt surfels",
-            bytemuck::cast_slice(&asset.surfels),
-            none,
-        );
+        let bricks = alloc.storage("prt bricks", bytemuck::cast_slice(&asset.bricks), none)?;
+        let surfels = alloc.storage("prt surfels", bytemuck::cast_slice(&asset.surfels), none)?;
         let normal_bounds: Vec<GpuNormalBounds> = brick_normal_bounds(asset)
             .iter()
             .map(GpuNormalBounds::from)
             .collect();
-        let normal_bounds = storage(
-            device,
+        let normal_bounds = alloc.storage(
             "prt normal bounds",
             bytemuck::cast_slice(&normal_bounds),
             none,
-        );
+        )?;
+        // A scene without triangles gets one leaf holding a degenerate triangle: no ray hits it.
+        let empty_node = [prt_format::BvhNode {
+            min: [f32::MAX; 3],
+            max: [f32::MIN; 3],
+            count: 1,
+            first: 0,
+        }];
+        let empty_triangle = [prt_format::Triangle::default()];
         let (nodes, tris) = if asset.geometry.nodes.is_empty() {
-            // One leaf holding a degenerate triangle: no ray hits it.
-            let empty = prt_format::BvhNode {
-                min: [f32::MAX; 3],
-                max: [f32::MIN; 3],
-                count: 1,
-                first: 0,
-            };
-            (vec![empty], vec![prt_format::Triangle::default()])
+            (&empty_node[..], &empty_triangle[..])
         } else {
-            (
-                asset.geometry.nodes.clone(),
-                asset.geometry.triangles.clone(),
-            )
+            (&asset.geometry.nodes[..], &asset.geometry.triangles[..])
         };
-        let bvh_nodes = storage(device, "prt bvh nodes", bytemuck::cast_slice(&nodes), none);
-        let triangles = storage(device, "prt triangles", bytemuck::cast_slice(&tris), none);
-        let sky_transfer = storage(
-            device,
+        let bvh_nodes = alloc.storage("prt bvh nodes", bytemuck::cast_slice(nodes), none)?;
+        let triangles = alloc.storage("prt triangles", bytemuck::cast_slice(tris), none)?;
+        let sky_transfer = alloc.storage(
             "prt sky transfer",
             bytemuck::cast_slice(&asset.sky_transfer),
             none,
-        );
-        let sky_mask = storage(
-            device,
-            "prt sky mask",
-            bytemuck::cast_slice(&asset.sky_mask),
-            none,
-        );
+        )?;
+        let sky_mask =
+            alloc.storage("prt sky mask", bytemuck::cast_slice(&asset.sky_mask), none)?;
         let n_bricks = asset.bricks.len() as u64;
         let n_surfels = asset.surfels.len() as u64;
         let n_probes = asset.probes.len() as u64;
-        let brick_light_mask = zeroed(device, "prt brick light mask", 4 * n_bricks, none);
-        let brick_dirty = zeroed(device, "prt brick dirty", 4 * n_bricks, none);
-        let surfel_visibility = zeroed(device, "prt surfel visibility", 4 * n_surfels, none);
-        let surfel_radiance = zeroed(device, "prt surfel radiance", 16 * n_surfels, none);
-        let brick_radiance = zeroed(device, "prt brick radiance", 64 * n_bricks, none);
-        let probe_dirty = zeroed(device, "prt probe dirty", 4 * n_probes, none);
-        let probe_sh = zeroed(
-            device,
+        let brick_light_mask = alloc.zeroed("prt brick light mask", 4 * n_bricks, none)?;
+        let brick_dirty = alloc.zeroed("prt brick dirty", 4 * n_bricks, none)?;
+        let surfel_visibility = alloc.zeroed("prt surfel visibility", 4 * n_surfels, none)?;
+        let surfel_radiance = alloc.zeroed("prt surfel radiance", 16 * n_surfels, none)?;
+        let brick_radiance = alloc.zeroed("prt brick radiance", 64 * n_bricks, none)?;
+        let probe_dirty = alloc.zeroed("prt probe dirty", 4 * n_probes, none)?;
+        let probe_sh = alloc.zeroed(
             "prt probe sh",
             16 * 9 * n_probes,
             wgpu::BufferUsages::COPY_SRC,
-        );
-        let counters = zeroed(device, "prt counters", 16, wgpu::BufferUsages::COPY_SRC);
-        let lights = zeroed(device, "prt lights", (64 * MAX_LIGHTS) as u64, none);
-        let sky_directions = zeroed(
-            device,
+        )?;
+        let counters = alloc.zeroed("prt counters", 16, wgpu::BufferUsages::COPY_SRC)?;
+        let lights = alloc.zeroed("prt lights", (64 * MAX_LIGHTS) as u64, none)?;
+        let sky_directions = alloc.zeroed(
             "prt sky directions",
             32 * u64::from(asset.header.ray_count),
             none,
-        );
+        )?;
         let params = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("prt params"),
             size: std::mem::size_of::<Params>() as u64,
@@ -521,8 +492,7 @@ impl PrtRuntime {
             ..Default::default()
         });
 
-        let fixed_accum = zeroed(
-            device,
+        let fixed_accum = alloc.zeroed(
             "prt fixed-point accumulators",
             if settings.benchmark_baselines {
                 4 * 27 * n_probes
@@ -530,7 +500,7 @@ impl PrtRuntime {
                 0
             },
             none,
-        );
+        )?;
         let gather_groups = |c: usize| -> Vec<Vec<wgpu::BindingResource<'_>>> {
             vec![
                 vec![
@@ -676,7 +646,6 @@ impl PrtRuntime {
                 _ => 1.0,
             },
             settings,
-            directions: directions::fibonacci_directions(asset.header.ray_count),
             params,
             lights,
             sky_directions,
@@ -712,12 +681,9 @@ impl PrtRuntime {
             sky @ SkyModel::Equirect { .. } => (
                 SKY_DIRECTIONS,
                 [0.0; 3],
-                self.directions
-                    .iter()
-                    .flat_map(|&d| {
-                        let l = sky.radiance(d);
-                        [[d[0], d[1], d[2], 0.0], [l[0], l[1], l[2], 0.0]]
-                    })
+                sky.lattice(self.ray_count)
+                    .into_iter()
+                    .flat_map(|(d, l)| [[d[0], d[1], d[2], 0.0], [l[0], l[1], l[2], 0.0]])
                     .collect(),
             ),
         };
@@ -911,14 +877,14 @@ impl PrtRuntime {
         shaders::sample_irradiance_snippet(group)
     }
 
-    fn read_buffer(&self, src: &wgpu::Buffer, size: u64) -> Result<Vec<u8>, GpuError> {
-        read_buffer(&self.device, &self.queue, src, size)
-    }
-
     /// Blocks until the GPU is done and returns every probe's SH as last gathered.
     pub fn read_probe_sh(&self) -> Result<Vec<ShRgb>, GpuError> {
-        let bytes =
-            self.read_buffer(&self.probe_sh, 16 * 9 * u64::from(self.probe_count.max(1)))?;
+        let bytes = read_buffer(
+            &self.device,
+            &self.queue,
+            &self.probe_sh,
+            16 * 9 * u64::from(self.probe_count.max(1)),
+        )?;
         let v: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
         Ok((0..self.probe_count as usize)
             .map(|p| std::array::from_fn(|k| [v[9 * p + k][0], v[9 * p + k][1], v[9 * p + k][2]]))
@@ -927,7 +893,7 @@ impl PrtRuntime {
 
     /// Blocks and returns the work counters of the last submitted update.
     pub fn read_counters(&self) -> Result<Counters, GpuError> {
-        let bytes = self.read_buffer(&self.counters, 16)?;
+        let bytes = read_buffer(&self.device, &self.queue, &self.counters, 16)?;
         Ok(*bytemuck::from_bytes(&bytes))
     }
 
