@@ -127,11 +127,12 @@ impl<'a> CpuRelighter<'a> {
             .collect();
         let mut sh = Vec::new();
         for bounce in 0..bounces {
-            let irradiance: Vec<[f32; 3]> = if bounce == 0 {
-                direct.clone()
+            let radiance = if bounce == 0 {
+                self.brick_radiance(&direct)
             } else {
                 let volume = Volume::new(self.asset, &sh);
-                self.asset
+                let irradiance: Vec<[f32; 3]> = self
+                    .asset
                     .surfels
                     .par_iter()
                     .zip(&direct)
@@ -139,9 +140,9 @@ impl<'a> CpuRelighter<'a> {
                         let ind = volume.irradiance(Vec3::from(s.position), Vec3::from(s.normal));
                         std::array::from_fn(|c| e[c] + ind[c])
                     })
-                    .collect()
+                    .collect();
+                self.brick_radiance(&irradiance)
             };
-            let radiance = self.brick_radiance(&irradiance);
             let (g, gather_stats) = self.gather(&radiance, &sky);
             sh = g;
             if bounce + 1 == bounces {
