@@ -279,7 +279,6 @@ pub struct PrtRuntime {
     state: Option<State>,
     cursor: u32,
     pending_windows: u32,
-    pub subgroups: bool,
 }
 
 impl PrtRuntime {
@@ -660,7 +659,6 @@ impl PrtRuntime {
             state: None,
             cursor: 0,
             pending_windows: 0,
-            subgroups,
         })
     }
 
