@@ -6,12 +6,26 @@
 // The textures hold SH premultiplied by validity (texture 0's alpha), so one hardware trilinear
 // fetch per texture weights the eight surrounding probes by validity; dividing by the filtered
 // validity renormalises. Where no valid probe surrounds the point, the result is 0.
+//
+// Both functions sample at world_pos + normal * normal_bias (metres; RuntimeSettings::normal_bias
+// in probe spacings): probes just behind a surface see its back faces and are invalid or dark, so
+// a point sampled exactly on the surface mixes them in (self-shadowing, leaking through thin
+// walls); moving the point off the surface along its normal weights the probes in front more.
+// prt_sample_sh exposes the interpolated SH and validity for engines with their own lobes.
 
 struct PrtVolumeInfo {
     origin: vec3<f32>,
     spacing: f32,
     counts: vec3<f32>,
-    pad0: f32,
+    // Metres along the normal that prt_sample_sh moves the point before sampling.
+    normal_bias: f32,
+}
+
+// The interpolated probe SH at a point (validity-renormalised; zero where validity <= 1e-6) and
+// the filtered validity itself (0 = no valid probe around the point, 1 = all eight valid).
+struct PrtSample {
+    sh: array<vec3<f32>, 9>,
+    validity: f32,
 }
 
 @group(PRT_GROUP) @binding(0) var prt_volume0: texture_3d<f32>;
@@ -24,11 +38,14 @@ struct PrtVolumeInfo {
 @group(PRT_GROUP) @binding(7) var prt_sampler: sampler;
 @group(PRT_GROUP) @binding(8) var<uniform> prt_volume: PrtVolumeInfo;
 
-fn sample_irradiance(world_pos: vec3<f32>, normal: vec3<f32>) -> vec3<f32> {
-    let uvw = ((world_pos - prt_volume.origin) / prt_volume.spacing + 0.5) / prt_volume.counts;
+fn prt_sample_sh(world_pos: vec3<f32>, normal: vec3<f32>) -> PrtSample {
+    let p = world_pos + normal * prt_volume.normal_bias;
+    let uvw = ((p - prt_volume.origin) / prt_volume.spacing + 0.5) / prt_volume.counts;
+    var s: PrtSample;
     let t0 = textureSampleLevel(prt_volume0, prt_sampler, uvw, 0.0);
+    s.validity = t0.w;
     if t0.w <= 1e-6 {
-        return vec3<f32>(0.0);
+        return s;
     }
     let inv = 1.0 / t0.w;
     let t1 = textureSampleLevel(prt_volume1, prt_sampler, uvw, 0.0) * inv;
@@ -37,7 +54,7 @@ fn sample_irradiance(world_pos: vec3<f32>, normal: vec3<f32>) -> vec3<f32> {
     let t4 = textureSampleLevel(prt_volume4, prt_sampler, uvw, 0.0) * inv;
     let t5 = textureSampleLevel(prt_volume5, prt_sampler, uvw, 0.0) * inv;
     let t6 = textureSampleLevel(prt_volume6, prt_sampler, uvw, 0.0) * inv;
-    let c = array<vec3<f32>, 9>(
+    s.sh = array<vec3<f32>, 9>(
         t0.xyz * inv,
         t1.xyz,
         vec3<f32>(t1.w, t2.xy),
@@ -48,6 +65,13 @@ fn sample_irradiance(world_pos: vec3<f32>, normal: vec3<f32>) -> vec3<f32> {
         vec3<f32>(t5.zw, t6.x),
         t6.yzw,
     );
+    return s;
+}
+
+// Irradiance E at world_pos for a surface with unit normal `normal` (0 where no valid probe
+// surrounds the biased point).
+fn sample_irradiance(world_pos: vec3<f32>, normal: vec3<f32>) -> vec3<f32> {
+    let c = prt_sample_sh(world_pos, normal).sh;
     let n = normal;
     // Clamped-cosine factors A_l (pi, 2pi/3, pi/4) times the basis of conventions.md section 2.
     let e = PRT_A0 * PRT_SH_Y00 * c[0]

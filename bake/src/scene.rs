@@ -67,6 +67,22 @@ pub struct Scene {
     pub warnings: Vec<String>,
     /// Some primitive has COLOR_0 (else per-hit attributes matter only for textured materials).
     pub has_vertex_colors: bool,
+    /// Perspective cameras of the scene's nodes, in node visiting order (renderers default to
+    /// the first).
+    pub cameras: Vec<Camera>,
+}
+
+/// A perspective camera placed by its node (glTF 2.0 spec 3.10: it looks along the node's -Z
+/// with +Y up).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Camera {
+    pub eye: Vec3,
+    /// Unit viewing direction.
+    pub forward: Vec3,
+    /// Unit up direction.
+    pub up: Vec3,
+    /// Vertical field of view, radians.
+    pub yfov: f32,
 }
 
 impl Scene {
@@ -262,6 +278,21 @@ impl Loader<'_> {
         }
         if let Some(light) = node.light() {
             self.light(&light, world);
+        }
+        let camera = node.camera();
+        if let Some(gltf::camera::Projection::Perspective(p)) =
+            camera.as_ref().map(|c| c.projection())
+        {
+            let forward = world.transform_vector3(Vec3::NEG_Z).normalize_or_zero();
+            let up = world.transform_vector3(Vec3::Y).normalize_or_zero();
+            if forward != Vec3::ZERO && up != Vec3::ZERO && p.yfov().is_finite() {
+                self.scene.cameras.push(Camera {
+                    eye: world.transform_point3(Vec3::ZERO),
+                    forward,
+                    up,
+                    yfov: p.yfov(),
+                });
+            }
         }
         for child in node.children() {
             self.visit(&child, world, depth + 1)?;

@@ -2,7 +2,10 @@
 //! options into a settings struct and calls one library function.
 
 mod bench;
+mod bench_render;
 mod progress;
+mod render;
+mod sample;
 
 use std::path::PathBuf;
 
@@ -10,6 +13,7 @@ use anyhow::{Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
 use prt_bake::BakeSettings;
 use prt_format::TransferPrecision;
+use render::{parse_size, parse_vec3};
 
 #[derive(Parser)]
 #[command(
@@ -96,6 +100,31 @@ enum BenchKind {
         #[arg(long, default_value_t = 0.05)]
         cell_size: f32,
     },
+    /// Forward+ cost: frame time split into depth, cull and shade, and lights evaluated per
+    /// pixel, brute force against tiled culling, at several light counts.
+    Render {
+        scene: PathBuf,
+        /// Light counts (point and spot lights scattered through the scene).
+        #[arg(long, value_delimiter = ',', default_value = "16,64,256,1024")]
+        lights: Vec<usize>,
+        /// Tile sizes of the tiled rows.
+        #[arg(long, value_delimiter = ',', default_value = "16,64")]
+        tiles: Vec<u32>,
+        #[arg(long, value_parser = parse_size, default_value = "1280x720")]
+        size: (u32, u32),
+        #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+        eye: Option<glam::Vec3>,
+        #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+        target: Option<glam::Vec3>,
+        #[arg(long, default_value_t = 50.0)]
+        fov: f32,
+        /// Bake with every material double-sided.
+        #[arg(long)]
+        double_sided: bool,
+        /// Frames per stage (the median is reported).
+        #[arg(long, default_value_t = 3)]
+        frames: usize,
+    },
 }
 
 #[derive(Subcommand)]
@@ -164,6 +193,10 @@ enum Command {
         #[command(subcommand)]
         kind: BenchKind,
     },
+    /// Relight an asset once and write what the engine's sample_irradiance returns at points.
+    Sample(sample::SampleArgs),
+    /// Render the scene with direct light (tiled Forward+) and the GI's indirect diffuse.
+    Render(render::RenderArgs),
     /// Print the summary of an asset.
     Inspect {
         asset: PathBuf,
@@ -171,6 +204,23 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+}
+
+/// The rig at `rig`, or without one the asset's own (KHR_lights_punctual) lights and a black sky.
+fn lighting_of(
+    rig: Option<&std::path::Path>,
+    asset: &prt_format::Asset,
+) -> Result<prt_runtime::Lighting> {
+    Ok(match rig {
+        Some(rig) => prt_runtime::load_rig(rig)?,
+        None => prt_runtime::Lighting {
+            rig: prt_format::LightRig {
+                lights: asset.lights.clone(),
+                sky: None,
+            },
+            sky: prt_runtime::SkyModel::Black,
+        },
+    })
 }
 
 /// Parses `MINX,MINY,MINZ,MAXX,MAXY,MAXZ`.
@@ -190,7 +240,27 @@ fn main() {
     if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
         std::env::set_var("XDG_RUNTIME_DIR", std::env::temp_dir());
     }
-    if let Err(e) = run(Cli::parse()) {
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) if !e.use_stderr() => e.exit(),
+        Err(e) => {
+            // One line, as for every other error (conventions.md section 6): clap's message and
+            // its list of possible values, without the usage block.
+            let text = e.render().to_string();
+            let parts: Vec<&str> = text
+                .lines()
+                .map(str::trim)
+                .filter(|l| {
+                    !l.is_empty()
+                        && !l.starts_with("Usage:")
+                        && !l.starts_with("For more information")
+                })
+                .collect();
+            eprintln!("{}", parts.join(" "));
+            std::process::exit(2);
+        }
+    };
+    if let Err(e) = run(cli) {
         eprintln!("error: {e:#}");
         std::process::exit(1);
     }
@@ -260,16 +330,7 @@ fn run(cli: Cli) -> Result<()> {
         } => {
             let loaded = prt_format::read_asset(&asset)
                 .with_context(|| format!("loading {}", asset.display()))?;
-            let lighting = match &lights {
-                Some(rig) => prt_runtime::load_rig(rig)?,
-                None => prt_runtime::Lighting {
-                    rig: prt_format::LightRig {
-                        lights: loaded.lights.clone(),
-                        sky: None,
-                    },
-                    sky: prt_runtime::SkyModel::Black,
-                },
-            };
+            let lighting = lighting_of(lights.as_deref(), &loaded)?;
             let start = std::time::Instant::now();
             let (sh, stats, name) = match backend {
                 Backend::Cpu => {
@@ -366,6 +427,42 @@ fn run(cli: Cli) -> Result<()> {
                 );
                 Ok(())
             }
+            BenchKind::Render {
+                scene,
+                lights,
+                tiles,
+                size,
+                eye,
+                target,
+                fov,
+                double_sided,
+                frames,
+            } => {
+                let camera = match (eye, target) {
+                    (Some(eye), Some(target)) => Some(prt_render::Camera {
+                        eye,
+                        target,
+                        up: glam::Vec3::Y,
+                        fov_degrees: fov,
+                    }),
+                    (None, None) => None,
+                    _ => anyhow::bail!("--eye and --target go together"),
+                };
+                let bench = bench_render::RenderBench {
+                    scene: &scene,
+                    bake: BakeSettings {
+                        double_sided,
+                        ..BakeSettings::default()
+                    },
+                    camera,
+                    lights,
+                    tiles,
+                    size,
+                    frames: frames.max(1),
+                };
+                println!("{}", bench_render::render(&bench)?);
+                Ok(())
+            }
             BenchKind::Gpu {
                 scene,
                 lights,
@@ -381,6 +478,8 @@ fn run(cli: Cli) -> Result<()> {
                 Ok(())
             }
         },
+        Command::Sample(args) => sample::run(args),
+        Command::Render(args) => render::run(args),
         Command::Inspect { asset, json } => {
             let bytes =
                 std::fs::read(&asset).with_context(|| format!("reading {}", asset.display()))?;

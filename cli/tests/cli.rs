@@ -237,3 +237,300 @@ fn relight_json_is_the_same_on_cpu_and_gpu() {
         }
     }
 }
+
+/// Bakes the Cornell reference room (128 rays per probe, for speed) into `dir`.
+fn bake_cornell(dir: &Scratch) -> PathBuf {
+    let asset = dir.0.join("cornell.prt");
+    let out = prt(
+        &[
+            "bake".as_ref(),
+            cornell().as_os_str(),
+            "-o".as_ref(),
+            asset.as_os_str(),
+            "--rays".as_ref(),
+            "128".as_ref(),
+        ],
+        None,
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    asset
+}
+
+fn cornell_rig() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/reference/cornell/rig.json")
+}
+
+/// `prt sample ASSET --lights RIG --points POINTS --json OUT [more args]`.
+fn sample(asset: &Path, points: &Path, out: &Path, more: &[&str]) -> Output {
+    let rig = cornell_rig();
+    let mut args: Vec<&std::ffi::OsStr> = vec![
+        "sample".as_ref(),
+        asset.as_os_str(),
+        "--lights".as_ref(),
+        rig.as_os_str(),
+        "--points".as_ref(),
+        points.as_os_str(),
+        "--json".as_ref(),
+        out.as_os_str(),
+    ];
+    args.extend(more.iter().map(|s| std::ffi::OsStr::new(*s)));
+    prt(&args, None)
+}
+
+/// `prt sample` on both backends returns the same samples, in input order, with normalised
+/// normals: irradiance within 1% of the point's mean irradiance plus 0.1% of the brightest
+/// point's (the GPU relight differs from the CPU's by ~1e-4, the half-float volume by 2^-11 per
+/// texel; measured worst 0.35% on the Cornell reference points).
+#[test]
+fn sample_is_the_same_on_cpu_and_gpu() {
+    let dir = Scratch::new("sample_backends");
+    let asset = bake_cornell(&dir);
+    // Inside the room, on the floor and walls and outside the grid, with assorted normals.
+    let points: Vec<serde_json::Value> = (0..64)
+        .map(|i| {
+            let t = i as f64 / 64.0;
+            let p = [
+                -0.98 + 1.96 * (t * 7.3).fract(),
+                0.01 + 1.98 * (t * 3.1).fract(),
+                -0.98 + 1.96 * (t * 5.7).fract(),
+            ];
+            let a = i as f64 * 2.399_963;
+            let z = 1.0 - 2.0 * (i as f64 + 0.5) / 64.0;
+            let r = (1.0 - z * z).sqrt();
+            let n = [3.0 * r * a.cos(), 3.0 * z, 3.0 * r * a.sin()];
+            serde_json::json!({"position": p, "normal": n})
+        })
+        .collect();
+    let input = dir.0.join("points.json");
+    std::fs::write(&input, serde_json::json!({ "points": points }).to_string()).unwrap();
+    let mut docs = Vec::new();
+    for backend in ["cpu", "gpu"] {
+        let json = dir.0.join(format!("{backend}.json"));
+        let out = sample(&asset, &input, &json, &["--backend", backend]);
+        assert!(out.status.success(), "{backend}: {}", text(&out.stderr));
+        let doc: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+        docs.push(doc["samples"].as_array().unwrap().clone());
+    }
+    let (cpu, gpu) = (&docs[0], &docs[1]);
+    assert_eq!(cpu.len(), points.len());
+    assert_eq!(gpu.len(), points.len());
+    let v = |s: &serde_json::Value, k: &str, c: usize| s[k][c].as_f64().unwrap();
+    let mean_e = |s: &serde_json::Value| (0..3).map(|c| v(s, "irradiance", c)).sum::<f64>() / 3.0;
+    let peak = cpu.iter().map(mean_e).fold(0.0, f64::max);
+    assert!(peak > 0.0);
+    for (i, ((c, g), p)) in cpu.iter().zip(gpu).zip(&points).enumerate() {
+        for a in 0..3 {
+            assert!((v(c, "position", a) - p["position"][a].as_f64().unwrap()).abs() < 1e-6);
+            assert!((v(c, "normal", a) - p["normal"][a].as_f64().unwrap() / 3.0).abs() < 1e-6);
+        }
+        assert_eq!(c["position"], g["position"]);
+        assert!((c["validity"].as_f64().unwrap() - g["validity"].as_f64().unwrap()).abs() < 1e-3);
+        let tol = 1e-2 * mean_e(c) + 1e-3 * peak;
+        for ch in 0..3 {
+            let (a, b) = (v(c, "irradiance", ch), v(g, "irradiance", ch));
+            assert!(
+                (a - b).abs() <= tol,
+                "point {i} ch {ch}: cpu {a} gpu {b} (tol {tol})"
+            );
+        }
+    }
+}
+
+/// Bad `prt sample` input exits non-zero with one stderr line naming the file, the point and the
+/// value, and writes nothing.
+#[test]
+fn sample_bad_input_fails_cleanly() {
+    let dir = Scratch::new("sample_bad");
+    let asset = bake_cornell(&dir);
+    let ok = r#"{"position": [0, 1, 0], "normal": [0, 1, 0]}"#;
+    // (file name, contents, extra args, what the error must mention)
+    let cases: Vec<(&str, String, Vec<&str>, Vec<&str>)> = vec![
+        ("missing.json", String::new(), vec![], vec!["missing.json"]),
+        (
+            "malformed.json",
+            "{\"points\": [".into(),
+            vec![],
+            vec!["malformed.json", "JSON"],
+        ),
+        (
+            "no_list.json",
+            "{\"pts\": []}".into(),
+            vec![],
+            vec!["no_list.json", "points"],
+        ),
+        (
+            "no_normal.json",
+            format!(r#"{{"points": [{ok}, {{"position": [0, 1, 0]}}]}}"#),
+            vec![],
+            vec!["no_normal.json", "point 1", "normal", "missing"],
+        ),
+        (
+            "huge.json",
+            format!(
+                r#"{{"points": [{ok}, {ok}, {{"position": [1e300, 1, 0], "normal": [0, 1, 0]}}]}}"#
+            ),
+            vec![],
+            vec!["huge.json", "point 2", "position", "1e+300"],
+        ),
+        (
+            "text.json",
+            r#"{"points": [{"position": [0, "up", 0], "normal": [0, 1, 0]}]}"#.into(),
+            vec![],
+            vec!["text.json", "point 0", "\"up\""],
+        ),
+        (
+            "zero.json",
+            format!(r#"{{"points": [{ok}, {{"position": [0, 1, 0], "normal": [0, 0, 0]}}]}}"#),
+            vec![],
+            vec![
+                "zero.json",
+                "point 1",
+                "normal",
+                "[0.0, 0.0, 0.0]",
+                "zero length",
+            ],
+        ),
+        (
+            "neg.json",
+            format!(r#"{{"points": [{ok}]}}"#),
+            vec!["--normal-bias", "-0.1"],
+            vec!["--normal-bias", "-0.1"],
+        ),
+        (
+            "nan.json",
+            format!(r#"{{"points": [{ok}]}}"#),
+            vec!["--normal-bias", "NaN"],
+            vec!["--normal-bias", "NaN"],
+        ),
+    ];
+    for (name, contents, args, mentions) in cases {
+        let input = dir.0.join(name);
+        if name != "missing.json" {
+            std::fs::write(&input, contents).unwrap();
+        }
+        let out = dir.0.join("out.json");
+        let o = sample(&asset, &input, &out, &args);
+        let stderr = text(&o.stderr);
+        assert!(!o.status.success(), "{name}: exit status {:?}", o.status);
+        let lines: Vec<&str> = stderr.lines().collect();
+        assert_eq!(lines.len(), 1, "{name}: stderr is not one line: {stderr:?}");
+        assert!(lines[0].starts_with("error:"), "{name}: {stderr:?}");
+        for m in mentions {
+            assert!(
+                lines[0].contains(m),
+                "{name}: {stderr:?} does not mention {m:?}"
+            );
+        }
+        assert!(!out.exists(), "{name}: wrote {}", out.display());
+        let _ = std::fs::remove_file(&input);
+        let left: Vec<String> = dir
+            .entries()
+            .into_iter()
+            .filter(|e| e != "cornell.prt")
+            .collect();
+        assert!(left.is_empty(), "{name}: left {left:?}");
+    }
+}
+
+/// `prt render SCENE ASSET --lights RIG -o OUT [more args]`, 160x90 unless `more` sets a size.
+fn render(scene: &Path, asset: &Path, rig: &Path, out: &Path, more: &[&str]) -> Output {
+    let mut args: Vec<&std::ffi::OsStr> = vec![
+        "render".as_ref(),
+        scene.as_os_str(),
+        asset.as_os_str(),
+        "--lights".as_ref(),
+        rig.as_os_str(),
+        "-o".as_ref(),
+        out.as_os_str(),
+    ];
+    if !more.contains(&"--size") {
+        args.extend(["--size", "160x90"].map(std::ffi::OsStr::new));
+    }
+    args.extend(more.iter().map(|s| std::ffi::OsStr::new(*s)));
+    prt(&args, None)
+}
+
+/// `prt render` writes a PNG (and the EXR on request) for every view, and nothing else.
+#[test]
+fn render_writes_every_view() {
+    let dir = Scratch::new("render-ok");
+    let asset = bake_cornell(&dir);
+    for view in ["lit", "direct", "indirect", "albedo", "heatmap"] {
+        let png = dir.0.join(format!("{view}.png"));
+        let exr = dir.0.join(format!("{view}.exr"));
+        let o = render(
+            &cornell(),
+            &asset,
+            &cornell_rig(),
+            &png,
+            &["--view", view, "--exr", exr.to_str().unwrap()],
+        );
+        assert!(o.status.success(), "{view}: {}", text(&o.stderr));
+        let bytes = std::fs::read(&png).unwrap();
+        assert_eq!(&bytes[1..4], b"PNG", "{view}");
+        assert!(std::fs::metadata(&exr).unwrap().len() > 0);
+    }
+    let mut want: Vec<String> = ["lit", "direct", "indirect", "albedo", "heatmap"]
+        .iter()
+        .flat_map(|v| [format!("{v}.exr"), format!("{v}.png")])
+        .collect();
+    want.push("cornell.prt".into());
+    want.sort();
+    assert_eq!(dir.entries(), want);
+}
+
+/// Every bad render input gives one `error:` line naming the flag or file and the value, a
+/// non-zero exit, and no output file.
+#[test]
+fn render_bad_input_fails_cleanly() {
+    let dir = Scratch::new("render-bad");
+    let asset = bake_cornell(&dir);
+    let out = dir.0.join("out.png");
+    let many = fixture("rigs/cornell_256.json");
+    let other = fixture("lights.gltf");
+    let empty = fixture("empty.gltf");
+    let (scene, rig) = (cornell(), cornell_rig());
+    let cases: Vec<(&Path, &Path, Vec<&str>, Vec<&str>)> = vec![
+        (
+            &scene,
+            &rig,
+            vec!["--view", "shiny"],
+            vec!["--view", "shiny"],
+        ),
+        (&scene, &rig, vec!["--size", "0x90"], vec!["--size", "0x90"]),
+        (&scene, &rig, vec!["--size", "9000000x90"], vec!["9000000"]),
+        (&scene, &rig, vec!["--fov", "0"], vec!["--fov", "0"]),
+        (&scene, &rig, vec!["--fov", "180"], vec!["--fov", "180"]),
+        (
+            &scene,
+            &rig,
+            vec!["--eye", "1,1,1", "--target", "1,1,1"],
+            vec!["--eye", "--target"],
+        ),
+        (&scene, &rig, vec!["--tile", "8"], vec!["--tile", "8"]),
+        (&other, &rig, vec![], vec!["lights.gltf", "--force"]),
+        (&empty, &rig, vec!["--force"], vec!["no triangles"]),
+        (&scene, &many, vec!["--view", "lit"], vec!["257", "32"]),
+    ];
+    for (s, r, args, needles) in cases {
+        let o = render(s, &asset, r, &out, &args);
+        let stderr = text(&o.stderr);
+        assert!(!o.status.success(), "{args:?} succeeded");
+        let lines: Vec<&str> = stderr.lines().collect();
+        assert_eq!(
+            lines.len(),
+            1,
+            "{args:?}: stderr is not one line: {stderr:?}"
+        );
+        assert!(lines[0].starts_with("error:"), "{args:?}: {stderr:?}");
+        for n in needles {
+            assert!(lines[0].contains(n), "{args:?}: {n:?} not in {stderr:?}");
+        }
+        assert!(!out.exists(), "{args:?} left {}", out.display());
+        assert_eq!(dir.entries(), ["cornell.prt"], "{args:?}");
+    }
+    // The direct view takes the 257 lights (the GI's limit does not apply).
+    let o = render(&scene, &asset, &many, &out, &["--view", "direct"]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+}

@@ -13,9 +13,11 @@ pub mod lights;
 pub mod output;
 pub mod relight;
 pub mod rig;
+pub mod sample;
 pub mod sky;
 pub mod visibility;
 
 pub use relight::{CpuRelighter, RelightError, RelightStats, Relit};
 pub use rig::{load_rig, Lighting, RigLoadError};
+pub use sample::{Sample, VolumeSampler};
 pub use sky::SkyModel;

@@ -7,9 +7,9 @@ use prt_bake::BakeSettings;
 use prt_format::sh::ShRgb;
 use prt_format::{Asset, Light, LightKind, LightRig, Sky};
 use prt_runtime::gpu::{
-    headless_device, sh_from_texels, wgpu, PrtRuntime, RuntimeSettings, VolumeFormat,
+    headless_device, sample_points, sh_from_texels, wgpu, PrtRuntime, RuntimeSettings, VolumeFormat,
 };
-use prt_runtime::{load_rig, CpuRelighter, Lighting, SkyModel};
+use prt_runtime::{load_rig, CpuRelighter, Lighting, SkyModel, VolumeSampler};
 use prt_tests::{bake_ok as bake, fixture, shared};
 
 fn device() -> (wgpu::Device, wgpu::Queue) {
@@ -475,17 +475,21 @@ fn chunked_factor_tables_match_the_unsplit_result() {
 /// The engine-side snippet, run for real in a compute shader: at a probe's texel centre,
 /// `sample_irradiance` equals the CPU irradiance of that probe's SH (half-float rounding); between
 /// a valid probe and an invalid neighbour, hardware trilinear filtering over the
-/// validity-premultiplied texels gives the valid probe alone.
+/// validity-premultiplied texels gives the valid probe alone. No normal bias: the points are the
+/// texel centres themselves.
 #[test]
 fn sample_irradiance_snippet_matches_the_cpu() {
-    use prt_runtime::gpu::wgpu::util::DeviceExt;
     let (device, queue) = device();
     let asset = bake(
         &shared("reference/cornell/cornell.gltf"),
         &BakeSettings::default(),
     );
     let lighting = load_rig(&shared("reference/cornell/rig.json")).unwrap();
-    let mut runtime = PrtRuntime::new(&device, &queue, &asset, RuntimeSettings::default()).unwrap();
+    let settings = RuntimeSettings {
+        normal_bias: 0.0,
+        ..RuntimeSettings::default()
+    };
+    let mut runtime = PrtRuntime::new(&device, &queue, &asset, settings).unwrap();
     let sh = gpu_update(&device, &queue, &mut runtime, &lighting, None);
     let g = asset.header.grid;
     let normals = [
@@ -522,100 +526,17 @@ fn sample_irradiance_snippet_matches_the_cpu() {
         "the grid has a valid probe beside an invalid one"
     );
 
-    let wgsl = PrtRuntime::wgsl_snippet(1)
-        + "@group(0) @binding(0) var<storage, read> queries: array<vec4<f32>>;\n\
-           @group(0) @binding(1) var<storage, read_write> results: array<vec4<f32>>;\n\
-           @compute @workgroup_size(64) fn main(@builtin(global_invocation_id) id: vec3<u32>) {\n\
-               let i = id.x;\n\
-               if i >= arrayLength(&results) { return; }\n\
-               results[i] = vec4<f32>(sample_irradiance(queries[2u * i].xyz, queries[2u * i + 1u].xyz), 0.0);\n\
-           }\n";
-    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-        label: Some("sample_irradiance test"),
-        source: wgpu::ShaderSource::Wgsl(wgsl.into()),
-    });
-    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: None,
-        layout: None,
-        module: &module,
-        entry_point: Some("main"),
-        compilation_options: Default::default(),
-        cache: None,
-    });
-    let packed: Vec<[f32; 4]> = queries
-        .iter()
-        .flat_map(|(p, n, _)| [[p[0], p[1], p[2], 0.0], [n[0], n[1], n[2], 0.0]])
-        .collect();
-    let storage = |contents: &[u8], extra| {
-        device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: None,
-            contents,
-            usage: wgpu::BufferUsages::STORAGE | extra,
-        })
-    };
-    let query_buf = storage(bytemuck::cast_slice(&packed), wgpu::BufferUsages::empty());
-    let result_buf = storage(&vec![0u8; 16 * queries.len()], wgpu::BufferUsages::COPY_SRC);
-    let info = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: None,
-        contents: bytemuck::bytes_of(&runtime.volume_info()),
-        usage: wgpu::BufferUsages::UNIFORM,
-    });
-    let mut volume: Vec<wgpu::BindGroupEntry> = runtime
-        .volume_views()
-        .iter()
-        .enumerate()
-        .map(|(b, v)| wgpu::BindGroupEntry {
-            binding: b as u32,
-            resource: wgpu::BindingResource::TextureView(v),
-        })
-        .collect();
-    volume.push(wgpu::BindGroupEntry {
-        binding: 7,
-        resource: wgpu::BindingResource::Sampler(runtime.sampler()),
-    });
-    volume.push(wgpu::BindGroupEntry {
-        binding: 8,
-        resource: info.as_entire_binding(),
-    });
-    let io = [
-        wgpu::BindGroupEntry {
-            binding: 0,
-            resource: query_buf.as_entire_binding(),
-        },
-        wgpu::BindGroupEntry {
-            binding: 1,
-            resource: result_buf.as_entire_binding(),
-        },
-    ];
-    let groups = [&io[..], &volume[..]].map(|entries| {
-        device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: None,
-            layout: &pipeline.get_bind_group_layout(if entries.len() == 2 { 0 } else { 1 }),
-            entries,
-        })
-    });
-    let mut encoder = device.create_command_encoder(&Default::default());
-    {
-        let mut pass = encoder.begin_compute_pass(&Default::default());
-        pass.set_pipeline(&pipeline);
-        pass.set_bind_group(0, &groups[0], &[]);
-        pass.set_bind_group(1, &groups[1], &[]);
-        pass.dispatch_workgroups((queries.len() as u32).div_ceil(64), 1, 1);
-    }
-    queue.submit([encoder.finish()]);
-    let bytes =
-        prt_runtime::gpu::read_buffer(&device, &queue, &result_buf, 16 * queries.len() as u64)
-            .unwrap();
-    let results: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
+    let points: Vec<([f32; 3], [f32; 3])> = queries.iter().map(|q| (q.0, q.1)).collect();
+    let results = sample_points(&device, &queue, &runtime, &points).unwrap();
     let peak = queries
         .iter()
         .map(|q| q.2[0].max(q.2[1]).max(q.2[2]))
         .fold(0.0, f32::max);
-    for (q, r) in queries.iter().zip(results) {
+    for (q, r) in queries.iter().zip(&results) {
         for c in 0..3 {
             let tol = 4e-3 * q.2[c].abs() + 1e-4 * peak;
             assert!(
-                (r[c] - q.2[c]).abs() <= tol,
+                (r.irradiance[c] - q.2[c]).abs() <= tol,
                 "at {:?} n {:?}: gpu {r:?} cpu {:?}",
                 q.0,
                 q.1,
@@ -624,3 +545,123 @@ fn sample_irradiance_snippet_matches_the_cpu() {
         }
     }
 }
+
+/// Deterministic sample points inside `g` (an R3 low-discrepancy sequence) with Fibonacci-lattice
+/// normals, plus, for every valid probe with an invalid +x, +y or +z neighbour, points a quarter,
+/// half and three quarters of the way to it.
+fn sample_queries(asset: &Asset, count: usize) -> Vec<([f32; 3], [f32; 3])> {
+    let g = asset.header.grid;
+    let extent: [f32; 3] = std::array::from_fn(|a| (g.counts[a] - 1) as f32 * g.spacing);
+    // R3 sequence: fractional parts of i * (1/phi3, 1/phi3^2, 1/phi3^3).
+    let phi3 = 1.220_744_1_f64;
+    let alpha = [1.0 / phi3, 1.0 / (phi3 * phi3), 1.0 / (phi3 * phi3 * phi3)];
+    let normal = |i: usize| {
+        let d = prt_format::directions::fibonacci_direction(i as u32 % 97, 97);
+        [d[0], d[1], d[2]]
+    };
+    let mut out: Vec<([f32; 3], [f32; 3])> = (0..count)
+        .map(|i| {
+            let p = std::array::from_fn(|a| {
+                let t = (0.5 + alpha[a] * i as f64).fract() as f32;
+                g.origin[a] + t * extent[a]
+            });
+            (p, normal(i))
+        })
+        .collect();
+    for k in 0..g.counts[2] {
+        for j in 0..g.counts[1] {
+            for i in 0..g.counts[0] {
+                if !asset.probes[g.index(i, j, k)].is_valid() {
+                    continue;
+                }
+                let here = g.position(i, j, k);
+                for (a, next) in [(0, [i + 1, j, k]), (1, [i, j + 1, k]), (2, [i, j, k + 1])] {
+                    if next[a] >= g.counts[a]
+                        || asset.probes[g.index(next[0], next[1], next[2])].is_valid()
+                    {
+                        continue;
+                    }
+                    for f in [0.25, 0.5, 0.75] {
+                        let mut p = here;
+                        p[a] += f * g.spacing;
+                        let n = out.len();
+                        out.push((p, normal(n)));
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+/// `sample_points` (the real snippet on the GPU, default normal bias) equals the CPU
+/// `VolumeSampler` over the same probe SH at a few hundred points of the Cornell reference bake,
+/// including points between valid and invalid probes. The volume is half-float (relative
+/// rounding 2^-11 per texel) and the filter weights are the hardware's, so the tolerance is
+/// relative to the point's brightness: see the constants.
+#[test]
+fn sample_points_matches_the_cpu_sampler() {
+    let (device, queue) = device();
+    let asset = bake(
+        &shared("reference/cornell/cornell.gltf"),
+        &BakeSettings::default(),
+    );
+    let lighting = load_rig(&shared("reference/cornell/rig.json")).unwrap();
+    let settings = RuntimeSettings::default();
+    let mut runtime = PrtRuntime::new(&device, &queue, &asset, settings).unwrap();
+    let sh = gpu_update(&device, &queue, &mut runtime, &lighting, None);
+    let g = asset.header.grid;
+    let cpu = VolumeSampler::new(&g, &asset.probes, &sh, settings.normal_bias * g.spacing);
+    let points = sample_queries(&asset, 384);
+    let mixed = points.len() - 384;
+    assert!(mixed > 0, "no point beside an invalid probe");
+    let gpu = sample_points(&device, &queue, &runtime, &points).unwrap();
+    assert_eq!(gpu.len(), points.len());
+    let (mut worst_sh, mut worst_e, mut worst_v) = (0.0f32, 0.0f32, 0.0f32);
+    for (i, ((p, n), gs)) in points.iter().zip(&gpu).enumerate() {
+        let cs = cpu.sample(*p, *n);
+        let dv = (gs.validity - cs.validity).abs();
+        worst_v = worst_v.max(dv);
+        assert!(
+            dv <= VALIDITY_TOL,
+            "point {i} at {p:?}: validity gpu {} cpu {}",
+            gs.validity,
+            cs.validity
+        );
+        if cs.validity < 1e-3 {
+            continue;
+        }
+        // Scale: the DC term's share of irradiance (the mean E over all normals).
+        let scale = cs.sh[0].iter().fold(0.0f32, |m, v| m.max(v.abs()));
+        for k in 0..9 {
+            for ch in 0..3 {
+                let d = (gs.sh[k][ch] - cs.sh[k][ch]).abs() / scale;
+                worst_sh = worst_sh.max(d);
+                assert!(
+                    d <= SH_TOL,
+                    "point {i} at {p:?} k {k} ch {ch}: gpu {gs:?} cpu {cs:?}"
+                );
+            }
+        }
+        let e_scale = std::f32::consts::PI * prt_format::sh::Y00 * scale;
+        for ch in 0..3 {
+            let d = (gs.irradiance[ch] - cs.irradiance[ch]).abs() / e_scale;
+            worst_e = worst_e.max(d);
+            assert!(
+                d <= SH_TOL,
+                "point {i} at {p:?} ch {ch}: gpu {gs:?} cpu {cs:?}"
+            );
+        }
+    }
+    eprintln!(
+        "{} points ({mixed} beside invalid probes): worst |dSH|/SH0 {worst_sh:.2e}, |dE|/E0 {worst_e:.2e}, |dvalidity| {worst_v:.2e}",
+        points.len()
+    );
+}
+
+/// Tolerances of `sample_points_matches_the_cpu_sampler`, relative to the sample's SH0 (for E: to
+/// pi Y00 SH0, the mean irradiance): half-float texels round each coefficient to 2^-11 of its
+/// magnitude, and the renormalised L1/L2 terms can be a few times SH0's size.
+const SH_TOL: f32 = 4e-3;
+/// Hardware filter weights: 8-bit fixed-point fractions on most GPUs (1/256 of a texel).
+const VALIDITY_TOL: f32 = 1.0 / 256.0;

@@ -137,7 +137,7 @@ pub struct Params {
 const _: () = assert!(std::mem::size_of::<Params>() == 96);
 
 /// The uniform of the engine-side sampling snippet (`PrtVolumeInfo` in
-/// `shaders/sample_irradiance.wgsl`): the grid the volume covers.
+/// `shaders/sample_irradiance.wgsl`): the grid the volume covers and the sampling bias.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 #[repr(C)]
 pub struct VolumeInfo {
@@ -145,7 +145,8 @@ pub struct VolumeInfo {
     pub spacing: f32,
     /// Probe counts along x, y, z, as floats.
     pub counts: [f32; 3],
-    pub _pad: f32,
+    /// Metres along the normal the snippet moves a point before sampling (`prt_sample_sh`).
+    pub normal_bias: f32,
 }
 const _: () = assert!(std::mem::size_of::<VolumeInfo>() == 32);
 
@@ -155,7 +156,7 @@ impl From<&prt_format::Grid> for VolumeInfo {
             origin: g.origin,
             spacing: g.spacing,
             counts: g.counts.map(|c| c as f32),
-            _pad: 0.0,
+            normal_bias: 0.0,
         }
     }
 }

@@ -21,9 +21,11 @@
 //! always hold one complete gather, and a cycle of `ceil(P / B)` updates converges exactly to the
 //! full update. Only the one-bounce contract runs on the GPU (bounces are CPU-only for now).
 
+pub use sample::sample_points;
 pub use wgpu;
 
 pub mod layout;
+pub mod sample;
 pub mod shaders;
 
 use prt_format::sh::{ShRgb, SH_COUNT};
@@ -86,7 +88,7 @@ impl VolumeFormat {
 }
 
 /// Runtime options.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RuntimeSettings {
     pub volume_format: VolumeFormat,
     /// Also build the benchmark baselines (the integer-atomic gather and its 108 bytes per
@@ -96,6 +98,26 @@ pub struct RuntimeSettings {
     /// device's storage binding limit). Lower values trade one extra mark and gather dispatch
     /// per chunk for smaller buffers.
     pub max_factor_chunk_bytes: Option<u64>,
+    /// How far the sampling snippet moves a point along its normal before sampling, in probe
+    /// spacings (relative to the scene, so one value suits every grid; [`PrtRuntime::volume_info`]
+    /// turns it into metres). Probes just behind a surface see its back faces: they are invalid
+    /// or dark, and a point sampled on the surface still gives them trilinear weight
+    /// (self-shadowing, and light leaking through thin walls from probes on the other side).
+    /// A larger bias weights the probes in front of the surface more, at the price of sampling
+    /// the lighting off the surface (contact detail blurs, and a bias beyond the wall's distance
+    /// to the next probe can reach past nearby geometry). 0 samples exactly at the point.
+    pub normal_bias: f32,
+}
+
+impl Default for RuntimeSettings {
+    fn default() -> Self {
+        RuntimeSettings {
+            volume_format: VolumeFormat::default(),
+            benchmark_baselines: false,
+            max_factor_chunk_bytes: None,
+            normal_bias: 0.1,
+        }
+    }
 }
 
 /// What one `update` recorded.
@@ -867,10 +889,14 @@ impl PrtRuntime {
 
     /// The contents of the sampling snippet's `PrtVolumeInfo` uniform (binding 8 of its group).
     pub fn volume_info(&self) -> VolumeInfo {
-        VolumeInfo::from(&self.grid)
+        VolumeInfo {
+            normal_bias: self.settings.normal_bias * self.grid.spacing,
+            ..VolumeInfo::from(&self.grid)
+        }
     }
 
-    /// WGSL defining `sample_irradiance(world_pos, normal)` with its bindings at `group`.
+    /// WGSL defining `sample_irradiance(world_pos, normal)` and `prt_sample_sh(world_pos,
+    /// normal)` with their bindings at `group`.
     pub fn wgsl_snippet(group: u32) -> String {
         shaders::sample_irradiance_snippet(group)
     }

@@ -99,6 +99,22 @@ pub fn source(stage: Stage, config: &ShaderConfig) -> String {
     s.replace("VOLUME_FORMAT", config.volume_format)
 }
 
+/// The shared types, the light model (`light_sample`) and the any-hit shadow-ray traversal
+/// (`occluded`, `ray_offset`), for shaders outside this crate: the Forward+ renderer shades
+/// pixels with exactly the functions that relight surfels. `occluded` reads `bvh_nodes` and
+/// `triangles` at bind group 1, bindings 0 and 1.
+pub fn light_model_source() -> String {
+    let config = ShaderConfig {
+        factors: prt_format::TransferPrecision::U8,
+        volume_format: "rgba16float",
+        subgroups: false,
+    };
+    let mut s = prelude(&config);
+    s.push_str(TYPES);
+    s.push_str(VISIBILITY);
+    s
+}
+
 /// The engine-side snippet defining `sample_irradiance(world_pos, normal)`, its bindings at
 /// bind group `group` (see `shaders/sample_irradiance.wgsl`).
 pub fn sample_irradiance_snippet(group: u32) -> String {
@@ -273,6 +289,7 @@ mod tests {
                 vec![
                     ("spacing", offset_of!(layout::VolumeInfo, spacing)),
                     ("counts", offset_of!(layout::VolumeInfo, counts)),
+                    ("normal_bias", offset_of!(layout::VolumeInfo, normal_bias)),
                 ],
             ),
             (

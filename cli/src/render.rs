@@ -1,0 +1,198 @@
+//! `prt render` (conventions.md section 6): options to a [`prt_render::job::RenderJob`].
+
+use std::path::PathBuf;
+
+use anyhow::{bail, Context, Result};
+use clap::ValueEnum;
+use glam::Vec3;
+use prt_render::job::{Output, RenderJob};
+use prt_render::{Camera, Culling, RenderSettings};
+use prt_runtime::gpu::RuntimeSettings;
+
+#[derive(Clone, Copy, ValueEnum)]
+pub enum ViewArg {
+    /// Direct + indirect.
+    Lit,
+    /// Emission and direct light, shadowed.
+    Direct,
+    /// Indirect diffuse from the probe volume.
+    Indirect,
+    Albedo,
+    /// Lights per tile, with a legend.
+    Heatmap,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+pub enum CullingArg {
+    /// Per-tile light lists (Forward+).
+    Tiled,
+    /// Every light at every pixel (the reference).
+    None,
+}
+
+#[derive(clap::Args)]
+pub struct RenderArgs {
+    /// The scene the asset was baked from (.gltf or .glb).
+    scene: PathBuf,
+    /// The baked asset (.prt).
+    asset: PathBuf,
+    /// Light rig JSON [default: the scene's KHR_lights_punctual lights, black sky].
+    #[arg(long)]
+    lights: Option<PathBuf>,
+    /// Output PNG (tone-mapped with Khronos PBR Neutral, sRGB), written atomically.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Also write linear radiance (before exposure and tone mapping) as OpenEXR.
+    #[arg(long)]
+    exr: Option<PathBuf>,
+    /// Camera position X,Y,Z [default: the glTF's first camera, else a view of the whole scene].
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    eye: Option<Vec3>,
+    /// Point the camera looks at X,Y,Z (with --eye).
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    target: Option<Vec3>,
+    /// Vertical field of view in degrees [default: the glTF camera's, else 50].
+    #[arg(long, allow_hyphen_values = true)]
+    fov: Option<f32>,
+    /// Image size WxH.
+    #[arg(long, value_parser = parse_size, default_value = "1280x720")]
+    size: (u32, u32),
+    #[arg(long, value_enum, default_value = "lit")]
+    view: ViewArg,
+    /// Exposure in EV (the image is scaled by 2^EV before tone mapping).
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    exposure: f32,
+    #[arg(long, value_enum, default_value = "tiled")]
+    culling: CullingArg,
+    /// Tile side in pixels (16 to 256).
+    #[arg(long, default_value_t = 16)]
+    tile: u32,
+    /// Most lights listed per tile (more are dropped and reported).
+    #[arg(long, default_value_t = 512)]
+    max_lights_per_tile: u32,
+    /// Direct light without shadow rays (to measure their cost).
+    #[arg(long)]
+    no_shadows: bool,
+    /// Light bounces of the GI (the GPU runtime computes 1).
+    #[arg(long, default_value_t = 1)]
+    bounces: u32,
+    /// Move indirect lookups this many probe spacings along the surface normal [default: the
+    /// runtime's].
+    #[arg(long, allow_hyphen_values = true)]
+    normal_bias: Option<f32>,
+    /// Render even if the asset was baked from another scene file.
+    #[arg(long)]
+    force: bool,
+}
+
+/// Parses `X,Y,Z`.
+pub fn parse_vec3(s: &str) -> Result<Vec3, String> {
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|t| t.trim().parse::<f32>().map_err(|e| format!("{t:?}: {e}")))
+        .collect::<Result<_, _>>()?;
+    match v[..] {
+        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok(Vec3::new(x, y, z)),
+        [_, _, _] => Err("coordinates must be finite".into()),
+        _ => Err(format!("expected X,Y,Z, got {} numbers", v.len())),
+    }
+}
+
+/// Parses `WxH`.
+pub fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("expected WxH, got {s:?}"))?;
+    let parse = |t: &str| t.trim().parse::<u32>().map_err(|e| format!("{t:?}: {e}"));
+    Ok((parse(w)?, parse(h)?))
+}
+
+pub fn run(args: RenderArgs) -> Result<()> {
+    if args.bounces != 1 {
+        bail!(
+            "--bounces {}: the GPU runtime that lights `prt render` computes one bounce (use `prt relight --backend cpu --bounces N` for more)",
+            args.bounces
+        );
+    }
+    let camera = match (args.eye, args.target) {
+        (Some(eye), Some(target)) => Some(Camera {
+            eye,
+            target,
+            up: Vec3::Y,
+            fov_degrees: args.fov.unwrap_or(50.0),
+        }),
+        (None, None) => None,
+        _ => bail!("--eye and --target go together"),
+    };
+    let mut runtime = RuntimeSettings::default();
+    if let Some(bias) = args.normal_bias {
+        if !bias.is_finite() || bias < 0.0 {
+            bail!("--normal-bias {bias}: expected a finite number of probe spacings >= 0");
+        }
+        runtime.normal_bias = bias;
+    }
+    let job = RenderJob {
+        scene: args.scene,
+        asset: args.asset,
+        lights: args.lights,
+        png: args.output,
+        exr: args.exr,
+        camera,
+        fov: args.fov,
+        output: match args.view {
+            ViewArg::Lit => Output::Lit,
+            ViewArg::Direct => Output::Direct,
+            ViewArg::Indirect => Output::Indirect,
+            ViewArg::Albedo => Output::Albedo,
+            ViewArg::Heatmap => Output::Heatmap,
+        },
+        exposure_ev: args.exposure,
+        settings: RenderSettings {
+            width: args.size.0,
+            height: args.size.1,
+            tile: args.tile,
+            max_lights_per_tile: args.max_lights_per_tile,
+            culling: match args.culling {
+                CullingArg::Tiled => Culling::Tiled,
+                CullingArg::None => Culling::None,
+            },
+            shadows: !args.no_shadows,
+        },
+        runtime,
+        force: args.force,
+    };
+    if !args.exposure.is_finite() {
+        bail!("--exposure {}: expected a finite EV", args.exposure);
+    }
+    let asset = prt_format::read_asset(&job.asset)
+        .with_context(|| format!("loading {}", job.asset.display()))?;
+    let lighting = crate::lighting_of(job.lights.as_deref(), &asset)?;
+    let report = prt_render::job::run(&job, &lighting, &asset)?;
+    eprintln!("adapter: {}", report.adapter);
+    let c = report.camera;
+    println!(
+        "camera           eye {:.3},{:.3},{:.3} target {:.3},{:.3},{:.3} fov {:.1}",
+        c.eye.x, c.eye.y, c.eye.z, c.target.x, c.target.y, c.target.z, c.fov_degrees
+    );
+    println!(
+        "lights           {} in the rig; {:.2} evaluated per shaded pixel ({} pixels)",
+        lighting.rig.lights.len(),
+        report.lights_per_pixel,
+        report.shaded_pixels
+    );
+    if report.stats.overflow_tiles > 0 {
+        eprintln!(
+            "warning: {} tiles had more than {} lights: {} light entries dropped (raise --max-lights-per-tile or lower --tile)",
+            report.stats.overflow_tiles, job.settings.max_lights_per_tile, report.stats.dropped
+        );
+    }
+    println!(
+        "time             gi {:.3} s | render {:.3} s",
+        report.gi_seconds, report.render_seconds
+    );
+    println!("wrote            {}", job.png.display());
+    if let Some(exr) = &job.exr {
+        println!("wrote            {}", exr.display());
+    }
+    Ok(())
+}

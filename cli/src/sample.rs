@@ -1,0 +1,191 @@
+//! `prt sample` (conventions.md section 6): relights an asset once and returns, at given surface
+//! points, what the engine-side `sample_irradiance` returns there (SH, irradiance, validity), on
+//! the CPU twin (`VolumeSampler`) or the real snippet on the GPU (`sample_points`).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use prt_format::sh::ShRgb;
+use prt_runtime::gpu::{PrtRuntime, RuntimeSettings};
+use prt_runtime::{Sample, VolumeSampler};
+use serde_json::{json, Value};
+
+use crate::Backend;
+
+#[derive(clap::Args)]
+pub struct SampleArgs {
+    asset: PathBuf,
+    /// Light rig JSON.
+    #[arg(long)]
+    lights: PathBuf,
+    /// `{"points": [{"position": [x,y,z], "normal": [x,y,z]}, ...]}` (normals are normalised).
+    #[arg(long)]
+    points: PathBuf,
+    /// Output JSON, written atomically: `{"samples": [...]}` in input order.
+    #[arg(long)]
+    json: PathBuf,
+    #[arg(long, value_enum, default_value = "cpu")]
+    backend: Backend,
+    /// Move each point this many probe spacings along its normal before sampling [default: the
+    /// runtime's, 0.1].
+    #[arg(long, allow_hyphen_values = true)]
+    normal_bias: Option<f32>,
+}
+
+/// A surface point: position and unit normal.
+type Point = ([f32; 3], [f32; 3]);
+
+pub fn run(args: SampleArgs) -> Result<()> {
+    let normal_bias = args
+        .normal_bias
+        .unwrap_or(RuntimeSettings::default().normal_bias);
+    if !normal_bias.is_finite() || normal_bias < 0.0 {
+        bail!("--normal-bias {normal_bias}: expected a finite number of probe spacings >= 0");
+    }
+    let points = read_points(&args.points)?;
+    let asset = prt_format::read_asset(&args.asset)
+        .with_context(|| format!("loading {}", args.asset.display()))?;
+    let lighting = prt_runtime::load_rig(&args.lights)?;
+    let start = std::time::Instant::now();
+    let (samples, name) = match args.backend {
+        Backend::Cpu => {
+            let sh = prt_runtime::CpuRelighter::new(&asset)?
+                .relight(&lighting, 1)?
+                .sh;
+            (sample_cpu(&asset, &sh, normal_bias, &points), "cpu")
+        }
+        Backend::Gpu => (sample_gpu(&asset, &lighting, normal_bias, &points)?, "gpu"),
+    };
+    let seconds = start.elapsed().as_secs_f64();
+    let doc = samples_json(&points, &samples, name, normal_bias, &asset);
+    let text = serde_json::to_vec(&doc)?;
+    prt_format::io::write_bytes_atomic(&args.json, &text)
+        .with_context(|| format!("writing {}", args.json.display()))?;
+    println!(
+        "sampled {} points ({name}, normal bias {normal_bias} spacings) in {seconds:.3} s",
+        samples.len()
+    );
+    println!("wrote {}", args.json.display());
+    Ok(())
+}
+
+/// The CPU twin of the snippet over the CPU relight's SH.
+fn sample_cpu(
+    asset: &prt_format::Asset,
+    sh: &[ShRgb],
+    normal_bias: f32,
+    points: &[Point],
+) -> Vec<Sample> {
+    let g = asset.header.grid;
+    let sampler = VolumeSampler::new(&g, &asset.probes, sh, normal_bias * g.spacing);
+    points.iter().map(|(p, n)| sampler.sample(*p, *n)).collect()
+}
+
+/// One full GPU update, then the real snippet at every point.
+fn sample_gpu(
+    asset: &prt_format::Asset,
+    lighting: &prt_runtime::Lighting,
+    normal_bias: f32,
+    points: &[Point],
+) -> Result<Vec<Sample>> {
+    let (device, queue, info) = prt_runtime::gpu::headless_device()?;
+    eprintln!("adapter: {} ({:?})", info.name, info.backend);
+    let settings = RuntimeSettings {
+        normal_bias,
+        ..RuntimeSettings::default()
+    };
+    let mut runtime = PrtRuntime::new(&device, &queue, asset, settings)?;
+    let mut encoder = device.create_command_encoder(&Default::default());
+    runtime.update(&mut encoder, lighting, None)?;
+    queue.submit([encoder.finish()]);
+    Ok(prt_runtime::gpu::sample_points(
+        &device, &queue, &runtime, points,
+    )?)
+}
+
+/// The output document of conventions.md section 6 (plus the backend and the bias used).
+fn samples_json(
+    points: &[Point],
+    samples: &[Sample],
+    backend: &str,
+    normal_bias: f32,
+    asset: &prt_format::Asset,
+) -> Value {
+    let samples: Vec<Value> = points
+        .iter()
+        .zip(samples)
+        .map(|((p, n), s)| {
+            json!({
+                "position": p,
+                "normal": n,
+                "irradiance": s.irradiance,
+                "sh": s.sh,
+                "validity": s.validity,
+            })
+        })
+        .collect();
+    json!({
+        "backend": backend,
+        "normal_bias": normal_bias,
+        "normal_bias_metres": normal_bias * asset.header.grid.spacing,
+        "samples": samples,
+    })
+}
+
+/// Reads and checks the points file; every error names the file, and the point and value at
+/// fault.
+fn read_points(path: &Path) -> Result<Vec<Point>> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let doc: Value = serde_json::from_str(&text)
+        .with_context(|| format!("{}: not valid JSON", path.display()))?;
+    let Some(list) = doc.get("points").and_then(Value::as_array) else {
+        bail!(
+            "{}: expected {{\"points\": [{{\"position\": [x,y,z], \"normal\": [x,y,z]}}, ...]}}",
+            path.display()
+        );
+    };
+    list.iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let field = |name: &str| {
+                vec3(p.get(name)).with_context(|| {
+                    format!(
+                        "{}: point {i}: \"{name}\" is {}, expected [x, y, z] of finite 32-bit floats",
+                        path.display(),
+                        p.get(name).map_or("missing".to_string(), Value::to_string)
+                    )
+                })
+            };
+            let position = field("position")?;
+            let normal = field("normal")?;
+            // Scaled by the largest component first: no overflow or underflow on the way.
+            let big = normal.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+            if big == 0.0 {
+                bail!(
+                    "{}: point {i}: \"normal\" {normal:?} has zero length",
+                    path.display()
+                );
+            }
+            let scaled = normal.map(|v| v / big);
+            let len = scaled.iter().map(|v| v * v).sum::<f32>().sqrt();
+            Ok((position, scaled.map(|v| v / len)))
+        })
+        .collect()
+}
+
+/// Three finite f32s, or `None`.
+fn vec3(v: Option<&Value>) -> Option<[f32; 3]> {
+    let a = v?.as_array()?;
+    if a.len() != 3 {
+        return None;
+    }
+    let mut out = [0.0f32; 3];
+    for (o, x) in out.iter_mut().zip(a) {
+        *o = x.as_f64()? as f32;
+        if !o.is_finite() {
+            return None;
+        }
+    }
+    Some(out)
+}

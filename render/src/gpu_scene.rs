@@ -1,0 +1,206 @@
+//! The scene on the GPU: the bake's own loader output (same triangles, materials, textures) as a
+//! flat-shaded triangle list, materials and texels in storage buffers (so that the shading pass
+//! samples textures exactly as the bake's `texture::sample` does), and the asset's BVH for
+//! shadow rays.
+//!
+//! Single-sided triangles come first and are drawn with back-face culling; double-sided ones
+//! follow and are drawn without it (glTF 2.0 spec 3.9.5, conventions.md section 4).
+
+use glam::Vec3;
+use gltf::texture::WrappingMode;
+use prt_bake::scene::Scene;
+use prt_bake::texture::TextureRef;
+use prt_format::Asset;
+use wgpu::util::DeviceExt;
+
+use crate::layout::*;
+use crate::RenderError;
+
+/// The uploaded scene.
+pub struct GpuScene {
+    pub vertices: wgpu::Buffer,
+    /// Vertices of single-sided triangles (drawn culled); the rest are double-sided.
+    pub single_sided_vertices: u32,
+    pub vertex_count: u32,
+    pub materials: wgpu::Buffer,
+    pub images: wgpu::Buffer,
+    pub texels: wgpu::Buffer,
+    pub bvh_nodes: wgpu::Buffer,
+    pub bvh_triangles: wgpu::Buffer,
+    /// World bounds of the triangles.
+    pub bounds: (Vec3, Vec3),
+}
+
+fn wrap_code(w: WrappingMode) -> u32 {
+    match w {
+        WrappingMode::Repeat => WRAP_REPEAT,
+        WrappingMode::ClampToEdge => WRAP_CLAMP,
+        WrappingMode::MirroredRepeat => WRAP_MIRROR,
+    }
+}
+
+fn sampler_bits(t: &TextureRef) -> u32 {
+    wrap_code(t.wrap_s)
+        | (wrap_code(t.wrap_t) << 2)
+        | if t.nearest { SAMPLER_NEAREST } else { 0 }
+        | if t.tex_coord >= 1 { SAMPLER_UV1 } else { 0 }
+}
+
+/// Vertices in draw order (single-sided first) and how many are single-sided.
+fn vertices(scene: &Scene, double_sided_override: bool) -> (Vec<Vertex>, u32) {
+    let mut single = Vec::new();
+    let mut double = Vec::new();
+    for (t, tri) in scene.triangles.iter().enumerate() {
+        let material = scene.materials_of_triangles[t];
+        let two = double_sided_override || scene.materials[material as usize].double_sided;
+        let normal = (tri[1] - tri[0]).cross(tri[2] - tri[0]).normalize_or_zero();
+        let attr = scene.attributes.get(t).copied().unwrap_or_default();
+        let out = if two { &mut double } else { &mut single };
+        for (k, corner) in tri.iter().enumerate() {
+            out.push(Vertex {
+                position: corner.to_array(),
+                material,
+                normal: normal.to_array(),
+                _pad: 0,
+                uv0: attr.uv[0][k].to_array(),
+                uv1: attr.uv[1][k].to_array(),
+                color: attr.color[k].to_array(),
+            });
+        }
+    }
+    let n = single.len() as u32;
+    single.extend(double);
+    (single, n)
+}
+
+impl GpuScene {
+    /// Uploads `scene` (loaded from the file `asset` was baked from) and the asset's BVH.
+    pub fn new(
+        device: &wgpu::Device,
+        scene: &Scene,
+        asset: &Asset,
+    ) -> Result<GpuScene, RenderError> {
+        let bounds = scene.bounds().ok_or(RenderError::NoTriangles)?;
+        if scene.attributes.len() != scene.triangles.len() && !scene.attributes.is_empty() {
+            return Err(RenderError::Scene(format!(
+                "{} triangles but {} attribute records",
+                scene.triangles.len(),
+                scene.attributes.len()
+            )));
+        }
+        let needed = asset.geometry.stack_needed();
+        if needed > prt_runtime::visibility::MAX_STACK || asset.geometry.nodes.is_empty() {
+            return Err(RenderError::Scene(format!(
+                "the asset's BVH needs a traversal stack of {needed} entries (at most {}) and at least one node",
+                prt_runtime::visibility::MAX_STACK
+            )));
+        }
+        let (verts, single) = vertices(scene, asset.header.settings.double_sided_override);
+        let limits = device.limits();
+        let max_binding = limits.max_storage_buffer_binding_size;
+        let max_buffer = limits.max_buffer_size;
+
+        let mut images = Vec::with_capacity(scene.images.len().max(1));
+        let mut texels: Vec<u32> = Vec::new();
+        for img in &scene.images {
+            images.push(ImageInfo {
+                offset: texels.len() as u32,
+                width: img.width,
+                height: img.height,
+                _pad: 0,
+            });
+            texels.extend(img.texels.iter().map(|t| u32::from_le_bytes(*t)));
+        }
+        let materials: Vec<GpuMaterial> = scene
+            .materials
+            .iter()
+            .map(|m| {
+                let (base_image, base_sampler) = m
+                    .base_texture
+                    .as_ref()
+                    .map_or((NO_IMAGE, 0), |t| (t.image as u32, sampler_bits(t)));
+                let (emissive_image, emissive_sampler) = m
+                    .emissive_texture
+                    .as_ref()
+                    .map_or((NO_IMAGE, 0), |t| (t.image as u32, sampler_bits(t)));
+                GpuMaterial {
+                    base_color: m.base_color,
+                    flags: u32::from(m.double_sided),
+                    emissive: m.emissive,
+                    base_image,
+                    base_sampler,
+                    emissive_image,
+                    emissive_sampler,
+                    _pad: 0,
+                }
+            })
+            .collect();
+
+        let create = |label: &'static str, bytes: &[u8], usage: wgpu::BufferUsages, limit: u64| {
+            // Never bind an empty buffer: keep one zeroed element.
+            let padded;
+            let contents = if bytes.is_empty() {
+                padded = vec![0u8; 64];
+                &padded[..]
+            } else {
+                bytes
+            };
+            if contents.len() as u64 > limit {
+                return Err(RenderError::Limit {
+                    what: label,
+                    needed: contents.len() as u64,
+                    limit,
+                });
+            }
+            Ok(
+                device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some(label),
+                    contents,
+                    usage,
+                }),
+            )
+        };
+        let storage = wgpu::BufferUsages::STORAGE;
+        Ok(GpuScene {
+            vertices: create(
+                "prt-render vertices",
+                bytemuck::cast_slice(&verts),
+                wgpu::BufferUsages::VERTEX,
+                max_buffer,
+            )?,
+            single_sided_vertices: single,
+            vertex_count: verts.len() as u32,
+            materials: create(
+                "prt-render materials",
+                bytemuck::cast_slice(&materials),
+                storage,
+                max_binding,
+            )?,
+            images: create(
+                "prt-render images",
+                bytemuck::cast_slice(&images),
+                storage,
+                max_binding,
+            )?,
+            texels: create(
+                "prt-render texels",
+                bytemuck::cast_slice(&texels),
+                storage,
+                max_binding,
+            )?,
+            bvh_nodes: create(
+                "prt-render bvh nodes",
+                bytemuck::cast_slice(&asset.geometry.nodes),
+                storage,
+                max_binding,
+            )?,
+            bvh_triangles: create(
+                "prt-render bvh triangles",
+                bytemuck::cast_slice(&asset.geometry.triangles),
+                storage,
+                max_binding,
+            )?,
+            bounds,
+        })
+    }
+}

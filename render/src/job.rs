@@ -1,0 +1,187 @@
+//! What `prt render` does, as a library call: check that the asset was baked from the scene,
+//! relight the GI volume when the view needs it, render one frame and write the PNG (and EXR).
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use prt_format::Asset;
+use prt_runtime::gpu::{PrtRuntime, RuntimeSettings};
+use prt_runtime::Lighting;
+
+use crate::image::{self, Heatmap};
+use crate::{Camera, CullStats, RenderError, RenderSettings, Renderer, View};
+
+/// The image a job writes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Output {
+    #[default]
+    Lit,
+    Direct,
+    Indirect,
+    Albedo,
+    /// Lights per tile over the albedo, with a legend.
+    Heatmap,
+}
+
+impl Output {
+    /// The shading pass's view for this output.
+    pub fn view(self) -> View {
+        match self {
+            Output::Lit => View::Lit,
+            Output::Direct => View::Direct,
+            Output::Indirect => View::Indirect,
+            Output::Albedo | Output::Heatmap => View::Albedo,
+        }
+    }
+
+    fn needs_gi(self) -> bool {
+        matches!(self, Output::Lit | Output::Indirect)
+    }
+}
+
+/// One render.
+#[derive(Clone, Debug)]
+pub struct RenderJob {
+    pub scene: PathBuf,
+    pub asset: PathBuf,
+    /// Light rig JSON; none: the scene's KHR_lights_punctual lights and a black sky.
+    pub lights: Option<PathBuf>,
+    pub png: PathBuf,
+    pub exr: Option<PathBuf>,
+    /// None: the glTF's first camera, else a framing of the whole scene.
+    pub camera: Option<Camera>,
+    /// Overrides the camera's vertical field of view (degrees).
+    pub fov: Option<f32>,
+    pub output: Output,
+    pub exposure_ev: f32,
+    pub settings: RenderSettings,
+    /// The runtime's settings for the GI volume (its normal offset among them).
+    pub runtime: RuntimeSettings,
+    /// Render even if the asset was baked from another file.
+    pub force: bool,
+}
+
+/// What a job did.
+#[derive(Clone, Debug)]
+pub struct RenderReport {
+    pub adapter: String,
+    pub camera: Camera,
+    pub stats: CullStats,
+    /// Mean lights evaluated per shaded pixel.
+    pub lights_per_pixel: f64,
+    pub shaded_pixels: u64,
+    pub gi_seconds: f64,
+    pub render_seconds: f64,
+}
+
+/// Fails unless `scene_bytes` are the bytes `asset` was baked from.
+pub fn check_source(
+    scene: &Path,
+    scene_bytes: &[u8],
+    asset_path: &Path,
+    asset: &Asset,
+) -> Result<(), RenderError> {
+    let hash = xxhash_rust::xxh3::xxh3_64(scene_bytes);
+    if hash != asset.header.source_hash {
+        return Err(RenderError::Scene(format!(
+            "{} (xxh3 {hash:016x}) is not the file {} was baked from ({}, xxh3 {:016x}); pass --force to render anyway",
+            scene.display(),
+            asset_path.display(),
+            asset.header.source_name,
+            asset.header.source_hash
+        )));
+    }
+    Ok(())
+}
+
+/// Runs the job.
+pub fn run(
+    job: &RenderJob,
+    lighting: &Lighting,
+    asset: &Asset,
+) -> Result<RenderReport, RenderError> {
+    let scene_bytes = std::fs::read(&job.scene)
+        .map_err(|e| RenderError::Scene(format!("reading {}: {e}", job.scene.display())))?;
+    if !job.force {
+        check_source(&job.scene, &scene_bytes, &job.asset, asset)?;
+    }
+    let scene = prt_bake::scene::load(&job.scene).map_err(|e| RenderError::Scene(e.to_string()))?;
+    let mut camera = match (&job.camera, scene.cameras.first()) {
+        (Some(c), _) => *c,
+        (None, Some(c)) => Camera::from_gltf(c),
+        (None, None) => {
+            let (lo, hi) = scene.bounds().ok_or(RenderError::NoTriangles)?;
+            Camera::framing(lo, hi)
+        }
+    };
+    if let Some(fov) = job.fov {
+        camera.fov_degrees = fov;
+    }
+    camera.validate()?;
+    let max_gi = prt_runtime::gpu::layout::MAX_LIGHTS;
+    if job.output.needs_gi() && lighting.rig.lights.len() > max_gi {
+        return Err(RenderError::GiLights {
+            count: lighting.rig.lights.len(),
+            max: max_gi,
+        });
+    }
+    let (device, queue, info) = prt_runtime::gpu::headless_device()?;
+    let mut renderer = Renderer::new(&device, &scene, asset, job.settings)?;
+    renderer.set_lights(&queue, &lighting.rig.lights)?;
+    renderer.set_camera(&queue, &camera, job.output.view())?;
+
+    let start = Instant::now();
+    let runtime = if job.output.needs_gi() {
+        let mut rt = PrtRuntime::new(&device, &queue, asset, job.runtime)?;
+        let mut encoder = device.create_command_encoder(&Default::default());
+        rt.update(&mut encoder, lighting, None)?;
+        queue.submit([encoder.finish()]);
+        rt.wait()?;
+        Some(rt)
+    } else {
+        None
+    };
+    let gi_seconds = start.elapsed().as_secs_f64();
+
+    let start = Instant::now();
+    let mut encoder = device.create_command_encoder(&Default::default());
+    renderer.record(&device, &mut encoder, runtime.as_ref());
+    queue.submit([encoder.finish()]);
+    let frame = renderer.read_frame(&device, &queue)?;
+    let render_seconds = start.elapsed().as_secs_f64();
+
+    let mut pixels = image::tone_map(&frame.radiance, job.exposure_ev);
+    if job.output == Output::Heatmap {
+        let counts = renderer.read_tile_counts(&device, &queue)?;
+        pixels = Heatmap {
+            width: frame.width,
+            height: frame.height,
+            tile: job.settings.tile,
+            tiles_x: renderer.tiles().0,
+            counts: &counts,
+            max_per_tile: job.settings.max_lights_per_tile,
+        }
+        .draw(&pixels);
+    }
+    image::write_png(&job.png, frame.width, frame.height, &pixels)?;
+    if let Some(exr) = &job.exr {
+        image::write_exr(exr, frame.width, frame.height, &frame.radiance)?;
+    }
+    let shaded: Vec<&[f32; 4]> = frame
+        .radiance
+        .iter()
+        .zip(&frame.position)
+        .filter(|(_, p)| p[3] > 0.0)
+        .map(|(r, _)| r)
+        .collect();
+    let evaluated: f64 = shaded.iter().map(|r| f64::from(r[3])).sum();
+    Ok(RenderReport {
+        adapter: format!("{} ({:?})", info.name, info.backend),
+        camera,
+        stats: frame.stats,
+        lights_per_pixel: evaluated / shaded.len().max(1) as f64,
+        shaded_pixels: shaded.len() as u64,
+        gi_seconds,
+        render_seconds,
+    })
+}
