@@ -10,7 +10,8 @@
 // Volume layout (premultiplied by validity, so hardware trilinear filtering weights valid
 // probes only): texture 0 = (c0.rgb, validity); textures 1..6 = the 24 values c1.r, c1.g, c1.b,
 // c2.r, ... c8.b in order, four per texel. Invalid probes are never gathered: their texels stay
-// zero, validity included.
+// zero, validity included. Dilated probes (inside geometry, carrying a neighbour's table) are
+// gathered like valid ones.
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> probes: array<Probe>;

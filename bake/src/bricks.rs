@@ -281,6 +281,7 @@ mod tests {
             albedo: [0.5; 3],
             emission: [0.0; 3],
             backface: false,
+            facing_away: false,
         }
     }
 

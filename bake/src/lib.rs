@@ -21,6 +21,8 @@
 
 pub mod bricks;
 pub mod bvh;
+pub mod depth;
+pub mod dilate;
 pub mod error;
 pub mod factors;
 pub mod probes;
@@ -34,7 +36,7 @@ use std::time::{Duration, Instant};
 use glam::Vec3;
 use prt_format::{
     directions, split_rows_for_u8, Asset, BakeSettingsRecord, BakeStats, FactorRow, Factors,
-    Header, Probe, TransferPrecision, PROBE_OFFSET, PROBE_VALID, U8_MAX_BRICK,
+    Header, Probe, TransferPrecision, PROBE_DILATED, PROBE_OFFSET, PROBE_VALID, U8_MAX_BRICK,
 };
 use rayon::prelude::*;
 
@@ -69,6 +71,17 @@ pub struct BakeSettings {
     /// A probe is invalid (inside geometry) when more than this fraction of its rays hit back
     /// faces of single-sided surfaces.
     pub invalid_backface_fraction: f32,
+    /// A probe that sees no sky is inside geometry when more than this fraction of its rays hit
+    /// the back side of their triangle's winding, whatever the material's sidedness: inside a
+    /// closed solid with double-sided materials (thick walls) every hit does, while in a room
+    /// with inconsistent winding (Sponza) they stay well below.
+    pub inside_facing_away_fraction: f32,
+    /// Give probes inside geometry their nearest valid neighbour's data ([`dilate`]).
+    pub dilate: bool,
+    /// Move probes that lie on a surface (within 2% of a spacing, as when the grid coincides
+    /// with a wall) a tenth of a spacing off it before tracing: a probe on a wall sees both of
+    /// its sides and mixes the rooms it separates.
+    pub surface_offset: bool,
     /// Storage precision of factor transfers.
     pub transfer_precision: TransferPrecision,
     /// Move probes that are inside geometry out of it (virtual offset): through the nearest back
@@ -90,6 +103,9 @@ impl Default for BakeSettings {
             merge_normal_cos: 0.9,
             double_sided: false,
             invalid_backface_fraction: 0.1,
+            inside_facing_away_fraction: 0.75,
+            dilate: true,
+            surface_offset: true,
             transfer_precision: TransferPrecision::U8,
             virtual_offset: false,
             threads: None,
@@ -174,6 +190,13 @@ impl BakeSettings {
             return bad(
                 "invalid_backface_fraction",
                 self.invalid_backface_fraction.to_string(),
+                "must be in [0, 1]",
+            );
+        }
+        if !(0.0..=1.0).contains(&self.inside_facing_away_fraction) {
+            return bad(
+                "inside_facing_away_fraction",
+                self.inside_facing_away_fraction.to_string(),
                 "must be in [0, 1]",
             );
         }
@@ -321,10 +344,17 @@ fn bake_in_pool(
     progress.start("trace", positions.len() as u64);
     let is_inside = |r: &trace::ProbeRays| {
         r.backface_rays as f32 > settings.invalid_backface_fraction * n as f32
+            || (r.sky_rays == 0
+                && r.facing_away_rays as f32 > settings.inside_facing_away_fraction * n as f32)
     };
     let traced: Vec<(Vec3, trace::ProbeRays, bool)> = positions
         .par_iter()
-        .map(|&p| {
+        .map(|&grid_p| {
+            let p = if settings.surface_offset {
+                surface_offset(&tracer, grid_p, spacing)
+            } else {
+                grid_p
+            };
             let r = tracer.trace_probe(p);
             progress.advance(1);
             if settings.virtual_offset && is_inside(&r) {
@@ -332,7 +362,7 @@ fn bake_in_pool(
                     return (moved, again, true);
                 }
             }
-            (p, r, false)
+            (p, r, p != grid_p)
         })
         .collect();
     let (positions, traced): (Vec<(Vec3, bool)>, Vec<trace::ProbeRays>) = traced
@@ -385,21 +415,49 @@ fn bake_in_pool(
     };
     lap(&mut report, "merge", Some("assemble"));
 
+    let valid: Vec<bool> = traced.iter().map(|r| !is_inside(r)).collect();
+    let sources = if settings.dilate {
+        dilate::sources(&grid, &valid)
+    } else {
+        vec![None; valid.len()]
+    };
+    let probe_depth: Vec<u32> = traced
+        .par_iter()
+        .zip(&positions)
+        .flat_map_iter(|(r, &(pos, _))| depth::depth_map(pos, r, &dirs, spacing))
+        .collect();
     let mut probes_out = Vec::with_capacity(traced.len());
-    let mut first_factor = 0u32;
-    for ((r, &(pos, moved)), table) in traced.iter().zip(&positions).zip(&tables) {
-        let valid = if is_inside(r) { 0 } else { PROBE_VALID };
+    let mut rows: Vec<FactorRow> = Vec::new();
+    let (mut sky_mask, mut sky_transfer) = (Vec::new(), Vec::new());
+    for (p, &(pos, moved)) in positions.iter().enumerate() {
+        // A dilated probe carries its source's table, sky and ray counts (the record describes
+        // the data it carries); only its position is its own.
+        let (flags, from) = match (valid[p], sources[p]) {
+            (true, _) => (PROBE_VALID, p),
+            (false, Some(q)) => (PROBE_VALID | PROBE_DILATED, q),
+            (false, None) => (0, p),
+        };
+        let table = &tables[from];
         probes_out.push(Probe {
             position: pos.to_array(),
-            flags: valid | if moved { PROBE_OFFSET } else { 0 },
-            first_factor,
+            flags: flags | if moved { PROBE_OFFSET } else { 0 },
+            first_factor: rows.len() as u32,
             factor_count: table.len() as u32,
-            sky_rays: r.sky_rays,
-            backface_rays: r.backface_rays,
+            sky_rays: traced[from].sky_rays,
+            backface_rays: traced[from].backface_rays,
         });
-        first_factor += table.len() as u32;
+        rows.extend_from_slice(table);
+        sky_mask.extend_from_slice(&traced[from].sky_mask);
+        sky_transfer.push(traced[from].sky_transfer);
     }
-    let rows: Vec<FactorRow> = tables.into_iter().flatten().collect();
+    drop(tables);
+    if rows.len() > u32::MAX as usize {
+        return Err(BakeError::Setting {
+            name: "spacing",
+            value: format!("{} factors", rows.len()),
+            reason: "more than 2^32 factors: use fewer probes or rays",
+        });
+    }
     let stats = BakeStats {
         triangles: scene.triangles.len() as u64,
         degenerate_triangles_skipped: scene.degenerate_skipped,
@@ -428,11 +486,9 @@ fn bake_in_pool(
             stats,
         },
         probes: probes_out,
-        sky_mask: traced
-            .iter()
-            .flat_map(|r| r.sky_mask.iter().copied())
-            .collect(),
-        sky_transfer: traced.iter().map(|r| r.sky_transfer).collect(),
+        sky_mask,
+        sky_transfer,
+        probe_depth,
         factors: Factors::build(&rows, settings.transfer_precision, n, 4.0 * cell_size),
         bricks: bricked.bricks,
         surfels: bricked.surfels,
@@ -445,6 +501,48 @@ fn bake_in_pool(
     })?;
     lap(&mut report, "assemble", None);
     Ok((asset, report))
+}
+
+/// A probe within [`NEAR_SURFACE`] spacings of a surface (found by short rays through it along
+/// 26 directions, axes, face and corner diagonals) moves [`SURFACE_OFFSET`] spacings off the
+/// surface, to the side the short ray came from; repeated up to three times for corners.
+fn surface_offset(tracer: &trace::Tracer, p: Vec3, spacing: f32) -> Vec3 {
+    let eps = NEAR_SURFACE * spacing;
+    let mut at = p;
+    'moves: for _ in 0..3 {
+        for d in near_directions() {
+            let Some(h) = tracer.bvh.closest_hit(at - d * eps, d) else {
+                continue;
+            };
+            if h.t > 2.0 * eps {
+                continue;
+            }
+            let v = tracer.scene.triangles[h.triangle as usize];
+            let n = (v[1] - v[0]).cross(v[2] - v[0]).normalize_or_zero();
+            let towards = if n.dot(d) < 0.0 { n } else { -n };
+            at += towards * (SURFACE_OFFSET * spacing);
+            continue 'moves;
+        }
+        break;
+    }
+    at
+}
+
+/// Spacings within which a probe counts as on a surface.
+const NEAR_SURFACE: f32 = 0.02;
+/// Spacings a probe on a surface moves off it.
+const SURFACE_OFFSET: f32 = 0.1;
+
+/// The 26 unit directions to the neighbours of a grid cell, in a fixed order.
+fn near_directions() -> impl Iterator<Item = Vec3> {
+    (0..27).filter(|&i| i != 13).map(|i| {
+        Vec3::new(
+            (i % 3) as f32 - 1.0,
+            ((i / 3) % 3) as f32 - 1.0,
+            (i / 9) as f32 - 1.0,
+        )
+        .normalize()
+    })
 }
 
 /// Virtual offset of a probe inside geometry: the nearest back face its rays hit is the wall it

@@ -20,6 +20,9 @@ pub struct Hit {
     pub emission: [f32; 3],
     /// A back face of a single-sided surface: black, and evidence of being inside geometry.
     pub backface: bool,
+    /// The ray hit the back side of the triangle's winding, whatever the material's sidedness
+    /// (inside a closed, outward-wound solid every hit is one, double-sided or not).
+    pub facing_away: bool,
 }
 
 /// Everything one probe's rays found.
@@ -30,6 +33,8 @@ pub struct ProbeRays {
     pub sky_transfer: [f32; SH_COUNT],
     pub sky_rays: u32,
     pub backface_rays: u32,
+    /// Hits on the back side of their triangle's winding ([`Hit::facing_away`]).
+    pub facing_away_rays: u32,
 }
 
 /// Shared, read-only inputs of tracing.
@@ -56,6 +61,7 @@ impl Tracer<'_> {
                 Some(h) => {
                     let hit = self.shade(i as u32, origin, dir, h.triangle as usize, h.t);
                     out.backface_rays += u32::from(hit.backface);
+                    out.facing_away_rays += u32::from(hit.facing_away);
                     out.hits.push(hit);
                 }
                 None => {
@@ -86,6 +92,7 @@ impl Tracer<'_> {
                 albedo: [0.0; 3],
                 emission: [0.0; 3],
                 backface: true,
+                facing_away: true,
             };
         }
         let (albedo, emission) = self.material_at(material, tri, barycentric(&v, position));
@@ -96,6 +103,7 @@ impl Tracer<'_> {
             albedo,
             emission,
             backface: false,
+            facing_away: !front,
         }
     }
 

@@ -3,6 +3,7 @@
 
 mod bench;
 mod bench_render;
+mod bench_surface;
 mod progress;
 mod render;
 mod sample;
@@ -125,6 +126,9 @@ enum BenchKind {
         #[arg(long, default_value_t = 3)]
         frames: usize,
     },
+    /// Irradiance at surface points against the oracle's surface references (leaks, holes,
+    /// error), at the default spacing and half of it.
+    Surface(bench_surface::SurfaceArgs),
 }
 
 #[derive(Subcommand)]
@@ -169,6 +173,18 @@ enum Command {
         /// Probes with more than this fraction of back-face hits are invalid.
         #[arg(long, default_value_t = 0.1)]
         invalid_backface_fraction: f32,
+        /// Probes that see no sky and hit the back of their triangles' winding with more than
+        /// this fraction of their rays are inside closed geometry (double-sided thick walls).
+        #[arg(long, default_value_t = 0.75)]
+        inside_facing_away_fraction: f32,
+        /// Leave probes inside geometry empty instead of copying their nearest valid
+        /// neighbour's data (dilation).
+        #[arg(long)]
+        no_dilation: bool,
+        /// Keep probes that lie on a surface where they are (by default they move a tenth of a
+        /// spacing off it).
+        #[arg(long)]
+        no_surface_offset: bool,
         /// Storage precision of factor transfers.
         #[arg(long, value_enum, default_value = "u8")]
         precision: Precision,
@@ -282,6 +298,9 @@ fn run(cli: Cli) -> Result<()> {
             double_sided,
             virtual_offset,
             invalid_backface_fraction,
+            inside_facing_away_fraction,
+            no_dilation,
+            no_surface_offset,
             precision,
         } => {
             let preset = match quality {
@@ -297,6 +316,9 @@ fn run(cli: Cli) -> Result<()> {
                 double_sided,
                 virtual_offset,
                 invalid_backface_fraction,
+                inside_facing_away_fraction,
+                dilate: !no_dilation,
+                surface_offset: !no_surface_offset,
                 transfer_precision: match precision {
                     Precision::F16 => TransferPrecision::F16,
                     Precision::F32 => TransferPrecision::F32,
@@ -477,6 +499,7 @@ fn run(cli: Cli) -> Result<()> {
                 );
                 Ok(())
             }
+            BenchKind::Surface(args) => bench_surface::run(args),
         },
         Command::Sample(args) => sample::run(args),
         Command::Render(args) => render::run(args),

@@ -80,6 +80,10 @@ pub struct RenderArgs {
     /// runtime's].
     #[arg(long, allow_hyphen_values = true)]
     normal_bias: Option<f32>,
+    /// Indirect light by plain trilinear interpolation, without the visibility test that keeps
+    /// light from leaking through walls (to compare).
+    #[arg(long)]
+    no_visibility: bool,
     /// Render even if the asset was baked from another scene file.
     #[arg(long)]
     force: bool,
@@ -124,7 +128,10 @@ pub fn run(args: RenderArgs) -> Result<()> {
         (None, None) => None,
         _ => bail!("--eye and --target go together"),
     };
-    let mut runtime = RuntimeSettings::default();
+    let mut runtime = RuntimeSettings {
+        visibility: !args.no_visibility,
+        ..RuntimeSettings::default()
+    };
     if let Some(bias) = args.normal_bias {
         if !bias.is_finite() || bias < 0.0 {
             bail!("--normal-bias {bias}: expected a finite number of probe spacings >= 0");

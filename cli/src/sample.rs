@@ -27,9 +27,12 @@ pub struct SampleArgs {
     #[arg(long, value_enum, default_value = "cpu")]
     backend: Backend,
     /// Move each point this many probe spacings along its normal before sampling [default: the
-    /// runtime's, 0.1].
+    /// runtime's, 0.2].
     #[arg(long, allow_hyphen_values = true)]
     normal_bias: Option<f32>,
+    /// Plain trilinear interpolation: no visibility test against the probes' visibility maps.
+    #[arg(long)]
+    no_visibility: bool,
 }
 
 /// A surface point: position and unit normal.
@@ -42,6 +45,11 @@ pub fn run(args: SampleArgs) -> Result<()> {
     if !normal_bias.is_finite() || normal_bias < 0.0 {
         bail!("--normal-bias {normal_bias}: expected a finite number of probe spacings >= 0");
     }
+    let settings = RuntimeSettings {
+        normal_bias,
+        visibility: !args.no_visibility,
+        ..RuntimeSettings::default()
+    };
     let points = read_points(&args.points)?;
     let asset = prt_format::read_asset(&args.asset)
         .with_context(|| format!("loading {}", args.asset.display()))?;
@@ -52,9 +60,9 @@ pub fn run(args: SampleArgs) -> Result<()> {
             let sh = prt_runtime::CpuRelighter::new(&asset)?
                 .relight(&lighting, 1)?
                 .sh;
-            (sample_cpu(&asset, &sh, normal_bias, &points), "cpu")
+            (sample_cpu(&asset, &sh, &settings, &points), "cpu")
         }
-        Backend::Gpu => (sample_gpu(&asset, &lighting, normal_bias, &points)?, "gpu"),
+        Backend::Gpu => (sample_gpu(&asset, &lighting, settings, &points)?, "gpu"),
     };
     let seconds = start.elapsed().as_secs_f64();
     let doc = samples_json(&points, &samples, name, normal_bias, &asset);
@@ -73,11 +81,10 @@ pub fn run(args: SampleArgs) -> Result<()> {
 fn sample_cpu(
     asset: &prt_format::Asset,
     sh: &[ShRgb],
-    normal_bias: f32,
+    settings: &RuntimeSettings,
     points: &[Point],
 ) -> Vec<Sample> {
-    let g = asset.header.grid;
-    let sampler = VolumeSampler::new(&g, &asset.probes, sh, normal_bias * g.spacing);
+    let sampler = VolumeSampler::for_asset(asset, sh, settings);
     points.iter().map(|(p, n)| sampler.sample(*p, *n)).collect()
 }
 
@@ -85,15 +92,11 @@ fn sample_cpu(
 fn sample_gpu(
     asset: &prt_format::Asset,
     lighting: &prt_runtime::Lighting,
-    normal_bias: f32,
+    settings: RuntimeSettings,
     points: &[Point],
 ) -> Result<Vec<Sample>> {
     let (device, queue, info) = prt_runtime::gpu::headless_device()?;
     eprintln!("adapter: {} ({:?})", info.name, info.backend);
-    let settings = RuntimeSettings {
-        normal_bias,
-        ..RuntimeSettings::default()
-    };
     let mut runtime = PrtRuntime::new(&device, &queue, asset, settings)?;
     let mut encoder = device.create_command_encoder(&Default::default());
     runtime.update(&mut encoder, lighting, None)?;

@@ -18,6 +18,11 @@ pub struct Asset {
     /// Per probe, the SH9 projection of its sky directions (`4pi/N sum_{i in sky} Y_k(w_i)`):
     /// multiply by a constant sky radiance to get the probe's sky term without touching the mask.
     pub sky_transfer: Vec<[f32; SH_COUNT]>,
+    /// Per probe, [`DEPTH_WORDS`] words: the probe's visibility as an octahedral map
+    /// ([`crate::depth`]) of the mean and standard deviation of its rays' hit distances in probe
+    /// spacings, one byte each, two texels per word. Sampling weights each probe by whether the
+    /// shaded point is visible from it (Chebyshev test, Majercik et al. 2019).
+    pub probe_depth: Vec<u32>,
     /// Per-probe factor tables, concatenated; `Probe::first_factor..+factor_count` is a probe's.
     pub factors: Factors,
     /// Normal-keyed bricks of surfels; a brick's radiance is the weighted mean of its surfels'.
@@ -133,9 +138,22 @@ pub struct BakeStats {
 /// Probe flag: the probe is valid (not inside geometry).
 pub const PROBE_VALID: u32 = 1;
 /// Probe flag: the probe was inside geometry at its grid position and was moved out of it
-/// (virtual offset); `Probe::position` is where its rays start, its texel stays at the grid
-/// position.
+/// (virtual offset), or lay on a surface and was moved off it; `Probe::position` is where its
+/// rays start (and where visibility-aware sampling measures distances from), its texel stays at
+/// the grid position.
 pub const PROBE_OFFSET: u32 = 2;
+/// Probe flag (with [`PROBE_VALID`]): the probe is inside geometry and was *dilated*: its factor
+/// table, sky mask and sky transfer are copies of its nearest valid neighbour's, so a surface
+/// whose eight surrounding probes are all inside geometry still gets light. It keeps its own
+/// visibility map, which sees the geometry around it at short range: visibility-aware sampling
+/// therefore weights it down wherever a real probe sees the point.
+pub const PROBE_DILATED: u32 = 4;
+/// Side of the octahedral visibility map.
+pub const DEPTH_MAP_SIDE: u32 = 16;
+/// Texels of a visibility map (two bytes each: mean and standard deviation of distance).
+pub const DEPTH_TEXELS: usize = (DEPTH_MAP_SIDE * DEPTH_MAP_SIDE) as usize;
+/// Words of visibility data per probe (two texels per word): 512 bytes.
+pub const DEPTH_WORDS: usize = DEPTH_TEXELS / 2;
 
 /// A probe: where it is, whether it may be used, and where its factor table starts.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable, Serialize, Deserialize)]
@@ -155,8 +173,24 @@ pub struct Probe {
 const _: () = assert!(std::mem::size_of::<Probe>() == 32);
 
 impl Probe {
+    /// Gathered and sampled: a real probe or a dilated one.
     pub fn is_valid(&self) -> bool {
         self.flags & PROBE_VALID != 0
+    }
+
+    /// Inside geometry, its table copied from a neighbour ([`PROBE_DILATED`]).
+    pub fn is_dilated(&self) -> bool {
+        self.flags & PROBE_DILATED != 0
+    }
+
+    /// Weight of the probe when the volume is sampled: 1 for a valid (or dilated) probe, 0 for
+    /// an invalid one.
+    pub fn sample_weight(&self) -> f32 {
+        if self.is_valid() {
+            1.0
+        } else {
+            0.0
+        }
     }
 }
 

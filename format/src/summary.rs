@@ -14,7 +14,10 @@ pub struct Summary {
     pub source_name: String,
     pub source_hash: String,
     pub probe_count: usize,
+    /// Probes outside geometry (dilated ones not counted).
     pub valid_probe_count: usize,
+    /// Probes inside geometry whose table was copied from a valid neighbour.
+    pub dilated_probe_count: usize,
     /// Probes moved out of geometry by the virtual offset.
     pub offset_probe_count: usize,
     pub ray_count: u32,
@@ -28,7 +31,8 @@ pub struct Summary {
     pub light_count: usize,
     pub file_bytes: u64,
     pub bytes_per_probe: f64,
-    /// Per-probe transport data: probe record, sky mask, sky transfer and factor table.
+    /// Per-probe runtime data: probe record, sky mask, sky transfer, visibility map and factor
+    /// table.
     pub transport_bytes_per_probe: f64,
     pub section_bytes: SectionBytes,
     pub grid: Grid,
@@ -40,6 +44,8 @@ pub struct SectionBytes {
     pub probes: u64,
     pub sky_mask: u64,
     pub sky_transfer: u64,
+    /// Visibility maps (octahedral depth moments).
+    pub probe_depth: u64,
     pub factors: u64,
     pub bricks: u64,
     pub surfels: u64,
@@ -59,6 +65,7 @@ impl Summary {
             probes: bytes(&asset.probes),
             sky_mask: bytes(&asset.sky_mask),
             sky_transfer: (asset.sky_transfer.len() * SH_COUNT * 4) as u64,
+            probe_depth: bytes(&asset.probe_depth),
             factors: (asset.factors.len() * asset.factors.bytes_per_factor()) as u64,
             bricks: bytes(&asset.bricks),
             surfels: bytes(&asset.surfels),
@@ -78,7 +85,12 @@ impl Summary {
             source_name: asset.header.source_name.clone(),
             source_hash: format!("{:016x}", asset.header.source_hash),
             probe_count: probes,
-            valid_probe_count: asset.probes.iter().filter(|p| p.is_valid()).count(),
+            valid_probe_count: asset
+                .probes
+                .iter()
+                .filter(|p| p.is_valid() && !p.is_dilated())
+                .count(),
+            dilated_probe_count: asset.probes.iter().filter(|p| p.is_dilated()).count(),
             offset_probe_count: asset
                 .probes
                 .iter()
@@ -96,7 +108,7 @@ impl Summary {
             file_bytes,
             bytes_per_probe: per_probe(file_bytes),
             transport_bytes_per_probe: per_probe(
-                s.probes + s.sky_mask + s.sky_transfer + s.factors,
+                s.probes + s.sky_mask + s.sky_transfer + s.probe_depth + s.factors,
             ),
             section_bytes,
             grid: asset.header.grid,
@@ -120,10 +132,11 @@ impl std::fmt::Display for Summary {
         )?;
         writeln!(
             f,
-            "probes           {} ({} valid, {} invalid, {} moved by virtual offset), {} rays each",
+            "probes           {} ({} valid, {} inside geometry of which {} dilated, {} moved by virtual offset), {} rays each",
             self.probe_count,
             self.valid_probe_count,
             self.probe_count - self.valid_probe_count,
+            self.dilated_probe_count,
             self.offset_probe_count,
             self.ray_count
         )?;
@@ -146,8 +159,8 @@ impl std::fmt::Display for Summary {
         let s = &self.section_bytes;
         writeln!(
             f,
-            "section bytes    probes {} | sky mask {} | sky transfer {} | factors {} | bricks {} | surfels {} | bvh {} | triangles {}",
-            s.probes, s.sky_mask, s.sky_transfer, s.factors, s.bricks, s.surfels, s.bvh_nodes, s.triangles
+            "section bytes    probes {} | sky mask {} | sky transfer {} | visibility {} | factors {} | bricks {} | surfels {} | bvh {} | triangles {}",
+            s.probes, s.sky_mask, s.sky_transfer, s.probe_depth, s.factors, s.bricks, s.surfels, s.bvh_nodes, s.triangles
         )?;
         write!(
             f,

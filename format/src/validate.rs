@@ -76,9 +76,11 @@ pub fn validate(asset: &Asset) -> Result<(), FormatError> {
         probes * h.sky_mask_words(),
     )?;
     count("sky_transfer", asset.sky_transfer.len(), probes)?;
-    for (i, t) in asset.sky_transfer.iter().enumerate() {
-        finite("sky_transfer", i, "transfer", t)?;
-    }
+    count(
+        "probe_depth",
+        asset.probe_depth.len(),
+        probes * crate::asset::DEPTH_WORDS,
+    )?;
 
     let factors = &asset.factors;
     let mut next_factor = 0u64;
@@ -92,6 +94,13 @@ pub fn validate(asset: &Asset) -> Result<(), FormatError> {
                     "sky_rays {} / backface_rays {} exceed ray_count {}",
                     p.sky_rays, p.backface_rays, h.ray_count
                 ),
+            ));
+        }
+        if p.is_dilated() && !p.is_valid() {
+            return Err(FormatError::invalid(
+                "probes",
+                i,
+                format!("flags {:#x}: dilated but not valid", p.flags),
             ));
         }
         if u64::from(p.first_factor) != next_factor {

@@ -145,7 +145,7 @@ pub fn run(
 
     let start = Instant::now();
     let mut encoder = device.create_command_encoder(&Default::default());
-    renderer.record(&device, &mut encoder, runtime.as_ref());
+    renderer.record(&mut encoder, runtime.as_ref());
     queue.submit([encoder.finish()]);
     let frame = renderer.read_frame(&device, &queue)?;
     let render_seconds = start.elapsed().as_secs_f64();

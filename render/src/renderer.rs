@@ -52,8 +52,8 @@ pub struct Renderer {
     others: wgpu::Buffer,
     light_counts: (u32, u32),
     tiles: (u32, u32),
-    /// A 1x1x1 volume of validity 0 for frames without GI.
-    empty_volume: Vec<wgpu::Texture>,
+    /// The volume group of frames without GI: a 1x1x1 volume of validity 0.
+    empty_volume: wgpu::BindGroup,
 }
 
 fn layout_entry(
@@ -111,35 +111,61 @@ fn shade_layouts(device: &wgpu::Device) -> [wgpu::BindGroupLayout; 3] {
     let g1: Vec<_> = (0..2)
         .map(|b| layout_entry(b, frag, buffer_type(RO)))
         .collect();
-    let mut g2: Vec<_> = (0..7)
-        .map(|b| {
-            layout_entry(
-                b,
-                frag,
-                wgpu::BindingType::Texture {
-                    sample_type: wgpu::TextureSampleType::Float { filterable: true },
-                    view_dimension: wgpu::TextureViewDimension::D3,
-                    multisampled: false,
-                },
-            )
-        })
-        .collect();
-    g2.push(layout_entry(
-        7,
-        frag,
-        wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-    ));
-    g2.push(layout_entry(
-        8,
-        frag,
-        buffer_type(wgpu::BufferBindingType::Uniform),
-    ));
+    let g2 = PrtRuntime::volume_layout_entries(frag);
     [g0, g1, g2].map(|entries| {
         device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("prt-render shade"),
             entries: &entries,
         })
     })
+}
+
+/// The snippet's bind group over an empty (1x1x1, validity 0) volume, for frames without GI.
+fn empty_volume(device: &wgpu::Device, layout: &wgpu::BindGroupLayout) -> wgpu::BindGroup {
+    let views: Vec<wgpu::TextureView> = (0..7)
+        .map(|_| {
+            device
+                .create_texture(&wgpu::TextureDescriptor {
+                    label: Some("prt-render empty volume"),
+                    size: wgpu::Extent3d {
+                        width: 1,
+                        height: 1,
+                        depth_or_array_layers: 1,
+                    },
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D3,
+                    format: wgpu::TextureFormat::Rgba16Float,
+                    usage: wgpu::TextureUsages::TEXTURE_BINDING,
+                    view_formats: &[],
+                })
+                .create_view(&Default::default())
+        })
+        .collect();
+    let sampler = device.create_sampler(&Default::default());
+    let info = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("prt-render empty volume info"),
+        contents: bytemuck::bytes_of(&VolumeInfo {
+            counts: [1.0; 3],
+            spacing: 1.0,
+            ..VolumeInfo::default()
+        }),
+        usage: wgpu::BufferUsages::UNIFORM,
+    });
+    let depth = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("prt-render empty visibility and positions"),
+        contents: &[0u8; 4 * prt_format::DEPTH_WORDS],
+        usage: wgpu::BufferUsages::STORAGE,
+    });
+    let mut resources: Vec<wgpu::BindingResource> = views
+        .iter()
+        .map(wgpu::BindingResource::TextureView)
+        .collect();
+    resources.push(wgpu::BindingResource::Sampler(&sampler));
+    resources.push(info.as_entire_binding());
+    resources.push(depth.as_entire_binding());
+    resources.push(depth.as_entire_binding());
+    bind_group(device, layout, resources)
 }
 
 fn targets(device: &wgpu::Device, width: u32, height: u32) -> Targets {
@@ -306,24 +332,7 @@ impl Renderer {
                 gpu_scene.bvh_triangles.as_entire_binding(),
             ],
         );
-        let empty_volume = (0..7)
-            .map(|_| {
-                device.create_texture(&wgpu::TextureDescriptor {
-                    label: Some("prt-render empty volume"),
-                    size: wgpu::Extent3d {
-                        width: 1,
-                        height: 1,
-                        depth_or_array_layers: 1,
-                    },
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D3,
-                    format: wgpu::TextureFormat::Rgba16Float,
-                    usage: wgpu::TextureUsages::TEXTURE_BINDING,
-                    view_formats: &[],
-                })
-            })
-            .collect();
+        let empty_volume = empty_volume(device, &g2);
         Ok(Renderer {
             settings,
             scene: gpu_scene,
@@ -480,46 +489,9 @@ impl Renderer {
     }
 
     /// Stage 3: shading, with indirect light from `volume` (none: indirect is zero).
-    pub fn record_shade(
-        &self,
-        device: &wgpu::Device,
-        encoder: &mut wgpu::CommandEncoder,
-        volume: Option<&PrtRuntime>,
-    ) {
-        let info = volume.map_or(
-            VolumeInfo {
-                counts: [1.0; 3],
-                spacing: 1.0,
-                ..VolumeInfo::default()
-            },
-            |v| v.volume_info(),
-        );
-        let info_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("prt-render volume info"),
-            contents: bytemuck::bytes_of(&info),
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
-        let empty_views: Vec<wgpu::TextureView> = self
-            .empty_volume
-            .iter()
-            .map(|t| t.create_view(&Default::default()))
-            .collect();
-        let views = volume.map_or(&empty_views[..], |v| v.volume_views());
-        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
-            mag_filter: wgpu::FilterMode::Linear,
-            min_filter: wgpu::FilterMode::Linear,
-            ..Default::default()
-        });
-        let mut resources: Vec<wgpu::BindingResource> = views
-            .iter()
-            .map(wgpu::BindingResource::TextureView)
-            .collect();
-        resources.push(wgpu::BindingResource::Sampler(
-            volume.map_or(&sampler, |v| v.sampler()),
-        ));
-        resources.push(info_buf.as_entire_binding());
-        let volume_group = bind_group(device, &self.volume_layout, resources);
-
+    pub fn record_shade(&self, encoder: &mut wgpu::CommandEncoder, volume: Option<&PrtRuntime>) {
+        let gi_group = volume.map(|v| v.volume_bind_group(&self.volume_layout));
+        let volume_group = gi_group.as_ref().unwrap_or(&self.empty_volume);
         let attachments: Vec<Option<wgpu::RenderPassColorAttachment>> = self
             .targets
             .colors
@@ -553,7 +525,7 @@ impl Renderer {
         });
         pass.set_bind_group(0, &self.shade_group, &[]);
         pass.set_bind_group(1, &self.bvh_group, &[]);
-        pass.set_bind_group(2, &volume_group, &[]);
+        pass.set_bind_group(2, volume_group, &[]);
         pass.set_vertex_buffer(0, self.scene.vertices.slice(..));
         raster::draw(
             &mut pass,
@@ -564,15 +536,10 @@ impl Renderer {
     }
 
     /// All three stages.
-    pub fn record(
-        &self,
-        device: &wgpu::Device,
-        encoder: &mut wgpu::CommandEncoder,
-        volume: Option<&PrtRuntime>,
-    ) {
+    pub fn record(&self, encoder: &mut wgpu::CommandEncoder, volume: Option<&PrtRuntime>) {
         self.record_depth(encoder);
         self.record_cull(encoder);
-        self.record_shade(device, encoder, volume);
+        self.record_shade(encoder, volume);
     }
 
     /// Reads the last frame back (blocks until the GPU is done).

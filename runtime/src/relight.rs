@@ -328,7 +328,8 @@ pub fn brick_normal_bounds(asset: &Asset) -> Vec<NormalBounds> {
 }
 
 /// The probe volume as a field: trilinear interpolation of SH over the valid probes around a
-/// point (weights renormalised over valid probes; outside the grid, clamped to its border).
+/// point, each weighted by `Probe::sample_weight` (renormalised; outside the grid, clamped to
+/// its border).
 pub struct Volume<'a> {
     asset: &'a Asset,
     sh: &'a [ShRgb],
@@ -357,7 +358,8 @@ impl<'a> Volume<'a> {
                 .map(|a| if o[a] == 1 { f[a] } else { 1.0 - f[a] })
                 .product();
             let i = g.index(idx[0], idx[1], idx[2]);
-            if w <= 0.0 || !self.asset.probes[i].is_valid() {
+            let w = w * self.asset.probes[i].sample_weight();
+            if w <= 0.0 {
                 continue;
             }
             wsum += w;

@@ -1,114 +1,221 @@
 //! # Sampling the probe volume at surface points: the CPU twin of the engine-side snippet
 //!
 //! Engines shade with `sample_irradiance(world_pos, normal)` from
-//! `shaders/sample_irradiance.wgsl`: one hardware trilinear fetch per volume texture, whose texels
-//! hold each probe's SH premultiplied by its validity (0 or 1), so the filter weights the eight
-//! surrounding probes by validity, and dividing by the filtered validity renormalises.
-//! [`VolumeSampler`] does exactly that on the CPU, from the probes' SH, so that `prt sample`
-//! answers "what does the engine see here" without a GPU and every GPU result has a reference:
+//! `shaders/sample_irradiance.wgsl`. [`VolumeSampler`] computes exactly what it returns, on the
+//! CPU, from the probes' SH, so that `prt sample` answers "what does the engine see here" without
+//! a GPU and every GPU result has a reference:
 //!
 //! - the point is first moved along its normal by `normal_bias` metres
 //!   (`RuntimeSettings::normal_bias`, in probe spacings, explains the trade-off);
-//! - texel coordinate `(p - origin) / spacing` (texel centres sit on the probes), clamp-to-edge:
-//!   outside the grid the nearest face's probes are used, as the sampler's `ClampToEdge` does;
-//! - trilinear weights times validity, summed; SH = weighted sum / summed weight, zero when the
-//!   summed weight is at most 1e-6 (no valid probe around the point, where the shader returns 0);
+//! - grid coordinate `(p - origin) / spacing` (texel centres sit on the probes), clamped to the
+//!   grid: outside it the nearest face's probes are used, as the sampler's `ClampToEdge` does;
+//! - each of the eight probes around the point gets its trilinear weight times its validity
+//!   (`Probe::sample_weight`: 1 for a valid or dilated probe, 0 for an invalid one), and **with
+//!   visibility** (the runtime's default) also `((n . direction to probe + 1) / 2)^2 +
+//!   FACING_FLOOR` and the Chebyshev visibility `max(cheb^3, MIN_VISIBILITY)` of the point's
+//!   distance against the probe's visibility map in that direction (`prt_format::depth`;
+//!   Majercik et al., JCGT 2019); distances are measured from where the probe's rays started
+//!   (`Probe::position`: the grid position unless the probe was moved off a surface). A
+//!   dilated probe sits inside geometry and its map sees that geometry close by, so it only
+//!   weighs where no real probe sees the point;
+//! - SH = weighted sum / summed weight, zero when the summed trilinear-times-probe weight
+//!   (`Sample::validity`) is at most `MIN_VALIDITY` (no probe around the point);
 //! - irradiance = `prt_format::sh::irradiance` (clamped-cosine convolution, clamped at 0).
 //!
-//! The GPU differs only by the volume's storage (half floats by default) and the hardware's
-//! filter weights (8-bit fixed-point fractions on most GPUs); `tests/tests/gpu.rs` states the
-//! tolerance.
+//! The GPU differs only by the volume's storage (half floats by default) and, without
+//! visibility, the hardware's filter weights (8-bit fixed-point fractions on most GPUs);
+//! `tests/tests/gpu.rs` states the tolerance.
 
+use glam::Vec3;
+use prt_format::depth::{MAX_DEPTH, MAX_DEVIATION};
 use prt_format::sh::{ShRgb, SH_COUNT};
-use prt_format::{Grid, Probe};
+use prt_format::{Asset, Grid, Probe, DEPTH_MAP_SIDE, DEPTH_WORDS};
 
 /// What the engine-side snippet returns at one point.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Sample {
-    /// Interpolated SH of incident radiance (conventions.md section 2), zero where no valid probe
+    /// Interpolated SH of incident radiance (conventions.md section 2), zero where no probe
     /// surrounds the point.
     pub sh: ShRgb,
     /// Irradiance E on a surface with the sample's normal (clamped at 0).
     pub irradiance: [f32; 3],
-    /// Summed trilinear weight of the valid probes around the point (1 = all eight valid).
+    /// Summed trilinear weight times probe weight of the probes around the point (1 = all
+    /// eight valid, 0 = none).
     pub validity: f32,
 }
 
 /// Summed validity at or below which the sample is empty (as in the shader).
 pub const MIN_VALIDITY: f32 = 1e-6;
+/// Floor of the Chebyshev visibility term: a point that no probe sees still gets the least
+/// occluded probes' light rather than nothing.
+pub const MIN_VISIBILITY: f32 = 1e-5;
+/// Floor of the facing term (DDGI's 0.2): probes behind the surface count less, not zero.
+pub const FACING_FLOOR: f32 = 0.02;
+/// Floor of the depth variance, in spacings squared (a perfectly flat hit distribution would
+/// make the test a hard step).
+pub const MIN_VARIANCE: f32 = 1e-4;
+/// Distance in spacings below which a point counts as at the probe (visible).
+pub const MIN_DISTANCE: f32 = 1e-4;
 
-/// Samples probe SH like the GPU's trilinear, validity-weighted fetch.
+/// Visibility below this is crushed towards zero (DDGI's crush threshold): a probe that sees the
+/// point only partly is most likely on the far side of a thin wall, and a room 500 times
+/// brighter than the point leaks visibly even at a weight of 1/1000.
+pub const CRUSH_THRESHOLD: f32 = 0.2;
+
+/// DDGI's crush: `v` below the threshold becomes `v^3 / threshold^2` (continuous at it).
+fn crush(v: f32) -> f32 {
+    if v < CRUSH_THRESHOLD {
+        v * v * v / (CRUSH_THRESHOLD * CRUSH_THRESHOLD)
+    } else {
+        v
+    }
+}
+
+/// `(name, value)` of the sampling constants the snippet shares with this twin.
+pub fn wgsl_constants() -> Vec<(&'static str, String)> {
+    vec![
+        ("PRT_MIN_VALIDITY", format!("{MIN_VALIDITY:e}")),
+        ("PRT_MIN_VISIBILITY", format!("{MIN_VISIBILITY:e}")),
+        ("PRT_CRUSH_THRESHOLD", format!("{CRUSH_THRESHOLD:?}")),
+        ("PRT_FACING_FLOOR", format!("{FACING_FLOOR:?}")),
+        ("PRT_MIN_VARIANCE", format!("{MIN_VARIANCE:e}")),
+        ("PRT_MIN_DISTANCE", format!("{MIN_DISTANCE:e}")),
+        ("PRT_DEPTH_SIDE", format!("{DEPTH_MAP_SIDE}u")),
+        ("PRT_DEPTH_WORDS", format!("{DEPTH_WORDS}u")),
+        ("PRT_MAX_DEPTH", format!("{MAX_DEPTH:?}")),
+        ("PRT_MAX_DEVIATION", format!("{MAX_DEVIATION:?}")),
+        (
+            "PRT_FLAG_VISIBILITY",
+            format!("{}u", crate::gpu::layout::VOLUME_VISIBILITY),
+        ),
+    ]
+}
+
+/// Samples probe SH like the engine-side snippet.
 #[derive(Clone, Debug)]
 pub struct VolumeSampler<'a> {
     grid: Grid,
-    validity: Vec<f32>,
+    weight: Vec<f32>,
+    /// Where each probe's rays started (`Probe::position`).
+    positions: Vec<Vec3>,
     sh: &'a [ShRgb],
+    /// Visibility maps (`Asset::probe_depth`); empty: trilinear only.
+    depth: &'a [u32],
     normal_bias: f32,
 }
 
 impl<'a> VolumeSampler<'a> {
-    /// A sampler over `sh` (one per probe, in `grid` index order) with each probe's validity
-    /// taken from `probes`; `normal_bias` is in metres. Probes missing from `probes` or `sh`
-    /// count as invalid.
+    /// A trilinear sampler (no visibility) over `sh` (one per probe, in `grid` index order),
+    /// each probe weighted by `Probe::sample_weight`; `normal_bias` is in metres. Probes missing
+    /// from `probes` or `sh` count as invalid.
     pub fn new(grid: &Grid, probes: &[Probe], sh: &'a [ShRgb], normal_bias: f32) -> Self {
         let count = usize::try_from(grid.probe_count()).unwrap_or(usize::MAX);
-        let validity = (0..count.min(probes.len()).min(sh.len()))
-            .map(|i| if probes[i].is_valid() { 1.0 } else { 0.0 })
-            .collect();
+        let n = count.min(probes.len()).min(sh.len());
+        let weight = (0..n).map(|i| probes[i].sample_weight()).collect();
+        let positions = (0..n).map(|i| Vec3::from(probes[i].position)).collect();
         VolumeSampler {
             grid: *grid,
-            validity,
+            weight,
+            positions,
             sh,
+            depth: &[],
             normal_bias,
         }
+    }
+
+    /// What the GPU runtime's snippet samples for `asset` relit to `sh` with `settings`:
+    /// visibility-aware unless `settings.visibility` is off.
+    pub fn for_asset(
+        asset: &'a Asset,
+        sh: &'a [ShRgb],
+        settings: &crate::gpu::RuntimeSettings,
+    ) -> Self {
+        let g = &asset.header.grid;
+        let s = VolumeSampler::new(g, &asset.probes, sh, settings.normal_bias * g.spacing);
+        if settings.visibility {
+            s.with_visibility(&asset.probe_depth)
+        } else {
+            s
+        }
+    }
+
+    /// Weights probes by visibility from `depth` (`Asset::probe_depth`).
+    pub fn with_visibility(mut self, depth: &'a [u32]) -> Self {
+        if depth.len() >= self.weight.len() * DEPTH_WORDS {
+            self.depth = depth;
+        }
+        self
+    }
+
+    /// Visibility and facing weight of probe `i` at `probe` for point `x`, normal `n`.
+    fn visibility(&self, i: usize, probe: Vec3, x: Vec3, n: Vec3) -> f32 {
+        let v = x - probe;
+        let len = v.length();
+        let dist = len / self.grid.spacing;
+        if dist <= MIN_DISTANCE {
+            return 1.0;
+        }
+        let dir = v / len;
+        let facing = ((-dir).dot(n) + 1.0) * 0.5;
+        let mut w = facing * facing + FACING_FLOOR;
+        let words = &self.depth[i * DEPTH_WORDS..(i + 1) * DEPTH_WORDS];
+        let (mean, deviation) =
+            prt_format::depth::moments(words, prt_format::depth::texel_of(dir.to_array()));
+        if dist > mean {
+            let variance = (deviation * deviation).max(MIN_VARIANCE);
+            let d = dist - mean;
+            let chebyshev = variance / (variance + d * d);
+            w *= crush(chebyshev * chebyshev * chebyshev).max(MIN_VISIBILITY);
+        }
+        w
     }
 
     /// The sample at `position` for a surface with unit normal `normal`.
     pub fn sample(&self, position: [f32; 3], normal: [f32; 3]) -> Sample {
         let g = &self.grid;
-        // Per axis: the two clamped probe indices and the weight of the upper one.
-        let axes: [(u32, u32, f32); 3] = std::array::from_fn(|a| {
-            let p = position[a] + normal[a] * self.normal_bias;
-            let t = (p - g.origin[a]) / g.spacing;
-            let last = g.counts[a].saturating_sub(1) as f32;
-            let lo = t.floor();
-            let frac = t - lo;
-            let clamp = |v: f32| v.clamp(0.0, last) as u32;
-            (clamp(lo), clamp(lo + 1.0), frac)
-        });
+        let n = Vec3::from(normal);
+        let p = Vec3::from(position) + n * self.normal_bias;
+        let last = Vec3::from(g.counts.map(|c| c.saturating_sub(1) as f32));
+        let t = ((p - Vec3::from(g.origin)) / g.spacing).clamp(Vec3::ZERO, last);
+        let base = t.floor();
+        let f = t - base;
         let mut sum = [[0.0f32; 3]; SH_COUNT];
-        let mut weight = 0.0f32;
-        for corner in 0..8 {
-            let mut w = 1.0f32;
-            let mut ijk = [0u32; 3];
-            for (a, &(lo, hi, frac)) in axes.iter().enumerate() {
-                let upper = corner >> a & 1 == 1;
-                ijk[a] = if upper { hi } else { lo };
-                w *= if upper { frac } else { 1.0 - frac };
-            }
-            let i = g.index(ijk[0], ijk[1], ijk[2]);
-            let w = w * self.validity.get(i).copied().unwrap_or(0.0);
-            if w == 0.0 {
+        let (mut validity, mut total) = (0.0f32, 0.0f32);
+        for corner in 0..8u32 {
+            let o = Vec3::new(
+                (corner & 1) as f32,
+                (corner >> 1 & 1) as f32,
+                (corner >> 2 & 1) as f32,
+            );
+            let tri = f * o + (Vec3::ONE - f) * (Vec3::ONE - o);
+            let w_tri = tri.x * tri.y * tri.z;
+            let ijk = (base + o).min(last);
+            let i = g.index(ijk.x as u32, ijk.y as u32, ijk.z as u32);
+            let probe_weight = self.weight.get(i).copied().unwrap_or(0.0);
+            if w_tri <= 0.0 || probe_weight <= 0.0 {
                 continue;
             }
-            weight += w;
+            validity += w_tri * probe_weight;
+            let mut w = w_tri;
+            if !self.depth.is_empty() {
+                w *= self.visibility(i, self.positions[i], p, n);
+            }
+            let w = w * probe_weight;
+            total += w;
             for k in 0..SH_COUNT {
                 for ch in 0..3 {
                     sum[k][ch] += w * self.sh[i][k][ch];
                 }
             }
         }
-        if weight <= MIN_VALIDITY {
-            return Sample {
-                validity: weight,
-                ..Sample::default()
-            };
+        if validity <= MIN_VALIDITY || total <= 0.0 {
+            return Sample::default();
         }
-        let sh = sum.map(|c| c.map(|v| v / weight));
+        let sh = sum.map(|c| c.map(|v| v / total));
         Sample {
             sh,
             irradiance: prt_format::sh::irradiance(&sh, normal),
-            validity: weight,
+            validity,
         }
     }
 }

@@ -272,9 +272,11 @@ fn every_ray_is_accounted_for() {
 /// probe land in the same brick).
 #[test]
 fn merging_keeps_per_probe_totals() {
+    // Without dilation, so that every factor comes from the probe's own ray hits.
     let base = BakeSettings {
         spacing: Some(0.5),
         transfer_precision: TransferPrecision::F32,
+        dilate: false,
         ..rays(4096)
     };
     let unmerged = bake_ok(

@@ -480,9 +480,13 @@ fn chunked_factor_tables_match_the_unsplit_result() {
 #[test]
 fn sample_irradiance_snippet_matches_the_cpu() {
     let (device, queue) = device();
+    // Without dilation, so that probes inside the boxes stay invalid.
     let asset = bake(
         &shared("reference/cornell/cornell.gltf"),
-        &BakeSettings::default(),
+        &BakeSettings {
+            dilate: false,
+            ..BakeSettings::default()
+        },
     );
     let lighting = load_rig(&shared("reference/cornell/rig.json")).unwrap();
     let settings = RuntimeSettings {
@@ -571,13 +575,14 @@ fn sample_queries(asset: &Asset, count: usize) -> Vec<([f32; 3], [f32; 3])> {
     for k in 0..g.counts[2] {
         for j in 0..g.counts[1] {
             for i in 0..g.counts[0] {
-                if !asset.probes[g.index(i, j, k)].is_valid() {
+                let real = |p: &prt_format::Probe| p.is_valid() && !p.is_dilated();
+                if !real(&asset.probes[g.index(i, j, k)]) {
                     continue;
                 }
                 let here = g.position(i, j, k);
                 for (a, next) in [(0, [i + 1, j, k]), (1, [i, j + 1, k]), (2, [i, j, k + 1])] {
                     if next[a] >= g.counts[a]
-                        || asset.probes[g.index(next[0], next[1], next[2])].is_valid()
+                        || real(&asset.probes[g.index(next[0], next[1], next[2])])
                     {
                         continue;
                     }
@@ -607,14 +612,39 @@ fn sample_points_matches_the_cpu_sampler() {
         &BakeSettings::default(),
     );
     let lighting = load_rig(&shared("reference/cornell/rig.json")).unwrap();
-    let settings = RuntimeSettings::default();
-    let mut runtime = PrtRuntime::new(&device, &queue, &asset, settings).unwrap();
-    let sh = gpu_update(&device, &queue, &mut runtime, &lighting, None);
-    let g = asset.header.grid;
-    let cpu = VolumeSampler::new(&g, &asset.probes, &sh, settings.normal_bias * g.spacing);
-    let points = sample_queries(&asset, 384);
+    for visibility in [true, false] {
+        let settings = RuntimeSettings {
+            visibility,
+            ..RuntimeSettings::default()
+        };
+        let mixed = compare_samplers(&device, &queue, &asset, &lighting, settings);
+        assert!(mixed > 0, "no point beside a probe inside geometry");
+    }
+    // Two rooms sharing a thin wall: the visibility test decides most of the weights there.
+    let rooms = bake(&fixture("two_rooms.gltf"), &BakeSettings::default());
+    let lighting = load_rig(&fixture("rigs/two_rooms.json")).unwrap();
+    compare_samplers(
+        &device,
+        &queue,
+        &rooms,
+        &lighting,
+        RuntimeSettings::default(),
+    );
+}
+
+fn compare_samplers(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    asset: &Asset,
+    lighting: &Lighting,
+    settings: RuntimeSettings,
+) -> usize {
+    let (device, queue) = (device.clone(), queue.clone());
+    let mut runtime = PrtRuntime::new(&device, &queue, asset, settings).unwrap();
+    let sh = gpu_update(&device, &queue, &mut runtime, lighting, None);
+    let cpu = VolumeSampler::for_asset(asset, &sh, &settings);
+    let points = sample_queries(asset, 384);
     let mixed = points.len() - 384;
-    assert!(mixed > 0, "no point beside an invalid probe");
     let gpu = sample_points(&device, &queue, &runtime, &points).unwrap();
     assert_eq!(gpu.len(), points.len());
     let (mut worst_sh, mut worst_e, mut worst_v) = (0.0f32, 0.0f32, 0.0f32);
@@ -654,9 +684,11 @@ fn sample_points_matches_the_cpu_sampler() {
         }
     }
     eprintln!(
-        "{} points ({mixed} beside invalid probes): worst |dSH|/SH0 {worst_sh:.2e}, |dE|/E0 {worst_e:.2e}, |dvalidity| {worst_v:.2e}",
+        "visibility {}: {} points ({mixed} beside probes inside geometry): worst |dSH|/SH0 {worst_sh:.2e}, |dE|/E0 {worst_e:.2e}, |dvalidity| {worst_v:.2e}",
+        settings.visibility,
         points.len()
     );
+    mixed
 }
 
 /// Tolerances of `sample_points_matches_the_cpu_sampler`, relative to the sample's SH0 (for E: to

@@ -79,7 +79,7 @@ fn render(
     r.set_lights(&s.queue, &lighting.rig.lights).unwrap();
     r.set_camera(&s.queue, &camera(), view).unwrap();
     let mut encoder = s.device.create_command_encoder(&Default::default());
-    r.record(&s.device, &mut encoder, gi);
+    r.record(&mut encoder, gi);
     s.queue.submit([encoder.finish()]);
     let frame = r.read_frame(&s.device, &s.queue).unwrap();
     let counts = r.read_tile_counts(&s.device, &s.queue).unwrap();
@@ -203,9 +203,7 @@ fn indirect_light_equals_the_cpu_volume_lookup() {
     let lighting = load_rig(&fixture("cornell/rig.json")).unwrap();
     let rt = gi(&s, &lighting);
     let sh = rt.read_probe_sh().unwrap();
-    let g = s.asset.header.grid;
-    let bias = rt.volume_info().normal_bias;
-    let sampler = VolumeSampler::new(&g, &s.asset.probes, &sh, bias);
+    let sampler = VolumeSampler::for_asset(&s.asset, &sh, rt.settings());
     let st = settings(16, Culling::Tiled, true);
     let (indirect, _) = render(&s, st, &lighting, View::Indirect, Some(&rt));
     let (albedo, _) = render(&s, st, &lighting, View::Albedo, None);

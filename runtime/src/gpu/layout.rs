@@ -147,8 +147,15 @@ pub struct VolumeInfo {
     pub counts: [f32; 3],
     /// Metres along the normal the snippet moves a point before sampling (`prt_sample_sh`).
     pub normal_bias: f32,
+    /// [`VOLUME_VISIBILITY`]: weight each of the eight probes by whether the point is visible
+    /// from it (eight manual fetches); without it, one hardware trilinear fetch per texture.
+    pub flags: u32,
+    pub _pad: [u32; 3],
 }
-const _: () = assert!(std::mem::size_of::<VolumeInfo>() == 32);
+const _: () = assert!(std::mem::size_of::<VolumeInfo>() == 48);
+
+/// `VolumeInfo::flags`: visibility-aware sampling.
+pub const VOLUME_VISIBILITY: u32 = 1;
 
 impl From<&prt_format::Grid> for VolumeInfo {
     fn from(g: &prt_format::Grid) -> Self {
@@ -157,6 +164,8 @@ impl From<&prt_format::Grid> for VolumeInfo {
             spacing: g.spacing,
             counts: g.counts.map(|c| c as f32),
             normal_bias: 0.0,
+            flags: 0,
+            _pad: [0; 3],
         }
     }
 }

@@ -106,7 +106,16 @@ pub struct RuntimeSettings {
     /// A larger bias weights the probes in front of the surface more, at the price of sampling
     /// the lighting off the surface (contact detail blurs, and a bias beyond the wall's distance
     /// to the next probe can reach past nearby geometry). 0 samples exactly at the point.
+    /// Default 0.2: with visibility it also moves a point on the dark side of a thin wall far
+    /// enough past the wall, as the lit side's probes see it, for the Chebyshev test to reject
+    /// them (`prt bench surface`: two rooms sharing a wall, 2 of 300 points leaking at 0.2
+    /// against 6 at 0.1; the Cornell room 8.4% against 8.2% mean error).
     pub normal_bias: f32,
+    /// Visibility-aware sampling (DDGI's Chebyshev test against each probe's visibility map, see
+    /// `shaders/sample_irradiance.wgsl`): no light through walls from probes on their far side,
+    /// for 56 texel loads and 8 visibility words per lookup instead of 7 filtered fetches. Off:
+    /// hardware trilinear over the probes' weights only.
+    pub visibility: bool,
 }
 
 impl Default for RuntimeSettings {
@@ -115,7 +124,8 @@ impl Default for RuntimeSettings {
             volume_format: VolumeFormat::default(),
             benchmark_baselines: false,
             max_factor_chunk_bytes: None,
-            normal_bias: 0.1,
+            normal_bias: 0.2,
+            visibility: true,
         }
     }
 }
@@ -163,6 +173,19 @@ pub fn headless_device() -> Result<(wgpu::Device, wgpu::Queue, wgpu::AdapterInfo
     }))
     .map_err(|e| GpuError::Device(e.to_string()))?;
     Ok((device, queue, adapter.get_info()))
+}
+
+/// The sampling snippet's uniform for `grid` and `settings`.
+fn volume_info(grid: &prt_format::Grid, settings: &RuntimeSettings) -> VolumeInfo {
+    VolumeInfo {
+        normal_bias: settings.normal_bias * grid.spacing,
+        flags: if settings.visibility {
+            VOLUME_VISIBILITY
+        } else {
+            0
+        },
+        ..VolumeInfo::from(grid)
+    }
 }
 
 /// Smallest buffer the runtime creates: larger than every element type it binds.
@@ -294,6 +317,11 @@ pub struct PrtRuntime {
     textures: Vec<wgpu::Texture>,
     views: Vec<wgpu::TextureView>,
     sampler: wgpu::Sampler,
+    /// The sampling snippet's uniform (binding 8), visibility maps (binding 9) and probe
+    /// positions (binding 10).
+    volume_info: wgpu::Buffer,
+    probe_depth: wgpu::Buffer,
+    probe_positions: wgpu::Buffer,
     pipelines: Vec<(Stage, Pipeline)>,
     /// The integer-atomic gather, built only for benchmarks ([`PrtRuntime::use_atomic_gather`]).
     atomic_gather: Option<Pipeline>,
@@ -450,6 +478,21 @@ impl PrtRuntime {
         )?;
         let sky_mask =
             alloc.storage("prt sky mask", bytemuck::cast_slice(&asset.sky_mask), none)?;
+        let probe_depth = alloc.storage(
+            "prt probe visibility",
+            bytemuck::cast_slice(&asset.probe_depth),
+            none,
+        )?;
+        let positions: Vec<[f32; 4]> = asset
+            .probes
+            .iter()
+            .map(|p| [p.position[0], p.position[1], p.position[2], 0.0])
+            .collect();
+        let probe_positions = alloc.storage(
+            "prt probe positions",
+            bytemuck::cast_slice(&positions),
+            none,
+        )?;
         let n_bricks = asset.bricks.len() as u64;
         let n_surfels = asset.surfels.len() as u64;
         let n_probes = asset.probes.len() as u64;
@@ -675,6 +718,13 @@ impl PrtRuntime {
             textures,
             views,
             sampler,
+            volume_info: device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("prt volume info"),
+                contents: bytemuck::bytes_of(&volume_info(&g, &settings)),
+                usage: wgpu::BufferUsages::UNIFORM,
+            }),
+            probe_depth,
+            probe_positions,
             pipelines,
             atomic_gather,
             use_atomic: false,
@@ -889,10 +939,87 @@ impl PrtRuntime {
 
     /// The contents of the sampling snippet's `PrtVolumeInfo` uniform (binding 8 of its group).
     pub fn volume_info(&self) -> VolumeInfo {
-        VolumeInfo {
-            normal_bias: self.settings.normal_bias * self.grid.spacing,
-            ..VolumeInfo::from(&self.grid)
+        volume_info(&self.grid, &self.settings)
+    }
+
+    /// The settings the runtime was created with.
+    pub fn settings(&self) -> &RuntimeSettings {
+        &self.settings
+    }
+
+    /// The bind group layout entries of the sampling snippet (`wgsl_snippet`), visible to
+    /// `stages`: textures 0-6, sampler 7, uniform 8, visibility maps 9, probe positions 10.
+    pub fn volume_layout_entries(stages: wgpu::ShaderStages) -> Vec<wgpu::BindGroupLayoutEntry> {
+        let entry = |binding, ty| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: stages,
+            ty,
+            count: None,
+        };
+        let buffer = |ty| wgpu::BindingType::Buffer {
+            ty,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        };
+        let mut e: Vec<_> = (0..7)
+            .map(|b| {
+                entry(
+                    b,
+                    wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                        view_dimension: wgpu::TextureViewDimension::D3,
+                        multisampled: false,
+                    },
+                )
+            })
+            .collect();
+        e.push(entry(
+            7,
+            wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+        ));
+        e.push(entry(8, buffer(wgpu::BufferBindingType::Uniform)));
+        for b in [9, 10] {
+            e.push(entry(
+                b,
+                buffer(wgpu::BufferBindingType::Storage { read_only: true }),
+            ));
         }
+        e
+    }
+
+    /// The bind group of the sampling snippet for `layout` (made from
+    /// [`PrtRuntime::volume_layout_entries`] or taken from a pipeline built with the snippet).
+    pub fn volume_bind_group(&self, layout: &wgpu::BindGroupLayout) -> wgpu::BindGroup {
+        let mut entries: Vec<wgpu::BindGroupEntry> = self
+            .views
+            .iter()
+            .enumerate()
+            .map(|(b, v)| wgpu::BindGroupEntry {
+                binding: b as u32,
+                resource: wgpu::BindingResource::TextureView(v),
+            })
+            .collect();
+        entries.push(wgpu::BindGroupEntry {
+            binding: 7,
+            resource: wgpu::BindingResource::Sampler(&self.sampler),
+        });
+        entries.push(wgpu::BindGroupEntry {
+            binding: 8,
+            resource: self.volume_info.as_entire_binding(),
+        });
+        entries.push(wgpu::BindGroupEntry {
+            binding: 9,
+            resource: self.probe_depth.as_entire_binding(),
+        });
+        entries.push(wgpu::BindGroupEntry {
+            binding: 10,
+            resource: self.probe_positions.as_entire_binding(),
+        });
+        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("prt volume"),
+            layout,
+            entries: &entries,
+        })
     }
 
     /// WGSL defining `sample_irradiance(world_pos, normal)` and `prt_sample_sh(world_pos,

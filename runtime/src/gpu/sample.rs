@@ -63,33 +63,7 @@ pub fn sample_points(
         compilation_options: Default::default(),
         cache: None,
     });
-    let info = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("prt sample volume info"),
-        contents: bytemuck::bytes_of(&runtime.volume_info()),
-        usage: wgpu::BufferUsages::UNIFORM,
-    });
-    let mut entries: Vec<wgpu::BindGroupEntry> = runtime
-        .volume_views()
-        .iter()
-        .enumerate()
-        .map(|(b, v)| wgpu::BindGroupEntry {
-            binding: b as u32,
-            resource: wgpu::BindingResource::TextureView(v),
-        })
-        .collect();
-    entries.push(wgpu::BindGroupEntry {
-        binding: 7,
-        resource: wgpu::BindingResource::Sampler(runtime.sampler()),
-    });
-    entries.push(wgpu::BindGroupEntry {
-        binding: 8,
-        resource: info.as_entire_binding(),
-    });
-    let volume = device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("prt sample volume"),
-        layout: &pipeline.get_bind_group_layout(1),
-        entries: &entries,
-    });
+    let volume = runtime.volume_bind_group(&pipeline.get_bind_group_layout(1));
     let mut out = Vec::with_capacity(points.len());
     let mut result = Ok(());
     for batch in points.chunks(BATCH) {

@@ -133,6 +133,9 @@ pub fn sample_irradiance_snippet(group: u32) -> String {
     ] {
         s.push_str(&format!("const {name}: f32 = {v:?};\n"));
     }
+    for (name, v) in crate::sample::wgsl_constants() {
+        s.push_str(&format!("const {name} = {v};\n"));
+    }
     s.push_str(SAMPLE_IRRADIANCE);
     s.replace("PRT_GROUP", &group.to_string())
 }
