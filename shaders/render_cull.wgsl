@@ -10,10 +10,11 @@
 //    degrees the smaller sphere around its cone sector; lights without a range touch every tile;
 // 4. the mask is compacted in light order (deterministic lists, so tiled shading sums lights in
 //    the same order as brute force) into [count, index...]; lights past the tile's maximum are
-//    dropped and counted in `stats`, never silently.
+//    dropped, counted in `stats` and flagged in the count word (TILE_OVERFLOW), never silently.
 // Every test bounds the pixels conservatively, so a culled light's range window or cone factor is
-// exactly zero at every pixel of the tile (spheres are inflated by CULL_RANGE_MARGIN against
-// rounding).
+// exactly zero at every pixel of the tile: spheres are inflated by CULL_RANGE_MARGIN against
+// rounding, and by CULL_DEPTH_MARGIN of the tile's far depth against the depth buffer's
+// quantisation (the tile's bounds come from stored depths, shading from interpolated positions).
 
 @group(0) @binding(0) var<uniform> frame: Frame;
 @group(0) @binding(1) var<storage, read> lights: array<Light>;
@@ -49,7 +50,7 @@ struct TileBounds {
 fn light_sphere(light: Light) -> vec4<f32> {
     var centre = light.position;
     var radius = light.range;
-    if light.kind == LIGHT_SPOT && light.cos_outer > 0.70710678 {
+    if light.kind == LIGHT_SPOT && light.cos_outer > SPOT_SPHERE_COS {
         // Sphere through the apex around the sector {d <= range, angle <= outer}.
         radius = light.range / (2.0 * light.cos_outer);
         centre = light.position + light.direction * radius;
@@ -59,7 +60,8 @@ fn light_sphere(light: Light) -> vec4<f32> {
 
 fn bin_of(z: f32, near: f32, far: f32) -> u32 {
     let t = (z - near) / max(far - near, 1e-30);
-    return u32(clamp(t * 32.0, 0.0, 31.0));
+    let bins = f32(CULL_DEPTH_BINS);
+    return u32(clamp(t * bins, 0.0, bins - 1.0));
 }
 
 fn touches(light: Light, b: TileBounds, bins: u32) -> bool {
@@ -71,7 +73,8 @@ fn touches(light: Light, b: TileBounds, bins: u32) -> bool {
     }
     let s = light_sphere(light);
     let c = s.xyz;
-    let r = s.w;
+    // The sphere grows by the depth-quantisation margin of the tile (layout.rs).
+    let r = s.w + CULL_DEPTH_MARGIN * b.far;
     let nearest = clamp(c, b.bmin, b.bmax);
     if dot(c - nearest, c - nearest) > r * r {
         return false;
@@ -201,7 +204,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) loca
     }
     if lid == 0u {
         let kept = min(total, frame.max_per_tile);
-        tile_lists[base] = kept;
+        tile_lists[base] = kept | select(0u, TILE_OVERFLOW, total > kept);
         atomicAdd(&stats.listed, kept);
         if total > kept {
             atomicAdd(&stats.overflow_tiles, 1u);

@@ -109,7 +109,9 @@ fn fetch(info: ImageInfo, x: i32, y: i32, sampler_bits: u32) -> vec3<f32> {
 // Twin of prt_bake::texture::sample: the glTF sampler's wrap modes, nearest or bilinear.
 fn sample_image(image: u32, sampler_bits: u32, uv: vec2<f32>) -> vec3<f32> {
     let info = images[image];
-    if info.width == 0u || info.height == 0u {
+    // Empty images and non-finite coordinates sample white, as on the CPU.
+    let finite = uv.x == uv.x && uv.y == uv.y && abs(uv.x) < 3.0e38 && abs(uv.y) < 3.0e38;
+    if info.width == 0u || info.height == 0u || !finite {
         return vec3<f32>(1.0);
     }
     let x = clamp(uv.x * f32(info.width), -1.0e6, 1.0e6);
@@ -195,7 +197,7 @@ fn fs_main(in: VertexOut, @builtin(front_facing) front: bool) -> ShadeOut {
         if (frame.flags & FLAG_TILED) != 0u {
             let tile = vec2<u32>(in.clip.xy) / frame.tile;
             let base = (tile.y * frame.tiles_x + tile.x) * tile_stride();
-            let count = tile_lists[base];
+            let count = tile_lists[base] & ~TILE_OVERFLOW;
             for (var k = 0u; k < count; k = k + 1u) {
                 direct = direct + direct_light(lights[tile_lists[base + 1u + k]], p, n);
             }

@@ -13,7 +13,7 @@
 //
 // With visibility (PrtVolumeInfo.flags, the default) the eight probes around the point are read
 // one by one and weighted, as DDGI does (Majercik et al., JCGT 2019), by
-//   trilinear weight x validity x (((n . direction to probe) + 1) / 2)^2 + 0.2)
+//   trilinear weight x validity x (((n . direction to probe) + 1) / 2)^2 + PRT_FACING_FLOOR)
 //                    x Chebyshev visibility,
 // where the Chebyshev term tests the point's distance from the probe (from where its rays
 // started) against the mean and
@@ -78,10 +78,10 @@ fn prt_sample_trilinear(p: vec3<f32>) -> PrtSample {
     var s: PrtSample;
     var t: array<vec4<f32>, 7>;
     t[0] = textureSampleLevel(prt_volume0, prt_sampler, uvw, 0.0);
-    s.validity = t[0].w;
     if t[0].w <= PRT_MIN_VALIDITY {
         return s;
     }
+    s.validity = t[0].w;
     t[1] = textureSampleLevel(prt_volume1, prt_sampler, uvw, 0.0);
     t[2] = textureSampleLevel(prt_volume2, prt_sampler, uvw, 0.0);
     t[3] = textureSampleLevel(prt_volume3, prt_sampler, uvw, 0.0);
@@ -123,7 +123,8 @@ fn prt_probe_visibility(index: u32, probe: vec3<f32>, x: vec3<f32>, n: vec3<f32>
     let pair = select(bytes.xy, bytes.zw, (texel & 1u) == 1u);
     let mean = pair.x * PRT_MAX_DEPTH;
     let deviation = pair.y * PRT_MAX_DEVIATION;
-    if dist > mean {
+    // A saturated mean (sky, or hits beyond PRT_MAX_DEPTH) bounds nothing.
+    if dist > mean && pair.x < 1.0 {
         let variance = max(deviation * deviation, PRT_MIN_VARIANCE);
         let d = dist - mean;
         let chebyshev = variance / (variance + d * d);

@@ -25,6 +25,7 @@ pub mod depth;
 pub mod dilate;
 pub mod error;
 pub mod factors;
+pub mod offset;
 pub mod probes;
 pub mod scene;
 pub mod texture;
@@ -351,14 +352,16 @@ fn bake_in_pool(
         .par_iter()
         .map(|&grid_p| {
             let p = if settings.surface_offset {
-                surface_offset(&tracer, grid_p, spacing)
+                offset::surface_offset(&tracer, grid_p, spacing)
             } else {
                 grid_p
             };
             let r = tracer.trace_probe(p);
             progress.advance(1);
             if settings.virtual_offset && is_inside(&r) {
-                if let Some((moved, again)) = virtual_offset(&tracer, p, &r, spacing, &is_inside) {
+                if let Some((moved, again)) =
+                    offset::virtual_offset(&tracer, p, &r, spacing, &is_inside)
+                {
                     return (moved, again, true);
                 }
             }
@@ -455,7 +458,7 @@ fn bake_in_pool(
         return Err(BakeError::Setting {
             name: "spacing",
             value: format!("{} factors", rows.len()),
-            reason: "more than 2^32 factors: use fewer probes or rays",
+            reason: "more than 2^32 factors (dilation copies tables into probes inside geometry): use fewer probes or rays, or --no-dilation",
         });
     }
     let stats = BakeStats {
@@ -501,71 +504,4 @@ fn bake_in_pool(
     })?;
     lap(&mut report, "assemble", None);
     Ok((asset, report))
-}
-
-/// A probe within [`NEAR_SURFACE`] spacings of a surface (found by short rays through it along
-/// 26 directions, axes, face and corner diagonals) moves [`SURFACE_OFFSET`] spacings off the
-/// surface, to the side the short ray came from; repeated up to three times for corners.
-fn surface_offset(tracer: &trace::Tracer, p: Vec3, spacing: f32) -> Vec3 {
-    let eps = NEAR_SURFACE * spacing;
-    let mut at = p;
-    'moves: for _ in 0..3 {
-        for d in near_directions() {
-            let Some(h) = tracer.bvh.closest_hit(at - d * eps, d) else {
-                continue;
-            };
-            if h.t > 2.0 * eps {
-                continue;
-            }
-            let v = tracer.scene.triangles[h.triangle as usize];
-            let n = (v[1] - v[0]).cross(v[2] - v[0]).normalize_or_zero();
-            let towards = if n.dot(d) < 0.0 { n } else { -n };
-            at += towards * (SURFACE_OFFSET * spacing);
-            continue 'moves;
-        }
-        break;
-    }
-    at
-}
-
-/// Spacings within which a probe counts as on a surface.
-const NEAR_SURFACE: f32 = 0.02;
-/// Spacings a probe on a surface moves off it.
-const SURFACE_OFFSET: f32 = 0.1;
-
-/// The 26 unit directions to the neighbours of a grid cell, in a fixed order.
-fn near_directions() -> impl Iterator<Item = Vec3> {
-    (0..27).filter(|&i| i != 13).map(|i| {
-        Vec3::new(
-            (i % 3) as f32 - 1.0,
-            ((i / 3) % 3) as f32 - 1.0,
-            (i / 9) as f32 - 1.0,
-        )
-        .normalize()
-    })
-}
-
-/// Virtual offset of a probe inside geometry: the nearest back face its rays hit is the wall it
-/// is behind; the probe moves just past it along that ray (at most half a spacing) and is traced
-/// again. Returns the new position and rays when the probe is valid there.
-fn virtual_offset(
-    tracer: &trace::Tracer,
-    origin: Vec3,
-    rays: &trace::ProbeRays,
-    spacing: f32,
-    is_inside: &dyn Fn(&trace::ProbeRays) -> bool,
-) -> Option<(Vec3, trace::ProbeRays)> {
-    let nearest = rays.hits.iter().filter(|h| h.backface).min_by(|a, b| {
-        (a.position - origin)
-            .length_squared()
-            .total_cmp(&(b.position - origin).length_squared())
-            .then(a.ray.cmp(&b.ray))
-    })?;
-    let dir = tracer.directions[nearest.ray as usize];
-    let moved = nearest.position + dir * (1e-3 * spacing).max(1e-4);
-    if (moved - origin).length() > 0.5 * spacing {
-        return None;
-    }
-    let again = tracer.trace_probe(moved);
-    (!is_inside(&again)).then_some((moved, again))
 }

@@ -76,6 +76,9 @@ pub fn validate(asset: &Asset) -> Result<(), FormatError> {
         probes * h.sky_mask_words(),
     )?;
     count("sky_transfer", asset.sky_transfer.len(), probes)?;
+    for (i, t) in asset.sky_transfer.iter().enumerate() {
+        finite("sky_transfer", i, "transfer", t)?;
+    }
     count(
         "probe_depth",
         asset.probe_depth.len(),

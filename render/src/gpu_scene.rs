@@ -8,7 +8,7 @@
 
 use glam::Vec3;
 use gltf::texture::WrappingMode;
-use prt_bake::scene::Scene;
+use prt_bake::scene::{Scene, TriangleAttributes};
 use prt_bake::texture::TextureRef;
 use prt_format::Asset;
 use wgpu::util::DeviceExt;
@@ -54,7 +54,15 @@ fn vertices(scene: &Scene, double_sided_override: bool) -> (Vec<Vertex>, u32) {
         let material = scene.materials_of_triangles[t];
         let two = double_sided_override || scene.materials[material as usize].double_sided;
         let normal = (tri[1] - tri[0]).cross(tri[2] - tri[0]).normalize_or_zero();
-        let attr = scene.attributes.get(t).copied().unwrap_or_default();
+        // Without attributes: UV 0 and white vertex colour (COLOR_0 absent).
+        let attr = scene
+            .attributes
+            .get(t)
+            .copied()
+            .unwrap_or(TriangleAttributes {
+                uv: Default::default(),
+                color: [glam::Vec4::ONE; 3],
+            });
         let out = if two { &mut double } else { &mut single };
         for (k, corner) in tri.iter().enumerate() {
             out.push(Vertex {

@@ -193,30 +193,39 @@ impl Canvas<'_> {
 
 /// The heat map: each tile's light count on a colour ramp from 0 to the busiest tile, blended
 /// over the grey base image (`base`, already tone-mapped), with a legend bar labelled with the
-/// counts along the bottom. Tiles whose list overflowed are outlined in white.
+/// counts along the bottom (when the image is at least 64 pixels wide and 32 high). Tiles whose
+/// list overflowed (lights dropped) are outlined in white.
 pub struct Heatmap<'a> {
     pub width: u32,
     pub height: u32,
     pub tile: u32,
     pub tiles_x: u32,
+    /// Count words of the tile lists (`Renderer::read_tile_counts`).
     pub counts: &'a [u32],
-    pub max_per_tile: u32,
 }
 
 impl Heatmap<'_> {
     pub fn draw(&self, base: &[[u8; 3]]) -> Vec<[u8; 3]> {
         let (w, h) = (self.width, self.height);
-        let busiest = self.counts.iter().copied().max().unwrap_or(0).max(1);
+        let count_of = |word: u32| word & !crate::layout::TILE_OVERFLOW;
+        let busiest = self
+            .counts
+            .iter()
+            .map(|&c| count_of(c))
+            .max()
+            .unwrap_or(0)
+            .max(1);
         let mut img: Vec<[u8; 3]> = Vec::with_capacity(base.len());
         for y in 0..h {
             for x in 0..w {
                 let (tx, ty) = (x / self.tile, y / self.tile);
-                let count = self.counts[(ty * self.tiles_x + tx) as usize];
+                let word = self.counts[(ty * self.tiles_x + tx) as usize];
+                let count = count_of(word);
                 let b = base[(y * w + x) as usize];
                 let grey = (f32::from(b[0]) + f32::from(b[1]) + f32::from(b[2])) / (3.0 * 255.0);
                 let heat = ramp(count as f32 / busiest as f32);
                 let edge = x % self.tile == 0 || y % self.tile == 0;
-                let px = if count >= self.max_per_tile && edge {
+                let px = if word & crate::layout::TILE_OVERFLOW != 0 && edge {
                     [255; 3]
                 } else {
                     heat.map(|c| ((0.7 * c + 0.3 * grey) * 255.0) as u8)
@@ -224,7 +233,9 @@ impl Heatmap<'_> {
                 img.push(px);
             }
         }
-        self.legend(&mut img, busiest);
+        if w >= 64 && h >= 32 {
+            self.legend(&mut img, busiest);
+        }
         img
     }
 

@@ -74,6 +74,21 @@ pub struct RenderReport {
     pub render_seconds: f64,
 }
 
+/// Fails before any GPU work when `path` cannot be written: its directory must exist.
+fn check_output(path: &Path) -> Result<(), RenderError> {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    if !dir.is_dir() {
+        return Err(RenderError::Write {
+            path: path.to_owned(),
+            message: format!("directory {} does not exist", dir.display()),
+        });
+    }
+    Ok(())
+}
+
 /// Fails unless `scene_bytes` are the bytes `asset` was baked from.
 pub fn check_source(
     scene: &Path,
@@ -104,6 +119,9 @@ pub fn run(
         .map_err(|e| RenderError::Scene(format!("reading {}: {e}", job.scene.display())))?;
     if !job.force {
         check_source(&job.scene, &scene_bytes, &job.asset, asset)?;
+    }
+    for out in std::iter::once(&job.png).chain(&job.exr) {
+        check_output(out)?;
     }
     let scene = prt_bake::scene::load(&job.scene).map_err(|e| RenderError::Scene(e.to_string()))?;
     let mut camera = match (&job.camera, scene.cameras.first()) {
@@ -159,13 +177,18 @@ pub fn run(
             tile: job.settings.tile,
             tiles_x: renderer.tiles().0,
             counts: &counts,
-            max_per_tile: job.settings.max_lights_per_tile,
         }
         .draw(&pixels);
     }
-    image::write_png(&job.png, frame.width, frame.height, &pixels)?;
+    // Both files or neither: the EXR first, removed again if the PNG fails.
     if let Some(exr) = &job.exr {
         image::write_exr(exr, frame.width, frame.height, &frame.radiance)?;
+    }
+    if let Err(e) = image::write_png(&job.png, frame.width, frame.height, &pixels) {
+        if let Some(exr) = &job.exr {
+            let _ = std::fs::remove_file(exr);
+        }
+        return Err(e);
     }
     let shaded: Vec<&[f32; 4]> = frame
         .radiance

@@ -16,8 +16,19 @@ pub const CULL_GROUP: u32 = 16;
 /// from an inverse projection whose rounding could otherwise drop a light whose window is not
 /// yet zero at the very edge of its range (conservative, never lossy).
 pub const CULL_RANGE_MARGIN: f32 = 1.001;
+/// Depth margin of the culling tests, relative to the tile's farthest linear depth: the tile's
+/// bounds come from the depth buffer (32-bit float depth with near = far / 1000 quantises view
+/// depth to about 6e-5 of the far distance), while shading uses the interpolated position.
+pub const CULL_DEPTH_MARGIN: f32 = 2e-4;
+/// Depth bins of the 2.5D culling mask (one bit each in a u32).
+pub const CULL_DEPTH_BINS: u32 = 32;
+/// Spots whose outer cone is narrower than this cosine's angle (45 degrees) are bounded by the
+/// sphere around their cone sector instead of their range sphere (smaller below 45 degrees).
+pub const SPOT_SPHERE_COS: f32 = std::f32::consts::FRAC_1_SQRT_2;
 /// Ranges at or above this mean "no range" (the runtime stores `f32::MAX`).
 pub const UNBOUNDED_RANGE: f32 = 1.0e30;
+/// Bit of a tile list's count word set when the tile had more lights than its list holds.
+pub const TILE_OVERFLOW: u32 = 1 << 31;
 /// `Material::base_image` / `emissive_image` of a material without that texture.
 pub const NO_IMAGE: u32 = u32::MAX;
 
@@ -124,6 +135,10 @@ pub fn wgsl_constants() -> String {
             format!("{}u", MAX_OTHER_LIGHTS.div_ceil(32)),
         ),
         ("CULL_RANGE_MARGIN", format!("{CULL_RANGE_MARGIN:?}")),
+        ("CULL_DEPTH_MARGIN", format!("{CULL_DEPTH_MARGIN:?}")),
+        ("CULL_DEPTH_BINS", format!("{CULL_DEPTH_BINS}u")),
+        ("SPOT_SPHERE_COS", format!("{SPOT_SPHERE_COS:?}")),
+        ("TILE_OVERFLOW", format!("{TILE_OVERFLOW}u")),
         ("UNBOUNDED_RANGE", format!("{UNBOUNDED_RANGE:e}")),
         ("NO_IMAGE", format!("{NO_IMAGE}u")),
         ("WRAP_CLAMP", format!("{WRAP_CLAMP}u")),

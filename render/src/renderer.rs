@@ -453,19 +453,27 @@ impl Renderer {
         Ok(())
     }
 
+    /// The depth buffer as an attachment, cleared (pre-pass) or loaded (shading).
+    fn depth_attachment(
+        &self,
+        load: wgpu::LoadOp<f32>,
+    ) -> wgpu::RenderPassDepthStencilAttachment<'_> {
+        wgpu::RenderPassDepthStencilAttachment {
+            view: &self.targets.depth,
+            depth_ops: Some(wgpu::Operations {
+                load,
+                store: wgpu::StoreOp::Store,
+            }),
+            stencil_ops: None,
+        }
+    }
+
     /// Stage 1: the depth pre-pass.
     pub fn record_depth(&self, encoder: &mut wgpu::CommandEncoder) {
         let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("prt-render depth pre-pass"),
             color_attachments: &[],
-            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                view: &self.targets.depth,
-                depth_ops: Some(wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(1.0),
-                    store: wgpu::StoreOp::Store,
-                }),
-                stencil_ops: None,
-            }),
+            depth_stencil_attachment: Some(self.depth_attachment(wgpu::LoadOp::Clear(1.0))),
             timestamp_writes: None,
             occlusion_query_set: None,
             multiview_mask: None,
@@ -511,14 +519,7 @@ impl Renderer {
         let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("prt-render shade"),
             color_attachments: &attachments,
-            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                view: &self.targets.depth,
-                depth_ops: Some(wgpu::Operations {
-                    load: wgpu::LoadOp::Load,
-                    store: wgpu::StoreOp::Store,
-                }),
-                stencil_ops: None,
-            }),
+            depth_stencil_attachment: Some(self.depth_attachment(wgpu::LoadOp::Load)),
             timestamp_writes: None,
             occlusion_query_set: None,
             multiview_mask: None,
@@ -581,7 +582,7 @@ impl Renderer {
             let mut plane = Vec::with_capacity((w * h) as usize);
             for y in 0..h as usize {
                 let start = y * row as usize;
-                plane.extend_from_slice(bytemuck::cast_slice::<u8, [f32; 4]>(
+                plane.extend(bytemuck::pod_collect_to_vec::<u8, [f32; 4]>(
                     &bytes[start..start + w as usize * 16],
                 ));
             }
@@ -602,12 +603,13 @@ impl Renderer {
             radiance,
             position,
             normal,
-            stats: *bytemuck::from_bytes(&stats_bytes),
+            stats: bytemuck::pod_read_unaligned(&stats_bytes),
         })
     }
 
-    /// Lights listed per tile (row-major tiles), or every point and spot light with
-    /// [`Culling::None`].
+    /// Per tile (row-major), the count word of its list: lights listed in the low bits, with
+    /// [`TILE_OVERFLOW`] set when the tile had more lights than its list holds; with
+    /// [`Culling::None`], every point and spot light.
     pub fn read_tile_counts(
         &self,
         device: &wgpu::Device,
@@ -619,7 +621,8 @@ impl Renderer {
         }
         let bytes =
             prt_runtime::gpu::read_buffer(device, queue, &self.tile_lists, self.tile_lists.size())?;
-        let words: &[u32] = bytemuck::cast_slice(&bytes);
+        // The readback need not be 4-byte aligned: copy instead of casting.
+        let words: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes);
         let stride = self.settings.max_lights_per_tile as usize + 1;
         Ok((0..tiles).map(|t| words[t * stride]).collect())
     }

@@ -70,7 +70,14 @@ mod tests {
                     ("eye", offset_of!(layout::FrameUniform, eye)),
                     ("mode", offset_of!(layout::FrameUniform, mode)),
                     ("width", offset_of!(layout::FrameUniform, width)),
+                    ("tile", offset_of!(layout::FrameUniform, tile)),
+                    ("tiles_x", offset_of!(layout::FrameUniform, tiles_x)),
                     ("tiles_y", offset_of!(layout::FrameUniform, tiles_y)),
+                    (
+                        "max_per_tile",
+                        offset_of!(layout::FrameUniform, max_per_tile),
+                    ),
+                    ("other_count", offset_of!(layout::FrameUniform, other_count)),
                     (
                         "directional_count",
                         offset_of!(layout::FrameUniform, directional_count),

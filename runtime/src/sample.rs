@@ -12,7 +12,7 @@
 //! - each of the eight probes around the point gets its trilinear weight times its validity
 //!   (`Probe::sample_weight`: 1 for a valid or dilated probe, 0 for an invalid one), and **with
 //!   visibility** (the runtime's default) also `((n . direction to probe + 1) / 2)^2 +
-//!   FACING_FLOOR` and the Chebyshev visibility `max(cheb^3, MIN_VISIBILITY)` of the point's
+//!   FACING_FLOOR` and the Chebyshev visibility `max(crush(cheb^3), MIN_VISIBILITY)` of the point's
 //!   distance against the probe's visibility map in that direction (`prt_format::depth`;
 //!   Majercik et al., JCGT 2019); distances are measured from where the probe's rays started
 //!   (`Probe::position`: the grid position unless the probe was moved off a surface). A
@@ -49,7 +49,9 @@ pub const MIN_VALIDITY: f32 = 1e-6;
 /// Floor of the Chebyshev visibility term: a point that no probe sees still gets the least
 /// occluded probes' light rather than nothing.
 pub const MIN_VISIBILITY: f32 = 1e-5;
-/// Floor of the facing term (DDGI's 0.2): probes behind the surface count less, not zero.
+/// Floor of the facing term: probes behind the surface's plane count less, not zero. DDGI uses
+/// 0.2; prt's rooms are up to 500 times brighter than their neighbours (two rooms sharing a
+/// wall), where 0.2 of a probe behind the wall is a visible leak, so the floor is 0.02.
 pub const FACING_FLOOR: f32 = 0.02;
 /// Floor of the depth variance, in spacings squared (a perfectly flat hit distribution would
 /// make the test a hard step).
@@ -161,7 +163,9 @@ impl<'a> VolumeSampler<'a> {
         let words = &self.depth[i * DEPTH_WORDS..(i + 1) * DEPTH_WORDS];
         let (mean, deviation) =
             prt_format::depth::moments(words, prt_format::depth::texel_of(dir.to_array()));
-        if dist > mean {
+        // A saturated mean (sky, or hits beyond MAX_DEPTH) bounds nothing: points beyond it,
+        // outside the grid, stay visible.
+        if dist > mean && mean < MAX_DEPTH {
             let variance = (deviation * deviation).max(MIN_VARIANCE);
             let d = dist - mean;
             let chebyshev = variance / (variance + d * d);

@@ -379,6 +379,15 @@ fn structurally_broken_assets_are_invalid() {
     assert_count("missing sky mask word", "sky_mask", |a| {
         a.sky_mask.pop();
     });
+    assert_invalid("NaN sky transfer", "sky_transfer", |a| {
+        a.sky_transfer[1][4] = f32::NAN
+    });
+    assert_count("short visibility maps", "probe_depth", |a| {
+        a.probe_depth.pop();
+    });
+    assert_invalid("dilated but not valid", "probes", |a| {
+        a.probes[0].flags = prt_format::PROBE_DILATED
+    });
     assert_count("grid larger than the probe list", "probes", |a| {
         a.header.grid.counts[0] += 1
     });

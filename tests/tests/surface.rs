@@ -75,36 +75,26 @@ fn no_light_leaks_through_a_shared_wall() {
     );
 }
 
-/// Where all eight probes around a surface point are inside the thick walls, the point still
-/// gets light: dilation gives those probes their neighbours' data. Without it the same points
-/// are holes (validity 0, black).
+/// Where all eight probes around a point are inside geometry, the point still gets light:
+/// dilation gives those probes their nearest valid neighbours' data. Without it the point is a
+/// hole (validity 0, black). The closed, outward-facing 2 m box with probes every 0.5 m: the
+/// 4x4x4 probes inside it see only back faces, the outer layer sees the lit outside.
 #[test]
 fn holes_are_filled_by_dilation() {
-    let scene = fixture("thick_walls.gltf");
-    let reference: serde_json::Value = serde_json::from_slice(
-        &std::fs::read(fixture("surface/thick_walls_surface.json")).unwrap(),
-    )
-    .unwrap();
-    let points: Vec<([f32; 3], [f32; 3])> = reference["points"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|p| {
-            let v =
-                |k: &str| -> [f32; 3] { std::array::from_fn(|a| p[k][a].as_f64().unwrap() as f32) };
-            (v("position"), v("normal"))
-        })
-        .collect();
+    let scene = fixture("closed_box_outward.gltf");
+    let base = BakeSettings {
+        bounds: Some([-1.5, -1.5, -1.5, 1.5, 1.5, 1.5]),
+        spacing: Some(0.5),
+        ..BakeSettings::default()
+    };
     let settings = RuntimeSettings {
-        visibility: false,
         normal_bias: 0.0,
         ..RuntimeSettings::default()
     };
-    // A coarse grid, so that whole cells of probes fall inside the walls.
-    let base = BakeSettings {
-        spacing: Some(0.6),
-        ..BakeSettings::default()
-    };
+    let inside = [
+        ([0.0, 0.0, 0.0], [0.0, 1.0, 0.0]),
+        ([0.4, -0.3, 0.1], [1.0, 0.0, 0.0]),
+    ];
     let undilated = bake_ok(
         &scene,
         &BakeSettings {
@@ -112,23 +102,24 @@ fn holes_are_filled_by_dilation() {
             ..base.clone()
         },
     );
-    let sh = relit(&undilated, "rigs/thick_walls.json");
+    let sh = relit(&undilated, "rigs/sky_only.json");
     let s = VolumeSampler::for_asset(&undilated, &sh, &settings);
-    let holes: Vec<usize> = (0..points.len())
-        .filter(|&i| s.sample(points[i].0, points[i].1).validity == 0.0)
-        .collect();
-    assert!(!holes.is_empty(), "the coarse grid leaves no hole to fill");
-
+    for (p, n) in inside {
+        assert_eq!(
+            s.sample(p, n).validity,
+            0.0,
+            "{p:?} is no hole without dilation"
+        );
+    }
     let dilated = bake_ok(&scene, &base);
-    assert!(dilated.probes.iter().any(|p| p.is_dilated()));
-    let sh = relit(&dilated, "rigs/thick_walls.json");
+    assert_eq!(dilated.probes.iter().filter(|p| p.is_dilated()).count(), 64);
+    let sh = relit(&dilated, "rigs/sky_only.json");
     let s = VolumeSampler::for_asset(&dilated, &sh, &settings);
-    for &i in &holes {
-        let got = s.sample(points[i].0, points[i].1);
+    for (p, n) in inside {
+        let got = s.sample(p, n);
         assert!(
             got.validity > 0.0 && mean(got.irradiance) > 0.0,
-            "point {i} {:?}: {got:?}",
-            points[i]
+            "{p:?}: {got:?}"
         );
     }
 }
@@ -220,5 +211,39 @@ fn visibility_maps_hold_distances_in_spacings() {
         let want = 1.0 / g.spacing;
         assert!((m - want).abs() < 0.05 * want, "{d:?}: mean {m} vs {want}");
         assert!(dev < 0.1 * want, "{d:?}: deviation {dev}");
+    }
+}
+
+/// Probes on the walls of a closed room (a grid whose outer planes coincide with the walls of
+/// the inward-facing 2 m box) move into the room, never out of it, whichever wall they are on.
+#[test]
+fn probes_on_room_walls_move_into_the_room() {
+    let asset = bake_ok(
+        &fixture("closed_box_inward.gltf"),
+        &BakeSettings {
+            bounds: Some([-1.25, -1.25, -1.25, 1.25, 1.25, 1.25]),
+            spacing: Some(0.5),
+            ..BakeSettings::default()
+        },
+    );
+    let g = asset.header.grid;
+    assert_eq!(
+        g.position(0, 0, 0),
+        [-1.0; 3],
+        "the grid's outer planes are the walls"
+    );
+    let moved = asset
+        .probes
+        .iter()
+        .filter(|p| p.flags & prt_format::PROBE_OFFSET != 0)
+        .count();
+    assert_eq!(moved, 125 - 27, "every probe on a wall or corner moves");
+    for p in &asset.probes {
+        assert!(
+            p.position.iter().all(|c| c.abs() < 1.0 - 0.05 * g.spacing),
+            "probe at {:?} is not inside the room",
+            p.position
+        );
+        assert!(p.is_valid() && !p.is_dilated(), "{:?}", p.position);
     }
 }

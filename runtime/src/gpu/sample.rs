@@ -16,14 +16,13 @@ const BATCH: usize = 1 << 16;
 
 /// The kernel: group 0 holds the points and results, group 1 the snippet's volume bindings.
 fn kernel() -> String {
-    PrtRuntime::wgsl_snippet(1)
-        + "
+    let body = "
 @group(0) @binding(0) var<storage, read> points: array<vec4<f32>>;
 @group(0) @binding(1) var<storage, read_write> results: array<vec4<f32>>;
 
-@compute @workgroup_size(64)
+@compute @workgroup_size(SAMPLE_WORKGROUP)
 fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
-    let i = id.x + id.y * groups.x * 64u;
+    let i = id.x + id.y * groups.x * SAMPLE_WORKGROUP;
     if i >= arrayLength(&points) / 2u {
         return;
     }
@@ -31,11 +30,15 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) g
     let n = points[2u * i + 1u].xyz;
     let s = prt_sample_sh(p, n);
     for (var k = 0u; k < 9u; k++) {
-        results[10u * i + k] = vec4<f32>(s.sh[k], 0.0);
+        results[SAMPLE_WORDS * i + k] = vec4<f32>(s.sh[k], 0.0);
     }
-    results[10u * i + 9u] = vec4<f32>(sample_irradiance(p, n), s.validity);
+    results[SAMPLE_WORDS * i + 9u] = vec4<f32>(sample_irradiance(p, n), s.validity);
 }
-"
+";
+    format!(
+        "{}const SAMPLE_WORKGROUP = {SAMPLE_WORKGROUP}u;\nconst SAMPLE_WORDS = {WORDS}u;\n{body}",
+        PrtRuntime::wgsl_snippet(1)
+    )
 }
 
 /// Samples `runtime`'s volume as last updated (submit the update first) at each

@@ -293,6 +293,7 @@ mod tests {
                     ("spacing", offset_of!(layout::VolumeInfo, spacing)),
                     ("counts", offset_of!(layout::VolumeInfo, counts)),
                     ("normal_bias", offset_of!(layout::VolumeInfo, normal_bias)),
+                    ("flags", offset_of!(layout::VolumeInfo, flags)),
                 ],
             ),
             (

@@ -1,0 +1,92 @@
+//! Moving probes to where their rays mean something: off surfaces they lie on (a grid that
+//! coincides with a wall puts probes on it, and a probe on a wall sees both of its sides), and,
+//! on request, out of geometry through the nearest back face (virtual offset, as in Unity's
+//! adaptive probe volumes).
+
+use glam::Vec3;
+
+use crate::trace;
+
+/// Spacings within which a probe counts as on a surface.
+pub const NEAR_SURFACE: f32 = 0.02;
+/// Spacings from the surface that a probe on it moves to.
+pub const SURFACE_OFFSET: f32 = 0.1;
+
+/// The 26 unit directions to the neighbours of a grid cell, in a fixed order.
+fn near_directions() -> impl Iterator<Item = Vec3> {
+    (0..27).filter(|&i| i != 13).map(|i| {
+        Vec3::new(
+            (i % 3) as f32 - 1.0,
+            ((i / 3) % 3) as f32 - 1.0,
+            (i / 9) as f32 - 1.0,
+        )
+        .normalize()
+    })
+}
+
+/// A probe within [`NEAR_SURFACE`] spacings of a surface (found by short rays through its
+/// position along 26 directions: axes, face and corner diagonals) moves to [`SURFACE_OFFSET`]
+/// spacings from it: to the side it is on for a double-sided surface, to the front for a
+/// single-sided one (its back is inside geometry), to the front when exactly on it. Repeated up
+/// to three times, for corners. Deterministic: fixed directions and order.
+pub fn surface_offset(tracer: &trace::Tracer, p: Vec3, spacing: f32) -> Vec3 {
+    let eps = NEAR_SURFACE * spacing;
+    let mut at = p;
+    'moves: for _ in 0..3 {
+        for d in near_directions() {
+            let o = at - d * eps;
+            let Some(h) = tracer.bvh.closest_hit(o, d) else {
+                continue;
+            };
+            if h.t > 2.0 * eps {
+                continue;
+            }
+            let tri = h.triangle as usize;
+            let v = tracer.scene.triangles[tri];
+            let n = (v[1] - v[0]).cross(v[2] - v[0]).normalize_or_zero();
+            if n == Vec3::ZERO {
+                continue;
+            }
+            let material =
+                &tracer.scene.materials[tracer.scene.materials_of_triangles[tri] as usize];
+            let double_sided = material.double_sided || tracer.double_sided;
+            // Signed distance of the probe from the triangle's plane (front positive).
+            let side = (at - v[0]).dot(n);
+            let towards = if double_sided && side < -1e-3 * eps {
+                -n
+            } else {
+                n
+            };
+            let target = v[0] + (at - v[0]).reject_from_normalized(n);
+            at = target + towards * (SURFACE_OFFSET * spacing);
+            continue 'moves;
+        }
+        break;
+    }
+    at
+}
+
+/// Virtual offset of a probe inside geometry: the nearest back face its rays hit is the wall it
+/// is behind; the probe moves just past it along that ray (at most half a spacing) and is traced
+/// again. Returns the new position and rays when the probe is valid there.
+pub fn virtual_offset(
+    tracer: &trace::Tracer,
+    origin: Vec3,
+    rays: &trace::ProbeRays,
+    spacing: f32,
+    is_inside: &dyn Fn(&trace::ProbeRays) -> bool,
+) -> Option<(Vec3, trace::ProbeRays)> {
+    let nearest = rays.hits.iter().filter(|h| h.backface).min_by(|a, b| {
+        (a.position - origin)
+            .length_squared()
+            .total_cmp(&(b.position - origin).length_squared())
+            .then(a.ray.cmp(&b.ray))
+    })?;
+    let dir = tracer.directions[nearest.ray as usize];
+    let moved = nearest.position + dir * (1e-3 * spacing).max(1e-4);
+    if (moved - origin).length() > 0.5 * spacing {
+        return None;
+    }
+    let again = tracer.trace_probe(moved);
+    (!is_inside(&again)).then_some((moved, again))
+}
