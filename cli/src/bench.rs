@@ -105,7 +105,7 @@ pub fn bake(scene: &Path, settings: &BakeSettings) -> Result<String> {
     )?;
     writeln!(
         md,
-        "| per-probe transport data (probe, sky mask and transfer, factors) | {:.0} bytes |",
+        "| per-probe runtime data (probe, sky mask and transfer, visibility map, factors) | {:.0} bytes |",
         summary.transport_bytes_per_probe
     )?;
     writeln!(
