@@ -261,6 +261,18 @@ pub fn bake_to_file(
     settings: &BakeSettings,
     progress: &dyn Progress,
 ) -> Result<(Asset, BakeReport), BakeError> {
+    // Refuse a bad output before the work, not after it.
+    if prt_format::io::same_file(scene_path, out) {
+        return Err(BakeError::Setting {
+            name: "output",
+            value: out.display().to_string(),
+            reason: "is the input scene; refusing to overwrite it",
+        });
+    }
+    prt_format::io::check_replaceable(out).map_err(|error| BakeError::Format {
+        path: out.to_owned(),
+        error,
+    })?;
     let (asset, mut report) = bake(scene_path, settings, progress)?;
     let t = Instant::now();
     report.file_bytes =

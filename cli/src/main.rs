@@ -222,13 +222,32 @@ enum Command {
     },
 }
 
+/// Fails when `output` is one of the command's input files (it would be replaced).
+fn ensure_not_input(output: &std::path::Path, inputs: &[&std::path::Path]) -> Result<()> {
+    for input in inputs {
+        anyhow::ensure!(
+            !prt_format::io::same_file(output, input),
+            "{}: is an input of this command ({}); refusing to overwrite it",
+            output.display(),
+            input.display()
+        );
+    }
+    Ok(())
+}
+
 /// The rig at `rig`, or without one the asset's own (KHR_lights_punctual) lights and a black sky.
 fn lighting_of(
     rig: Option<&std::path::Path>,
     asset: &prt_format::Asset,
 ) -> Result<prt_runtime::Lighting> {
     Ok(match rig {
-        Some(rig) => prt_runtime::load_rig(rig)?,
+        Some(rig) => {
+            let (lighting, warnings) = prt_runtime::load_rig_with_warnings(rig)?;
+            for w in warnings {
+                eprintln!("warning: {w}");
+            }
+            lighting
+        }
         None => prt_runtime::Lighting {
             rig: prt_format::LightRig {
                 lights: asset.lights.clone(),
@@ -350,6 +369,9 @@ fn run(cli: Cli) -> Result<()> {
             bounces,
             json,
         } => {
+            let mut inputs = vec![asset.as_path()];
+            inputs.extend(lights.as_deref());
+            ensure_not_input(&json, &inputs)?;
             let loaded = prt_format::read_asset(&asset)
                 .with_context(|| format!("loading {}", asset.display()))?;
             let lighting = lighting_of(lights.as_deref(), &loaded)?;

@@ -171,6 +171,11 @@ pub fn run(args: RenderArgs) -> Result<()> {
     if !args.exposure.is_finite() {
         bail!("--exposure {}: expected a finite EV", args.exposure);
     }
+    let mut inputs = vec![job.scene.as_path(), job.asset.as_path()];
+    inputs.extend(job.lights.as_deref());
+    for out in std::iter::once(&job.png).chain(&job.exr) {
+        crate::ensure_not_input(out, &inputs)?;
+    }
     let asset = prt_format::read_asset(&job.asset)
         .with_context(|| format!("loading {}", job.asset.display()))?;
     let lighting = crate::lighting_of(job.lights.as_deref(), &asset)?;

@@ -50,10 +50,11 @@ pub fn run(args: SampleArgs) -> Result<()> {
         visibility: !args.no_visibility,
         ..RuntimeSettings::default()
     };
+    crate::ensure_not_input(&args.json, &[&args.asset, &args.lights, &args.points])?;
     let points = read_points(&args.points)?;
     let asset = prt_format::read_asset(&args.asset)
         .with_context(|| format!("loading {}", args.asset.display()))?;
-    let lighting = prt_runtime::load_rig(&args.lights)?;
+    let lighting = crate::lighting_of(Some(&args.lights), &asset)?;
     let start = std::time::Instant::now();
     let (samples, name) = match args.backend {
         Backend::Cpu => {

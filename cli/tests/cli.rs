@@ -534,3 +534,77 @@ fn render_bad_input_fails_cleanly() {
     let o = render(&scene, &asset, &many, &out, &["--view", "direct"]);
     assert!(o.status.success(), "{}", text(&o.stderr));
 }
+
+/// Outputs that would destroy something are refused before any work: a device such as
+/// `/dev/null` (the atomic rename would replace it with a regular file), the command's own
+/// input scene, asset or rig. The inputs stay as they were.
+#[test]
+fn outputs_never_replace_inputs_or_devices() {
+    let dir = Scratch::new("outputs");
+    let scene = dir.0.join("scene.gltf");
+    std::fs::copy(cornell(), &scene).unwrap();
+    let before = std::fs::read(&scene).unwrap();
+    for out in [scene.as_path(), Path::new("/dev/null")] {
+        let o = prt(
+            &[
+                "bake".as_ref(),
+                scene.as_os_str(),
+                "-o".as_ref(),
+                out.as_os_str(),
+                "--rays".as_ref(),
+                "64".as_ref(),
+            ],
+            None,
+        );
+        let stderr = text(&o.stderr);
+        assert!(!o.status.success(), "bake -o {} succeeded", out.display());
+        assert_eq!(stderr.lines().count(), 1, "{stderr:?}");
+        assert!(stderr.contains(&out.display().to_string()), "{stderr:?}");
+    }
+    assert_eq!(
+        std::fs::read(&scene).unwrap(),
+        before,
+        "the scene was changed"
+    );
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        let dev = std::fs::metadata("/dev/null").unwrap();
+        assert!(
+            dev.file_type().is_char_device(),
+            "/dev/null is no longer a device"
+        );
+    }
+    let asset = bake_cornell(&dir);
+    let asset_bytes = std::fs::read(&asset).unwrap();
+    let rig = dir.0.join("rig.json");
+    std::fs::copy(cornell_rig(), &rig).unwrap();
+    for out in [&asset, &rig] {
+        let o = prt(
+            &[
+                "relight".as_ref(),
+                asset.as_os_str(),
+                "--lights".as_ref(),
+                rig.as_os_str(),
+                "--json".as_ref(),
+                out.as_os_str(),
+            ],
+            None,
+        );
+        assert!(
+            !o.status.success(),
+            "relight --json {} succeeded",
+            out.display()
+        );
+        assert!(
+            text(&o.stderr).contains("refusing to overwrite"),
+            "{}",
+            text(&o.stderr)
+        );
+    }
+    assert_eq!(
+        std::fs::read(&asset).unwrap(),
+        asset_bytes,
+        "the asset was changed"
+    );
+}

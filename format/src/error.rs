@@ -10,6 +10,8 @@ pub enum FormatError {
         path: PathBuf,
         error: std::io::Error,
     },
+    #[error("not a regular file; refusing to replace it (write to a file path instead)")]
+    NotARegularFile { path: PathBuf },
     #[error(
         "not a prt asset: the file is {len} bytes, shorter than the {min}-byte header and checksum"
     )]

@@ -117,8 +117,32 @@ pub fn write_asset_atomic(path: &Path, asset: &Asset) -> Result<u64, FormatError
     Ok(bytes.len() as u64)
 }
 
+/// Fails when `path` exists and is not a regular file: the atomic rename would replace a device
+/// (`/dev/null` as root), a directory entry or a pipe with a regular file.
+pub fn check_replaceable(path: &Path) -> Result<(), FormatError> {
+    match std::fs::symlink_metadata(path) {
+        Ok(m) if !m.file_type().is_file() => {
+            // A symlink to a regular file is replaced by the rename, not followed: refuse it
+            // too, rather than break the link silently.
+            Err(FormatError::NotARegularFile {
+                path: path.to_owned(),
+            })
+        }
+        _ => Ok(()),
+    }
+}
+
+/// Whether `a` and `b` name the same existing file (after resolving links and `..`).
+pub fn same_file(a: &Path, b: &Path) -> bool {
+    match (std::fs::canonicalize(a), std::fs::canonicalize(b)) {
+        (Ok(x), Ok(y)) => x == y,
+        _ => false,
+    }
+}
+
 /// Writes `bytes` to `path` through a temporary file and a rename.
 pub fn write_bytes_atomic(path: &Path, bytes: &[u8]) -> Result<(), FormatError> {
+    check_replaceable(path)?;
     let io_err = |p: &Path| {
         let p = p.to_owned();
         move |error| FormatError::Io { path: p, error }

@@ -18,6 +18,6 @@ pub mod sky;
 pub mod visibility;
 
 pub use relight::{CpuRelighter, RelightError, RelightStats, Relit};
-pub use rig::{load_rig, Lighting, RigLoadError};
+pub use rig::{load_rig, load_rig_with_warnings, Lighting, RigLoadError};
 pub use sample::{Sample, VolumeSampler};
 pub use sky::SkyModel;

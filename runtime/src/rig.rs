@@ -62,13 +62,56 @@ impl Lighting {
 
 /// Reads, parses and validates a rig JSON file.
 pub fn load_rig(path: &Path) -> Result<Lighting, RigLoadError> {
+    load_rig_with_warnings(path).map(|(lighting, _)| lighting)
+}
+
+/// Fields a KHR_lights_punctual light (glTF 2.0 spec, 5.x "extensions", "extras") may carry
+/// that a rig accepts without interpreting them (conventions.md section 3).
+const IGNORED_LIGHT_FIELDS: [&str; 3] = ["name", "extensions", "extras"];
+/// The fields a rig light is read from.
+const LIGHT_FIELDS: [&str; 8] = [
+    "type",
+    "position",
+    "direction",
+    "color",
+    "intensity",
+    "range",
+    "inner_cone_angle",
+    "outer_cone_angle",
+];
+
+/// [`load_rig`], plus a warning for every other unknown field of a light (ignored, not refused:
+/// a rig written for another tool should still load; a typo in a known field name still shows).
+pub fn load_rig_with_warnings(path: &Path) -> Result<(Lighting, Vec<String>), RigLoadError> {
     let text = std::fs::read_to_string(path).map_err(|error| RigLoadError::Io {
         path: path.to_owned(),
         error,
     })?;
-    let rig: LightRig = serde_json::from_str(&text).map_err(|e| RigLoadError::Json {
+    let json_err = |e: serde_json::Error| RigLoadError::Json {
         path: path.to_owned(),
         message: e.to_string(),
-    })?;
-    Lighting::from_rig(rig, path.parent().unwrap_or(Path::new(".")), path)
+    };
+    let mut value: serde_json::Value = serde_json::from_str(&text).map_err(json_err)?;
+    let mut warnings = Vec::new();
+    if let Some(lights) = value.get_mut("lights").and_then(|l| l.as_array_mut()) {
+        for (i, light) in lights.iter_mut().enumerate() {
+            if let Some(fields) = light.as_object_mut() {
+                fields.retain(|key, _| {
+                    if LIGHT_FIELDS.contains(&key.as_str()) {
+                        return true;
+                    }
+                    if !IGNORED_LIGHT_FIELDS.contains(&key.as_str()) {
+                        warnings.push(format!(
+                            "{}: light {i}: unknown field {key:?} ignored",
+                            path.display()
+                        ));
+                    }
+                    false
+                });
+            }
+        }
+    }
+    let rig: LightRig = serde_json::from_value(value).map_err(json_err)?;
+    let lighting = Lighting::from_rig(rig, path.parent().unwrap_or(Path::new(".")), path)?;
+    Ok((lighting, warnings))
 }

@@ -176,3 +176,31 @@ fn bad_rigs_are_rejected_with_the_value() {
     }
     assert!(load_rig(&fixture("rigs/point_spot_sun_sky.json")).is_ok());
 }
+
+/// A rig light may carry the other fields of a KHR_lights_punctual light (`name`, `extensions`,
+/// `extras`): accepted, not interpreted. Any other unknown field is ignored with a warning naming
+/// the file, the light and the field; the rig still gives the same lights.
+#[test]
+fn rig_lights_accept_gltf_fields_and_warn_about_others() {
+    let dir = prt_tests::ScratchDir::new("rig-fields");
+    let path = dir.path().join("named.json");
+    std::fs::write(
+        &path,
+        r#"{"lights": [
+            {"type": "point", "name": "lamp", "position": [0, 2, 0], "intensity": 5,
+             "extensions": {"EXT_x": {}}, "extras": {"note": 1}},
+            {"type": "directional", "direction": [0, -1, 0], "colour": [1, 0, 0]}
+        ]}"#,
+    )
+    .unwrap();
+    let (lighting, warnings) = prt_runtime::load_rig_with_warnings(&path).unwrap();
+    assert_eq!(lighting.rig.lights.len(), 2);
+    assert_eq!(lighting.rig.lights[0].intensity, 5.0);
+    assert_eq!(warnings.len(), 1, "{warnings:?}");
+    assert!(
+        warnings[0].contains("named.json")
+            && warnings[0].contains("light 1")
+            && warnings[0].contains("colour"),
+        "{warnings:?}"
+    );
+}
