@@ -436,10 +436,11 @@ fn bake_in_pool(
     } else {
         vec![None; valid.len()]
     };
+    let depth_filter = depth::DepthFilter::new(&dirs);
     let probe_depth: Vec<u32> = traced
         .par_iter()
         .zip(&positions)
-        .flat_map_iter(|(r, &(pos, _))| depth::depth_map(pos, r, &dirs, spacing))
+        .flat_map_iter(|(r, &(pos, _))| depth_filter.map(pos, r, dirs.len(), spacing))
         .collect();
     let mut probes_out = Vec::with_capacity(traced.len());
     let mut rows: Vec<FactorRow> = Vec::new();
