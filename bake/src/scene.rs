@@ -102,8 +102,32 @@ struct Loader<'a> {
     default_material: u32,
 }
 
-/// Loads `path` (.gltf with embedded or external buffers, or .glb).
+/// Loads `path` (.gltf with embedded or external buffers, or .glb). A panic inside the gltf
+/// crate on input this loader does not check ends as a [`BakeError::Gltf`] naming the file, not
+/// as a crash (the panic message is kept, the default report of it suppressed meanwhile).
 pub fn load(path: &Path) -> Result<Scene, BakeError> {
+    // The panic hook is process-wide: loads swap it one at a time, so that one load never
+    // restores another's silent hook for good.
+    static HOOK: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let _guard = HOOK.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+    let previous = std::panic::take_hook();
+    std::panic::set_hook(Box::new(|_| {}));
+    let result = std::panic::catch_unwind(|| load_checked(path));
+    std::panic::set_hook(previous);
+    result.unwrap_or_else(|payload| {
+        let message = payload
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| payload.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "unknown panic".into());
+        Err(BakeError::Gltf {
+            path: path.to_owned(),
+            message: format!("the glTF reader failed on this file ({message})"),
+        })
+    })
+}
+
+fn load_checked(path: &Path) -> Result<Scene, BakeError> {
     let bytes = std::fs::read(path).map_err(|error| BakeError::Io {
         path: path.to_owned(),
         error,
@@ -259,6 +283,60 @@ fn material(m: &gltf::Material) -> Material {
     }
 }
 
+/// Checks what the gltf crate's readers assume about each attribute it reads (glTF 2.0 spec,
+/// 3.7.2.1 "Meshes", attribute table) before they read it: they panic on other formats
+/// (`unreachable!`) instead of returning an error.
+fn check_accessor_formats(prim: &gltf::Primitive) -> Result<(), String> {
+    use gltf::accessor::{DataType, Dimensions};
+    let describe = |a: &gltf::Accessor| {
+        format!(
+            "accessor {} is {:?} {:?}{}",
+            a.index(),
+            a.dimensions(),
+            a.data_type(),
+            if a.normalized() { " normalized" } else { "" }
+        )
+    };
+    for (semantic, a) in prim.attributes() {
+        let (dims, ty, norm) = (a.dimensions(), a.data_type(), a.normalized());
+        let ok = match &semantic {
+            gltf::Semantic::Positions => dims == Dimensions::Vec3 && ty == DataType::F32,
+            gltf::Semantic::TexCoords(_) => {
+                dims == Dimensions::Vec2
+                    && (ty == DataType::F32 || (norm && matches!(ty, DataType::U8 | DataType::U16)))
+            }
+            gltf::Semantic::Colors(_) => {
+                matches!(dims, Dimensions::Vec3 | Dimensions::Vec4)
+                    && (ty == DataType::F32 || (norm && matches!(ty, DataType::U8 | DataType::U16)))
+            }
+            _ => true,
+        };
+        if !ok {
+            return Err(format!(
+                "attribute {semantic:?}: {} (glTF 2.0 allows {})",
+                describe(&a),
+                match semantic {
+                    gltf::Semantic::Positions => "VEC3 FLOAT",
+                    gltf::Semantic::TexCoords(_) =>
+                        "VEC2 FLOAT, or normalized UNSIGNED_BYTE/UNSIGNED_SHORT",
+                    _ => "VEC3/VEC4 FLOAT, or normalized UNSIGNED_BYTE/UNSIGNED_SHORT",
+                }
+            ));
+        }
+    }
+    if let Some(a) = prim.indices() {
+        if a.dimensions() != Dimensions::Scalar
+            || !matches!(a.data_type(), DataType::U8 | DataType::U16 | DataType::U32)
+        {
+            return Err(format!(
+                "indices: {} (glTF 2.0 allows SCALAR UNSIGNED_BYTE/SHORT/INT)",
+                describe(&a)
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// Glam matrix of a node's local transform.
 fn local_transform(node: &gltf::Node) -> Mat4 {
     Mat4::from_cols_array_2d(&node.transform().matrix())
@@ -357,6 +435,7 @@ impl Loader<'_> {
                 ));
                 continue;
             }
+            check_accessor_formats(&prim).map_err(err)?;
             let buffers = &self.buffers;
             let reader = prim.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
             let Some(pos_accessor) = prim.get(&gltf::Semantic::Positions) else {
