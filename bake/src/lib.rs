@@ -22,6 +22,7 @@
 pub mod bricks;
 pub mod bvh;
 pub mod depth;
+pub mod diagnostics;
 pub mod dilate;
 pub mod error;
 pub mod factors;
@@ -42,6 +43,9 @@ use prt_format::{
 use rayon::prelude::*;
 
 pub use error::BakeError;
+
+/// Fraction of shared edges with inconsistent winding above which the bake warns.
+const WINDING_WARNING: f64 = 0.01;
 
 /// Bake settings. [`BakeSettings::default`] is the production preset; see the other presets for
 /// the trade-offs.
@@ -310,6 +314,18 @@ fn bake_in_pool(
     drop(source_bytes);
     let scene = scene::load(scene_path)?;
     report.warnings.extend(scene.warnings.iter().cloned());
+    let winding = diagnostics::winding(&scene.triangles);
+    let winding_hint = winding.inconsistent_fraction() > WINDING_WARNING && !settings.double_sided;
+    if winding_hint {
+        report.warnings.push(format!(
+            "{} of {} shared edges ({:.1}%) are walked the same way by both of their triangles: \
+             the scene's winding is inconsistent, so single-sided back faces will make probes \
+             invalid; bake with --double-sided",
+            winding.inconsistent_edges,
+            winding.shared_edges,
+            100.0 * winding.inconsistent_fraction()
+        ));
+    }
     if scene.degenerate_skipped > 0 {
         report.warnings.push(format!(
             "{} degenerate (zero-area) triangles skipped",
@@ -431,6 +447,30 @@ fn bake_in_pool(
     lap(&mut report, "merge", Some("assemble"));
 
     let valid: Vec<bool> = traced.iter().map(|r| !is_inside(r)).collect();
+    let inside = valid.iter().filter(|v| !**v).count();
+    if 2 * inside > valid.len() {
+        report.warnings.push(format!(
+            "{inside} of {} probes are inside geometry (more than {:.0}% of their rays hit back \
+             faces of single-sided surfaces{}); {}",
+            valid.len(),
+            100.0 * settings.invalid_backface_fraction,
+            if settings.double_sided {
+                ""
+            } else {
+                ", or they see no sky and face away from every hit"
+            },
+            if winding_hint {
+                "the winding is inconsistent (warned above): bake with --double-sided".to_string()
+            } else {
+                format!(
+                    "the winding is consistent ({} of {} shared edges inconsistent), so the \
+                     back faces are the model's own: check the bounds, and bake with \
+                     --double-sided if its surfaces are meant to be seen from both sides",
+                    winding.inconsistent_edges, winding.shared_edges
+                )
+            }
+        ));
+    }
     let sources = if settings.dilate {
         dilate::sources(&grid, &valid)
     } else {
@@ -453,7 +493,8 @@ fn bake_in_pool(
             (false, Some(q)) => (PROBE_VALID | PROBE_DILATED, q),
             (false, None) => (0, p),
         };
-        let table = &tables[from];
+        // An invalid probe is never gathered: its table would be dead weight.
+        let table: &[FactorRow] = if flags == 0 { &[] } else { &tables[from] };
         probes_out.push(Probe {
             position: pos.to_array(),
             flags: flags | if moved { PROBE_OFFSET } else { 0 },

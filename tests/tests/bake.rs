@@ -88,12 +88,21 @@ fn transfer_sum(asset: &Asset, p: usize) -> [f64; 9] {
     sum
 }
 
-/// Every probe: factor rays + sky rays = N exactly, back-face factor rays = backface_rays, and
-/// the k = 0 transfers plus the sky's solid angle cover the sphere (4pi).
+/// Every gathered probe: factor rays + sky rays = N exactly, back-face factor rays =
+/// backface_rays, and the k = 0 transfers plus the sky's solid angle cover the sphere (4pi).
+/// Invalid probes (inside geometry, nothing to dilate from) are never gathered and carry no
+/// factor table.
 fn assert_bookkeeping(asset: &Asset, what: &str) {
     let n = asset.header.ray_count;
     let four_pi = 4.0 * std::f64::consts::PI;
     for (p, probe) in asset.probes.iter().enumerate() {
+        if !probe.is_valid() {
+            assert_eq!(
+                probe.factor_count, 0,
+                "{what}: invalid probe {p} has a table"
+            );
+            continue;
+        }
         let (rays, back) = factor_rays(asset, p);
         assert_eq!(
             rays + u64::from(probe.sky_rays),
@@ -308,11 +317,15 @@ fn merging_keeps_per_probe_totals() {
             );
         }
     }
-    // Unmerged: one factor per ray hit. Merged: one per brick a probe sees.
-    assert_eq!(
-        unmerged.factors.len() as u64,
-        unmerged.header.stats.ray_hits
-    );
+    // Unmerged: one factor per ray hit of the gathered probes (invalid ones carry no table).
+    // Merged: one per brick a probe sees.
+    let gathered_hits: u64 = unmerged
+        .probes
+        .iter()
+        .filter(|p| p.is_valid())
+        .map(|p| u64::from(unmerged.header.ray_count - p.sky_rays))
+        .sum();
+    assert_eq!(unmerged.factors.len() as u64, gathered_hits);
     let (fu, fm) = (unmerged.factors.len(), merged.factors.len());
     assert!(
         fm * 3 < fu,
@@ -801,4 +814,62 @@ fn virtual_offset_moves_probes_out_of_geometry() {
     assert!(!asset.probes[0].is_valid());
     assert_eq!(asset.probes[0].flags & prt_format::PROBE_OFFSET, 0);
     assert_eq!(asset.probes[0].position, [0.0, 0.0, 0.0]);
+}
+
+/// Scene diagnostics: inconsistent winding is reported with the share of edges affected and the
+/// `--double-sided` hint (not when baking double-sided); a grid mostly inside geometry is
+/// reported with its count and the likely reason; a sound scene gets neither.
+#[test]
+fn scene_diagnostics_warn_about_winding_and_invalid_probes() {
+    let box_settings = BakeSettings {
+        bounds: Some([-0.9, -0.9, -0.9, 0.9, 0.9, 0.9]),
+        spacing: Some(0.6),
+        ..rays(64)
+    };
+    let mixed = fixture("mixed_winding_box.gltf");
+    let (_, report) = prt_bake::bake(&mixed, &box_settings, &NoProgress).unwrap();
+    assert!(
+        report.warnings.iter().any(|w| w.contains("shared edges")
+            && w.contains("inconsistent")
+            && w.contains("--double-sided")),
+        "{:?}",
+        report.warnings
+    );
+    let (_, report) = prt_bake::bake(
+        &mixed,
+        &BakeSettings {
+            double_sided: true,
+            ..box_settings
+        },
+        &NoProgress,
+    )
+    .unwrap();
+    assert!(report.warnings.is_empty(), "{:?}", report.warnings);
+
+    let sponza = shared("scenes/sponza_lod4.glb");
+    let (asset, report) = prt_bake::bake(
+        &sponza,
+        &BakeSettings {
+            spacing: Some(3.0),
+            ..rays(64)
+        },
+        &NoProgress,
+    )
+    .unwrap();
+    let inside = asset
+        .probes
+        .iter()
+        .filter(|p| !p.is_valid() || p.is_dilated())
+        .count();
+    assert!(2 * inside > asset.probes.len());
+    assert!(
+        report.warnings.iter().any(|w| w
+            .contains(&format!("{inside} of {} probes", asset.probes.len()))
+            && w.contains("--double-sided")),
+        "{:?}",
+        report.warnings
+    );
+
+    let (_, report) = prt_bake::bake(&cornell(), &rays(64), &NoProgress).unwrap();
+    assert!(report.warnings.is_empty(), "{:?}", report.warnings);
 }

@@ -1,0 +1,81 @@
+//! What is wrong with a scene, told before the user wonders why the light is wrong: inconsistent
+//! triangle winding (the usual reason a scene bakes with most probes invalid) and grids whose
+//! probes are mostly inside geometry.
+
+use std::collections::HashMap;
+
+use glam::Vec3;
+
+/// Shared edges of a mesh, and how many of them both of their triangles walk the same way.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Winding {
+    /// Edges used by exactly two triangles.
+    pub shared_edges: u64,
+    /// Of those, edges both triangles walk in the same direction: one of the two triangles faces
+    /// the other way round (glTF 2.0 spec 3.7.2.1: front faces are counter-clockwise).
+    pub inconsistent_edges: u64,
+}
+
+impl Winding {
+    /// Fraction of shared edges with inconsistent winding.
+    pub fn inconsistent_fraction(&self) -> f64 {
+        if self.shared_edges == 0 {
+            0.0
+        } else {
+            self.inconsistent_edges as f64 / self.shared_edges as f64
+        }
+    }
+}
+
+/// Counts shared and inconsistently wound edges; vertices are the same when their world
+/// positions are bit-identical (as when triangles share an index).
+pub fn winding(triangles: &[[Vec3; 3]]) -> Winding {
+    let key = |v: Vec3| v.to_array().map(f32::to_bits);
+    let mut directed: HashMap<([u32; 3], [u32; 3]), u32> = HashMap::new();
+    for t in triangles {
+        for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
+            *directed.entry((key(a), key(b))).or_default() += 1;
+        }
+    }
+    let mut w = Winding::default();
+    for (&(a, b), &forward) in &directed {
+        // Each undirected edge once: from its smaller key.
+        if a > b && directed.contains_key(&(b, a)) {
+            continue;
+        }
+        let backward = directed.get(&(b, a)).copied().unwrap_or(0);
+        if forward + backward == 2 {
+            w.shared_edges += 1;
+            if forward == 2 || backward == 2 {
+                w.inconsistent_edges += 1;
+            }
+        }
+    }
+    w
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_flipped_triangle_is_found() {
+        let (a, b, c, d) = (Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::new(1.0, 1.0, 0.0));
+        let good = winding(&[[a, b, c], [b, d, c]]);
+        assert_eq!(
+            good,
+            Winding {
+                shared_edges: 1,
+                inconsistent_edges: 0
+            }
+        );
+        let bad = winding(&[[a, b, c], [b, c, d]]);
+        assert_eq!(
+            bad,
+            Winding {
+                shared_edges: 1,
+                inconsistent_edges: 1
+            }
+        );
+    }
+}
