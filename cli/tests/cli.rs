@@ -170,20 +170,8 @@ fn bake_resolves_external_buffers_from_another_directory() {
 #[test]
 fn relight_json_is_the_same_on_cpu_and_gpu() {
     let dir = Scratch::new("relight_json");
-    let asset = dir.0.join("cornell.prt");
+    let asset = bake_cornell(&dir);
     let rig = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/cornell/rig_spot_range.json");
-    let out = prt(
-        &[
-            "bake".as_ref(),
-            cornell().as_os_str(),
-            "-o".as_ref(),
-            asset.as_os_str(),
-            "--rays".as_ref(),
-            "128".as_ref(),
-        ],
-        None,
-    );
-    assert!(out.status.success(), "{}", text(&out.stderr));
     let mut docs = Vec::new();
     for backend in ["cpu", "gpu"] {
         let json = dir.0.join(format!("{backend}.json"));

@@ -32,18 +32,7 @@ pub fn shade_source() -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn validate(src: &str, label: &str) -> naga::Module {
-        let module = naga::front::wgsl::parse_str(src)
-            .unwrap_or_else(|e| panic!("{label}: {}", e.emit_to_string(src)));
-        naga::valid::Validator::new(
-            naga::valid::ValidationFlags::all(),
-            naga::valid::Capabilities::all(),
-        )
-        .validate(&module)
-        .unwrap_or_else(|e| panic!("{label}: {}", e.emit_to_string(src)));
-        module
-    }
+    use prt_runtime::gpu::shaders::validation::{assert_layouts, validate, Expected};
 
     /// Both stages parse and validate with naga (no GPU needed).
     #[test]
@@ -56,10 +45,6 @@ mod tests {
     #[test]
     fn wgsl_structs_match_rust_layouts() {
         use std::mem::{offset_of, size_of};
-        let module = validate(&shade_source(), "shade");
-        let mut layouter = naga::proc::Layouter::default();
-        layouter.update(module.to_ctx()).expect("layout");
-        type Expected<'a> = Vec<(&'a str, usize, Vec<(&'a str, usize)>)>;
         let expect: Expected = vec![
             (
                 "Frame",
@@ -112,24 +97,7 @@ mod tests {
                 vec![("height", offset_of!(layout::ImageInfo, height))],
             ),
         ];
-        for (name, size, fields) in expect {
-            let (handle, ty) = module
-                .types
-                .iter()
-                .find(|(_, t)| t.name.as_deref() == Some(name))
-                .unwrap_or_else(|| panic!("WGSL struct {name} missing"));
-            assert_eq!(layouter[handle].size as usize, size, "size of {name}");
-            let naga::TypeInner::Struct { members, .. } = &ty.inner else {
-                panic!("{name} is not a struct");
-            };
-            for (field, offset) in fields {
-                let m = members
-                    .iter()
-                    .find(|m| m.name.as_deref() == Some(field))
-                    .unwrap_or_else(|| panic!("{name}.{field} missing"));
-                assert_eq!(m.offset as usize, offset, "offset of {name}.{field}");
-            }
-        }
+        assert_layouts(&shade_source(), expect);
         // The vertex attributes' offsets as the pipeline declares them.
         let attrs = crate::raster::VERTEX_ATTRIBUTES;
         assert_eq!(

@@ -140,8 +140,55 @@ pub fn sample_irradiance_snippet(group: u32) -> String {
     s.replace("PRT_GROUP", &group.to_string())
 }
 
+/// Shader checks without a GPU, for this crate's tests and other crates' (feature `validation`):
+/// naga parsing and validation, and WGSL struct layouts against their Rust twins.
+#[cfg(any(test, feature = "validation"))]
+pub mod validation {
+    /// `(struct name, size, [(field, offset)])` of the Rust twins.
+    pub type Expected<'a> = Vec<(&'a str, usize, Vec<(&'a str, usize)>)>;
+
+    /// Parses and validates `src` with naga; panics with the rendered error and `label`.
+    pub fn validate(src: &str, label: &str) -> naga::Module {
+        let module = naga::front::wgsl::parse_str(src)
+            .unwrap_or_else(|e| panic!("{label}: {}", e.emit_to_string(src)));
+        naga::valid::Validator::new(
+            naga::valid::ValidationFlags::all(),
+            naga::valid::Capabilities::all(),
+        )
+        .validate(&module)
+        .unwrap_or_else(|e| panic!("{label}: {}", e.emit_to_string(src)));
+        module
+    }
+
+    /// Asserts that every WGSL struct of `expect` has the size and field offsets given.
+    pub fn assert_layouts(src: &str, expect: Expected) {
+        let module = validate(src, "layout");
+        let mut layouter = naga::proc::Layouter::default();
+        layouter.update(module.to_ctx()).expect("layout");
+        for (name, size, fields) in expect {
+            let (handle, ty) = module
+                .types
+                .iter()
+                .find(|(_, t)| t.name.as_deref() == Some(name))
+                .unwrap_or_else(|| panic!("WGSL struct {name} missing"));
+            assert_eq!(layouter[handle].size as usize, size, "size of {name}");
+            let naga::TypeInner::Struct { members, .. } = &ty.inner else {
+                panic!("{name} is not a struct");
+            };
+            for (field, offset) in fields {
+                let m = members
+                    .iter()
+                    .find(|m| m.name.as_deref() == Some(field))
+                    .unwrap_or_else(|| panic!("{name}.{field} missing"));
+                assert_eq!(m.offset as usize, offset, "offset of {name}.{field}");
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
+    use super::validation::{assert_layouts, validate, Expected};
     use super::*;
 
     fn configs() -> Vec<ShaderConfig> {
@@ -164,18 +211,6 @@ mod tests {
         out
     }
 
-    fn validate(src: &str, label: &str) -> naga::Module {
-        let module = naga::front::wgsl::parse_str(src)
-            .unwrap_or_else(|e| panic!("{label}: {}", e.emit_to_string(src)));
-        naga::valid::Validator::new(
-            naga::valid::ValidationFlags::all(),
-            naga::valid::Capabilities::all(),
-        )
-        .validate(&module)
-        .unwrap_or_else(|e| panic!("{label}: {}", e.emit_to_string(src)));
-        module
-    }
-
     /// Every stage, in every configuration, parses and validates with naga (no GPU needed).
     #[test]
     fn every_shader_validates() {
@@ -196,11 +231,7 @@ mod tests {
         let config = configs()[0];
         let mut src = source(Stage::Gather, &config);
         src.push_str(&sample_irradiance_snippet(3));
-        let module = validate(&src, "layout");
-        let mut layouter = naga::proc::Layouter::default();
-        layouter.update(module.to_ctx()).expect("layout");
         // (struct, size, [(field, offset)])
-        type Expected<'a> = Vec<(&'a str, usize, Vec<(&'a str, usize)>)>;
         let expect: Expected = vec![
             (
                 "Probe",
@@ -316,23 +347,6 @@ mod tests {
                 ],
             ),
         ];
-        for (name, size, fields) in expect {
-            let (handle, ty) = module
-                .types
-                .iter()
-                .find(|(_, t)| t.name.as_deref() == Some(name))
-                .unwrap_or_else(|| panic!("WGSL struct {name} missing"));
-            assert_eq!(layouter[handle].size as usize, size, "size of {name}");
-            let naga::TypeInner::Struct { members, .. } = &ty.inner else {
-                panic!("{name} is not a struct");
-            };
-            for (field, offset) in fields {
-                let m = members
-                    .iter()
-                    .find(|m| m.name.as_deref() == Some(field))
-                    .unwrap_or_else(|| panic!("{name}.{field} missing"));
-                assert_eq!(m.offset as usize, offset, "offset of {name}.{field}");
-            }
-        }
+        assert_layouts(&src, expect);
     }
 }
