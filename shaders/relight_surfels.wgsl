@@ -36,7 +36,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
             continue;
         }
         if (params.moved_lights & bit) != 0u {
-            let off = ray_offset(surfel.position);
+            let off = ray_offset(surfel.position, params.ray_scale);
             let o = surfel.position + surfel.normal * off;
             var tmax = INFINITE_DISTANCE;
             if lights[i].kind != LIGHT_DIRECTIONAL {

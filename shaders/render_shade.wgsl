@@ -141,7 +141,7 @@ fn direct_light(light: Light, p: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
         return vec3<f32>(0.0);
     }
     if (frame.flags & FLAG_SHADOWS) != 0u {
-        let off = ray_offset(p);
+        let off = ray_offset(p, frame.ray_scale);
         let o = p + n * off;
         var tmax = INFINITE_DISTANCE;
         if light.kind != LIGHT_DIRECTIONAL {

@@ -16,7 +16,8 @@ struct Frame {
     other_count: u32,
     directional_count: u32,
     flags: u32,
-    pad0: u32,
+    // The scene's length scale for shadow-ray offsets (ray_offset).
+    ray_scale: f32,
     pad1: u32,
     pad2: u32,
 }

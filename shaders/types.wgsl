@@ -115,7 +115,8 @@ struct Params {
     offset_scale: f32,
     // 1 on the first update: every brick is relit (emissive bricks no light reaches too).
     all_bricks_dirty: u32,
-    pad0: u32,
+    // The scene's length scale for shadow-ray offsets (ray_offset): the probe spacing.
+    ray_scale: f32,
     pad1: u32,
 }
 
@@ -163,7 +164,7 @@ fn light_sample(light: Light, p: vec3<f32>, n: vec3<f32>) -> LightSample {
     let cosine = max(dot(n, l), 0.0);
     let x = d2 * light.inv_range_sq;
     let window = clamp(1.0 - x * x, 0.0, 1.0);
-    var e = cosine * window * window / max(d2, 1e-5);
+    var e = cosine * window * window / max(d2, MIN_DISTANCE_SQ);
     if light.kind == LIGHT_SPOT {
         let c = clamp((dot(light.direction, -l) - light.cos_outer) * light.cone_scale, 0.0, 1.0);
         e = e * c * c;

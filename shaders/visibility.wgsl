@@ -72,7 +72,8 @@ fn occluded(o: vec3<f32>, d: vec3<f32>, tmax: f32) -> bool {
     return false;
 }
 
-fn ray_offset(p: vec3<f32>) -> f32 {
+// Twin of prt_runtime::visibility::ray_offset: `scale` is the scene's length scale.
+fn ray_offset(p: vec3<f32>, scale: f32) -> f32 {
     let a = abs(p);
-    return 1e-4 * max(max(max(a.x, a.y), a.z), 1.0);
+    return 1e-4 * max(max(max(a.x, a.y), a.z), scale);
 }

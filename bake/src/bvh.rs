@@ -21,8 +21,23 @@ use obvhs::{
 };
 use prt_format::{BvhNode, Geometry};
 
+/// The power of two nearest `1 / spacing`: the bake traces in a frame where the probe spacing is
+/// about one unit. obvhs 0.4's wide-BVH traversal clamps a child box's entry distance to an
+/// absolute 1e-4 (`cwbvh::node::EPSILON`), which made a millimetre-sized scene miss every
+/// surface within 0.1 mm of a probe; scaled by a power of two, every float operation of the
+/// build and traversal is the same up to that constant, so results do not depend on the scene's
+/// scale (tests/tests/scale.rs).
+pub fn trace_scale(spacing: f32) -> f32 {
+    if !(spacing.is_finite() && spacing > 0.0) {
+        return 1.0;
+    }
+    (-spacing.log2()).round().clamp(-100.0, 100.0).exp2()
+}
+
 /// The scene's BVHs.
 pub struct SceneBvh {
+    /// The tracing frame's scale ([`trace_scale`]); the asset's geometry stays in world units.
+    scale: f32,
     cwbvh: CwBvh,
     /// Triangles in CWBVH primitive order, for intersection.
     rt_triangles: Vec<RtTriangle>,
@@ -38,10 +53,12 @@ pub struct TriangleHit {
 }
 
 impl SceneBvh {
-    /// Builds both BVHs (in parallel on the current rayon pool).
-    pub fn build(triangles: &[[Vec3; 3]]) -> SceneBvh {
+    /// Builds both BVHs (in parallel on the current rayon pool), the traced one in the frame
+    /// scaled by `scale` (a power of two, [`trace_scale`]).
+    pub fn build(triangles: &[[Vec3; 3]], scale: f32) -> SceneBvh {
         if triangles.is_empty() {
             return SceneBvh {
+                scale,
                 cwbvh: CwBvh::default(),
                 rt_triangles: Vec::new(),
                 geometry: Geometry::default(),
@@ -50,9 +67,9 @@ impl SceneBvh {
         let tris: Vec<Triangle> = triangles
             .iter()
             .map(|t| Triangle {
-                v0: t[0].into(),
-                v1: t[1].into(),
-                v2: t[2].into(),
+                v0: (t[0] * scale).into(),
+                v1: (t[1] * scale).into(),
+                v2: (t[2] * scale).into(),
             })
             .collect();
         let params = BvhBuildParams::medium_build();
@@ -70,8 +87,9 @@ impl SceneBvh {
             .iter()
             .map(|&i| RtTriangle::from(&tris[i as usize]))
             .collect();
-        let geometry = flatten(&bvh2, triangles);
+        let geometry = flatten(&bvh2, triangles, 1.0 / scale);
         SceneBvh {
+            scale,
             cwbvh,
             rt_triangles,
             geometry,
@@ -84,7 +102,7 @@ impl SceneBvh {
         if self.rt_triangles.is_empty() {
             return None;
         }
-        let ray = Ray::new_inf(origin.into(), dir.into());
+        let ray = Ray::new_inf((origin * self.scale).into(), dir.into());
         let mut hit = RayHit::none();
         if self
             .cwbvh
@@ -92,7 +110,7 @@ impl SceneBvh {
         {
             Some(TriangleHit {
                 triangle: self.cwbvh.primitive_indices[hit.primitive_id as usize],
-                t: hit.t,
+                t: hit.t / self.scale,
             })
         } else {
             None
@@ -101,8 +119,9 @@ impl SceneBvh {
 }
 
 /// Renumbers the BVH2 breadth first (children pairs consecutive and after their parent) and
-/// lays the triangles out in leaf order.
-fn flatten(bvh2: &Bvh2, triangles: &[[Vec3; 3]]) -> Geometry {
+/// lays the triangles out in leaf order, back in world units (boxes times `unscale`, exact for a
+/// power of two).
+fn flatten(bvh2: &Bvh2, triangles: &[[Vec3; 3]], unscale: f32) -> Geometry {
     let mut nodes: Vec<BvhNode> = Vec::with_capacity(bvh2.nodes.len());
     let mut tris = Vec::with_capacity(triangles.len());
     let mut queue = VecDeque::from([0usize]);
@@ -110,8 +129,8 @@ fn flatten(bvh2: &Bvh2, triangles: &[[Vec3; 3]]) -> Geometry {
         let n = &bvh2.nodes[src];
         let aabb = n.aabb();
         let mut out = BvhNode {
-            min: aabb.min.to_array(),
-            max: aabb.max.to_array(),
+            min: (aabb.min * unscale).to_array(),
+            max: (aabb.max * unscale).to_array(),
             count: 0,
             first: 0,
         };

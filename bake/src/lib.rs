@@ -348,12 +348,12 @@ fn bake_in_pool(
     }
     lap(&mut report, "load", Some("bvh"));
 
-    let bvh = bvh::SceneBvh::build(&scene.triangles);
-    lap(&mut report, "bvh", None);
-
     let spacing = settings
         .spacing
         .unwrap_or_else(|| probes::default_spacing(min, max));
+    let bvh = bvh::SceneBvh::build(&scene.triangles, bvh::trace_scale(spacing));
+    lap(&mut report, "bvh", None);
+
     let grid = probes::grid(min, max, spacing, settings.max_probes)?;
     let positions = probes::positions(&grid);
     let n = settings.rays;

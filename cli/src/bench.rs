@@ -23,7 +23,10 @@ pub fn bake(scene: &Path, settings: &BakeSettings) -> Result<String> {
 
     // Bare tracing: the same probes and lattice through the same CWBVH, closest hit only.
     let loaded = prt_bake::scene::load(scene)?;
-    let bvh = prt_bake::bvh::SceneBvh::build(&loaded.triangles);
+    let bvh = prt_bake::bvh::SceneBvh::build(
+        &loaded.triangles,
+        prt_bake::bvh::trace_scale(asset.header.grid.spacing),
+    );
     let dirs: Vec<Vec3> = prt_format::directions::fibonacci_directions(settings.rays)
         .into_iter()
         .map(Vec3::from)

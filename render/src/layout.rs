@@ -67,7 +67,9 @@ pub struct FrameUniform {
     pub other_count: u32,
     pub directional_count: u32,
     pub flags: u32,
-    pub _pad: [u32; 3],
+    /// The scene's length scale for shadow-ray offsets (the asset's probe spacing).
+    pub ray_scale: f32,
+    pub _pad: [u32; 2],
 }
 const _: () = assert!(std::mem::size_of::<FrameUniform>() == 256);
 

@@ -54,6 +54,8 @@ pub struct Renderer {
     others: wgpu::Buffer,
     light_counts: (u32, u32),
     tiles: (u32, u32),
+    /// The asset's probe spacing: the scene's length scale for shadow-ray offsets.
+    ray_scale: f32,
     /// The volume group of frames without GI: a 1x1x1 volume of validity 0.
     empty_volume: wgpu::BindGroup,
 }
@@ -353,6 +355,7 @@ impl Renderer {
             others,
             light_counts: (0, 0),
             tiles,
+            ray_scale: asset.header.grid.spacing,
             empty_volume,
         })
     }
@@ -449,7 +452,8 @@ impl Renderer {
             other_count: self.light_counts.1,
             directional_count: self.light_counts.0,
             flags,
-            _pad: [0; 3],
+            ray_scale: self.ray_scale,
+            _pad: [0; 2],
         };
         queue.write_buffer(&self.frame, 0, bytemuck::bytes_of(&uniform));
         Ok(())

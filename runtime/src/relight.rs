@@ -187,7 +187,7 @@ impl<'a> CpuRelighter<'a> {
                                     continue;
                                 }
                                 st.shadow_rays += 1;
-                                let off = ray_offset(p);
+                                let off = ray_offset(p, self.asset.header.grid.spacing);
                                 let o = p + n * off;
                                 // f32::MAX, not infinity, for directional lights: the
                                 // same slab arithmetic as the WGSL twin.

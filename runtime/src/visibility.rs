@@ -83,9 +83,11 @@ pub fn occluded(geo: &Geometry, o: Vec3, d: Vec3, tmax: f32) -> bool {
     false
 }
 
-/// Offset of shadow-ray origins along the surface normal, relative to the coordinates'
-/// magnitude (avoids self-intersection in float32 at any scene scale).
+/// Offset of shadow-ray origins along the surface normal: 1e-4 of the coordinates' magnitude
+/// (float32 rounding of a hit point grows with it), and at least 1e-4 of `scale`, the scene's
+/// own length scale (the probe spacing), near the origin. Nothing absolute: a 2 mm room and a
+/// 20 km one get the same shadows (tests/tests/scale.rs).
 #[inline]
-pub fn ray_offset(p: Vec3) -> f32 {
-    1e-4 * p.abs().max_element().max(1.0)
+pub fn ray_offset(p: Vec3, scale: f32) -> f32 {
+    1e-4 * p.abs().max_element().max(scale)
 }

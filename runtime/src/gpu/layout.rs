@@ -132,7 +132,9 @@ pub struct Params {
     pub moved_lights: u32,
     pub offset_scale: f32,
     pub all_bricks_dirty: u32,
-    pub _pad: [u32; 2],
+    /// The scene's length scale for shadow-ray offsets (`visibility::ray_offset`): the spacing.
+    pub ray_scale: f32,
+    pub _pad: u32,
 }
 const _: () = assert!(std::mem::size_of::<Params>() == 96);
 
@@ -190,6 +192,10 @@ pub fn wgsl_constants() -> Vec<(&'static str, String)> {
             format!("{}u", light_kind_code(LightKind::Spot)),
         ),
         ("INFINITE_DISTANCE", format!("{:e}", f32::MAX)),
+        (
+            "MIN_DISTANCE_SQ",
+            format!("{:e}", crate::lights::MIN_DISTANCE_SQ),
+        ),
         ("BRICK_BACKFACE", format!("{BRICK_BACKFACE}u")),
         ("PROBE_VALID", format!("{PROBE_VALID}u")),
         ("PROBE_NONE", format!("{}u", u32::MAX)),

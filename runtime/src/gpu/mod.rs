@@ -837,7 +837,8 @@ impl PrtRuntime {
             moved_lights: moved,
             offset_scale: self.offset_scale,
             all_bricks_dirty: u32::from(first),
-            _pad: [0; 2],
+            ray_scale: self.grid.spacing,
+            _pad: 0,
         };
         let copy = |encoder: &mut wgpu::CommandEncoder, dst: &wgpu::Buffer, bytes: &[u8]| {
             if bytes.is_empty() {
