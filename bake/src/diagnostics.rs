@@ -27,6 +27,53 @@ impl Winding {
     }
 }
 
+/// The warning for inconsistent winding, with the share of edges affected and the way out.
+pub fn winding_warning(w: &Winding) -> String {
+    format!(
+        "{} of {} shared edges ({:.1}%) are walked the same way by both of their triangles: \
+         the scene's winding is inconsistent, so single-sided back faces will make probes \
+         invalid; bake with --double-sided",
+        w.inconsistent_edges,
+        w.shared_edges,
+        100.0 * w.inconsistent_fraction()
+    )
+}
+
+/// The warning for a grid whose probes are mostly inside geometry (`valid`: per probe), with the
+/// likely reason; `None` when at least half are valid.
+pub fn inside_warning(
+    valid: &[bool],
+    settings: &crate::BakeSettings,
+    winding: &Winding,
+    winding_hint: bool,
+) -> Option<String> {
+    let inside = valid.iter().filter(|v| !**v).count();
+    if 2 * inside <= valid.len() {
+        return None;
+    }
+    let reason = if winding_hint {
+        "the winding is inconsistent (warned above): bake with --double-sided".to_string()
+    } else {
+        format!(
+            "the winding is consistent ({} of {} shared edges inconsistent), so the back faces \
+             are the model's own: check the bounds, and bake with --double-sided if its surfaces \
+             are meant to be seen from both sides",
+            winding.inconsistent_edges, winding.shared_edges
+        )
+    };
+    Some(format!(
+        "{inside} of {} probes are inside geometry (more than {:.0}% of their rays hit back faces \
+         of single-sided surfaces{}); {reason}",
+        valid.len(),
+        100.0 * settings.invalid_backface_fraction,
+        if settings.double_sided {
+            ""
+        } else {
+            ", or they see no sky and face away from every hit"
+        },
+    ))
+}
+
 /// Counts shared and inconsistently wound edges; vertices are the same when their world
 /// positions are bit-identical (as when triangles share an index).
 pub fn winding(triangles: &[[Vec3; 3]]) -> Winding {

@@ -317,14 +317,7 @@ fn bake_in_pool(
     let winding = diagnostics::winding(&scene.triangles);
     let winding_hint = winding.inconsistent_fraction() > WINDING_WARNING && !settings.double_sided;
     if winding_hint {
-        report.warnings.push(format!(
-            "{} of {} shared edges ({:.1}%) are walked the same way by both of their triangles: \
-             the scene's winding is inconsistent, so single-sided back faces will make probes \
-             invalid; bake with --double-sided",
-            winding.inconsistent_edges,
-            winding.shared_edges,
-            100.0 * winding.inconsistent_fraction()
-        ));
+        report.warnings.push(diagnostics::winding_warning(&winding));
     }
     if scene.degenerate_skipped > 0 {
         report.warnings.push(format!(
@@ -447,29 +440,8 @@ fn bake_in_pool(
     lap(&mut report, "merge", Some("assemble"));
 
     let valid: Vec<bool> = traced.iter().map(|r| !is_inside(r)).collect();
-    let inside = valid.iter().filter(|v| !**v).count();
-    if 2 * inside > valid.len() {
-        report.warnings.push(format!(
-            "{inside} of {} probes are inside geometry (more than {:.0}% of their rays hit back \
-             faces of single-sided surfaces{}); {}",
-            valid.len(),
-            100.0 * settings.invalid_backface_fraction,
-            if settings.double_sided {
-                ""
-            } else {
-                ", or they see no sky and face away from every hit"
-            },
-            if winding_hint {
-                "the winding is inconsistent (warned above): bake with --double-sided".to_string()
-            } else {
-                format!(
-                    "the winding is consistent ({} of {} shared edges inconsistent), so the \
-                     back faces are the model's own: check the bounds, and bake with \
-                     --double-sided if its surfaces are meant to be seen from both sides",
-                    winding.inconsistent_edges, winding.shared_edges
-                )
-            }
-        ));
+    if let Some(w) = diagnostics::inside_warning(&valid, settings, &winding, winding_hint) {
+        report.warnings.push(w);
     }
     let sources = if settings.dilate {
         dilate::sources(&grid, &valid)
@@ -482,31 +454,12 @@ fn bake_in_pool(
         .zip(&positions)
         .flat_map_iter(|(r, &(pos, _))| depth_filter.map(pos, r, dirs.len(), spacing))
         .collect();
-    let mut probes_out = Vec::with_capacity(traced.len());
-    let mut rows: Vec<FactorRow> = Vec::new();
-    let (mut sky_mask, mut sky_transfer) = (Vec::new(), Vec::new());
-    for (p, &(pos, moved)) in positions.iter().enumerate() {
-        // A dilated probe carries its source's table, sky and ray counts (the record describes
-        // the data it carries); only its position is its own.
-        let (flags, from) = match (valid[p], sources[p]) {
-            (true, _) => (PROBE_VALID, p),
-            (false, Some(q)) => (PROBE_VALID | PROBE_DILATED, q),
-            (false, None) => (0, p),
-        };
-        // An invalid probe is never gathered: its table would be dead weight.
-        let table: &[FactorRow] = if flags == 0 { &[] } else { &tables[from] };
-        probes_out.push(Probe {
-            position: pos.to_array(),
-            flags: flags | if moved { PROBE_OFFSET } else { 0 },
-            first_factor: rows.len() as u32,
-            factor_count: table.len() as u32,
-            sky_rays: traced[from].sky_rays,
-            backface_rays: traced[from].backface_rays,
-        });
-        rows.extend_from_slice(table);
-        sky_mask.extend_from_slice(&traced[from].sky_mask);
-        sky_transfer.push(traced[from].sky_transfer);
-    }
+    let Assembled {
+        probes: probes_out,
+        rows,
+        sky_mask,
+        sky_transfer,
+    } = assemble_probes(&traced, &positions, &tables, &valid, &sources);
     drop(tables);
     if rows.len() > u32::MAX as usize {
         return Err(BakeError::Setting {
@@ -558,4 +511,53 @@ fn bake_in_pool(
     })?;
     lap(&mut report, "assemble", None);
     Ok((asset, report))
+}
+
+/// Per probe: its record, and the factor table, sky mask and sky transfer it carries, in probe
+/// order. A dilated probe carries its source's table, sky and ray counts (the record describes
+/// the data it carries); only its position is its own. An invalid probe is never gathered and
+/// carries no table.
+fn assemble_probes(
+    traced: &[trace::ProbeRays],
+    positions: &[(Vec3, bool)],
+    tables: &[Vec<FactorRow>],
+    valid: &[bool],
+    sources: &[Option<usize>],
+) -> Assembled {
+    let mut probes = Vec::with_capacity(traced.len());
+    let mut rows: Vec<FactorRow> = Vec::new();
+    let (mut sky_mask, mut sky_transfer) = (Vec::new(), Vec::new());
+    for (p, &(pos, moved)) in positions.iter().enumerate() {
+        let (flags, from) = match (valid[p], sources[p]) {
+            (true, _) => (PROBE_VALID, p),
+            (false, Some(q)) => (PROBE_VALID | PROBE_DILATED, q),
+            (false, None) => (0, p),
+        };
+        let table: &[FactorRow] = if flags == 0 { &[] } else { &tables[from] };
+        probes.push(Probe {
+            position: pos.to_array(),
+            flags: flags | if moved { PROBE_OFFSET } else { 0 },
+            first_factor: rows.len() as u32,
+            factor_count: table.len() as u32,
+            sky_rays: traced[from].sky_rays,
+            backface_rays: traced[from].backface_rays,
+        });
+        rows.extend_from_slice(table);
+        sky_mask.extend_from_slice(&traced[from].sky_mask);
+        sky_transfer.push(traced[from].sky_transfer);
+    }
+    Assembled {
+        probes,
+        rows,
+        sky_mask,
+        sky_transfer,
+    }
+}
+
+/// The per-probe sections of the asset, before encoding.
+struct Assembled {
+    probes: Vec<Probe>,
+    rows: Vec<FactorRow>,
+    sky_mask: Vec<u32>,
+    sky_transfer: Vec<[f32; prt_format::sh::SH_COUNT]>,
 }
