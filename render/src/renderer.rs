@@ -208,6 +208,67 @@ fn targets(device: &wgpu::Device, width: u32, height: u32) -> Targets {
     Targets { depth, colors }
 }
 
+/// The renderer's own buffers.
+struct Buffers {
+    frame: wgpu::Buffer,
+    directional: wgpu::Buffer,
+    others: wgpu::Buffer,
+    tile_lists: wgpu::Buffer,
+    stats: wgpu::Buffer,
+}
+
+/// Creates the frame uniform, the light buffers at full capacity, the tile lists (refused when
+/// beyond one storage binding) and the culling counters.
+fn buffers(
+    device: &wgpu::Device,
+    settings: &RenderSettings,
+    tiles: (u32, u32),
+) -> Result<Buffers, RenderError> {
+    let list_bytes = u64::from(tiles.0 * tiles.1) * u64::from(settings.max_lights_per_tile + 1) * 4;
+    let max_binding = device.limits().max_storage_buffer_binding_size;
+    if list_bytes > max_binding {
+        return Err(RenderError::Limit {
+            what: "the tile light lists",
+            needed: list_bytes,
+            limit: max_binding,
+        });
+    }
+    let buffer = |label, size: u64, usage| {
+        device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size,
+            usage,
+            mapped_at_creation: false,
+        })
+    };
+    let copy = wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC;
+    let light_size = std::mem::size_of::<GpuLight>() as u64;
+    let storage = wgpu::BufferUsages::STORAGE | copy;
+    Ok(Buffers {
+        frame: buffer(
+            "prt-render frame",
+            std::mem::size_of::<FrameUniform>() as u64,
+            wgpu::BufferUsages::UNIFORM | copy,
+        ),
+        directional: buffer(
+            "prt-render directional lights",
+            light_size * MAX_DIRECTIONAL_LIGHTS as u64,
+            storage,
+        ),
+        others: buffer(
+            "prt-render lights",
+            light_size * MAX_OTHER_LIGHTS as u64,
+            storage,
+        ),
+        tile_lists: buffer("prt-render tile lists", list_bytes, storage),
+        stats: buffer(
+            "prt-render cull stats",
+            std::mem::size_of::<CullStats>() as u64,
+            storage,
+        ),
+    })
+}
+
 /// Checks size, tile and list settings against the device.
 fn check_settings(device: &wgpu::Device, s: &RenderSettings) -> Result<(), RenderError> {
     let max = device.limits().max_texture_dimension_2d;
@@ -241,48 +302,13 @@ impl Renderer {
             settings.width.div_ceil(settings.tile),
             settings.height.div_ceil(settings.tile),
         );
-        let list_bytes =
-            u64::from(tiles.0 * tiles.1) * u64::from(settings.max_lights_per_tile + 1) * 4;
-        let max_binding = device.limits().max_storage_buffer_binding_size;
-        if list_bytes > max_binding {
-            return Err(RenderError::Limit {
-                what: "the tile light lists",
-                needed: list_bytes,
-                limit: max_binding,
-            });
-        }
-        let buffer = |label, size: u64, usage| {
-            device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size,
-                usage,
-                mapped_at_creation: false,
-            })
-        };
-        let copy = wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC;
-        let frame = buffer(
-            "prt-render frame",
-            std::mem::size_of::<FrameUniform>() as u64,
-            wgpu::BufferUsages::UNIFORM | copy,
-        );
-        let light_size = std::mem::size_of::<GpuLight>() as u64;
-        let storage = wgpu::BufferUsages::STORAGE | copy;
-        let directional = buffer(
-            "prt-render directional lights",
-            light_size * MAX_DIRECTIONAL_LIGHTS as u64,
-            storage,
-        );
-        let others = buffer(
-            "prt-render lights",
-            light_size * MAX_OTHER_LIGHTS as u64,
-            storage,
-        );
-        let tile_lists = buffer("prt-render tile lists", list_bytes, storage);
-        let stats = buffer(
-            "prt-render cull stats",
-            std::mem::size_of::<CullStats>() as u64,
-            storage,
-        );
+        let Buffers {
+            frame,
+            directional,
+            others,
+            tile_lists,
+            stats,
+        } = buffers(device, &settings, tiles)?;
         let targets = targets(device, settings.width, settings.height);
 
         let cull = Cull::new(device);
