@@ -18,7 +18,7 @@ pub struct Summary {
     pub valid_probe_count: usize,
     /// Probes inside geometry whose table was copied from a valid neighbour.
     pub dilated_probe_count: usize,
-    /// Probes moved out of geometry by the virtual offset.
+    /// Probes moved off a surface they lay on, or out of geometry by the virtual offset.
     pub offset_probe_count: usize,
     pub ray_count: u32,
     pub surfel_count: usize,
@@ -132,7 +132,7 @@ impl std::fmt::Display for Summary {
         )?;
         writeln!(
             f,
-            "probes           {} ({} valid, {} inside geometry of which {} dilated, {} moved by virtual offset), {} rays each",
+            "probes           {} ({} valid, {} inside geometry of which {} dilated, {} moved off a surface or out of geometry), {} rays each",
             self.probe_count,
             self.valid_probe_count,
             self.probe_count - self.valid_probe_count,
