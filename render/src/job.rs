@@ -135,7 +135,15 @@ pub fn run(
     if let Some(fov) = job.fov {
         camera.fov_degrees = fov;
     }
-    camera.validate()?;
+    // Name where a bad camera came from: the flags, or the scene's own camera.
+    camera.validate().map_err(|e| match (&job.camera, e) {
+        (None, RenderError::Camera(m)) => RenderError::Camera(format!(
+            "{} (the camera of {}; pass --eye, --target and --fov to override it)",
+            m,
+            job.scene.display()
+        )),
+        (_, e) => e,
+    })?;
     let max_gi = prt_runtime::gpu::layout::MAX_LIGHTS;
     if job.output.needs_gi() && lighting.rig.lights.len() > max_gi {
         return Err(RenderError::GiLights {
