@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Regenerates the surface-irradiance references of `prt bench surface` (issue 11) with the
-# independent Mitsuba 3 oracle in ../shared/oracle/ (surface_oracle.py): points on visible
+# independent Mitsuba 3 oracle (surface_oracle.py; not part of this repository: point
+# PRT_ORACLE_DIR at it, default ../shared/oracle beside the clone): points on visible
 # surfaces, the SH of incident radiance there and the exact hemispherical irradiance.
 #
 # Not part of CI or the tests (it installs a Python venv and libllvm19, and runs minutes).
@@ -12,7 +13,11 @@
 set -euo pipefail
 ROOT="$(cd "$(dirname "$0")/.." && pwd)"
 ORACLE="${PRT_ORACLE_DIR:-$ROOT/../shared/oracle}"
-SCENES="$ROOT/../shared/scenes"
+SCENES="$ROOT/fixtures/scenes"
+if [ ! -f "$ORACLE/surface_oracle.py" ]; then
+  echo "surface_refs: no surface_oracle.py in $ORACLE; set PRT_ORACLE_DIR to the oracle's folder" >&2
+  exit 1
+fi
 VENV="${PRT_ORACLE_VENV:-/root/.cache/prt-oracle/venv}"
 OUT="$ROOT/fixtures/surface"
 PY="$VENV/bin/python"
@@ -69,14 +74,16 @@ cases=("$@")
 [ ${#cases[@]} -eq 0 ] && cases=(cornell two_rooms thick_walls sponza)
 for c in "${cases[@]}"; do
   case $c in
-    # The same room, rig and viewpoints as ../shared/reference/cornell/cornell_surface_n65536.json.
+    # The same room, rig and viewpoints as the shared reference data's Cornell surface reference
+    # (cornell_surface_n65536.json, seed 1234).
     cornell) oracle cornell "$ROOT/fixtures/cornell/cornell.gltf" "$ROOT/fixtures/cornell/rig.json" \
                "$ROOT/fixtures/cornell/cornell_probes.json" gltf ;;
     two_rooms) oracle two_rooms "$ROOT/fixtures/two_rooms.gltf" "$ROOT/fixtures/rigs/two_rooms.json" \
                  "$OUT/two_rooms_views.json" gltf ;;
     thick_walls) oracle thick_walls "$ROOT/fixtures/thick_walls.gltf" \
                    "$ROOT/fixtures/rigs/thick_walls.json" "$OUT/thick_walls_views.json" gltf ;;
-    # Sponza's winding is inconsistent; prt bakes it --double-sided, so every face is two-sided.
+    # Sponza's faces point out of the atrium; prt bakes it --double-sided, so every face is
+    # two-sided.
     sponza) oracle sponza "$SCENES/sponza_lod4.glb" "$ROOT/fixtures/rigs/sponza_sun_31.json" \
               "$OUT/sponza_views.json" two ;;
     *) echo "unknown case $c (cornell, two_rooms, thick_walls, sponza)" >&2; exit 2 ;;

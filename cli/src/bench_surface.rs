@@ -1,13 +1,14 @@
 //! `prt bench surface` (issue 11): irradiance where a renderer shows it, at surface points,
 //! against the independent oracle's surface references (`fixtures/surface/*_surface.json`, made by
-//! `scripts/surface_refs.sh` with `../shared/oracle/surface_oracle.py`).
+//! `scripts/surface_refs.sh` with the Mitsuba 3 oracle's `surface_oracle.py`, which is not part of
+//! this repository: the references are its output, committed as data).
 //!
 //! Probe SH are accurate at probe centres; surfaces sample the volume between probes, often with a
 //! wall between the point and some of its eight probes. Each case is baked as a new user would
 //! (whole scene, default spacing) and at half that spacing, relit on the CPU, and sampled with the
 //! CPU twin of the engine's `sample_irradiance` (normal offset included) at the reference points.
 //!
-//! Scores follow `../shared/oracle/score_surface.py` so that both give the same numbers:
+//! Scores follow the oracle's `score_surface.py` so that both give the same numbers:
 //! - per point, relative error `mean_rgb |E - E_ref| / max(mean_rgb E_ref, 1e-3 median)`, where
 //!   `median` is the median over points of the reference's mean-RGB hemispherical irradiance, and
 //!   a sample with validity 0 counts as `E = 0` (the shader returns nothing there);
@@ -80,7 +81,7 @@ const CASES: [Case; 4] = [
     },
     Case {
         name: "sponza",
-        scene: "../shared/scenes/sponza_lod4.glb",
+        scene: "fixtures/scenes/sponza_lod4.glb",
         rig: "fixtures/rigs/sponza_sun_31.json",
         reference: "fixtures/surface/sponza_surface.json",
         double_sided: true,
@@ -140,20 +141,10 @@ pub fn run(args: SurfaceArgs) -> Result<()> {
     }
     let picked = pick_cases(&args.cases)?;
     let mut rows = Vec::new();
-    let mut notes = Vec::new();
     let mut oracle = Vec::new();
     for case in picked {
         let scene = args.root.join(case.scene);
         let reference_path = args.root.join(case.reference);
-        if case.name == "sponza" && !(scene.exists() && reference_path.exists()) {
-            notes.push(format!(
-                "sponza skipped: {} or {} is missing (scripts/surface_refs.sh sponza makes the \
-                 reference)",
-                scene.display(),
-                reference_path.display()
-            ));
-            continue;
-        }
         let reference = read_reference(&reference_path)?;
         let lighting = prt_runtime::load_rig(&args.root.join(case.rig))
             .with_context(|| format!("loading the rig of case {}", case.name))?;
@@ -171,7 +162,7 @@ pub fn run(args: SurfaceArgs) -> Result<()> {
         rows.extend(default_rows);
         rows.extend(measure(case, &scene, &half, &lighting, &reference, bias)?);
     }
-    let md = markdown(&rows, &oracle, &notes, bias)?;
+    let md = markdown(&rows, &oracle, bias)?;
     println!("{md}");
     if let Some(out) = args.out {
         std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
@@ -393,12 +384,7 @@ fn ref_point(p: &Value) -> Result<RefPoint> {
 }
 
 /// The report: the accuracy table, then timings.
-fn markdown(
-    rows: &[Row],
-    oracle: &[(&str, Option<f64>)],
-    notes: &[String],
-    bias: f32,
-) -> Result<String> {
+fn markdown(rows: &[Row], oracle: &[(&str, Option<f64>)], bias: f32) -> Result<String> {
     let mut md = String::new();
     writeln!(
         md,
@@ -462,9 +448,6 @@ fn markdown(
             "\nOracle time per reference (300 points, 65,536 directions): {}.",
             timed.join(", ")
         )?;
-    }
-    for n in notes {
-        writeln!(md, "\n{n}")?;
     }
     Ok(md)
 }

@@ -11,7 +11,7 @@ fn fixture(rel: &str) -> PathBuf {
 }
 
 fn cornell() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/reference/cornell/cornell.gltf")
+    fixture("cornell/cornell.gltf")
 }
 
 /// A scratch directory unique to this process and test, removed when dropped.
@@ -245,7 +245,7 @@ fn bake_cornell(dir: &Scratch) -> PathBuf {
 }
 
 fn cornell_rig() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/reference/cornell/rig.json")
+    fixture("cornell/rig.json")
 }
 
 /// `prt sample ASSET --lights RIG --points POINTS --json OUT [more args]`.

@@ -1,4 +1,5 @@
-//! Helpers shared by the cross-crate tests in `tests/`: paths to fixtures and shared scenes,
+//! Helpers shared by the cross-crate tests in `tests/`: paths to fixtures (the repository's own
+//! scenes and the vendored public scenes and reference data: no test reads outside the clone),
 //! scratch directories, and small bake shortcuts.
 
 use std::path::{Path, PathBuf};
@@ -13,16 +14,10 @@ pub fn fixture(rel: &str) -> PathBuf {
         .join(rel)
 }
 
-/// `shared/<rel>`: the shared scenes and reference data that live beside the repository.
-pub fn shared(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared")
-        .join(rel)
-}
-
-/// The reference Cornell box (`shared/reference/cornell/cornell.gltf`).
+/// The reference Cornell box (`fixtures/cornell/cornell.gltf`, with the independent renderer's
+/// probe SH beside it).
 pub fn cornell() -> PathBuf {
-    shared("reference/cornell/cornell.gltf")
+    fixture("cornell/cornell.gltf")
 }
 
 /// Settings with `rays` rays and otherwise the defaults.

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use prt_bake::{scene, BakeError, BakeSettings, NoProgress};
 use prt_format::sh::Y00;
 use prt_format::{Asset, LightKind, TransferPrecision, BRICK_BACKFACE};
-use prt_tests::{bake_err, bake_ok, cornell, fixture, point_bounds, rays, shared, ScratchDir};
+use prt_tests::{bake_err, bake_ok, cornell, fixture, point_bounds, rays, ScratchDir};
 
 // ---------------------------------------------------------------------------------------------
 // Helpers
@@ -131,11 +131,11 @@ fn approx(a: [f32; 3], b: [f32; 3], tol: f32) -> bool {
 // ---------------------------------------------------------------------------------------------
 // 1. Everything bakes into a valid asset that round-trips
 
-/// The public scenes in shared/scenes (sponza at a 3 m spacing) bake at 64 rays into assets that
+/// The public scenes in fixtures/scenes (sponza at a 3 m spacing) bake at 64 rays into assets that
 /// validate and round-trip through the file encoding.
 #[test]
 fn shared_scenes_bake_validate_and_round_trip() {
-    let scenes = files_with_ext(&shared("scenes"), ".glb");
+    let scenes = files_with_ext(&fixture("scenes"), ".glb");
     assert!(
         scenes.len() >= 4,
         "expected the 4 shared scenes, found {scenes:?}"
@@ -158,7 +158,7 @@ fn shared_scenes_bake_validate_and_round_trip() {
 #[test]
 fn reference_cornell_gltf_and_glb_bake_alike() {
     let gltf = bake_ok(&cornell(), &rays(64));
-    let glb = bake_ok(&shared("reference/cornell/cornell.glb"), &rays(64));
+    let glb = bake_ok(&fixture("cornell/cornell.glb"), &rays(64));
     assert_valid_and_round_trips(&gltf, "cornell.gltf");
     assert_valid_and_round_trips(&glb, "cornell.glb");
     assert_eq!(gltf.header.grid, glb.header.grid);
@@ -232,7 +232,7 @@ fn deterministic_across_threads_cornell() {
 /// room.glb: 1 and 2 threads give byte-identical assets.
 #[test]
 fn deterministic_across_threads_room() {
-    assert_deterministic(&shared("scenes/room.glb"), rays(128));
+    assert_deterministic(&fixture("scenes/room.glb"), rays(128));
 }
 
 /// Sponza (187k triangles, BVH built in parallel): 1 and 2 threads give byte-identical assets,
@@ -243,7 +243,7 @@ fn deterministic_across_threads_sponza() {
         spacing: Some(2.5),
         ..rays(128)
     };
-    assert_deterministic(&shared("scenes/sponza_lod4.glb"), settings);
+    assert_deterministic(&fixture("scenes/sponza_lod4.glb"), settings);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -260,14 +260,14 @@ fn every_ray_is_accounted_for() {
             ..rays(256)
         };
         assert_bookkeeping(&bake_ok(&cornell(), &settings), "cornell");
-        let room = bake_ok(&shared("scenes/room.glb"), &settings);
+        let room = bake_ok(&fixture("scenes/room.glb"), &settings);
         assert_bookkeeping(&room, "room.glb");
     }
     let sponza = BakeSettings {
         spacing: Some(3.0),
         ..rays(128)
     };
-    let asset = bake_ok(&shared("scenes/sponza_lod4.glb"), &sponza);
+    let asset = bake_ok(&fixture("scenes/sponza_lod4.glb"), &sponza);
     assert!(
         asset.probes.iter().any(|p| p.backface_rays > 0),
         "sponza has back faces"
@@ -846,7 +846,7 @@ fn scene_diagnostics_warn_about_winding_and_invalid_probes() {
     .unwrap();
     assert!(report.warnings.is_empty(), "{:?}", report.warnings);
 
-    let sponza = shared("scenes/sponza_lod4.glb");
+    let sponza = fixture("scenes/sponza_lod4.glb");
     let (asset, report) = prt_bake::bake(
         &sponza,
         &BakeSettings {

@@ -197,7 +197,7 @@ fn wrong_checksum_is_checksum_error() {
 /// TooShort.
 #[test]
 fn bad_magic_is_rejected() {
-    let glb = std::fs::read(prt_tests::shared("reference/cornell/cornell.glb")).unwrap();
+    let glb = std::fs::read(prt_tests::fixture("cornell/cornell.glb")).unwrap();
     assert!(matches!(decode(&glb), Err(FormatError::BadMagic { .. })));
     let mut mangled = small_file();
     mangled[6] = b'\n'; // CR LF -> LF LF

@@ -10,7 +10,7 @@ use prt_runtime::gpu::{
     headless_device, sample_points, sh_from_texels, wgpu, PrtRuntime, RuntimeSettings, VolumeFormat,
 };
 use prt_runtime::{load_rig, CpuRelighter, Lighting, SkyModel, VolumeSampler};
-use prt_tests::{bake_ok as bake, fixture, shared};
+use prt_tests::{bake_ok as bake, fixture};
 
 fn device() -> (wgpu::Device, wgpu::Queue) {
     let (device, queue, _) = headless_device().expect("a GPU adapter (lavapipe in CI) is required");
@@ -87,7 +87,7 @@ fn volume_sh(runtime: &PrtRuntime) -> Vec<Option<ShRgb>> {
 #[test]
 fn gpu_equals_cpu_on_cornell() {
     let (device, queue) = device();
-    let scene = shared("reference/cornell/cornell.gltf");
+    let scene = fixture("cornell/cornell.gltf");
     let reference_grid = BakeSettings {
         spacing: Some(0.6),
         bounds: Some([-0.9, 0.1, -0.9, 0.9, 1.9, 0.9]),
@@ -106,7 +106,7 @@ fn gpu_equals_cpu_on_cornell() {
     ] {
         let asset = bake(&scene, &settings);
         for rig in ["rig.json", "rig_spot.json", "rig_spot_range.json"] {
-            let lighting = load_rig(&shared(&format!("reference/cornell/{rig}"))).unwrap();
+            let lighting = load_rig(&fixture(&format!("cornell/{rig}"))).unwrap();
             let mut runtime = PrtRuntime::new(
                 &device,
                 &queue,
@@ -153,13 +153,14 @@ fn gpu_equals_cpu_on_shared_scenes() {
         "sunshadowTest.glb",
         "sponza_lod4.glb",
     ] {
-        // sponza_lod4's winding is inconsistent (shared/scenes/README.md): bake it double-sided.
+        // sponza_lod4's surfaces face away from the atrium (fixtures/scenes/README.md): bake it
+        // double-sided.
         let settings = BakeSettings {
             rays: 256,
             double_sided: true,
             ..BakeSettings::default()
         };
-        let asset = bake(&shared(&format!("scenes/{scene}")), &settings);
+        let asset = bake(&fixture(&format!("scenes/{scene}")), &settings);
         let mut runtime =
             PrtRuntime::new(&device, &queue, &asset, RuntimeSettings::default()).unwrap();
         let gpu = gpu_update(&device, &queue, &mut runtime, &lighting, None);
@@ -205,10 +206,7 @@ fn rig(intensity: f32, point_x: f32) -> Lighting {
 #[test]
 fn amortised_updates_and_skipped_work() {
     let (device, queue) = device();
-    let asset = bake(
-        &shared("reference/cornell/cornell.gltf"),
-        &BakeSettings::default(),
-    );
+    let asset = bake(&fixture("cornell/cornell.gltf"), &BakeSettings::default());
     let settings = RuntimeSettings {
         volume_format: VolumeFormat::F32,
         benchmark_baselines: true,
@@ -291,10 +289,7 @@ fn amortised_updates_and_skipped_work() {
 #[test]
 fn hostile_values_stay_finite() {
     let (device, queue) = device();
-    let cornell = bake(
-        &shared("reference/cornell/cornell.gltf"),
-        &BakeSettings::default(),
-    );
+    let cornell = bake(&fixture("cornell/cornell.gltf"), &BakeSettings::default());
     let most = cornell
         .probes
         .iter()
@@ -414,10 +409,7 @@ fn emission_and_visibility_cache_follow_every_change() {
     );
     assert_close("furnace", &furnace, &gpu, &cpu(&furnace, &no_lights), 1e-4);
 
-    let cornell = bake(
-        &shared("reference/cornell/cornell.gltf"),
-        &BakeSettings::default(),
-    );
+    let cornell = bake(&fixture("cornell/cornell.gltf"), &BakeSettings::default());
     let mut runtime =
         PrtRuntime::new(&device, &queue, &cornell, RuntimeSettings::default()).unwrap();
     let mut lighting = rig(0.0, 0.0);
@@ -441,11 +433,8 @@ fn emission_and_visibility_cache_follow_every_change() {
 #[test]
 fn chunked_factor_tables_match_the_unsplit_result() {
     let (device, queue) = device();
-    let asset = bake(
-        &shared("reference/cornell/cornell.gltf"),
-        &BakeSettings::default(),
-    );
-    let lighting = load_rig(&shared("reference/cornell/rig_spot_range.json")).unwrap();
+    let asset = bake(&fixture("cornell/cornell.gltf"), &BakeSettings::default());
+    let lighting = load_rig(&fixture("cornell/rig_spot_range.json")).unwrap();
     let bytes = asset.factors.len() * asset.factors.bytes_per_factor();
     assert!(
         bytes > 16 * 64 * 1024,
@@ -482,13 +471,13 @@ fn sample_irradiance_snippet_matches_the_cpu() {
     let (device, queue) = device();
     // Without dilation, so that probes inside the boxes stay invalid.
     let asset = bake(
-        &shared("reference/cornell/cornell.gltf"),
+        &fixture("cornell/cornell.gltf"),
         &BakeSettings {
             dilate: false,
             ..BakeSettings::default()
         },
     );
-    let lighting = load_rig(&shared("reference/cornell/rig.json")).unwrap();
+    let lighting = load_rig(&fixture("cornell/rig.json")).unwrap();
     let settings = RuntimeSettings {
         normal_bias: 0.0,
         ..RuntimeSettings::default()
@@ -607,11 +596,8 @@ fn sample_queries(asset: &Asset, count: usize) -> Vec<([f32; 3], [f32; 3])> {
 #[test]
 fn sample_points_matches_the_cpu_sampler() {
     let (device, queue) = device();
-    let asset = bake(
-        &shared("reference/cornell/cornell.gltf"),
-        &BakeSettings::default(),
-    );
-    let lighting = load_rig(&shared("reference/cornell/rig.json")).unwrap();
+    let asset = bake(&fixture("cornell/cornell.gltf"), &BakeSettings::default());
+    let lighting = load_rig(&fixture("cornell/rig.json")).unwrap();
     for visibility in [true, false] {
         let settings = RuntimeSettings {
             visibility,

@@ -1,5 +1,5 @@
 //! CPU relight against the independent renderer (Mitsuba 3 oracle data in
-//! `shared/reference/cornell/`), analytic furnace and sky cases, and rig validation.
+//! `fixtures/cornell/`), analytic furnace and sky cases, and rig validation.
 
 use std::path::Path;
 
@@ -9,7 +9,7 @@ use prt_format::Asset;
 use prt_runtime::accuracy::{compare, ErrorStats};
 use prt_runtime::output::read_probe_sh;
 use prt_runtime::{load_rig, CpuRelighter};
-use prt_tests::{bake_ok as bake, fixture, shared};
+use prt_tests::{bake_ok as bake, fixture};
 
 /// The reference probes: a 3x3x3 grid at x, z in {-0.6, 0, 0.6}, y in {0.4, 1, 1.6}.
 fn cornell_settings(rays: u32, exact: bool) -> BakeSettings {
@@ -36,7 +36,7 @@ fn relight(asset: &Asset, rig: &Path, bounces: u32) -> Vec<ShRgb> {
 }
 
 fn reference(file: &str) -> Vec<([f32; 3], ShRgb)> {
-    let path = shared(&format!("reference/cornell/{file}"));
+    let path = fixture(&format!("cornell/{file}"));
     let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     read_probe_sh(&serde_json::from_str(&text).expect("json")).expect("probes")
 }
@@ -57,14 +57,14 @@ fn error(asset: &Asset, sh: &[ShRgb], reference: &[([f32; 3], ShRgb)]) -> ErrorS
 /// within 1e-3 of |SH0| per coefficient, for point + sun + sky, + spot, and ranged lights.
 #[test]
 fn cornell_matches_mitsuba_on_the_same_directions() {
-    let scene = shared("reference/cornell/cornell.gltf");
+    let scene = fixture("cornell/cornell.gltf");
     let asset = bake(&scene, &cornell_settings(512, true));
     for (rig, reference_file) in [
         ("rig.json", "cornell_sh_n512.json"),
         ("rig_spot.json", "cornell_spot_sh_n512.json"),
         ("rig_spot_range.json", "cornell_spot_range_sh_n512.json"),
     ] {
-        let sh = relight(&asset, &shared(&format!("reference/cornell/{rig}")), 1);
+        let sh = relight(&asset, &fixture(&format!("cornell/{rig}")), 1);
         let e = error(&asset, &sh, &reference(reference_file));
         assert!(e.max_coeff_rel <= 1e-3, "{rig}: {e:?}");
     }
@@ -75,8 +75,8 @@ fn cornell_matches_mitsuba_on_the_same_directions() {
 /// 25% to it while relighting far fewer bricks than rays.
 #[test]
 fn cornell_error_against_converged_reference() {
-    let scene = shared("reference/cornell/cornell.gltf");
-    let rig = shared("reference/cornell/rig.json");
+    let scene = fixture("cornell/cornell.gltf");
+    let rig = fixture("cornell/rig.json");
     let converged = reference("cornell_sh_n1M.json");
 
     let exact = bake(&scene, &cornell_settings(512, true));
@@ -104,14 +104,14 @@ fn cornell_error_against_converged_reference() {
 /// The high-quality preset reaches at most 1% mean and 3% p95 irradiance error.
 #[test]
 fn cornell_high_quality_preset() {
-    let scene = shared("reference/cornell/cornell.gltf");
+    let scene = fixture("cornell/cornell.gltf");
     let settings = BakeSettings {
         spacing: Some(0.6),
         bounds: Some([-0.9, 0.1, -0.9, 0.9, 1.9, 0.9]),
         ..BakeSettings::high_quality()
     };
     let asset = bake(&scene, &settings);
-    let sh = relight(&asset, &shared("reference/cornell/rig.json"), 1);
+    let sh = relight(&asset, &fixture("cornell/rig.json"), 1);
     let e = error(&asset, &sh, &reference("cornell_sh_n1M.json"));
     assert!(e.mean <= 0.01 && e.p95 <= 0.03, "{e:?}");
 }
