@@ -133,12 +133,7 @@ struct Row {
 }
 
 pub fn run(args: SurfaceArgs) -> Result<()> {
-    let bias = args
-        .normal_bias
-        .unwrap_or(RuntimeSettings::default().normal_bias);
-    if !bias.is_finite() || bias < 0.0 {
-        bail!("--normal-bias {bias}: expected a finite number of probe spacings >= 0");
-    }
+    let bias = crate::normal_bias(args.normal_bias)?;
     let picked = pick_cases(&args.cases)?;
     let mut rows = Vec::new();
     let mut oracle = Vec::new();

@@ -258,12 +258,26 @@ fn lighting_of(
     })
 }
 
+/// Parses a comma-separated list of numbers (flags of several commands).
+fn parse_numbers(s: &str) -> Result<Vec<f32>, String> {
+    s.split(',')
+        .map(|t| t.trim().parse::<f32>().map_err(|e| format!("{t:?}: {e}")))
+        .collect()
+}
+
+/// `--normal-bias` in probe spacings, or the runtime's default: finite and non-negative.
+fn normal_bias(arg: Option<f32>) -> Result<f32> {
+    let bias = arg.unwrap_or(prt_runtime::gpu::RuntimeSettings::default().normal_bias);
+    anyhow::ensure!(
+        bias.is_finite() && bias >= 0.0,
+        "--normal-bias {bias}: expected a finite number of probe spacings >= 0"
+    );
+    Ok(bias)
+}
+
 /// Parses `MINX,MINY,MINZ,MAXX,MAXY,MAXZ`.
 fn parse_bounds(s: &str) -> Result<[f32; 6], String> {
-    let v: Vec<f32> = s
-        .split(',')
-        .map(|t| t.trim().parse::<f32>().map_err(|e| format!("{t:?}: {e}")))
-        .collect::<Result<_, _>>()?;
+    let v = parse_numbers(s)?;
     v.try_into()
         .map_err(|v: Vec<f32>| format!("expected 6 comma-separated numbers, got {}", v.len()))
 }

@@ -91,10 +91,7 @@ pub struct RenderArgs {
 
 /// Parses `X,Y,Z`.
 pub fn parse_vec3(s: &str) -> Result<Vec3, String> {
-    let v: Vec<f32> = s
-        .split(',')
-        .map(|t| t.trim().parse::<f32>().map_err(|e| format!("{t:?}: {e}")))
-        .collect::<Result<_, _>>()?;
+    let v = crate::parse_numbers(s)?;
     match v[..] {
         [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok(Vec3::new(x, y, z)),
         [_, _, _] => Err("coordinates must be finite".into()),
@@ -128,16 +125,11 @@ pub fn run(args: RenderArgs) -> Result<()> {
         (None, None) => None,
         _ => bail!("--eye and --target go together"),
     };
-    let mut runtime = RuntimeSettings {
+    let runtime = RuntimeSettings {
         visibility: !args.no_visibility,
+        normal_bias: crate::normal_bias(args.normal_bias)?,
         ..RuntimeSettings::default()
     };
-    if let Some(bias) = args.normal_bias {
-        if !bias.is_finite() || bias < 0.0 {
-            bail!("--normal-bias {bias}: expected a finite number of probe spacings >= 0");
-        }
-        runtime.normal_bias = bias;
-    }
     let job = RenderJob {
         scene: args.scene,
         asset: args.asset,

@@ -39,12 +39,7 @@ pub struct SampleArgs {
 type Point = ([f32; 3], [f32; 3]);
 
 pub fn run(args: SampleArgs) -> Result<()> {
-    let normal_bias = args
-        .normal_bias
-        .unwrap_or(RuntimeSettings::default().normal_bias);
-    if !normal_bias.is_finite() || normal_bias < 0.0 {
-        bail!("--normal-bias {normal_bias}: expected a finite number of probe spacings >= 0");
-    }
+    let normal_bias = crate::normal_bias(args.normal_bias)?;
     let settings = RuntimeSettings {
         normal_bias,
         visibility: !args.no_visibility,

@@ -11,7 +11,6 @@ use gltf::texture::WrappingMode;
 use prt_bake::scene::{Scene, TriangleAttributes};
 use prt_bake::texture::TextureRef;
 use prt_format::Asset;
-use wgpu::util::DeviceExt;
 
 use crate::layout::*;
 use crate::RenderError;
@@ -144,29 +143,8 @@ impl GpuScene {
             })
             .collect();
 
-        let create = |label: &'static str, bytes: &[u8], usage: wgpu::BufferUsages, limit: u64| {
-            // Never bind an empty buffer: keep one zeroed element.
-            let padded;
-            let contents = if bytes.is_empty() {
-                padded = vec![0u8; 64];
-                &padded[..]
-            } else {
-                bytes
-            };
-            if contents.len() as u64 > limit {
-                return Err(RenderError::Limit {
-                    what: label,
-                    needed: contents.len() as u64,
-                    limit,
-                });
-            }
-            Ok(
-                device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                    label: Some(label),
-                    contents,
-                    usage,
-                }),
-            )
+        let create = |label, bytes: &[u8], usage, limit| {
+            prt_runtime::gpu::buffer_with(device, label, bytes, usage, limit)
         };
         let storage = wgpu::BufferUsages::STORAGE;
         Ok(GpuScene {

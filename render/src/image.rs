@@ -51,28 +51,15 @@ pub fn tone_map(radiance: &[[f32; 4]], exposure_ev: f32) -> Vec<[u8; 3]> {
         .collect()
 }
 
-/// Writes `path` only once complete (temp file in the same directory, then rename).
-fn write_atomic(
-    path: &Path,
-    write: impl FnOnce(&Path) -> Result<(), String>,
-) -> Result<(), RenderError> {
-    let err = |message: String| RenderError::Write {
+/// Writes encoded `bytes` to `path` the project's one way: atomically (temp file, then rename),
+/// never over a device or directory (`prt_format::io::write_bytes_atomic`).
+fn write_file(path: &Path, bytes: &[u8]) -> Result<(), RenderError> {
+    prt_format::io::write_bytes_atomic(path, bytes).map_err(|e| RenderError::Write {
         path: path.to_owned(),
-        message,
-    };
-    let name = path
-        .file_name()
-        .ok_or_else(|| err("not a file path".into()))?;
-    let mut tmp_name = name.to_os_string();
-    tmp_name.push(format!(".tmp{}", std::process::id()));
-    let tmp = path.with_file_name(tmp_name);
-    if let Err(e) = write(&tmp) {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(err(e));
-    }
-    std::fs::rename(&tmp, path).map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        err(e.to_string())
+        message: match e {
+            prt_format::FormatError::Io { error, .. } => error.to_string(),
+            other => other.to_string(),
+        },
     })
 }
 
@@ -83,18 +70,21 @@ pub fn write_png(
     height: u32,
     pixels: &[[u8; 3]],
 ) -> Result<(), RenderError> {
-    write_atomic(path, |tmp| {
-        let file = std::fs::File::create(tmp).map_err(|e| e.to_string())?;
-        let mut enc = png::Encoder::new(std::io::BufWriter::new(file), width, height);
+    let mut bytes = Vec::new();
+    let encoded = (|| {
+        let mut enc = png::Encoder::new(&mut bytes, width, height);
         enc.set_color(png::ColorType::Rgb);
         enc.set_depth(png::BitDepth::Eight);
         enc.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
-        let mut writer = enc.write_header().map_err(|e| e.to_string())?;
-        writer
-            .write_image_data(bytemuck::cast_slice(pixels))
-            .map_err(|e| e.to_string())?;
-        writer.finish().map_err(|e| e.to_string())
-    })
+        let mut writer = enc.write_header()?;
+        writer.write_image_data(bytemuck::cast_slice(pixels))?;
+        writer.finish()
+    })();
+    encoded.map_err(|e| RenderError::Write {
+        path: path.to_owned(),
+        message: e.to_string(),
+    })?;
+    write_file(path, &bytes)
 }
 
 /// Writes linear RGB radiance as a 32-bit float OpenEXR.
@@ -104,13 +94,20 @@ pub fn write_exr(
     height: u32,
     radiance: &[[f32; 4]],
 ) -> Result<(), RenderError> {
-    write_atomic(path, |tmp| {
-        exr::prelude::write_rgb_file(tmp, width as usize, height as usize, |x, y| {
-            let p = radiance[y * width as usize + x];
-            (p[0], p[1], p[2])
-        })
-        .map_err(|e| e.to_string())
-    })
+    use exr::prelude::{Image, SpecificChannels, Vec2, WritableImage};
+    let channels = SpecificChannels::rgb(|Vec2(x, y): Vec2<usize>| {
+        let p = radiance[y * width as usize + x];
+        (p[0], p[1], p[2])
+    });
+    let mut bytes = std::io::Cursor::new(Vec::new());
+    Image::from_channels((width as usize, height as usize), channels)
+        .write()
+        .to_buffered(&mut bytes)
+        .map_err(|e| RenderError::Write {
+            path: path.to_owned(),
+            message: e.to_string(),
+        })?;
+    write_file(path, bytes.get_ref())
 }
 
 /// A colour ramp from dark blue through green and yellow to red (t in [0, 1]).

@@ -14,12 +14,13 @@
 //!    conventions.md section 5, exactly when the bake did not merge surfels.
 
 use glam::Vec3;
-use prt_format::sh::{self, ShRgb, SH_COUNT};
+use prt_format::sh::{ShRgb, SH_COUNT};
 use prt_format::{Asset, BRICK_BACKFACE};
 use rayon::prelude::*;
 
 use crate::lights::{CullReason, NormalBounds, PreparedLight};
 use crate::rig::Lighting;
+use crate::sample::VolumeSampler;
 use crate::visibility::{self, occluded, ray_offset};
 
 /// Why an asset cannot be relit.
@@ -130,14 +131,17 @@ impl<'a> CpuRelighter<'a> {
             let radiance = if bounce == 0 {
                 self.brick_radiance(&direct)
             } else {
-                let volume = Volume::new(self.asset, &sh);
+                // The previous bounce's volume, trilinear over valid probes at the surfel itself
+                // (the engine-side lookup without visibility or normal offset).
+                let g = &self.asset.header.grid;
+                let volume = VolumeSampler::new(g, &self.asset.probes, &sh, 0.0);
                 let irradiance: Vec<[f32; 3]> = self
                     .asset
                     .surfels
                     .par_iter()
                     .zip(&direct)
                     .map(|(s, e)| {
-                        let ind = volume.irradiance(Vec3::from(s.position), Vec3::from(s.normal));
+                        let ind = volume.sample(s.position, s.normal).irradiance;
                         std::array::from_fn(|c| e[c] + ind[c])
                     })
                     .collect();
@@ -325,56 +329,4 @@ pub fn brick_normal_bounds(asset: &Asset) -> Vec<NormalBounds> {
             )
         })
         .collect()
-}
-
-/// The probe volume as a field: trilinear interpolation of SH over the valid probes around a
-/// point, each weighted by `Probe::sample_weight` (renormalised; outside the grid, clamped to
-/// its border).
-pub struct Volume<'a> {
-    asset: &'a Asset,
-    sh: &'a [ShRgb],
-}
-
-impl<'a> Volume<'a> {
-    pub fn new(asset: &'a Asset, sh: &'a [ShRgb]) -> Self {
-        Volume { asset, sh }
-    }
-
-    /// Interpolated SH at `p`, or `None` when no valid probe surrounds it.
-    pub fn sample(&self, p: Vec3) -> Option<ShRgb> {
-        let g = &self.asset.header.grid;
-        let rel = (p - Vec3::from(g.origin)) / g.spacing;
-        let counts = g.counts.map(|c| c as f32 - 1.0);
-        let rel = rel.clamp(Vec3::ZERO, Vec3::from(counts));
-        let base = rel.floor();
-        let f = rel - base;
-        let mut acc = [[0.0f32; 3]; SH_COUNT];
-        let mut wsum = 0.0;
-        for corner in 0..8u32 {
-            let o = [corner & 1, (corner >> 1) & 1, (corner >> 2) & 1];
-            let idx: [u32; 3] =
-                std::array::from_fn(|a| (base[a] as u32 + o[a]).min(g.counts[a] - 1));
-            let w: f32 = (0..3)
-                .map(|a| if o[a] == 1 { f[a] } else { 1.0 - f[a] })
-                .product();
-            let i = g.index(idx[0], idx[1], idx[2]);
-            let w = w * self.asset.probes[i].sample_weight();
-            if w <= 0.0 {
-                continue;
-            }
-            wsum += w;
-            for k in 0..SH_COUNT {
-                for c in 0..3 {
-                    acc[k][c] += w * self.sh[i][k][c];
-                }
-            }
-        }
-        (wsum > 0.0).then(|| acc.map(|k| k.map(|v| v / wsum)))
-    }
-
-    /// Irradiance at `p` with normal `n` (0 where no valid probe is near).
-    pub fn irradiance(&self, p: Vec3, n: Vec3) -> [f32; 3] {
-        self.sample(p)
-            .map_or([0.0; 3], |c| sh::irradiance(&c, n.to_array()))
-    }
 }

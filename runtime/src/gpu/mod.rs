@@ -225,6 +225,39 @@ fn buf(b: &wgpu::Buffer) -> wgpu::BindingResource<'_> {
     b.as_entire_binding()
 }
 
+/// A buffer holding `bytes`, refused with [`GpuError::Limit`] beyond `limit` bytes (a device
+/// limit: one storage binding, or the largest buffer). wgpu cannot bind empty buffers, nor ones
+/// smaller than one element: an empty array gets [`MIN_BUFFER`] zero bytes.
+pub fn buffer_with(
+    device: &wgpu::Device,
+    label: &'static str,
+    bytes: &[u8],
+    usage: wgpu::BufferUsages,
+    limit: u64,
+) -> Result<wgpu::Buffer, GpuError> {
+    if bytes.len() as u64 > limit {
+        return Err(GpuError::Limit {
+            what: label,
+            needed: bytes.len() as u64,
+            limit,
+        });
+    }
+    let padded;
+    let contents = if bytes.is_empty() {
+        padded = [0u8; MIN_BUFFER as usize];
+        &padded[..]
+    } else {
+        bytes
+    };
+    Ok(
+        device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents,
+            usage,
+        }),
+    )
+}
+
 /// Creates the runtime's storage buffers, refusing any larger than one storage binding.
 struct Alloc<'a> {
     device: &'a wgpu::Device,
@@ -250,22 +283,13 @@ impl Alloc<'_> {
         bytes: &[u8],
         extra: wgpu::BufferUsages,
     ) -> Result<wgpu::Buffer, GpuError> {
-        self.check(label, bytes.len() as u64)?;
-        // wgpu cannot bind empty buffers, nor ones smaller than one element: pad empty arrays.
-        let padded;
-        let contents = if bytes.is_empty() {
-            padded = [0u8; MIN_BUFFER as usize];
-            &padded[..]
-        } else {
-            bytes
-        };
-        Ok(self
-            .device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(label),
-                contents,
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | extra,
-            }))
+        buffer_with(
+            self.device,
+            label,
+            bytes,
+            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | extra,
+            self.max_binding,
+        )
     }
 
     /// A zero-initialised storage buffer of `size` bytes.
