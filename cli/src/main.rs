@@ -117,7 +117,7 @@ enum BenchKind {
         eye: Option<glam::Vec3>,
         #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
         target: Option<glam::Vec3>,
-        #[arg(long, default_value_t = 50.0)]
+        #[arg(long, default_value_t = prt_render::camera::DEFAULT_FOV)]
         fov: f32,
         /// Bake with every material double-sided.
         #[arg(long)]
@@ -496,16 +496,7 @@ fn run(cli: Cli) -> Result<()> {
                 double_sided,
                 frames,
             } => {
-                let camera = match (eye, target) {
-                    (Some(eye), Some(target)) => Some(prt_render::Camera {
-                        eye,
-                        target,
-                        up: glam::Vec3::Y,
-                        fov_degrees: fov,
-                    }),
-                    (None, None) => None,
-                    _ => anyhow::bail!("--eye and --target go together"),
-                };
+                let camera = render::camera_of(eye, target, Some(fov))?;
                 let bench = bench_render::RenderBench {
                     scene: &scene,
                     bake: BakeSettings {

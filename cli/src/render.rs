@@ -99,6 +99,25 @@ pub fn parse_vec3(s: &str) -> Result<Vec3, String> {
     }
 }
 
+/// The camera of `--eye`, `--target` and `--fov` (both or neither of the first two; `None`: the
+/// scene's own camera or framing).
+pub fn camera_of(
+    eye: Option<Vec3>,
+    target: Option<Vec3>,
+    fov: Option<f32>,
+) -> Result<Option<Camera>> {
+    Ok(match (eye, target) {
+        (Some(eye), Some(target)) => Some(Camera {
+            eye,
+            target,
+            up: Vec3::Y,
+            fov_degrees: fov.unwrap_or(prt_render::camera::DEFAULT_FOV),
+        }),
+        (None, None) => None,
+        _ => bail!("--eye and --target go together"),
+    })
+}
+
 /// Parses `WxH`.
 pub fn parse_size(s: &str) -> Result<(u32, u32), String> {
     let (w, h) = s
@@ -115,16 +134,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
             args.bounces
         );
     }
-    let camera = match (args.eye, args.target) {
-        (Some(eye), Some(target)) => Some(Camera {
-            eye,
-            target,
-            up: Vec3::Y,
-            fov_degrees: args.fov.unwrap_or(50.0),
-        }),
-        (None, None) => None,
-        _ => bail!("--eye and --target go together"),
-    };
+    let camera = camera_of(args.eye, args.target, args.fov)?;
     let runtime = RuntimeSettings {
         visibility: !args.no_visibility,
         normal_bias: crate::normal_bias(args.normal_bias)?,

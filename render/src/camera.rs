@@ -16,8 +16,9 @@ pub struct Camera {
     pub fov_degrees: f32,
 }
 
-/// Field of view of the whole-scene framing.
-const DEFAULT_FOV: f32 = 50.0;
+/// Vertical field of view, degrees, of the whole-scene framing and of `--eye/--target` views
+/// without `--fov`.
+pub const DEFAULT_FOV: f32 = 50.0;
 
 impl Camera {
     /// Checks the camera: finite, eye apart from target, fov in (0, 180).
