@@ -212,9 +212,10 @@ fn sampling_cost(
         let mut encoder = device.create_command_encoder(&Default::default());
         gi.update(&mut encoder, &lighting, None)?;
         queue.submit([encoder.finish()]);
-        submit_wait(device, queue, |e| r.record(e, Some(&gi)))?;
+        let volume = r.volume_group(&gi);
+        submit_wait(device, queue, |e| r.record(e, Some(&volume)))?;
         out[k] = median(b.frames, || {
-            submit_wait(device, queue, |e| r.record_shade(e, Some(&gi)))
+            submit_wait(device, queue, |e| r.record_shade(e, Some(&volume)))
         })?;
     }
     out[2] = median(b.frames, || {

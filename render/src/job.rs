@@ -171,7 +171,8 @@ pub fn run(
 
     let start = Instant::now();
     let mut encoder = device.create_command_encoder(&Default::default());
-    renderer.record(&mut encoder, runtime.as_ref());
+    let volume = runtime.as_ref().map(|rt| renderer.volume_group(rt));
+    renderer.record(&mut encoder, volume.as_ref());
     queue.submit([encoder.finish()]);
     let frame = renderer.read_frame(&device, &queue)?;
     let render_seconds = start.elapsed().as_secs_f64();

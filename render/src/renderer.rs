@@ -528,10 +528,20 @@ impl Renderer {
         }
     }
 
-    /// Stage 3: shading, with indirect light from `volume` (none: indirect is zero).
-    pub fn record_shade(&self, encoder: &mut wgpu::CommandEncoder, volume: Option<&PrtRuntime>) {
-        let gi_group = volume.map(|v| v.volume_bind_group(&self.volume_layout));
-        let volume_group = gi_group.as_ref().unwrap_or(&self.empty_volume);
+    /// The shading pass's bind group over `gi`'s volume: make it once per runtime and pass it
+    /// to [`Renderer::record`] every frame.
+    pub fn volume_group(&self, gi: &PrtRuntime) -> wgpu::BindGroup {
+        gi.volume_bind_group(&self.volume_layout)
+    }
+
+    /// Stage 3: shading, with indirect light from `volume` ([`Renderer::volume_group`]; none:
+    /// indirect is zero).
+    pub fn record_shade(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        volume: Option<&wgpu::BindGroup>,
+    ) {
+        let volume_group = volume.unwrap_or(&self.empty_volume);
         let attachments: Vec<Option<wgpu::RenderPassColorAttachment>> = self
             .targets
             .colors
@@ -569,7 +579,7 @@ impl Renderer {
     }
 
     /// All three stages.
-    pub fn record(&self, encoder: &mut wgpu::CommandEncoder, volume: Option<&PrtRuntime>) {
+    pub fn record(&self, encoder: &mut wgpu::CommandEncoder, volume: Option<&wgpu::BindGroup>) {
         self.record_depth(encoder);
         self.record_cull(encoder);
         self.record_shade(encoder, volume);

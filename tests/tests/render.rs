@@ -79,7 +79,8 @@ fn render(
     r.set_lights(&s.queue, &lighting.rig.lights).unwrap();
     r.set_camera(&s.queue, &camera(), view).unwrap();
     let mut encoder = s.device.create_command_encoder(&Default::default());
-    r.record(&mut encoder, gi);
+    let volume = gi.map(|g| r.volume_group(g));
+    r.record(&mut encoder, volume.as_ref());
     s.queue.submit([encoder.finish()]);
     let frame = r.read_frame(&s.device, &s.queue).unwrap();
     let counts = r.read_tile_counts(&s.device, &s.queue).unwrap();
