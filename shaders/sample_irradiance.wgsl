@@ -13,8 +13,11 @@
 //
 // With visibility (PrtVolumeInfo.flags, the default) the eight probes around the point are read
 // one by one and weighted, as DDGI does (Majercik et al., JCGT 2019), by
-//   trilinear weight x validity x (((n . direction to probe) + 1) / 2)^2 + PRT_FACING_FLOOR)
+//   trilinear weight x validity x (clamp(1 + h / PRT_FACING_DEPTH, 0, 1)^2 + PRT_FACING_FLOOR)
 //                    x Chebyshev visibility,
+// where h is the probe's signed distance, in spacings, from the plane through the unmoved
+// surface point (probes in front of the surface count fully, probes behind it fade out; DDGI's
+// angular term instead, see prt_runtime::sample::FACING_DEPTH for why), and
 // where the Chebyshev term tests the point's distance from the probe (from where its rays
 // started) against the mean and
 // variance of the probe's hit distances in that direction (its octahedral visibility map): a
@@ -24,15 +27,15 @@
 
 struct PrtVolumeInfo {
     origin: vec3<f32>,
+    // The grid's spacing: the unit of the visibility maps' distances.
     spacing: f32,
     counts: vec3<f32>,
     // Metres along the normal that prt_sample_sh moves the point before sampling.
     normal_bias: f32,
+    // The lattice step along x, y, z (at most the spacing; outer probes lie on the bounds).
+    step: vec3<f32>,
     // PRT_FLAG_VISIBILITY: visibility-aware interpolation.
     flags: u32,
-    pad0: u32,
-    pad1: u32,
-    pad2: u32,
 }
 
 // The interpolated probe SH at a point (validity-renormalised; zero where validity <= 1e-6) and
@@ -74,7 +77,7 @@ fn prt_sh_of_texels(t: array<vec4<f32>, 7>, inv: f32) -> array<vec3<f32>, 9> {
 
 // Hardware trilinear: one filtered fetch per texture.
 fn prt_sample_trilinear(p: vec3<f32>) -> PrtSample {
-    let uvw = ((p - prt_volume.origin) / prt_volume.spacing + 0.5) / prt_volume.counts;
+    let uvw = ((p - prt_volume.origin) / prt_volume.step + 0.5) / prt_volume.counts;
     var s: PrtSample;
     var t: array<vec4<f32>, 7>;
     t[0] = textureSampleLevel(prt_volume0, prt_sampler, uvw, 0.0);
@@ -107,8 +110,9 @@ fn prt_depth_texel(d: vec3<f32>) -> u32 {
     return t.y * PRT_DEPTH_SIDE + t.x;
 }
 
-// Visibility-and-facing weight of probe `index` at `probe` for the point x, normal n.
-fn prt_probe_visibility(index: u32, probe: vec3<f32>, x: vec3<f32>, n: vec3<f32>) -> f32 {
+// Visibility-and-facing weight of probe `index` at `probe` for the surface point `surface`
+// (facing) moved along its normal n to x (visibility).
+fn prt_probe_visibility(index: u32, probe: vec3<f32>, surface: vec3<f32>, x: vec3<f32>, n: vec3<f32>) -> f32 {
     let v = x - probe;
     let len = length(v);
     let dist = len / prt_volume.spacing;
@@ -116,8 +120,8 @@ fn prt_probe_visibility(index: u32, probe: vec3<f32>, x: vec3<f32>, n: vec3<f32>
         return 1.0;
     }
     let dir = v / len;
-    let facing = (dot(-dir, n) + 1.0) * 0.5;
-    var w = facing * facing + PRT_FACING_FLOOR;
+    let behind = clamp(dot(probe - surface, n) / prt_volume.spacing / PRT_FACING_DEPTH + 1.0, 0.0, 1.0);
+    var w = behind * behind + PRT_FACING_FLOOR;
     let texel = prt_depth_texel(dir);
     let bytes = unpack4x8unorm(prt_depth[index * PRT_DEPTH_WORDS + texel / 2u]);
     let pair = select(bytes.xy, bytes.zw, (texel & 1u) == 1u);
@@ -137,11 +141,12 @@ fn prt_probe_visibility(index: u32, probe: vec3<f32>, x: vec3<f32>, n: vec3<f32>
     return w;
 }
 
-// The eight probes around p read one by one, weighted by visibility from p (normal n).
-fn prt_sample_visible(p: vec3<f32>, n: vec3<f32>) -> PrtSample {
+// The eight probes around p (the surface point `surface` moved along its normal n) read one by
+// one, weighted by visibility.
+fn prt_sample_visible(surface: vec3<f32>, p: vec3<f32>, n: vec3<f32>) -> PrtSample {
     var s: PrtSample;
     let last = prt_volume.counts - 1.0;
-    let g = clamp((p - prt_volume.origin) / prt_volume.spacing, vec3<f32>(0.0), last);
+    let g = clamp((p - prt_volume.origin) / prt_volume.step, vec3<f32>(0.0), last);
     let base = floor(g);
     let f = g - base;
     let counts = vec3<u32>(prt_volume.counts);
@@ -159,7 +164,7 @@ fn prt_sample_visible(p: vec3<f32>, n: vec3<f32>) -> PrtSample {
         }
         s.validity = s.validity + w_tri * t0.w;
         let index = ijk.x + counts.x * (ijk.y + counts.y * ijk.z);
-        let w = w_tri * prt_probe_visibility(index, prt_probe_positions[index].xyz, p, n);
+        let w = w_tri * prt_probe_visibility(index, prt_probe_positions[index].xyz, surface, p, n);
         total = total + w * t0.w;
         acc[0] = acc[0] + w * t0;
         acc[1] = acc[1] + w * textureLoad(prt_volume1, at, 0);
@@ -180,7 +185,7 @@ fn prt_sample_visible(p: vec3<f32>, n: vec3<f32>) -> PrtSample {
 fn prt_sample_sh(world_pos: vec3<f32>, normal: vec3<f32>) -> PrtSample {
     let p = world_pos + normal * prt_volume.normal_bias;
     if (prt_volume.flags & PRT_FLAG_VISIBILITY) != 0u {
-        return prt_sample_visible(p, normal);
+        return prt_sample_visible(world_pos, p, normal);
     }
     return prt_sample_trilinear(p);
 }

@@ -53,11 +53,7 @@ mod tests {
 
     #[test]
     fn nearest_valid_neighbour_deterministically() {
-        let grid = Grid {
-            origin: [0.0; 3],
-            spacing: 1.0,
-            counts: [5, 1, 1],
-        };
+        let grid = Grid::cubic([0.0; 3], 1.0, [5, 1, 1]);
         let valid = [true, false, false, false, true];
         let s = sources(&grid, &valid);
         assert_eq!(s, vec![None, Some(0), Some(0), Some(4), None]);

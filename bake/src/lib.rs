@@ -83,8 +83,8 @@ pub struct BakeSettings {
     pub inside_facing_away_fraction: f32,
     /// Give probes inside geometry their nearest valid neighbour's data ([`dilate`]).
     pub dilate: bool,
-    /// Move probes that lie on a surface (within 2% of a spacing, as when the grid coincides
-    /// with a wall) a tenth of a spacing off it before tracing: a probe on a wall sees both of
+    /// Move probes that lie on a surface (within 2% of a spacing, as the grid's outer layers do
+    /// on a room's walls) 5% of a spacing off it before tracing: a probe on a wall sees both of
     /// its sides and mixes the rooms it separates.
     pub surface_offset: bool,
     /// Storage precision of factor transfers.
@@ -373,7 +373,7 @@ fn bake_in_pool(
         .par_iter()
         .map(|&grid_p| {
             let p = if settings.surface_offset {
-                offset::surface_offset(&tracer, grid_p, spacing)
+                offset::surface_offset(&tracer, grid_p, spacing, (min + max) * 0.5)
             } else {
                 grid_p
             };

@@ -9,8 +9,11 @@ use crate::trace;
 
 /// Spacings within which a probe counts as on a surface.
 pub const NEAR_SURFACE: f32 = 0.02;
-/// Spacings from the surface that a probe on it moves to.
-pub const SURFACE_OFFSET: f32 = 0.1;
+/// Spacings from the surface that a probe on it moves to: near enough to see what the surface
+/// sees (the probes on the bounds' faces stand in for the walls there), far enough for its rays
+/// to start clear of it. Measured (`prt bench surface`, Cornell, probes on the walls): mean
+/// error 4.6% at 0.1 spacings, 3.8% at 0.05, 3.8% at 0.03.
+pub const SURFACE_OFFSET: f32 = 0.05;
 
 /// The 26 unit directions to the neighbours of a grid cell, in a fixed order.
 fn near_directions() -> impl Iterator<Item = Vec3> {
@@ -26,10 +29,13 @@ fn near_directions() -> impl Iterator<Item = Vec3> {
 
 /// A probe within [`NEAR_SURFACE`] spacings of a surface (found by short rays through its
 /// position along 26 directions: axes, face and corner diagonals) moves to [`SURFACE_OFFSET`]
-/// spacings from it: to the side it is on for a double-sided surface, to the front for a
-/// single-sided one (its back is inside geometry), to the front when exactly on it. Repeated up
-/// to three times, for corners. Deterministic: fixed directions and order.
-pub fn surface_offset(tracer: &trace::Tracer, p: Vec3, spacing: f32) -> Vec3 {
+/// spacings from it: to the front for a single-sided surface (its back is inside geometry); for a
+/// double-sided one, to the side that faces `centre` (the bounds' centre: the grid's outer
+/// layers lie on a building's outer walls, and outside them is open air that the building's
+/// inside must not sample; Sponza at 1.2 m: 16.3% mean surface error against 19.4% with the side
+/// the probe happened to be on), else the side it is on, else the front. Repeated up to three
+/// times, for corners. Deterministic: fixed directions and order.
+pub fn surface_offset(tracer: &trace::Tracer, p: Vec3, spacing: f32, centre: Vec3) -> Vec3 {
     let eps = NEAR_SURFACE * spacing;
     let mut at = p;
     'moves: for _ in 0..3 {
@@ -52,7 +58,12 @@ pub fn surface_offset(tracer: &trace::Tracer, p: Vec3, spacing: f32) -> Vec3 {
             let double_sided = material.double_sided || tracer.double_sided;
             // Signed distance of the probe from the triangle's plane (front positive).
             let side = (at - v[0]).dot(n);
-            let towards = if double_sided && side < -1e-3 * eps {
+            let inward = (centre - at).dot(n);
+            let towards = if !double_sided {
+                n
+            } else if inward.abs() > 1e-3 * eps {
+                n * inward.signum()
+            } else if side < -1e-3 * eps {
                 -n
             } else {
                 n

@@ -1,8 +1,21 @@
-//! Probe placement: a regular grid with probes at cell centres of the bake bounds.
+//! Probe placement: a regular grid whose outer probes lie on the faces of the bake bounds.
 //!
-//! Along each axis the grid has `ceil(extent / spacing)` probes (at least one), centred in the
-//! bounds, so probes keep about half a spacing away from the bounds' faces (where the walls of a
-//! room usually are). Example: bounds x in [-0.9, 0.9], spacing 0.6 gives x = -0.6, 0, 0.6.
+//! Along each axis the bounds' extent is cut into `ceil(extent / spacing)` equal steps (at most
+//! the spacing asked for), giving one more probe than steps, the first and last on the bounds'
+//! faces; a flat axis (under [`FLAT_STEPS`] spacings) gets one probe in the middle. Example: bounds x in [-0.9, 0.9] at spacing
+//! 0.5 gives 4 steps of 0.45: x = -0.9, -0.45, 0, 0.45, 0.9.
+//!
+//! Why on the faces: the bounds' faces are usually where a level's outer walls, floor and ceiling
+//! are, and those surfaces are much of what a renderer shades. A layer of probes on a wall is
+//! moved just off it (`offset::SURFACE_OFFSET`), where it sees what the wall sees, and a point on
+//! the wall interpolates between that layer and the next. With probes at cell centres (half a
+//! spacing from the wall, the previous placement), a wall point was extrapolated from probes that
+//! see the room from inside it: the Cornell ceiling next to its light, seen from 0.1 m below, came
+//! out at half its irradiance. Steps per axis rather than one step, so that the outer layers land
+//! on every face: with one step, a layer that ends up a fraction of a step outside a wall sees
+//! only the wall's back and has to be filled from inside (two rooms at 0.46 m: 17% mean error
+//! against 8.5% with the layers on the walls). Measured with `prt bench surface` (Cornell, default
+//! spacing): mean error 8.4% with cell centres against 3.8% on the faces, p95 27% against 11%.
 
 use glam::Vec3;
 use prt_format::Grid;
@@ -26,12 +39,21 @@ pub fn default_spacing(min: Vec3, max: Vec3) -> f32 {
     (raw / scale).round() * scale
 }
 
+/// An axis whose extent is below this many spacings is flat: one probe, in the middle (two
+/// layers closer than a quarter spacing would see the same light).
+pub const FLAT_STEPS: f64 = 0.25;
+
 /// The grid for `bounds` and `spacing`, or an error when it would exceed `max_probes`.
 pub fn grid(min: Vec3, max: Vec3, spacing: f32, max_probes: u64) -> Result<Grid, BakeError> {
     let extent = (max - min).max(Vec3::ZERO);
-    let counts = extent
-        .to_array()
-        .map(|e| ((f64::from(e) / f64::from(spacing) - 1e-4).ceil()).max(1.0) as u64);
+    let counts = extent.to_array().map(|e| {
+        let steps = f64::from(e) / f64::from(spacing);
+        if steps < FLAT_STEPS {
+            1
+        } else {
+            (steps - 1e-4).ceil().max(1.0) as u64 + 1
+        }
+    });
     let count = counts
         .iter()
         .try_fold(1u64, |a, &c| a.checked_mul(c))
@@ -45,10 +67,18 @@ pub fn grid(min: Vec3, max: Vec3, spacing: f32, max_probes: u64) -> Result<Grid,
         });
     }
     let centre = (min + max) * 0.5;
-    let origin = std::array::from_fn(|a| centre[a] - (counts[a] - 1) as f32 * spacing * 0.5);
+    let step: [f32; 3] = std::array::from_fn(|a| {
+        if counts[a] > 1 {
+            (f64::from(extent[a]) / (counts[a] - 1) as f64) as f32
+        } else {
+            spacing
+        }
+    });
+    let origin = std::array::from_fn(|a| if counts[a] > 1 { min[a] } else { centre[a] });
     Ok(Grid {
         origin,
         spacing,
+        step,
         counts: counts.map(|c| c as u32),
     })
 }
@@ -80,10 +110,30 @@ mod tests {
             100,
         )
         .unwrap();
-        assert_eq!(g.counts, [3, 3, 3]);
+        assert_eq!(g.counts, [4, 4, 4]);
         let p = positions(&g);
-        assert!((p[0] - Vec3::new(-0.6, 0.4, -0.6)).length() < 1e-6);
-        assert!((p[26] - Vec3::new(0.6, 1.6, 0.6)).length() < 1e-6);
+        assert!((p[0] - Vec3::new(-0.9, 0.1, -0.9)).length() < 1e-6);
+        assert!((p[63] - Vec3::new(0.9, 1.9, 0.9)).length() < 1e-6);
+    }
+
+    #[test]
+    fn outer_probes_lie_on_the_bounds_faces() {
+        // x: extent 1.0 at spacing 0.3 is 4 steps of 0.25; y is flat; z: 0.6 is 2 steps of 0.3.
+        let g = grid(Vec3::ZERO, Vec3::new(1.0, 0.0, 0.6), 0.3, 100).unwrap();
+        assert_eq!(g.counts, [5, 1, 3]);
+        assert_eq!(g.step, [0.25, 0.3, 0.3]);
+        let p = positions(&g);
+        assert!((p[0] - Vec3::ZERO).length() < 1e-6, "{}", p[0]);
+        assert!(
+            (p[1] - Vec3::new(0.25, 0.0, 0.0)).length() < 1e-6,
+            "{}",
+            p[1]
+        );
+        assert!(
+            (p[14] - Vec3::new(1.0, 0.0, 0.6)).length() < 1e-6,
+            "{}",
+            p[14]
+        );
     }
 
     #[test]

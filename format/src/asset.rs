@@ -81,15 +81,31 @@ impl Header {
     }
 }
 
-/// The probe grid: probe (i, j, k) sits at `origin + spacing * (i, j, k)`.
+/// The probe grid: probe (i, j, k) sits at `origin + step * (i, j, k)`.
+///
+/// `spacing` is the spacing the bake was asked for: the scene's length unit for everything
+/// relative (surface offsets, the normal bias, visibility distances, ray offsets). `step` is the
+/// lattice step along each axis, at most `spacing`: the bake fits a whole number of steps between
+/// the bounds' faces so that its outer probes lie on them (`prt_bake::probes`).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Grid {
     pub origin: [f32; 3],
     pub spacing: f32,
+    pub step: [f32; 3],
     pub counts: [u32; 3],
 }
 
 impl Grid {
+    /// A grid with the same step along every axis.
+    pub fn cubic(origin: [f32; 3], spacing: f32, counts: [u32; 3]) -> Grid {
+        Grid {
+            origin,
+            spacing,
+            step: [spacing; 3],
+            counts,
+        }
+    }
+
     /// Number of probes.
     pub fn probe_count(&self) -> u64 {
         self.counts.iter().map(|&c| u64::from(c)).product()
@@ -103,9 +119,9 @@ impl Grid {
     /// Position of probe (i, j, k).
     pub fn position(&self, i: u32, j: u32, k: u32) -> [f32; 3] {
         [
-            self.origin[0] + self.spacing * i as f32,
-            self.origin[1] + self.spacing * j as f32,
-            self.origin[2] + self.spacing * k as f32,
+            self.origin[0] + self.step[0] * i as f32,
+            self.origin[1] + self.step[1] * j as f32,
+            self.origin[2] + self.step[2] * k as f32,
         ]
     }
 }

@@ -127,8 +127,8 @@ impl std::fmt::Display for Summary {
         )?;
         writeln!(
             f,
-            "grid             {} x {} x {} at {} m, origin {:?}",
-            g.counts[0], g.counts[1], g.counts[2], g.spacing, g.origin
+            "grid             {} x {} x {}, step {:?} m (spacing {} m), origin {:?}",
+            g.counts[0], g.counts[1], g.counts[2], g.step, g.spacing, g.origin
         )?;
         writeln!(
             f,

@@ -48,6 +48,19 @@ pub fn validate(asset: &Asset) -> Result<(), FormatError> {
             format!("spacing {}", g.spacing),
         ));
     }
+    if g.step
+        .iter()
+        .any(|&s| !(s.is_finite() && s > 0.0 && s <= g.spacing * 1.0001))
+    {
+        return Err(FormatError::invalid(
+            "header.grid",
+            0,
+            format!(
+                "step {:?} (expected 0 < step <= spacing {})",
+                g.step, g.spacing
+            ),
+        ));
+    }
     if g.counts.contains(&0) {
         return Err(FormatError::invalid(
             "header.grid",

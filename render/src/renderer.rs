@@ -152,6 +152,7 @@ fn empty_volume(device: &wgpu::Device, layout: &wgpu::BindGroupLayout) -> wgpu::
         contents: bytemuck::bytes_of(&VolumeInfo {
             counts: [1.0; 3],
             spacing: 1.0,
+            step: [1.0; 3],
             ..VolumeInfo::default()
         }),
         usage: wgpu::BufferUsages::UNIFORM,

@@ -7,12 +7,13 @@
 //!
 //! - the point is first moved along its normal by `normal_bias` metres
 //!   (`RuntimeSettings::normal_bias`, in probe spacings, explains the trade-off);
-//! - grid coordinate `(p - origin) / spacing` (texel centres sit on the probes), clamped to the
+//! - grid coordinate `(p - origin) / step` (texel centres sit on the probes), clamped to the
 //!   grid: outside it the nearest face's probes are used, as the sampler's `ClampToEdge` does;
 //! - each of the eight probes around the point gets its trilinear weight times its validity
 //!   (`Probe::sample_weight`: 1 for a valid or dilated probe, 0 for an invalid one), and **with
-//!   visibility** (the runtime's default) also `((n . direction to probe + 1) / 2)^2 +
-//!   FACING_FLOOR` and the Chebyshev visibility `max(crush(cheb^3), MIN_VISIBILITY)` of the point's
+//!   visibility** (the runtime's default) also the facing term `clamp(1 + h / FACING_DEPTH, 0,
+//!   1)^2 + FACING_FLOOR` (`h`: the probe's signed distance in spacings from the plane through
+//!   the unmoved surface point) and the Chebyshev visibility `max(crush(cheb^3), MIN_VISIBILITY)` of the point's
 //!   distance against the probe's visibility map in that direction (`prt_format::depth`;
 //!   Majercik et al., JCGT 2019); distances are measured from where the probe's rays started
 //!   (`Probe::position`: the grid position unless the probe was moved off a surface). A
@@ -49,10 +50,20 @@ pub const MIN_VALIDITY: f32 = 1e-6;
 /// Floor of the Chebyshev visibility term: a point that no probe sees still gets the least
 /// occluded probes' light rather than nothing.
 pub const MIN_VISIBILITY: f32 = 1e-5;
-/// Floor of the facing term: probes behind the surface's plane count less, not zero. DDGI uses
-/// 0.2; prt's rooms are up to 500 times brighter than their neighbours (two rooms sharing a
-/// wall), where 0.2 of a probe behind the wall is a visible leak, so the floor is 0.02.
-pub const FACING_FLOOR: f32 = 0.02;
+/// Spacings behind the surface's plane over which the facing term falls from 1 to its floor:
+/// `clamp(1 + h / FACING_DEPTH, 0, 1)^2 + FACING_FLOOR`, `h` being the probe's signed distance
+/// from the plane through the (unmoved) surface point, in spacings. Every probe in front of the
+/// plane counts fully, however grazing: with probes on the bounds' faces, the layer just off a
+/// wall (0.05 spacings in front, up to a step aside) sees what the wall sees, and DDGI's
+/// angular term `((n . dir + 1) / 2)^2` gave it a quarter of the weight of the layer a step
+/// inside. Measured (`prt bench surface`, normal bias 0.2): Cornell mean error 5.6% with the
+/// angular term, 4.0% with this one; two rooms at half spacing 6.1% and 4.6%, no leaks with either.
+pub const FACING_DEPTH: f32 = 0.25;
+/// Floor of the facing term: probes behind the surface's plane count less, not zero (a point
+/// whose probes are all behind it still gets light). DDGI uses 0.2; prt's rooms are up to 500
+/// times brighter than their neighbours (two rooms sharing a wall), where even 0.02 of a probe
+/// behind the wall leaked at half spacing (7 of 300 points), so the floor is 0.002.
+pub const FACING_FLOOR: f32 = 0.002;
 /// Floor of the depth variance, in spacings squared (a perfectly flat hit distribution would
 /// make the test a hard step).
 pub const MIN_VARIANCE: f32 = 1e-4;
@@ -80,6 +91,7 @@ pub fn wgsl_constants() -> Vec<(&'static str, String)> {
         ("PRT_MIN_VISIBILITY", format!("{MIN_VISIBILITY:e}")),
         ("PRT_CRUSH_THRESHOLD", format!("{CRUSH_THRESHOLD:?}")),
         ("PRT_FACING_FLOOR", format!("{FACING_FLOOR:?}")),
+        ("PRT_FACING_DEPTH", format!("{FACING_DEPTH:?}")),
         ("PRT_MIN_VARIANCE", format!("{MIN_VARIANCE:e}")),
         ("PRT_MIN_DISTANCE", format!("{MIN_DISTANCE:e}")),
         ("PRT_DEPTH_SIDE", format!("{DEPTH_MAP_SIDE}u")),
@@ -149,8 +161,9 @@ impl<'a> VolumeSampler<'a> {
         self
     }
 
-    /// Visibility and facing weight of probe `i` at `probe` for point `x`, normal `n`.
-    fn visibility(&self, i: usize, probe: Vec3, x: Vec3, n: Vec3) -> f32 {
+    /// Visibility and facing weight of probe `i` at `probe` for the surface point `surface`
+    /// (facing), moved along its normal `n` to `x` (visibility), as DDGI does.
+    fn visibility(&self, i: usize, probe: Vec3, surface: Vec3, x: Vec3, n: Vec3) -> f32 {
         let v = x - probe;
         let len = v.length();
         let dist = len / self.grid.spacing;
@@ -158,8 +171,9 @@ impl<'a> VolumeSampler<'a> {
             return 1.0;
         }
         let dir = v / len;
-        let facing = ((-dir).dot(n) + 1.0) * 0.5;
-        let mut w = facing * facing + FACING_FLOOR;
+        let behind =
+            ((probe - surface).dot(n) / self.grid.spacing / FACING_DEPTH + 1.0).clamp(0.0, 1.0);
+        let mut w = behind * behind + FACING_FLOOR;
         let words = &self.depth[i * DEPTH_WORDS..(i + 1) * DEPTH_WORDS];
         let (mean, deviation) =
             prt_format::depth::moments(words, prt_format::depth::texel_of(dir.to_array()));
@@ -180,7 +194,7 @@ impl<'a> VolumeSampler<'a> {
         let n = Vec3::from(normal);
         let p = Vec3::from(position) + n * self.normal_bias;
         let last = Vec3::from(g.counts.map(|c| c.saturating_sub(1) as f32));
-        let t = ((p - Vec3::from(g.origin)) / g.spacing).clamp(Vec3::ZERO, last);
+        let t = ((p - Vec3::from(g.origin)) / Vec3::from(g.step)).clamp(Vec3::ZERO, last);
         let base = t.floor();
         let f = t - base;
         let mut sum = [[0.0f32; 3]; SH_COUNT];
@@ -202,7 +216,7 @@ impl<'a> VolumeSampler<'a> {
             validity += w_tri * probe_weight;
             let mut w = w_tri;
             if !self.depth.is_empty() {
-                w *= self.visibility(i, self.positions[i], p, n);
+                w *= self.visibility(i, self.positions[i], Vec3::from(position), p, n);
             }
             let w = w * probe_weight;
             total += w;
@@ -231,11 +245,7 @@ mod tests {
 
     /// A 2x1x1 grid (spacing 2) whose probes have constant SH `a` and `b`.
     fn two_probes(valid: [bool; 2]) -> (Grid, Vec<Probe>, Vec<ShRgb>) {
-        let grid = Grid {
-            origin: [1.0, 0.0, 0.0],
-            spacing: 2.0,
-            counts: [2, 1, 1],
-        };
+        let grid = Grid::cubic([1.0, 0.0, 0.0], 2.0, [2, 1, 1]);
         let probes = valid
             .iter()
             .enumerate()

@@ -190,7 +190,7 @@ fn good_fixtures_bake_validate_and_round_trip() {
 #[test]
 fn empty_scene_with_bounds_is_all_sky() {
     let settings = BakeSettings {
-        bounds: Some([-1.0, -1.0, -1.0, 1.0, 1.0, 1.0]),
+        bounds: Some([-0.5, -0.5, -0.5, 0.5, 0.5, 0.5]),
         spacing: Some(1.0),
         ..rays(64)
     };

@@ -21,7 +21,7 @@ fn cornell_settings(rays: u32, exact: bool) -> BakeSettings {
     BakeSettings {
         rays,
         spacing: Some(0.6),
-        bounds: Some([-0.9, 0.1, -0.9, 0.9, 1.9, 0.9]),
+        bounds: Some([-0.6, 0.4, -0.6, 0.6, 1.6, 0.6]),
         ..base
     }
 }
@@ -107,7 +107,7 @@ fn cornell_high_quality_preset() {
     let scene = fixture("cornell/cornell.gltf");
     let settings = BakeSettings {
         spacing: Some(0.6),
-        bounds: Some([-0.9, 0.1, -0.9, 0.9, 1.9, 0.9]),
+        bounds: Some([-0.6, 0.4, -0.6, 0.6, 1.6, 0.6]),
         ..BakeSettings::high_quality()
     };
     let asset = bake(&scene, &settings);

@@ -35,7 +35,7 @@ fn scaled(dir: &std::path::Path, s: f32) -> (std::path::PathBuf, Lighting) {
 fn relit(path: &std::path::Path, lighting: &Lighting, s: f32) -> Vec<ShRgb> {
     let settings = BakeSettings {
         spacing: Some(0.25 * s),
-        bounds: Some([-0.9, 0.1, -0.9, 0.9, 1.9, 0.9].map(|c| c * s)),
+        bounds: Some([-0.6, 0.4, -0.6, 0.6, 1.6, 0.6].map(|c| c * s)),
         ..BakeSettings::default()
     };
     let asset = bake_ok(path, &settings);

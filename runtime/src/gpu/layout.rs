@@ -144,15 +144,17 @@ const _: () = assert!(std::mem::size_of::<Params>() == 96);
 #[repr(C)]
 pub struct VolumeInfo {
     pub origin: [f32; 3],
+    /// The grid's spacing: the unit of the visibility maps' distances.
     pub spacing: f32,
     /// Probe counts along x, y, z, as floats.
     pub counts: [f32; 3],
     /// Metres along the normal the snippet moves a point before sampling (`prt_sample_sh`).
     pub normal_bias: f32,
+    /// The lattice step along x, y, z (`prt_format::Grid::step`).
+    pub step: [f32; 3],
     /// [`VOLUME_VISIBILITY`]: weight each of the eight probes by whether the point is visible
     /// from it (eight manual fetches); without it, one hardware trilinear fetch per texture.
     pub flags: u32,
-    pub _pad: [u32; 3],
 }
 const _: () = assert!(std::mem::size_of::<VolumeInfo>() == 48);
 
@@ -166,8 +168,8 @@ impl From<&prt_format::Grid> for VolumeInfo {
             spacing: g.spacing,
             counts: g.counts.map(|c| c as f32),
             normal_bias: 0.0,
+            step: g.step,
             flags: 0,
-            _pad: [0; 3],
         }
     }
 }

@@ -324,6 +324,7 @@ mod tests {
                     ("spacing", offset_of!(layout::VolumeInfo, spacing)),
                     ("counts", offset_of!(layout::VolumeInfo, counts)),
                     ("normal_bias", offset_of!(layout::VolumeInfo, normal_bias)),
+                    ("step", offset_of!(layout::VolumeInfo, step)),
                     ("flags", offset_of!(layout::VolumeInfo, flags)),
                 ],
             ),
