@@ -507,7 +507,7 @@ fn sample_irradiance_snippet_matches_the_cpu() {
                 queries.push((g.position(i, j, k), n, e));
                 if i + 1 < g.counts[0] && !asset.probes[g.index(i + 1, j, k)].is_valid() {
                     let mut mid = g.position(i, j, k);
-                    mid[0] += 0.5 * g.spacing;
+                    mid[0] += 0.5 * g.step[0];
                     queries.push((mid, n, e));
                     mixed += 1;
                 }
