@@ -7,6 +7,7 @@
 //!   leaf order, which the asset carries so that the runtime (CPU reference and WGSL alike) can
 //!   trace shadow rays with a plain stack traversal.
 
+use crate::error::BakeError;
 use std::collections::VecDeque;
 
 use glam::Vec3;
@@ -94,6 +95,23 @@ impl SceneBvh {
             rt_triangles,
             geometry,
         }
+    }
+
+    /// [`SceneBvh::build`], with a panic inside obvhs (its CWBVH conversion indexes out of bounds
+    /// on boxes near f32's range, e.g. a quad scaled by 1e19 in the traced frame) ended as an
+    /// error naming the scene's extent in metres.
+    pub fn build_checked(triangles: &[[Vec3; 3]], scale: f32) -> Result<SceneBvh, BakeError> {
+        crate::catch_quietly(|| SceneBvh::build(triangles, scale)).map_err(|message| {
+            let extent = triangles
+                .iter()
+                .flatten()
+                .fold(0.0f32, |m, v| m.max(v.abs().max_element()));
+            BakeError::Bvh {
+                message,
+                extent,
+                unit: 1.0 / scale,
+            }
+        })
     }
 
     /// Closest hit along `origin + t dir`, `t` in `(0, inf)`.

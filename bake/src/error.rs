@@ -32,15 +32,21 @@ pub enum BakeError {
         primitive: usize,
         message: String,
     },
-    #[error("{path}: the scene has no triangles (give --bounds to bake an all-sky volume)")]
-    NoTriangles { path: PathBuf },
+    #[error("{path}: the scene has no triangles{} (give --bounds to bake an all-sky volume)", match degenerate { 0 => String::new(), n => format!(": all {n} were degenerate (zero area) and skipped") })]
+    NoTriangles { path: PathBuf, degenerate: u64 },
+    #[error("building the BVH failed ({message}); coordinates up to {extent:e} m, traced in units of {unit:e} m")]
+    Bvh {
+        message: String,
+        extent: f32,
+        unit: f32,
+    },
     #[error("invalid setting {name} = {value}: {reason}")]
     Setting {
         name: &'static str,
         value: String,
         reason: &'static str,
     },
-    #[error("the probe grid {counts:?} at spacing {spacing} m has {count} probes, more than --max-probes {max}; raise --spacing or --max-probes, or give smaller --bounds")]
+    #[error("the probe grid {counts:?} at spacing {spacing} m has {} probes, more than --max-probes {max}; raise --spacing or --max-probes, or give smaller --bounds", if *count == u64::MAX { "more than 2^64".to_string() } else { count.to_string() })]
     TooManyProbes {
         counts: [u64; 3],
         spacing: f32,

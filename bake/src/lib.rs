@@ -26,6 +26,7 @@ pub mod diagnostics;
 pub mod dilate;
 pub mod error;
 pub mod factors;
+pub mod gltf_check;
 pub mod offset;
 pub mod probes;
 pub mod scene;
@@ -205,8 +206,12 @@ impl BakeSettings {
                 "must be in [0, 1]",
             );
         }
-        if self.threads == Some(0) {
-            return bad("threads", "0".into(), "must be at least 1");
+        if let Some(t) = self.threads.filter(|&t| t == 0 || t > MAX_THREADS) {
+            return bad(
+                "threads",
+                t.to_string(),
+                "must be in 1..=1024 (more threads than cores only add overhead)",
+            );
         }
         Ok(())
     }
@@ -239,6 +244,31 @@ pub struct BakeReport {
     pub warnings: Vec<String>,
     /// Bytes of the written file (0 before writing).
     pub file_bytes: u64,
+}
+
+/// Most worker threads a bake starts.
+pub const MAX_THREADS: usize = 1024;
+
+/// Runs `f`, turning a panic inside a dependency (the gltf crate's readers, obvhs) into its
+/// message, for an error that names the input instead of a crash. The default report of the
+/// panic is suppressed meanwhile; the hook is process-wide, so callers swap it one at a time
+/// and one never restores another's silent hook for good.
+pub(crate) fn catch_quietly<T>(
+    f: impl FnOnce() -> T + std::panic::UnwindSafe,
+) -> Result<T, String> {
+    static HOOK: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let _guard = HOOK.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+    let previous = std::panic::take_hook();
+    std::panic::set_hook(Box::new(|_| {}));
+    let result = std::panic::catch_unwind(f);
+    std::panic::set_hook(previous);
+    result.map_err(|payload| {
+        payload
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| payload.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "unknown panic".into())
+    })
 }
 
 /// Bakes `scene_path` into an asset (not written).
@@ -306,10 +336,11 @@ fn bake_in_pool(
     };
     progress.start("load", 0);
 
-    let source_bytes = std::fs::read(scene_path).map_err(|error| BakeError::Io {
-        path: scene_path.to_owned(),
-        error,
-    })?;
+    let source_bytes =
+        prt_format::read_regular_file(scene_path).map_err(|error| BakeError::Io {
+            path: scene_path.to_owned(),
+            error,
+        })?;
     let source_hash = xxhash_rust::xxh3::xxh3_64(&source_bytes);
     drop(source_bytes);
     let scene = scene::load(scene_path)?;
@@ -331,6 +362,7 @@ fn bake_in_pool(
         (None, None) => {
             return Err(BakeError::NoTriangles {
                 path: scene_path.to_owned(),
+                degenerate: scene.degenerate_skipped,
             })
         }
     };
@@ -344,10 +376,11 @@ fn bake_in_pool(
     let spacing = settings
         .spacing
         .unwrap_or_else(|| probes::default_spacing(min, max));
-    let bvh = bvh::SceneBvh::build(&scene.triangles, bvh::trace_scale(spacing));
+    // The grid first: a spacing far too small for the scene is refused before any other work.
+    let grid = probes::grid(min, max, spacing, settings.max_probes)?;
+    let bvh = bvh::SceneBvh::build_checked(&scene.triangles, bvh::trace_scale(spacing))?;
     lap(&mut report, "bvh", None);
 
-    let grid = probes::grid(min, max, spacing, settings.max_probes)?;
     let positions = probes::positions(&grid);
     let n = settings.rays;
     let dirs: Vec<Vec3> = directions::fibonacci_directions(n)

@@ -52,7 +52,7 @@ pub fn grid(min: Vec3, max: Vec3, spacing: f32, max_probes: u64) -> Result<Grid,
         if steps < FLAT_STEPS {
             1
         } else {
-            (steps - 1e-4).ceil().max(1.0) as u64 + 1
+            ((steps - 1e-4).ceil().max(1.0) as u64).saturating_add(1)
         }
     });
     let count = counts

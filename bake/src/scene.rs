@@ -21,6 +21,7 @@ use gltf::mesh::Mode;
 use prt_format::{Light, LightKind};
 
 use crate::error::BakeError;
+use crate::gltf_check;
 use crate::texture::{is_nearest, Image, TextureRef};
 
 /// Surface description used at ray hits (conventions.md section 4).
@@ -106,20 +107,7 @@ struct Loader<'a> {
 /// crate on input this loader does not check ends as a [`BakeError::Gltf`] naming the file, not
 /// as a crash (the panic message is kept, the default report of it suppressed meanwhile).
 pub fn load(path: &Path) -> Result<Scene, BakeError> {
-    // The panic hook is process-wide: loads swap it one at a time, so that one load never
-    // restores another's silent hook for good.
-    static HOOK: std::sync::Mutex<()> = std::sync::Mutex::new(());
-    let _guard = HOOK.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
-    let previous = std::panic::take_hook();
-    std::panic::set_hook(Box::new(|_| {}));
-    let result = std::panic::catch_unwind(|| load_checked(path));
-    std::panic::set_hook(previous);
-    result.unwrap_or_else(|payload| {
-        let message = payload
-            .downcast_ref::<&str>()
-            .map(|s| s.to_string())
-            .or_else(|| payload.downcast_ref::<String>().cloned())
-            .unwrap_or_else(|| "unknown panic".into());
+    crate::catch_quietly(|| load_checked(path)).unwrap_or_else(|message| {
         Err(BakeError::Gltf {
             path: path.to_owned(),
             message: format!("the glTF reader failed on this file ({message})"),
@@ -128,7 +116,7 @@ pub fn load(path: &Path) -> Result<Scene, BakeError> {
 }
 
 fn load_checked(path: &Path) -> Result<Scene, BakeError> {
-    let bytes = std::fs::read(path).map_err(|error| BakeError::Io {
+    let bytes = prt_format::read_regular_file(path).map_err(|error| BakeError::Io {
         path: path.to_owned(),
         error,
     })?;
@@ -136,15 +124,23 @@ fn load_checked(path: &Path) -> Result<Scene, BakeError> {
         path: path.to_owned(),
         message,
     };
-    let gltf = gltf::Gltf::from_slice(&bytes).map_err(|e| gltf_err(e.to_string()))?;
+    // Parsed without the crate's validation first: it indexes some references unchecked (an
+    // attribute's accessor), so prt's own checks run before it.
+    let gltf =
+        gltf::Gltf::from_slice_without_validation(&bytes).map_err(|e| gltf_err(e.to_string()))?;
     let base = path.parent().unwrap_or(Path::new("."));
-    let doc = gltf.document;
+    let json = gltf.document.as_json();
+    let declared: u64 = json.buffers.iter().map(|b| b.byte_length.0).sum();
+    let mut warnings = gltf_check::check_document(path, json, base, bytes.len() as u64 + declared)?;
+    let doc = gltf::Document::from_json(gltf.document.into_json())
+        .map_err(|e| gltf_err(e.to_string()))?;
+    let json = doc.as_json();
     let buffers = gltf::import_buffers(&doc, Some(base), gltf.blob)
         .map_err(|e| buffer_error(path, base, &doc, e))?;
-    let images = load_images(path, base, &doc, &buffers)?;
+    gltf_check::check_sparse(path, json, &buffers)?;
+    let images = gltf_check::decode_images(path, base, &doc, &buffers)?;
 
     let mut materials: Vec<Material> = doc.materials().map(|m| material(&m)).collect();
-    let mut warnings = Vec::new();
     for (i, m) in materials.iter().enumerate() {
         for tex in [&m.base_texture, &m.emissive_texture].into_iter().flatten() {
             if tex.tex_coord > 1 {
@@ -202,56 +198,6 @@ fn buffer_error(path: &Path, base: &Path, doc: &gltf::Document, e: gltf::Error) 
     BakeError::Gltf {
         path: path.to_owned(),
         message: format!("buffers: {e}"),
-    }
-}
-
-fn load_images(
-    path: &Path,
-    base: &Path,
-    doc: &gltf::Document,
-    buffers: &[gltf::buffer::Data],
-) -> Result<Vec<Image>, BakeError> {
-    if doc.images().len() == 0 {
-        return Ok(Vec::new());
-    }
-    let data = gltf::import_images(doc, Some(base), buffers).map_err(|e| {
-        let bad = doc.images().find(|img| match img.source() {
-            gltf::image::Source::Uri { uri, .. } => {
-                !uri.starts_with("data:") && !base.join(uri).exists()
-            }
-            _ => false,
-        });
-        match bad {
-            Some(img) => BakeError::Image {
-                path: path.to_owned(),
-                index: img.index(),
-                uri: image_uri(&img),
-                message: "file not found".into(),
-            },
-            None => BakeError::Gltf {
-                path: path.to_owned(),
-                message: format!("images: {e}"),
-            },
-        }
-    })?;
-    data.iter()
-        .zip(doc.images())
-        .map(|(d, img)| {
-            Image::from_gltf(d).map_err(|message| BakeError::Image {
-                path: path.to_owned(),
-                index: img.index(),
-                uri: image_uri(&img),
-                message,
-            })
-        })
-        .collect()
-}
-
-fn image_uri(img: &gltf::Image) -> String {
-    match img.source() {
-        gltf::image::Source::Uri { uri, .. } if !uri.starts_with("data:") => uri.to_owned(),
-        gltf::image::Source::Uri { .. } => "data URI".to_owned(),
-        gltf::image::Source::View { .. } => "buffer view".to_owned(),
     }
 }
 

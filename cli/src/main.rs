@@ -7,6 +7,7 @@ mod bench_surface;
 mod progress;
 mod render;
 mod sample;
+mod signals;
 
 use std::path::PathBuf;
 
@@ -289,6 +290,7 @@ fn main() {
     if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
         std::env::set_var("XDG_RUNTIME_DIR", std::env::temp_dir());
     }
+    signals::install();
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
         Err(e) if !e.use_stderr() => e.exit(),
@@ -531,8 +533,8 @@ fn run(cli: Cli) -> Result<()> {
         Command::Sample(args) => sample::run(args),
         Command::Render(args) => render::run(args),
         Command::Inspect { asset, json } => {
-            let bytes =
-                std::fs::read(&asset).with_context(|| format!("reading {}", asset.display()))?;
+            let bytes = prt_format::read_regular_file(&asset)
+                .with_context(|| format!("reading {}", asset.display()))?;
             let loaded = prt_format::decode(&bytes)
                 .with_context(|| format!("loading {}", asset.display()))?;
             let summary = prt_format::Summary::of(&loaded, bytes.len() as u64);

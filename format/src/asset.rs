@@ -107,8 +107,12 @@ impl Grid {
     }
 
     /// Number of probes.
+    /// Number of probes (`u64::MAX` when the counts' product overflows; validation refuses it).
     pub fn probe_count(&self) -> u64 {
-        self.counts.iter().map(|&c| u64::from(c)).product()
+        self.counts
+            .iter()
+            .try_fold(1u64, |a, &c| a.checked_mul(u64::from(c)))
+            .unwrap_or(u64::MAX)
     }
 
     /// Linear index of probe (i, j, k): x fastest, then y, then z (3D texture order).

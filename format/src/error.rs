@@ -12,6 +12,8 @@ pub enum FormatError {
     },
     #[error("not a regular file; refusing to replace it (write to a file path instead)")]
     NotARegularFile { path: PathBuf },
+    #[error("{path}: the output's directory {dir} does not exist or is not a directory")]
+    NoOutputDirectory { path: PathBuf, dir: PathBuf },
     #[error(
         "not a prt asset: the file is {len} bytes, shorter than the {min}-byte header and checksum"
     )]
@@ -24,8 +26,12 @@ pub enum FormatError {
     LengthMismatch { declared: u64, actual: u64 },
     #[error("checksum mismatch: stored {stored:#018x}, computed {computed:#018x} (the file is corrupted)")]
     Checksum { stored: u64, computed: u64 },
-    #[error("payload does not decode: {0}")]
-    Decode(String),
+    #[error("section {section} (payload byte {offset}) does not decode: {message}")]
+    Decode {
+        section: &'static str,
+        offset: usize,
+        message: String,
+    },
     #[error("payload does not encode: {0}")]
     Encode(String),
     #[error("{payload_bytes} bytes of payload left over after decoding the asset")]

@@ -35,6 +35,36 @@ fn config() -> bincode::config::Configuration<bincode::config::LittleEndian, bin
         .with_fixed_int_encoding()
 }
 
+/// The payload read one section (top-level field of [`Asset`]) at a time.
+struct Sections<'a> {
+    payload: &'a [u8],
+    at: usize,
+}
+
+impl Sections<'_> {
+    fn next<T: serde::de::DeserializeOwned>(
+        &mut self,
+        section: &'static str,
+    ) -> Result<T, FormatError> {
+        let rest = &self.payload[self.at..];
+        let (value, used) = bincode::serde::decode_from_slice(rest, config()).map_err(|e| {
+            let message = match e {
+                bincode::error::DecodeError::UnexpectedEnd { additional } => {
+                    format!("the payload ends {additional} bytes too early")
+                }
+                other => other.to_string(),
+            };
+            FormatError::Decode {
+                section,
+                offset: self.at,
+                message,
+            }
+        })?;
+        self.at += used;
+        Ok(value)
+    }
+}
+
 /// Serializes an asset into the bytes of a `.prt` file.
 pub fn encode(asset: &Asset) -> Result<Vec<u8>, FormatError> {
     let payload = bincode::serde::encode_to_vec(asset, config())
@@ -88,21 +118,47 @@ pub fn decode(bytes: &[u8]) -> Result<Asset, FormatError> {
         return Err(FormatError::Checksum { stored, computed });
     }
     let payload = &bytes[PREFIX..body_end];
-    let (asset, used): (Asset, usize) =
-        bincode::serde::decode_from_slice(payload, config().with_limit::<{ 1 << 36 }>())
-            .map_err(|e| FormatError::Decode(e.to_string()))?;
-    if used != payload.len() {
+    let mut r = Sections { payload, at: 0 };
+    // Field by field, in the struct's order (bincode writes a struct as its fields back to
+    // back), so that an error names the section it is in.
+    let asset = Asset {
+        header: r.next("header")?,
+        probes: r.next("probes")?,
+        sky_mask: r.next("sky_mask")?,
+        sky_transfer: r.next("sky_transfer")?,
+        probe_depth: r.next("probe_depth")?,
+        factors: r.next("factors")?,
+        bricks: r.next("bricks")?,
+        surfels: r.next("surfels")?,
+        geometry: r.next("geometry")?,
+        lights: r.next("lights")?,
+    };
+    if r.at != payload.len() {
         return Err(FormatError::TrailingBytes {
-            payload_bytes: payload.len() - used,
+            payload_bytes: payload.len() - r.at,
         });
     }
     crate::validate::validate(&asset)?;
     Ok(asset)
 }
 
+/// Reads a whole input file, refusing anything but a regular file (after following links):
+/// `/dev/zero`, a FIFO or a directory given as an input would otherwise be read until memory
+/// runs out, block, or fail with an unhelpful message.
+pub fn read_regular_file(path: &Path) -> std::io::Result<Vec<u8>> {
+    let meta = std::fs::metadata(path)?;
+    if !meta.is_file() {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            "not a regular file (a device, directory or pipe)",
+        ));
+    }
+    std::fs::read(path)
+}
+
 /// Reads and validates an asset file.
 pub fn read_asset(path: &Path) -> Result<Asset, FormatError> {
-    let bytes = std::fs::read(path).map_err(|error| FormatError::Io {
+    let bytes = read_regular_file(path).map_err(|error| FormatError::Io {
         path: path.to_owned(),
         error,
     })?;
@@ -117,9 +173,20 @@ pub fn write_asset_atomic(path: &Path, asset: &Asset) -> Result<u64, FormatError
     Ok(bytes.len() as u64)
 }
 
-/// Fails when `path` exists and is not a regular file: the atomic rename would replace a device
-/// (`/dev/null` as root), a directory entry or a pipe with a regular file.
+/// Fails when `path` exists and is not a regular file (the atomic rename would replace a device,
+/// `/dev/null` as root, a directory entry or a pipe with a regular file), or when its directory
+/// does not exist: checked before a long bake or render, not after it.
 pub fn check_replaceable(path: &Path) -> Result<(), FormatError> {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    if !dir.is_dir() {
+        return Err(FormatError::NoOutputDirectory {
+            path: path.to_owned(),
+            dir: dir.to_owned(),
+        });
+    }
     match std::fs::symlink_metadata(path) {
         Ok(m) if !m.file_type().is_file() => {
             // A symlink to a regular file is replaced by the rename, not followed: refuse it
@@ -148,6 +215,7 @@ pub fn write_bytes_atomic(path: &Path, bytes: &[u8]) -> Result<(), FormatError> 
         move |error| FormatError::Io { path: p, error }
     };
     let tmp = temp_path(path);
+    let _pending = PendingTemp::new(&tmp);
     let result = (|| {
         let mut f = std::fs::File::create(&tmp).map_err(io_err(&tmp))?;
         f.write_all(bytes).map_err(io_err(&tmp))?;
@@ -159,6 +227,40 @@ pub fn write_bytes_atomic(path: &Path, bytes: &[u8]) -> Result<(), FormatError> 
         let _ = std::fs::remove_file(&tmp);
     }
     result
+}
+
+/// Temporary files being written, removed by [`remove_pending_temp_files`] (the CLI calls it on
+/// SIGINT and SIGTERM, so that an interrupted write leaves no `NAME.tmpPID` behind).
+static PENDING: std::sync::Mutex<Vec<PathBuf>> = std::sync::Mutex::new(Vec::new());
+
+/// Registers a temporary file for the length of one write.
+struct PendingTemp(PathBuf);
+
+impl PendingTemp {
+    fn new(path: &Path) -> PendingTemp {
+        lock_pending().push(path.to_owned());
+        PendingTemp(path.to_owned())
+    }
+}
+
+impl Drop for PendingTemp {
+    fn drop(&mut self) {
+        lock_pending().retain(|p| p != &self.0);
+    }
+}
+
+fn lock_pending() -> std::sync::MutexGuard<'static, Vec<PathBuf>> {
+    PENDING
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
+/// Removes every temporary file a write of this process has open (for a signal handler that
+/// is about to exit the process).
+pub fn remove_pending_temp_files() {
+    for p in lock_pending().iter() {
+        let _ = std::fs::remove_file(p);
+    }
 }
 
 fn temp_path(path: &Path) -> PathBuf {

@@ -61,7 +61,7 @@ pub fn validate(asset: &Asset) -> Result<(), FormatError> {
             ),
         ));
     }
-    if g.counts.contains(&0) {
+    if g.counts.contains(&0) || g.probe_count() == u64::MAX {
         return Err(FormatError::invalid(
             "header.grid",
             0,
@@ -263,6 +263,22 @@ pub fn validate(asset: &Asset) -> Result<(), FormatError> {
                 format!("first {} count {} out of range", n.first, n.count),
             ));
         }
+    }
+    // A tree: every node but the root is the child of exactly one node. Children after their
+    // parent rule out loops, not sharing: a crafted BVH whose nodes share children (a DAG) would
+    // make traversal exponential.
+    let mut parents = vec![0u8; nodes];
+    for n in geo.nodes.iter().filter(|n| n.count == 0) {
+        for c in [n.first as usize, n.first as usize + 1] {
+            parents[c] = parents[c].saturating_add(1);
+        }
+    }
+    if let Some((i, &p)) = parents.iter().enumerate().skip(1).find(|(_, &p)| p != 1) {
+        return Err(FormatError::invalid(
+            "geometry.nodes",
+            i,
+            format!("the child of {p} nodes (a BVH must be a tree)"),
+        ));
     }
     let stack = geo.stack_needed();
     if stack > MAX_BVH_STACK {

@@ -115,7 +115,7 @@ pub fn run(
     lighting: &Lighting,
     asset: &Asset,
 ) -> Result<RenderReport, RenderError> {
-    let scene_bytes = std::fs::read(&job.scene)
+    let scene_bytes = prt_format::read_regular_file(&job.scene)
         .map_err(|e| RenderError::Scene(format!("reading {}: {e}", job.scene.display())))?;
     if !job.force {
         check_source(&job.scene, &scene_bytes, &job.asset, asset)?;

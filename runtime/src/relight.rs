@@ -28,9 +28,20 @@ use crate::visibility::{self, occluded, ray_offset};
 pub enum RelightError {
     #[error("the asset's BVH needs a traversal stack of {needed} entries, more than {max}")]
     BvhTooDeep { needed: usize, max: usize },
-    #[error("bounces must be at least 1, got {0}")]
+    #[error("bounces must be in 1..={MAX_BOUNCES}, got {0}")]
     Bounces(u32),
+    #[error("{count} lights: the CPU relight takes at most {MAX_CPU_LIGHTS} (its cost is lights x surfels)")]
+    TooManyLights { count: usize },
+    #[error("the relit SH of probe {probe} is not finite: the light intensities (up to {max_intensity:e}) overflow f32")]
+    NonFinite { probe: usize, max_intensity: f32 },
 }
+
+/// Most bounces a relight computes: each adds at most the albedo (below 1) times the previous
+/// one, so after 100 bounces of albedo 0.9 the next would add 3e-5 of the first.
+pub const MAX_BOUNCES: u32 = 100;
+/// Most lights the CPU relight takes (the renderer's own limit): beyond it a relight takes
+/// minutes per update on a real level, which is not what a reference is for.
+pub const MAX_CPU_LIGHTS: usize = 4096;
 
 /// What a relight did and skipped.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -115,8 +126,13 @@ impl<'a> CpuRelighter<'a> {
 
     /// Relights with `lighting`; `bounces` >= 1.
     pub fn relight(&self, lighting: &Lighting, bounces: u32) -> Result<Relit, RelightError> {
-        if bounces == 0 {
-            return Err(RelightError::Bounces(0));
+        if bounces == 0 || bounces > MAX_BOUNCES {
+            return Err(RelightError::Bounces(bounces));
+        }
+        if lighting.rig.lights.len() > MAX_CPU_LIGHTS {
+            return Err(RelightError::TooManyLights {
+                count: lighting.rig.lights.len(),
+            });
         }
         let lights: Vec<PreparedLight> =
             lighting.rig.lights.iter().map(PreparedLight::new).collect();
@@ -152,6 +168,20 @@ impl<'a> CpuRelighter<'a> {
             if bounce + 1 == bounces {
                 stats = stats + gather_stats;
             }
+        }
+        if let Some(probe) = sh
+            .iter()
+            .position(|c| c.iter().flatten().any(|v| !v.is_finite()))
+        {
+            return Err(RelightError::NonFinite {
+                probe,
+                max_intensity: lighting
+                    .rig
+                    .lights
+                    .iter()
+                    .map(|l| l.intensity)
+                    .fold(0.0, f32::max),
+            });
         }
         Ok(Relit { sh, stats })
     }

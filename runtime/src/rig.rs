@@ -83,15 +83,31 @@ const LIGHT_FIELDS: [&str; 8] = [
 /// [`load_rig`], plus a warning for every other unknown field of a light (ignored, not refused:
 /// a rig written for another tool should still load; a typo in a known field name still shows).
 pub fn load_rig_with_warnings(path: &Path) -> Result<(Lighting, Vec<String>), RigLoadError> {
-    let text = std::fs::read_to_string(path).map_err(|error| RigLoadError::Io {
+    let io_err = |error| RigLoadError::Io {
         path: path.to_owned(),
         error,
-    })?;
+    };
+    let bytes = prt_format::read_regular_file(path).map_err(io_err)?;
     let json_err = |e: serde_json::Error| RigLoadError::Json {
         path: path.to_owned(),
         message: e.to_string(),
     };
-    let mut value: serde_json::Value = serde_json::from_str(&text).map_err(json_err)?;
+    let mut value: serde_json::Value = serde_json::from_slice(&bytes).map_err(json_err)?;
+    if !value.is_object() {
+        return Err(RigLoadError::Json {
+            path: path.to_owned(),
+            message: format!(
+                "expected an object with \"lights\" (and optionally \"sky\"), found {}",
+                match value {
+                    serde_json::Value::Array(_) => "an array",
+                    serde_json::Value::Null => "null",
+                    serde_json::Value::Bool(_) => "a boolean",
+                    serde_json::Value::Number(_) => "a number",
+                    _ => "a string",
+                }
+            ),
+        });
+    }
     let mut warnings = Vec::new();
     if let Some(lights) = value.get_mut("lights").and_then(|l| l.as_array_mut()) {
         for (i, light) in lights.iter_mut().enumerate() {

@@ -22,9 +22,45 @@ pub enum SkyModel {
     },
 }
 
+/// Texel bytes an EXR may decode to per byte of file, above [`MIN_EXR_BUDGET`]: refuses a small
+/// file whose header claims a huge image before anything is allocated for it (a 300-byte header
+/// saying 100000 x 100000 would otherwise allocate 120 GB).
+const EXR_BYTES_PER_FILE_BYTE: u64 = 256;
+/// Texel bytes any EXR may decode to.
+const MIN_EXR_BUDGET: u64 = 64 << 20;
+
+/// Refuses non-regular files and headers whose first layer would decode to more than the budget.
+fn check_exr_size(path: &Path) -> Result<(), String> {
+    let meta = std::fs::metadata(path).map_err(|e| e.to_string())?;
+    if !meta.is_file() {
+        return Err("not a regular file (a device, directory or pipe)".into());
+    }
+    let header = exr::meta::MetaData::read_from_file(path, false).map_err(|e| e.to_string())?;
+    let Some(layer) = header.headers.first() else {
+        return Err("no layer".into());
+    };
+    let size = layer.layer_size;
+    let texels = (size.width() as u64).saturating_mul(size.height() as u64);
+    let bytes = texels.saturating_mul(12);
+    let budget = meta
+        .len()
+        .saturating_mul(EXR_BYTES_PER_FILE_BYTE)
+        .max(MIN_EXR_BUDGET);
+    if bytes > budget {
+        return Err(format!(
+            "{} x {} texels would take {bytes} bytes from a {}-byte file, more than {budget}",
+            size.width(),
+            size.height(),
+            meta.len()
+        ));
+    }
+    Ok(())
+}
+
 impl SkyModel {
     /// Loads the first RGB(A) layer of an OpenEXR file, scaled by `intensity`.
     pub fn load_exr(path: &Path, intensity: f32) -> Result<SkyModel, String> {
+        check_exr_size(path)?;
         let image = exr::prelude::read_first_rgba_layer_from_file(
             path,
             |res, _| (res.width(), vec![[0.0f32; 3]; res.width() * res.height()]),

@@ -225,7 +225,7 @@ fn resealed_short_or_long_payload_is_rejected() {
     short.remove(good.len() - SUFFIX - 1);
     reseal(&mut short);
     assert!(
-        matches!(decode(&short), Err(FormatError::Decode(_))),
+        matches!(decode(&short), Err(FormatError::Decode { .. })),
         "{:?}",
         decode(&short).err()
     );
@@ -296,7 +296,7 @@ fn resealed_huge_string_lengths_are_errors() {
             reseal(&mut bad);
             let e = decode(&bad).expect_err("huge string length accepted");
             assert!(
-                matches!(e, FormatError::Decode(_)),
+                matches!(e, FormatError::Decode { .. }),
                 "length {len} at {at}: {e:?}"
             );
         }
