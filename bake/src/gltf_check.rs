@@ -32,6 +32,10 @@ use crate::texture::Image;
 /// Most triangles a scene may instance: about 4.5 GB of loaded triangles and attributes.
 pub const MAX_TRIANGLES: u64 = 1 << 25;
 
+/// Most node instances a scene may visit (a node reached through several parents counts once per
+/// path).
+pub const MAX_NODE_VISITS: u64 = 1 << 24;
+
 /// Decoded bytes a file may imply per input byte (images, accessors without a buffer view),
 /// above a floor of [`MIN_BUDGET`]: real PNG and JPEG textures compress 2-20x, bombs 1000x.
 pub const BUDGET_PER_INPUT_BYTE: u64 = 256;
@@ -419,22 +423,29 @@ fn check_nodes(path: &Path, root: &json::Root) -> Result<(), BakeError> {
             ));
         }
     }
-    // Triangles per node subtree, children first (memoised; a cycle counts as 0 here and is
-    // refused by the loader's depth limit).
-    let mut memo: Vec<Option<u64>> = vec![None; n];
-    fn count(root: &json::Root, i: usize, memo: &mut Vec<Option<u64>>, depth: u32) -> u64 {
+    // Node visits and triangles per node subtree (memoised; a cycle counts as 0 here and is
+    // refused by the loader's depth limit): instancing (nodes shared by several parents)
+    // multiplies both, and visiting 2^40 empty nodes hangs as surely as 2^40 triangles.
+    let mut memo: Vec<Option<(u64, u64)>> = vec![None; n];
+    fn count(
+        root: &json::Root,
+        i: usize,
+        memo: &mut Vec<Option<(u64, u64)>>,
+        depth: u32,
+    ) -> (u64, u64) {
         if let Some(c) = memo[i] {
             return c;
         }
         if depth > 256 {
-            return 0;
+            return (0, 0);
         }
         let node = &root.nodes[i];
         let own = node
             .mesh
             .map_or(0, |m| mesh_triangles(root, &root.meshes[m.value()]));
-        let total = node.children.iter().flatten().fold(own, |acc, c| {
-            acc.saturating_add(count(root, c.value(), memo, depth + 1))
+        let total = node.children.iter().flatten().fold((1u64, own), |acc, c| {
+            let (v, t) = count(root, c.value(), memo, depth + 1);
+            (acc.0.saturating_add(v), acc.1.saturating_add(t))
         });
         memo[i] = Some(total);
         total
@@ -456,14 +467,15 @@ fn check_nodes(path: &Path, root: &json::Root) -> Result<(), BakeError> {
             .unwrap_or_default(),
         None => (0..n).collect(),
     };
-    let total = roots.iter().fold(0u64, |acc, &r| {
-        acc.saturating_add(count(root, r, &mut memo, 0))
+    let (visits, triangles) = roots.iter().fold((0u64, 0u64), |acc, &r| {
+        let (v, t) = count(root, r, &mut memo, 0);
+        (acc.0.saturating_add(v), acc.1.saturating_add(t))
     });
-    if total > MAX_TRIANGLES {
+    if triangles > MAX_TRIANGLES || visits > MAX_NODE_VISITS {
         return Err(err(
             path,
             format!(
-                "the node graph instances {total} triangles (nodes shared by several parents), more than {MAX_TRIANGLES}"
+                "the node graph instances {visits} nodes and {triangles} triangles (nodes shared by several parents), more than {MAX_NODE_VISITS} nodes or {MAX_TRIANGLES} triangles"
             ),
         ));
     }

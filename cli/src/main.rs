@@ -2,6 +2,7 @@
 //! options into a settings struct and calls one library function.
 
 mod bench;
+mod bench_fuzz;
 mod bench_render;
 mod bench_surface;
 mod progress;
@@ -53,6 +54,8 @@ enum Backend {
 
 #[derive(Subcommand)]
 enum BenchKind {
+    /// Mutation fuzzing of the glTF path or the asset loader for a fixed time (issue 8).
+    Fuzz(bench_fuzz::FuzzArgs),
     /// Bake throughput against bare obvhs tracing of the same rays, and bytes per probe.
     Bake {
         scene: PathBuf,
@@ -529,6 +532,7 @@ fn run(cli: Cli) -> Result<()> {
                 Ok(())
             }
             BenchKind::Surface(args) => bench_surface::run(args),
+            BenchKind::Fuzz(args) => bench_fuzz::run(args),
         },
         Command::Sample(args) => sample::run(args),
         Command::Render(args) => render::run(args),

@@ -55,7 +55,8 @@ refused! {
     attribute_accessor_out_of_range: "attribute_index_out_of_range.gltf" => ["accessor 99", "does not exist"];
     image_view_without_mime_type: "image_view_without_mime.gltf" => ["image 0", "mimeType"];
     // Allocations far beyond the file's size, and instancing that never ends.
-    shared_children_instancing: "shared_children.gltf" => ["instances", "triangles"];
+    shared_children_instancing: "shared_children.gltf" => ["instances", "2199023255552 triangles"];
+    shared_empty_children_instancing: "shared_children_empty.gltf" => ["2199023255551 nodes"];
     sparse_accessor_without_view: "sparse_huge_count.gltf" => ["accessor 0", "2147483648 elements"];
     png_bomb: "png_bomb.gltf" => ["image 0", "bomb.png", "16384 x 16384"];
     // Accepted silently before.
