@@ -28,18 +28,19 @@ fn intersect_triangle(t: Triangle, o: vec3<f32>, d: vec3<f32>, tmax: f32) -> boo
     let e2 = t.v2 - t.v0;
     let p = cross(d, e2);
     let det = dot(e1, p);
-    if abs(det) < 1e-12 {
+    if det == 0.0 {
         return false;
     }
     let inv_det = 1.0 / det;
     let s = o - t.v0;
+    // Barycentric tests widened by EDGE_TOLERANCE (prt_format): no ray slips through a shared edge.
     let u = dot(s, p) * inv_det;
-    if u < 0.0 || u > 1.0 {
+    if u < -EDGE_TOLERANCE || u > 1.0 + EDGE_TOLERANCE {
         return false;
     }
     let q = cross(s, e1);
     let v = dot(d, q) * inv_det;
-    if v < 0.0 || u + v > 1.0 {
+    if v < -EDGE_TOLERANCE || u + v > 1.0 + EDGE_TOLERANCE {
         return false;
     }
     let dist = dot(e2, q) * inv_det;

@@ -559,6 +559,13 @@ impl Geometry {
     }
 }
 
+/// Barycentric tolerance of every ray/triangle test against the asset's geometry (bake tracer,
+/// CPU and GPU shadow rays): a hit counts when each barycentric coordinate is at least
+/// `-EDGE_TOLERANCE`. Exact tests let rays aimed at an edge shared by two triangles pass between
+/// them when both round it outside; the tolerance is relative (barycentrics have no unit), so it
+/// means the same at every scene scale. It widens each triangle by a millionth of its size.
+pub const EDGE_TOLERANCE: f32 = 1e-6;
+
 /// A BVH2 node. `count > 0`: a leaf holding triangles `first..first+count`. `count == 0`: an
 /// inner node whose children are nodes `first` and `first + 1`. Node 0 is the root.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable, Serialize, Deserialize)]

@@ -29,7 +29,10 @@ fn hits_box(n: &BvhNode, o: Vec3, inv: Vec3, tmax: f32) -> bool {
     near <= far
 }
 
-/// Moller-Trumbore: distance to the triangle along the ray, if within `(0, tmax)`.
+/// Moller-Trumbore: whether the triangle lies on the ray within `(0, tmax)`. Barycentric tests
+/// are widened by [`prt_format::EDGE_TOLERANCE`] (no shadow ray slips through a shared edge) and
+/// only an exactly zero determinant (a ray in the triangle's plane) is refused: an absolute
+/// floor on it (1e-12, before) dropped every triangle below a micrometre.
 #[inline]
 pub fn intersect(t: &Triangle, o: Vec3, d: Vec3, tmax: f32) -> bool {
     let v0 = Vec3::from(t.v0);
@@ -37,18 +40,19 @@ pub fn intersect(t: &Triangle, o: Vec3, d: Vec3, tmax: f32) -> bool {
     let e2 = Vec3::from(t.v2) - v0;
     let p = d.cross(e2);
     let det = e1.dot(p);
-    if det.abs() < 1e-12 {
+    if det == 0.0 {
         return false;
     }
     let inv_det = 1.0 / det;
     let s = o - v0;
+    let eps = prt_format::EDGE_TOLERANCE;
     let u = s.dot(p) * inv_det;
-    if !(0.0..=1.0).contains(&u) {
+    if !(-eps..=1.0 + eps).contains(&u) {
         return false;
     }
     let q = s.cross(e1);
     let v = d.dot(q) * inv_det;
-    if v < 0.0 || u + v > 1.0 {
+    if v < -eps || u + v > 1.0 + eps {
         return false;
     }
     let dist = e2.dot(q) * inv_det;

@@ -195,6 +195,10 @@ pub fn wgsl_constants() -> Vec<(&'static str, String)> {
         ),
         ("INFINITE_DISTANCE", format!("{:e}", f32::MAX)),
         (
+            "EDGE_TOLERANCE",
+            format!("{:e}", prt_format::EDGE_TOLERANCE),
+        ),
+        (
             "MIN_DISTANCE_SQ",
             format!("{:e}", crate::lights::MIN_DISTANCE_SQ),
         ),
