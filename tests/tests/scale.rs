@@ -65,7 +65,8 @@ fn worst(a: &[ShRgb], b: &[ShRgb]) -> f32 {
 /// identical (any absolute length, such as obvhs's box epsilon or a fixed ray offset, breaks
 /// that: before, 122% at 1/1000 and 58% at 1/100). At other scales rounding changes discrete
 /// decisions (which cell a hit on a cell boundary merges into, shadow rays grazing an edge):
-/// up to 3.3% of SH0 measured, the size of the merging error itself.
+/// up to 2.1% of SH0 measured (3.3% before the bounds-face grid), the size of the merging error
+/// itself.
 #[test]
 fn relit_sh_do_not_depend_on_the_scene_scale() {
     let dir = ScratchDir::new("scale");
@@ -95,4 +96,89 @@ fn relit_sh_do_not_depend_on_the_scene_scale() {
         let tolerance = if exact { 1e-6 } else { 0.05 };
         assert!(w <= tolerance, "scale {s}: worst |dSH| / SH0 = {w}");
     }
+}
+
+/// The Cornell fixture under a root node translating it by `t`, and its rig moved to match.
+fn translated(dir: &std::path::Path, t: f32) -> (std::path::PathBuf, Lighting) {
+    let mut doc: Value =
+        serde_json::from_slice(&std::fs::read(fixture("cornell/cornell.gltf")).unwrap()).unwrap();
+    let scene = doc["scene"].as_u64().unwrap_or(0) as usize;
+    let roots = doc["scenes"][scene]["nodes"].clone();
+    let nodes = doc["nodes"].as_array_mut().unwrap();
+    nodes.push(serde_json::json!({"name": "move", "translation": [t, 0.0, t], "children": roots}));
+    let root = nodes.len() - 1;
+    doc["scenes"][scene]["nodes"] = serde_json::json!([root]);
+    let path = dir.join(format!("cornell_at_{t}.gltf"));
+    std::fs::write(&path, serde_json::to_vec(&doc).unwrap()).unwrap();
+    let mut lighting = load_rig(&fixture("cornell/rig.json")).unwrap();
+    for l in &mut lighting.rig.lights {
+        l.position[0] += t;
+        l.position[2] += t;
+    }
+    (path, lighting)
+}
+
+/// Far from the origin f32 positions lose precision (at 1e5 m floats are 8 mm apart, a third of
+/// the 0.25 m spacing's surfel cell): the relit SH of the Cornell room moved by (t, 0, t) against
+/// at the origin. Measured 9% of SH0 at 1 km, 85% at 10 km, 129% at 100 km: not fixed (no
+/// bake-local origin yet); the test holds that bound and finiteness, see the README.
+#[test]
+fn relit_sh_far_from_the_origin() {
+    let dir = ScratchDir::new("far");
+    let (p0, l0) = translated(dir.path(), 0.0);
+    let settings = |t: f32| BakeSettings {
+        spacing: Some(0.25),
+        bounds: Some([-0.6 + t, 0.4, -0.6 + t, 0.6 + t, 1.6, 0.6 + t]),
+        ..BakeSettings::default()
+    };
+    let relit_at = |p: &std::path::Path, l: &Lighting, t: f32| {
+        let asset = bake_ok(p, &settings(t));
+        CpuRelighter::new(&asset).unwrap().relight(l, 1).unwrap().sh
+    };
+    let reference = relit_at(&p0, &l0, 0.0);
+    let mut report = Vec::new();
+    for t in [1e3f32, 1e4, 1e5] {
+        let (p, l) = translated(dir.path(), t);
+        report.push((t, worst(&relit_at(&p, &l, t), &reference)));
+    }
+    eprintln!("far from the origin: worst |dSH| / SH0 {report:?}");
+    for (t, w) in report {
+        assert!(w.is_finite() && w <= FAR_BOUND, "at {t} m: {w}");
+    }
+}
+
+/// The bound `relit_sh_far_from_the_origin` holds (measured worst, 1.29, plus margin).
+const FAR_BOUND: f32 = 1.5;
+
+/// Brightness is linear: every light's intensity and the sky times k from 1e-6 to 1e7 gives the
+/// SH times k, finite, to within float rounding (relative error per decade printed).
+#[test]
+fn relit_sh_are_linear_in_brightness() {
+    let asset = bake_ok(
+        &fixture("cornell/cornell.gltf"),
+        &BakeSettings {
+            spacing: Some(0.5),
+            ..BakeSettings::default()
+        },
+    );
+    let base = load_rig(&fixture("cornell/rig.json")).unwrap();
+    let relighter = CpuRelighter::new(&asset).unwrap();
+    let reference = relighter.relight(&base, 1).unwrap().sh;
+    let mut report = Vec::new();
+    for e in -6..=7 {
+        let k = 10f32.powi(e);
+        let mut l = base.clone();
+        for light in &mut l.rig.lights {
+            light.intensity *= k;
+        }
+        if let prt_runtime::sky::SkyModel::Constant(c) = &mut l.sky {
+            *c = c.map(|x| x * k);
+        }
+        let sh = relighter.relight(&l, 1).unwrap().sh;
+        let unscaled: Vec<ShRgb> = sh.iter().map(|c| c.map(|v| v.map(|x| x / k))).collect();
+        let w = worst(&unscaled, &reference);
+        assert!(w.is_finite() && w < 1e-5, "x{k:e}: {w}");
+        report.push((e, w));
+    }
+    eprintln!("brightness: worst |dSH/k| / SH0 per decade {report:?}");
 }
