@@ -76,5 +76,5 @@ fn occluded(o: vec3<f32>, d: vec3<f32>, tmax: f32) -> bool {
 // Twin of prt_runtime::visibility::ray_offset: `scale` is the scene's length scale.
 fn ray_offset(p: vec3<f32>, scale: f32) -> f32 {
     let a = abs(p);
-    return 1e-4 * max(max(max(a.x, a.y), a.z), scale);
+    return max(RAY_OFFSET_MAGNITUDE * max(max(a.x, a.y), a.z), RAY_OFFSET_SCALE * scale);
 }

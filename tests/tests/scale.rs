@@ -118,10 +118,10 @@ fn translated(dir: &std::path::Path, t: f32) -> (std::path::PathBuf, Lighting) {
     (path, lighting)
 }
 
-/// Far from the origin f32 positions lose precision (at 1e5 m floats are 8 mm apart, a third of
-/// the 0.25 m spacing's surfel cell): the relit SH of the Cornell room moved by (t, 0, t) against
-/// at the origin. Measured 9% of SH0 at 1 km, 85% at 10 km, 129% at 100 km: not fixed (no
-/// bake-local origin yet); the test holds that bound and finiteness, see the README.
+/// Far from the origin f32 positions lose precision (at 1e5 m floats are 8 mm apart): the relit
+/// SH of the Cornell room moved by (t, 0, t) against at the origin. Measured 0.5% of SH0 at 1 km,
+/// 1.7% at 10 km, 10.8% at 100 km (with shadow-ray offsets of 1e-4 of the coordinates' magnitude
+/// before: 9%, 85%, 129%). The rest is the runtime's f32 world coordinates (no local origin).
 #[test]
 fn relit_sh_far_from_the_origin() {
     let dir = ScratchDir::new("far");
@@ -143,12 +143,10 @@ fn relit_sh_far_from_the_origin() {
     }
     eprintln!("far from the origin: worst |dSH| / SH0 {report:?}");
     for (t, w) in report {
-        assert!(w.is_finite() && w <= FAR_BOUND, "at {t} m: {w}");
+        let bound = if t < 5e4 { 0.03 } else { 0.15 };
+        assert!(w.is_finite() && w <= bound, "at {t} m: {w} (bound {bound})");
     }
 }
-
-/// The bound `relit_sh_far_from_the_origin` holds (measured worst, 1.29, plus margin).
-const FAR_BOUND: f32 = 1.5;
 
 /// Brightness is linear: every light's intensity and the sky times k from 1e-6 to 1e7 gives the
 /// SH times k, finite, to within float rounding (relative error per decade printed).

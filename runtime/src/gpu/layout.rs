@@ -195,6 +195,14 @@ pub fn wgsl_constants() -> Vec<(&'static str, String)> {
         ),
         ("INFINITE_DISTANCE", format!("{:e}", f32::MAX)),
         (
+            "RAY_OFFSET_MAGNITUDE",
+            format!("{:e}", crate::visibility::RAY_OFFSET_MAGNITUDE),
+        ),
+        (
+            "RAY_OFFSET_SCALE",
+            format!("{:e}", crate::visibility::RAY_OFFSET_SCALE),
+        ),
+        (
             "EDGE_TOLERANCE",
             format!("{:e}", prt_format::EDGE_TOLERANCE),
         ),
