@@ -11,8 +11,8 @@
 //! - accessors lie inside their buffer views (`byteStride` at least the element size), those
 //!   without a view (zeros plus sparse values) stay within [`allocation_budget`] of the input's
 //!   size, sparse indices are unsigned and below the count;
-//! - meshes reference existing accessors and materials; triangle lists have a multiple of 3
-//!   indices;
+//! - meshes reference existing accessors and materials (a triangle list whose count is not a
+//!   multiple of 3 is warned about, as the Khronos validator does, and its tail ignored);
 //! - nodes do not combine `matrix` with TRS, and instancing (nodes shared by several parents)
 //!   produces at most [`MAX_TRIANGLES`] triangles;
 //! - materials have finite factors in f32.
@@ -39,8 +39,8 @@ pub const MAX_NODE_VISITS: u64 = 1 << 24;
 /// Decoded bytes a file may imply per input byte (images, accessors without a buffer view),
 /// above a floor of [`MIN_BUDGET`]: real PNG and JPEG textures compress 2-20x, bombs 1000x.
 pub const BUDGET_PER_INPUT_BYTE: u64 = 256;
-/// Decoded bytes any file may imply, however small.
-pub const MIN_BUDGET: u64 = 64 << 20;
+/// Decoded bytes any file may imply, however small: an 8192 x 8192 RGBA texture.
+pub const MIN_BUDGET: u64 = 256 << 20;
 
 /// Decoded bytes allowed for `input_bytes` of input.
 pub fn allocation_budget(input_bytes: u64) -> u64 {
@@ -56,7 +56,8 @@ fn err(path: &Path, message: String) -> BakeError {
     }
 }
 
-/// A relative path to a regular file below `base`, or why `uri` is refused.
+/// A relative path (resolved against `base`; `..` allowed, as shared texture folders need it) to a
+/// regular file, or why `uri` is refused.
 pub fn external_file(base: &Path, uri: &str) -> Result<PathBuf, String> {
     let decoded = percent_decode(uri);
     // A colon is a scheme (`file:`, `http:`) or a drive letter; a leading slash is absolute.
@@ -110,10 +111,10 @@ pub fn check_document(
     check_buffers(path, root, base)?;
     check_views(path, root)?;
     check_accessors(path, root, allocation_budget(input_bytes))?;
-    check_meshes(path, root)?;
+    let mut warnings = Vec::new();
+    check_meshes(path, root, &mut warnings)?;
     check_nodes(path, root)?;
     check_materials(path, root)?;
-    let mut warnings = Vec::new();
     if root
         .extensions_used
         .iter()
@@ -313,7 +314,11 @@ fn check_accessors(path: &Path, root: &json::Root, budget: u64) -> Result<(), Ba
     Ok(())
 }
 
-fn check_meshes(path: &Path, root: &json::Root) -> Result<(), BakeError> {
+fn check_meshes(
+    path: &Path,
+    root: &json::Root,
+    warnings: &mut Vec<String>,
+) -> Result<(), BakeError> {
     let accessors = root.accessors.len();
     for (m, mesh) in root.meshes.iter().enumerate() {
         for (p, prim) in mesh.primitives.iter().enumerate() {
@@ -360,14 +365,11 @@ fn check_meshes(path: &Path, root: &json::Root) -> Result<(), BakeError> {
                 })
                 .map(|a| root.accessors[a.value()].count.0);
             if let Some(n) = vertices.filter(|n| triangles && n % 3 != 0) {
-                return Err(e(format!(
-                    "a triangle list of {n} {}, not a multiple of 3",
-                    if prim.indices.is_some() {
-                        "indices"
-                    } else {
-                        "vertices"
-                    }
-                )));
+                warnings.push(format!(
+                    "mesh {m} primitive {p}: a triangle list of {n} {}, not a multiple of 3: the last {} ignored",
+                    if prim.indices.is_some() { "indices" } else { "vertices" },
+                    n % 3
+                ));
             }
         }
     }
@@ -465,7 +467,14 @@ fn check_nodes(path: &Path, root: &json::Root) -> Result<(), BakeError> {
                     .collect()
             })
             .unwrap_or_default(),
-        None => (0..n).collect(),
+        // No scene: the loader visits the nodes no other node lists as a child.
+        None => {
+            let mut is_child = vec![false; n];
+            for c in root.nodes.iter().flat_map(|x| x.children.iter().flatten()) {
+                is_child[c.value()] = true;
+            }
+            (0..n).filter(|&i| !is_child[i]).collect()
+        }
     };
     let (visits, triangles) = roots.iter().fold((0u64, 0u64), |acc, &r| {
         let (v, t) = count(root, r, &mut memo, 0);
@@ -547,7 +556,7 @@ pub fn check_sparse(
     Ok(())
 }
 
-/// Decodes every image of the document to 8-bit RGBA (16-bit and float channels are converted
+/// Decodes the images materials sample to 8-bit RGBA (16-bit and float channels are converted
 /// by the image crate), with its allocation limit set to [`allocation_budget`] of the image's
 /// encoded size: a small file that claims a huge image is refused before it is decoded.
 pub fn decode_images(
@@ -556,8 +565,30 @@ pub fn decode_images(
     doc: &gltf::Document,
     buffers: &[gltf::buffer::Data],
 ) -> Result<Vec<Image>, BakeError> {
+    // Only what the bake samples: base colour and emissive. Normal, occlusion and
+    // metallic-roughness maps are never decoded (they could only fail the bake).
+    let mut used = vec![false; doc.images().len()];
+    for m in doc.materials() {
+        let pbr = m.pbr_metallic_roughness();
+        let textures = [
+            pbr.base_color_texture().map(|t| t.texture()),
+            m.emissive_texture().map(|t| t.texture()),
+        ];
+        for t in textures.into_iter().flatten() {
+            if let Some(u) = used.get_mut(t.source().index()) {
+                *u = true;
+            }
+        }
+    }
     doc.images()
         .map(|img| {
+            if !used[img.index()] {
+                return Ok(Image {
+                    width: 1,
+                    height: 1,
+                    texels: vec![[255; 4]],
+                });
+            }
             let uri = match img.source() {
                 gltf::image::Source::Uri { uri, .. } if !uri.starts_with("data:") => uri.to_owned(),
                 gltf::image::Source::Uri { .. } => "data URI".to_owned(),

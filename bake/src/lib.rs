@@ -402,11 +402,22 @@ fn bake_in_pool(
             || (r.sky_rays == 0
                 && r.facing_away_rays as f32 > settings.inside_facing_away_fraction * n as f32)
     };
+    let [nx, ny, nz] = grid.counts;
     let traced: Vec<(Vec3, trace::ProbeRays, bool)> = positions
         .par_iter()
-        .map(|&grid_p| {
+        .enumerate()
+        .map(|(index, &grid_p)| {
+            let (i, j, k) = (
+                index as u32 % nx,
+                (index as u32 / nx) % ny,
+                index as u32 / (nx * ny),
+            );
+            let outer = [(i, nx), (j, ny), (k, nz)]
+                .iter()
+                .any(|&(c, n)| n > 1 && (c == 0 || c == n - 1));
             let p = if settings.surface_offset {
-                offset::surface_offset(&tracer, grid_p, spacing, (min + max) * 0.5)
+                let centre = outer.then_some((min + max) * 0.5);
+                offset::surface_offset(&tracer, grid_p, spacing, centre)
             } else {
                 grid_p
             };

@@ -70,7 +70,7 @@ pub fn grid(min: Vec3, max: Vec3, spacing: f32, max_probes: u64) -> Result<Grid,
     let centre = (min + max) * 0.5;
     let step: [f32; 3] = std::array::from_fn(|a| {
         if counts[a] > 1 {
-            (f64::from(extent[a]) / (counts[a] - 1) as f64) as f32
+            ((f64::from(extent[a]) / (counts[a] - 1) as f64) as f32).min(spacing)
         } else {
             spacing
         }

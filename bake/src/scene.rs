@@ -130,7 +130,10 @@ fn load_checked(path: &Path) -> Result<Scene, BakeError> {
         gltf::Gltf::from_slice_without_validation(&bytes).map_err(|e| gltf_err(e.to_string()))?;
     let base = path.parent().unwrap_or(Path::new("."));
     let json = gltf.document.as_json();
-    let declared: u64 = json.buffers.iter().map(|b| b.byte_length.0).sum();
+    let declared = json
+        .buffers
+        .iter()
+        .fold(0u64, |a, b| a.saturating_add(b.byte_length.0));
     let mut warnings = gltf_check::check_document(path, json, base, bytes.len() as u64 + declared)?;
     let doc = gltf::Document::from_json(gltf.document.into_json())
         .map_err(|e| gltf_err(e.to_string()))?;

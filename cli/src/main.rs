@@ -428,6 +428,7 @@ fn run(cli: Cli) -> Result<()> {
                 }
             };
             let seconds = start.elapsed().as_secs_f64();
+            prt_runtime::relight::check_finite(&sh, &lighting)?;
             let doc = prt_runtime::output::relight_json(&loaded, &sh, name, stats);
             let text = serde_json::to_vec_pretty(&doc)?;
             prt_format::io::write_bytes_atomic(&json, &text)

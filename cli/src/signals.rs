@@ -1,5 +1,5 @@
-//! SIGINT and SIGTERM: remove the temporary file of a write in progress, then exit with the
-//! shell's code for the signal (128 + its number). Without this a kill during the last moments
+//! SIGINT and SIGTERM: remove the temporary file of a write in progress, then die of the signal
+//! (the shell reports 128 + its number). Without this a kill during the last moments
 //! of a bake leaves `NAME.prt.tmpPID` beside the output, and stale ones pile up.
 //!
 //! How: the two signals are blocked before any other thread exists (threads inherit the mask:
@@ -22,8 +22,16 @@ pub fn install() {
             let mut sig: libc::c_int = 0;
             if libc::sigwait(&set, &mut sig) == 0 {
                 prt_format::io::remove_pending_temp_files();
-                eprintln!("interrupted (signal {sig}): no output written");
-                std::process::exit(128 + sig);
+                // Die of the signal itself (not exit(128 + sig), which runs other libraries'
+                // exit handlers while the GPU and worker threads still run, and which a shell
+                // loop reads as "the program handled it" and carries on): default action,
+                // unblocked in this thread, raised here.
+                libc::signal(sig, libc::SIG_DFL);
+                let mut one: libc::sigset_t = std::mem::zeroed();
+                libc::sigemptyset(&mut one);
+                libc::sigaddset(&mut one, sig);
+                libc::pthread_sigmask(libc::SIG_UNBLOCK, &one, std::ptr::null_mut());
+                libc::raise(sig);
             }
         });
     }

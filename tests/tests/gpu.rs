@@ -544,7 +544,7 @@ fn sample_irradiance_snippet_matches_the_cpu() {
 /// half and three quarters of the way to it.
 fn sample_queries(asset: &Asset, count: usize) -> Vec<([f32; 3], [f32; 3])> {
     let g = asset.header.grid;
-    let extent: [f32; 3] = std::array::from_fn(|a| (g.counts[a] - 1) as f32 * g.spacing);
+    let extent: [f32; 3] = std::array::from_fn(|a| (g.counts[a] - 1) as f32 * g.step[a]);
     // R3 sequence: fractional parts of i * (1/phi3, 1/phi3^2, 1/phi3^3).
     let phi3 = 1.220_744_1_f64;
     let alpha = [1.0 / phi3, 1.0 / (phi3 * phi3), 1.0 / (phi3 * phi3 * phi3)];
@@ -577,7 +577,7 @@ fn sample_queries(asset: &Asset, count: usize) -> Vec<([f32; 3], [f32; 3])> {
                     }
                     for f in [0.25, 0.5, 0.75] {
                         let mut p = here;
-                        p[a] += f * g.spacing;
+                        p[a] += f * g.step[a];
                         let n = out.len();
                         out.push((p, normal(n)));
                     }

@@ -957,7 +957,7 @@ impl PrtRuntime {
         &self.sampler
     }
 
-    /// The grid the volume covers (origin, spacing, counts).
+    /// The grid the volume covers (origin, spacing, per-axis step, counts).
     pub fn grid(&self) -> prt_format::Grid {
         self.grid
     }
