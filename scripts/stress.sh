@@ -16,7 +16,7 @@ if [[ "${1:-}" == "--long" ]]; then
     seconds=300
     seeds="1 2 3"
 fi
-cargo test --release -p prt-tests --test hostile --test geometry --test repeat --test scale --test format
+cargo test --release -p prt-tests --test hostile --test geometry --test repeat --test scale --test sums --test format
 cargo build --release -p prt
 target_dir="${CARGO_TARGET_DIR:-target}"
 prt="$target_dir/release/prt"

@@ -303,18 +303,20 @@ impl<'a> CpuRelighter<'a> {
                 if !probe.is_valid() {
                     return [[0.0; 3]; SH_COUNT];
                 }
-                let mut acc = sky[p];
+                // Accumulated in f64: the reference every GPU gather is measured against must not
+                // drift itself over 100,000 factors (`tests/tests/sums.rs`).
+                let mut acc = sky[p].map(|c| c.map(f64::from));
                 for f in probe.first_factor..probe.first_factor + probe.factor_count {
                     let (brick, _) = asset.factors.brick_and_rays(f as usize);
                     let t = asset.factors.transfer(f as usize, n);
                     let l = brick_radiance[brick as usize].at(asset.factors.offset(f as usize));
                     for k in 0..SH_COUNT {
                         for c in 0..3 {
-                            acc[k][c] += t[k] * l[c];
+                            acc[k][c] += f64::from(t[k] * l[c]);
                         }
                     }
                 }
-                acc
+                acc.map(|c| c.map(|v| v as f32))
             })
             .collect();
         let valid = asset.probes.iter().filter(|p| p.is_valid()).count() as u64;
