@@ -150,4 +150,11 @@ fn finish(p: u32, c: array<vec3<f32>, 9>) {
     textureStore(volume6, at, texel(vec4<f32>(c[7].z, c[8])));
     probe_dirty[p] = 0u;
     atomicAdd(&counters.probes_gathered, 1u);
+    var peak = 0.0;
+    for (var k = 0u; k < 9u; k = k + 1u) {
+        peak = max(peak, max(max(abs(c[k].x), abs(c[k].y)), abs(c[k].z)));
+    }
+    if peak > params.texel_limit {
+        atomicAdd(&counters.probes_clamped, 1u);
+    }
 }

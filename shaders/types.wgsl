@@ -84,6 +84,7 @@ struct Counters {
     surfels_relit: atomic<u32>,
     shadow_rays: atomic<u32>,
     probes_gathered: atomic<u32>,
+    probes_clamped: atomic<u32>,
 }
 
 struct Params {

@@ -424,6 +424,12 @@ fn run(cli: Cli) -> Result<()> {
                         counters.shadow_rays,
                         counters.probes_gathered
                     );
+                    if counters.probes_clamped > 0 {
+                        eprintln!(
+                            "warning: {} probes exceed the f16 volume's range (+-65504) and are clamped in it (the SH written here are exact)",
+                            counters.probes_clamped
+                        );
+                    }
                     (sh, prt_runtime::output::gpu_stats(&counters), "gpu")
                 }
             };

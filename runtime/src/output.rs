@@ -55,6 +55,7 @@ pub fn gpu_stats(counters: &Counters) -> Value {
         "surfels_relit": counters.surfels_relit,
         "shadow_rays": counters.shadow_rays,
         "probes_gathered": counters.probes_gathered,
+        "probes_clamped": counters.probes_clamped,
     })
 }
 

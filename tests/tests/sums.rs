@@ -44,3 +44,35 @@ fn gpu_gather_sums_match_the_f64_reference_up_to_100k_factors() {
     }
     eprintln!("gather: (factors, worst |GPU - f64| / SH0) {report:?}");
 }
+
+/// The f16 volume's range rule: a rig (lights and sky) a million times brighter than the Cornell rig pushes SH
+/// past 65504; those probes are counted as clamped (`Counters::probes_clamped`), none are at the
+/// rig's own brightness, and the f32 SH the gather writes stay linear either way.
+#[test]
+fn f16_volume_clamping_is_counted() {
+    let asset = bake_ok(
+        &fixture("cornell/cornell.gltf"),
+        &BakeSettings {
+            spacing: Some(0.5),
+            ..BakeSettings::default()
+        },
+    );
+    let base = load_rig(&fixture("cornell/rig.json")).unwrap();
+    let mut bright = base.clone();
+    for l in &mut bright.rig.lights {
+        l.intensity *= 1e6;
+    }
+    if let prt_runtime::sky::SkyModel::Constant(c) = &mut bright.sky {
+        *c = c.map(|x| x * 1e6);
+    }
+    let (sh, counters, _) = relight_once(&asset, &base, RuntimeSettings::default()).unwrap();
+    assert_eq!(counters.probes_clamped, 0);
+    let (sh_bright, counters, _) =
+        relight_once(&asset, &bright, RuntimeSettings::default()).unwrap();
+    assert!(counters.probes_clamped > 0, "{counters:?}");
+    for (a, b) in sh.iter().zip(&sh_bright) {
+        let dc = a[0].iter().fold(0.0f32, |m, v| m.max(v.abs())).max(1e-12);
+        let rel = (b[0][0] / 1e6 - a[0][0]).abs() / dc;
+        assert!(rel < 1e-4, "SH0 {} vs {}", b[0][0] / 1e6, a[0][0]);
+    }
+}

@@ -107,8 +107,11 @@ pub struct Counters {
     pub surfels_relit: u32,
     pub shadow_rays: u32,
     pub probes_gathered: u32,
+    /// Probes whose SH exceeded the volume texture's range (`VolumeFormat::F16`: +-65504) and
+    /// were clamped in it (the probes' f32 SH stay exact).
+    pub probes_clamped: u32,
 }
-const _: () = assert!(std::mem::size_of::<Counters>() == 16);
+const _: () = assert!(std::mem::size_of::<Counters>() == 20);
 
 /// The uniform block of every stage.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]

@@ -63,8 +63,9 @@ pub enum GpuError {
 /// Texel format of the SH volume.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum VolumeFormat {
-    /// `Rgba16Float`: half the memory; values beyond +-65504 are clamped to it (scale the
-    /// lights' units if a scene is brighter than that).
+    /// `Rgba16Float`: half the memory; values beyond +-65504 are clamped to it and counted
+    /// (`Counters::probes_clamped`, printed by `prt relight --backend gpu`): use `F32`, or scale
+    /// the lights' units, for a scene brighter than that.
     #[default]
     F16,
     /// `Rgba32Float`: exact; sampling with filtering needs `Features::FLOAT32_FILTERABLE`.
@@ -531,7 +532,11 @@ impl PrtRuntime {
             16 * 9 * n_probes,
             wgpu::BufferUsages::COPY_SRC,
         )?;
-        let counters = alloc.zeroed("prt counters", 16, wgpu::BufferUsages::COPY_SRC)?;
+        let counters = alloc.zeroed(
+            "prt counters",
+            std::mem::size_of::<Counters>() as u64,
+            wgpu::BufferUsages::COPY_SRC,
+        )?;
         let lights = alloc.zeroed("prt lights", (64 * MAX_LIGHTS) as u64, none)?;
         let sky_directions = alloc.zeroed(
             "prt sky directions",
@@ -1071,7 +1076,8 @@ impl PrtRuntime {
 
     /// Blocks and returns the work counters of the last submitted update.
     pub fn read_counters(&self) -> Result<Counters, GpuError> {
-        let bytes = read_buffer(&self.device, &self.queue, &self.counters, 16)?;
+        let size = std::mem::size_of::<Counters>() as u64;
+        let bytes = read_buffer(&self.device, &self.queue, &self.counters, size)?;
         Ok(*bytemuck::from_bytes(&bytes))
     }
 

@@ -304,10 +304,16 @@ mod tests {
             (
                 "Counters",
                 size_of::<layout::Counters>(),
-                vec![(
-                    "probes_gathered",
-                    offset_of!(layout::Counters, probes_gathered),
-                )],
+                vec![
+                    (
+                        "probes_gathered",
+                        offset_of!(layout::Counters, probes_gathered),
+                    ),
+                    (
+                        "probes_clamped",
+                        offset_of!(layout::Counters, probes_clamped),
+                    ),
+                ],
             ),
             (
                 "FactorChunk",
