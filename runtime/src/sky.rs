@@ -7,6 +7,7 @@ use std::path::Path;
 use prt_format::directions::{direction_weight, fibonacci_direction};
 use prt_format::sh::{self, ShRgb, SH_COUNT};
 use prt_format::Asset;
+use rayon::prelude::*;
 
 /// A sky model.
 #[derive(Clone, Debug, PartialEq)]
@@ -60,6 +61,59 @@ fn check_exr_size(path: &Path) -> Result<(), String> {
         ));
     }
     Ok(())
+}
+
+/// Each texel of row `y`, split into `k` x `k` sub-texels, as (nearest lattice direction,
+/// radiance times solid angle, solid angle).
+fn equirect_row(
+    dirs: &[[f32; 3]],
+    (width, height): (usize, usize),
+    k: usize,
+    y: usize,
+    texels: &[[f32; 3]],
+) -> Vec<(usize, [f64; 3], f64)> {
+    let (pi, tau) = (std::f64::consts::PI, std::f64::consts::TAU);
+    let rows = (height * k) as f64;
+    let cols = (width * k) as f64;
+    let mut out = Vec::with_capacity(width * k * k);
+    for sy in 0..k {
+        let r = (y * k + sy) as f64;
+        let (t0, t1) = (pi * r / rows, pi * (r + 1.0) / rows);
+        let omega = tau / cols * (t0.cos() - t1.cos());
+        let theta = 0.5 * (t0 + t1);
+        for x in 0..width {
+            let l = texels[y * width + x];
+            for sx in 0..k {
+                let phi = tau * ((x * k + sx) as f64 + 0.5) / cols;
+                // The inverse of `radiance`'s mapping: u = atan2(x, -z) / tau, v = acos(y) / pi.
+                let d = [
+                    (theta.sin() * phi.sin()) as f32,
+                    theta.cos() as f32,
+                    (-theta.sin() * phi.cos()) as f32,
+                ];
+                out.push((
+                    nearest_direction(dirs, d),
+                    l.map(|v| f64::from(v) * omega),
+                    omega,
+                ));
+            }
+        }
+    }
+    out
+}
+
+/// Index of the lattice direction nearest `d`. Lattice direction i has z = 1 - (2i + 1) / n,
+/// so only those within the lattice's covering radius in z can be nearest: three times the
+/// spacing `sqrt(4pi / n)` bounds it (checked against a full search in the tests).
+pub fn nearest_direction(dirs: &[[f32; 3]], d: [f32; 3]) -> usize {
+    let n = dirs.len();
+    let reach = (3.0 * (4.0 * std::f32::consts::PI / n as f32).sqrt()).min(2.0);
+    let centre = ((1.0 - d[2]) * n as f32 - 1.0) * 0.5;
+    let span = (reach * n as f32 * 0.5).ceil() as i64 + 1;
+    let lo = (centre.floor() as i64 - span).max(0) as usize;
+    let hi = ((centre.ceil() as i64 + span).max(0) as usize).min(n - 1);
+    let dot = |i: usize| dirs[i][0] * d[0] + dirs[i][1] * d[1] + dirs[i][2] * d[2];
+    (lo..=hi).fold(lo, |best, i| if dot(i) > dot(best) { i } else { best })
 }
 
 impl SkyModel {
@@ -130,15 +184,52 @@ impl SkyModel {
 
     /// Direction and radiance of every direction of the `n`-ray lattice, for skies that vary
     /// with direction (empty for black and constant skies, which need no lookup).
+    ///
+    /// Each direction's radiance is the sky's mean over its Voronoi cell: every texel goes to
+    /// its nearest lattice direction, weighted by its solid angle. A constant sky stays exactly
+    /// constant; a sun keeps its energy up to the ratio of its cell's area to `4pi / n` (the
+    /// cells differ by a few percent). Point sampling (the radiance at the direction itself)
+    /// missed or multiplied a sun a few texels wide: an all-sky probe under a one-texel sun 1e5
+    /// times the sky's mean came out wrong by most of the sun's energy (`tests`). Cost: one
+    /// pass over the texels (split so that every cell gets at least 256 samples) with a
+    /// nearest-direction search among about `3 sqrt(pi n)` lattice directions each (the lattice
+    /// is sorted by z), once per sky change.
     pub fn lattice(&self, n: u32) -> Vec<([f32; 3], [f32; 3])> {
         match self {
             SkyModel::Black | SkyModel::Constant(_) => Vec::new(),
-            SkyModel::Equirect { .. } => (0..n)
-                .map(|i| {
-                    let d = fibonacci_direction(i, n);
-                    (d, self.radiance(d))
-                })
-                .collect(),
+            SkyModel::Equirect {
+                width,
+                height,
+                texels,
+            } => {
+                let dirs: Vec<[f32; 3]> = (0..n).map(|i| fibonacci_direction(i, n)).collect();
+                // At least 256 samples per lattice cell, so that each cell's area (and so the
+                // mean radiance over it) is measured well even when the map is coarse.
+                let per_cell = (*width * *height) as f64 / f64::from(n);
+                let k = (256.0 / per_cell).sqrt().ceil().max(1.0) as usize;
+                let rows: Vec<Vec<(usize, [f64; 3], f64)>> = (0..*height)
+                    .into_par_iter()
+                    .map(|y| equirect_row(&dirs, (*width, *height), k, y, texels))
+                    .collect();
+                let mut energy = vec![([0.0f64; 3], 0.0f64); n as usize];
+                for (i, e, omega) in rows.into_iter().flatten() {
+                    for c in 0..3 {
+                        energy[i].0[c] += e[c];
+                    }
+                    energy[i].1 += omega;
+                }
+                dirs.iter()
+                    .zip(energy)
+                    .map(|(&d, (e, area))| {
+                        let l = if area > 0.0 {
+                            e.map(|v| (v / area) as f32)
+                        } else {
+                            self.radiance(d)
+                        };
+                        (d, l)
+                    })
+                    .collect()
+            }
         }
     }
 
@@ -197,6 +288,64 @@ mod tests {
         std::fs::write(dir.join("bad.exr"), b"not an exr").unwrap();
         assert!(SkyModel::load_exr(&dir.join("bad.exr"), 1.0).is_err());
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// The z-window search finds the same nearest direction as a full search.
+    #[test]
+    fn nearest_direction_matches_a_full_search() {
+        for n in [16u32, 512, 4096] {
+            let dirs: Vec<[f32; 3]> = (0..n).map(|i| fibonacci_direction(i, n)).collect();
+            for k in 0..2000u32 {
+                let d = fibonacci_direction(k, 2000);
+                let d = [d[1], d[2], d[0]];
+                let dot = |i: usize| dirs[i][0] * d[0] + dirs[i][1] * d[1] + dirs[i][2] * d[2];
+                let full = (0..n as usize).fold(0, |b, i| if dot(i) > dot(b) { i } else { b });
+                assert!(dot(nearest_direction(&dirs, d)) >= dot(full), "n {n} k {k}");
+            }
+        }
+    }
+
+    /// An all-sky probe under a sky of radiance 1 with a one-texel sun 1e5 times brighter gets
+    /// the sky's energy: the lattice radiance times 4pi/n sums to the map's integral within 1%
+    /// (measured 0.01% at 512 directions, 0.8% at 4096; point sampling, printed, misses the sun).
+    #[test]
+    fn lattice_keeps_a_one_texel_sun() {
+        let (w, h) = (256usize, 128usize);
+        let mut texels = vec![[1.0f32; 3]; w * h];
+        texels[40 * w + 77] = [1e5; 3];
+        let sky = SkyModel::Equirect {
+            width: w,
+            height: h,
+            texels: texels.clone(),
+        };
+        let pi = std::f64::consts::PI;
+        let integral: f64 = (0..h)
+            .map(|y| {
+                let (t0, t1) = (pi * y as f64 / h as f64, pi * (y + 1) as f64 / h as f64);
+                let omega = std::f64::consts::TAU / w as f64 * (t0.cos() - t1.cos());
+                (0..w)
+                    .map(|x| f64::from(texels[y * w + x][0]) * omega)
+                    .sum::<f64>()
+            })
+            .sum();
+        for n in [512u32, 4096] {
+            let lattice = sky.lattice(n);
+            let total: f64 = lattice
+                .iter()
+                .map(|(_, l)| f64::from(l[0]) * f64::from(direction_weight(n)))
+                .sum();
+            let err = ((total - integral) / integral).abs();
+            let point: f64 = (0..n)
+                .map(|i| {
+                    let l = sky.radiance(fibonacci_direction(i, n))[0];
+                    f64::from(l) * f64::from(direction_weight(n))
+                })
+                .sum();
+            eprintln!(
+                "n {n}: lattice energy {total}, map {integral}, error {err}; point sampling {point}"
+            );
+            assert!(err < 0.01, "n {n}: {total} vs {integral}");
+        }
     }
 
     #[test]
