@@ -32,6 +32,8 @@ pub fn install() {
                 libc::sigaddset(&mut one, sig);
                 libc::pthread_sigmask(libc::SIG_UNBLOCK, &one, std::ptr::null_mut());
                 libc::raise(sig);
+                // Not reached: the default action ends the process.
+                libc::_exit(128 + sig);
             }
         });
     }

@@ -312,7 +312,7 @@ impl<'a> CpuRelighter<'a> {
                     let l = brick_radiance[brick as usize].at(asset.factors.offset(f as usize));
                     for k in 0..SH_COUNT {
                         for c in 0..3 {
-                            acc[k][c] += f64::from(t[k] * l[c]);
+                            acc[k][c] += f64::from(t[k]) * f64::from(l[c]);
                         }
                     }
                 }

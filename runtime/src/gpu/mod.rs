@@ -352,6 +352,9 @@ pub struct PrtRuntime {
     atomic_gather: Option<Pipeline>,
     use_atomic: bool,
     state: Option<State>,
+    /// The last equirect sky and its lattice radiance (`SkyModel::lattice` averages the map over
+    /// every direction's cell: computed again only when the sky changes, not every update).
+    sky_cache: Option<(SkyModel, Vec<[f32; 4]>)>,
     cursor: u32,
     pending_windows: u32,
 }
@@ -758,12 +761,13 @@ impl PrtRuntime {
             atomic_gather,
             use_atomic: false,
             state: None,
+            sky_cache: None,
             cursor: 0,
             pending_windows: 0,
         })
     }
 
-    fn state_for(&self, lighting: &Lighting) -> Result<State, GpuError> {
+    fn state_for(&mut self, lighting: &Lighting) -> Result<State, GpuError> {
         let lights = &lighting.rig.lights;
         if lights.len() > MAX_LIGHTS {
             return Err(GpuError::TooManyLights {
@@ -777,14 +781,22 @@ impl PrtRuntime {
         let (sky_mode, sky_color, sky_directions) = match &lighting.sky {
             SkyModel::Black => (SKY_BLACK, [0.0; 3], Vec::new()),
             SkyModel::Constant(c) => (SKY_CONSTANT, *c, Vec::new()),
-            sky @ SkyModel::Equirect { .. } => (
-                SKY_DIRECTIONS,
-                [0.0; 3],
-                sky.lattice(self.ray_count)
-                    .into_iter()
-                    .flat_map(|(d, l)| [[d[0], d[1], d[2], 0.0], [l[0], l[1], l[2], 0.0]])
-                    .collect(),
-            ),
+            sky @ SkyModel::Equirect { .. } => {
+                let cached = self.sky_cache.as_ref().filter(|(s, _)| s == sky);
+                let directions = match cached {
+                    Some((_, d)) => d.clone(),
+                    None => {
+                        let d: Vec<[f32; 4]> = sky
+                            .lattice(self.ray_count)
+                            .into_iter()
+                            .flat_map(|(d, l)| [[d[0], d[1], d[2], 0.0], [l[0], l[1], l[2], 0.0]])
+                            .collect();
+                        self.sky_cache = Some((sky.clone(), d.clone()));
+                        d
+                    }
+                };
+                (SKY_DIRECTIONS, [0.0; 3], directions)
+            }
         };
         Ok(State {
             lights,
