@@ -44,14 +44,20 @@ pub fn dominant_axis(n: Vec3) -> u32 {
 
 type Key = (i32, i32, i32, u32);
 
-fn key(h: &Hit, brick_size: f32) -> Key {
-    let c = (h.position / brick_size).floor();
+fn key(h: &Hit, anchor: Vec3, brick_size: f32) -> Key {
+    let c = ((h.position - anchor) / brick_size).floor();
     let flags = dominant_axis(h.normal) | if h.backface { BRICK_BACKFACE } else { 0 };
     (c.x as i32, c.y as i32, c.z as i32, flags)
 }
 
-/// Groups `hits` into bricks (see the module docs).
-pub fn build(hits: &[Hit], cell_size: f32, merge_normal_cos: f32) -> Bricked {
+/// Groups `hits` into bricks (see the module docs). The cell lattice starts at `anchor`: the
+/// bake puts it half a cell below the bounds' minimum corner, so that walls on the bounds'
+/// faces, or a whole number of cells from them, lie in the middle of cells. Anchored at the
+/// world origin, axis-aligned walls at round coordinates lay exactly on cell boundaries, and
+/// float rounding split their hits between two cells at random: more bricks and surfels, and
+/// different ones at every scene scale (Cornell scaled by 10: 6,234 bricks against 5,976, SH
+/// 1.9% of SH0 apart).
+pub fn build(hits: &[Hit], cell_size: f32, merge_normal_cos: f32, anchor: Vec3) -> Bricked {
     if cell_size <= 0.0 {
         return unmerged(hits);
     }
@@ -59,7 +65,7 @@ pub fn build(hits: &[Hit], cell_size: f32, merge_normal_cos: f32) -> Bricked {
     let mut order: Vec<(Key, u32)> = hits
         .par_iter()
         .enumerate()
-        .map(|(i, h)| (key(h, brick_size), i as u32))
+        .map(|(i, h)| (key(h, anchor, brick_size), i as u32))
         .collect();
     order.par_sort_unstable();
     let mut groups: Vec<std::ops::Range<usize>> = Vec::new();
@@ -76,7 +82,7 @@ pub fn build(hits: &[Hit], cell_size: f32, merge_normal_cos: f32) -> Bricked {
         .enumerate()
         .map(|(b, g)| {
             let k = order[g.start].0;
-            let origin = Vec3::new(k.0 as f32, k.1 as f32, k.2 as f32) * brick_size;
+            let origin = anchor + Vec3::new(k.0 as f32, k.1 as f32, k.2 as f32) * brick_size;
             let members = order[g.clone()].iter().map(|&(_, i)| &hits[i as usize]);
             let mut surfels = merge_brick(members, origin, cell_size, merge_normal_cos);
             for s in &mut surfels {
@@ -293,7 +299,7 @@ mod tests {
             hit([0.02, 0.0, 0.02], [0.0, -1.0, 0.0]),
             hit([0.35, 0.0, 0.02], [0.0, 1.0, 0.0]),
         ];
-        let b = build(&hits, 0.1, 0.9);
+        let b = build(&hits, 0.1, 0.9, Vec3::ZERO);
         assert_eq!(b.bricks.len(), 2, "up and down facing bricks");
         assert_eq!(
             b.surfels.len(),
@@ -312,7 +318,7 @@ mod tests {
             hit([0.0; 3], [0.0, 1.0, 0.0]),
             hit([0.0; 3], [0.0, 1.0, 0.0]),
         ];
-        let b = build(&hits, 0.0, 0.9);
+        let b = build(&hits, 0.0, 0.9, Vec3::ZERO);
         assert_eq!(b.bricks.len(), 2);
         assert_eq!(b.hit_brick, vec![0, 1]);
     }

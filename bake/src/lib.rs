@@ -455,7 +455,12 @@ fn bake_in_pool(
     let cell_size = settings
         .cell_size
         .unwrap_or(spacing / settings.cells_per_spacing);
-    let bricked = bricks::build(&hits, cell_size, settings.merge_normal_cos);
+    let bricked = bricks::build(
+        &hits,
+        cell_size,
+        settings.merge_normal_cos,
+        min - Vec3::splat(0.5 * cell_size),
+    );
     let tables: Vec<Vec<FactorRow>> = (0..traced.len())
         .into_par_iter()
         .map(|p| {
