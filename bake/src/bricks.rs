@@ -51,12 +51,13 @@ fn key(h: &Hit, anchor: Vec3, brick_size: f32) -> Key {
 }
 
 /// Groups `hits` into bricks (see the module docs). The cell lattice starts at `anchor`: the
-/// bake puts it half a cell below the bounds' minimum corner, so that walls on the bounds'
-/// faces, or a whole number of cells from them, lie in the middle of cells. Anchored at the
-/// world origin, axis-aligned walls at round coordinates lay exactly on cell boundaries, and
-/// float rounding split their hits between two cells at random: more bricks and surfels, and
-/// different ones at every scene scale (Cornell scaled by 10: 6,234 bricks against 5,976, SH
-/// 1.9% of SH0 apart).
+/// bake puts it half a cell off the world origin, so that walls at round coordinates (whole
+/// numbers of cells from the origin) lie in the middle of cells. Anchored at the origin itself,
+/// such walls lay exactly on cell boundaries, and float rounding split their hits between two
+/// cells at random: more bricks and surfels, and different ones at every scene scale (Cornell
+/// scaled by 10: 6,234 bricks against 5,976, SH 1.9% of SH0 apart; now 7e-6). Anchoring at the
+/// bounds' corner instead measured worse on the two-room fixture (14.9% mean surface error
+/// against 8.7%).
 pub fn build(hits: &[Hit], cell_size: f32, merge_normal_cos: f32, anchor: Vec3) -> Bricked {
     if cell_size <= 0.0 {
         return unmerged(hits);

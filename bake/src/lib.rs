@@ -459,7 +459,8 @@ fn bake_in_pool(
         &hits,
         cell_size,
         settings.merge_normal_cos,
-        min - Vec3::splat(0.5 * cell_size),
+        // Half a cell off the origin: see `bricks::build`.
+        Vec3::splat(-0.5 * cell_size),
     );
     let tables: Vec<Vec<FactorRow>> = (0..traced.len())
         .into_par_iter()

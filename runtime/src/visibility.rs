@@ -93,7 +93,7 @@ pub fn occluded(geo: &Geometry, o: Vec3, d: Vec3, tmax: f32) -> bool {
 /// absolute: a 2 mm room and a 20 km one get the same shadows (tests/tests/scale.rs). The
 /// magnitude term was 1e-4 before, a 10 m offset at 1e5 m from the origin that skipped every
 /// nearby occluder: the Cornell room moved 1 km, 10 km and 100 km away baked and relit 9%, 85%
-/// and 129% off (of SH0), against 0.5%, 1.7% and 10.8% now (`tests/tests/scale.rs`; 3e-7
+/// and 129% off (of SH0), against 0.5%, 2.4% and 9.5% now (`tests/tests/scale.rs`; 3e-7
 /// measured better still, but leaves 2.5 ulps).
 /// Shadow-ray offset per unit of coordinate magnitude ([`ray_offset`]).
 pub const RAY_OFFSET_MAGNITUDE: f32 = 1e-6;

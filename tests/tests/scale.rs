@@ -64,8 +64,8 @@ fn worst(a: &[ShRgb], b: &[ShRgb]) -> f32 {
 /// of two, every float operation of the bake and relight scales exactly, so the SH are
 /// identical (any absolute length, such as obvhs's box epsilon or a fixed ray offset, breaks
 /// that: before, 122% at 1/1000 and 58% at 1/100). At other scales only rounding differs:
-/// within 1e-3 of SH0 (measured 2e-6 to 9e-6), since the surfel cell lattice starts half a
-/// cell off the bounds (walls no longer lie on cell boundaries, where rounding split their hits
+/// within 1e-3 of SH0 (measured 3e-6 to 4e-5), since the surfel cell lattice starts half a
+/// cell off the origin (walls at round coordinates no longer lie on cell boundaries, where rounding split their hits
 /// differently at every scale: 1.6-2.1% before).
 #[test]
 fn relit_sh_do_not_depend_on_the_scene_scale() {
@@ -119,8 +119,8 @@ fn translated(dir: &std::path::Path, t: f32) -> (std::path::PathBuf, Lighting) {
 }
 
 /// Far from the origin f32 positions lose precision (at 1e5 m floats are 8 mm apart): the relit
-/// SH of the Cornell room moved by (t, 0, t) against at the origin. Measured 0.7% of SH0 at 1 km,
-/// 3.5% at 10 km, 12.8% at 100 km (with shadow-ray offsets of 1e-4 of the coordinates' magnitude
+/// SH of the Cornell room moved by (t, 0, t) against at the origin. Measured 0.5% of SH0 at 1 km,
+/// 2.4% at 10 km, 9.5% at 100 km (with shadow-ray offsets of 1e-4 of the coordinates' magnitude
 /// before: 9%, 85%, 129%). The rest is f32 world coordinates (no local origin).
 #[test]
 fn relit_sh_far_from_the_origin() {
