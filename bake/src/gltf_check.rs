@@ -354,17 +354,7 @@ fn check_meshes(
                 }
             }
             let triangles = valid(&prim.mode) == Some(json::mesh::Mode::Triangles);
-            let vertices = prim
-                .indices
-                .or_else(|| {
-                    prim.attributes
-                        .get(&json::validation::Checked::Valid(
-                            json::mesh::Semantic::Positions,
-                        ))
-                        .copied()
-                })
-                .map(|a| root.accessors[a.value()].count.0);
-            if let Some(n) = vertices.filter(|n| triangles && n % 3 != 0) {
+            if let Some(n) = vertex_count(root, prim).filter(|n| triangles && n % 3 != 0) {
                 warnings.push(format!(
                     "mesh {m} primitive {p}: a triangle list of {n} {}, not a multiple of 3: the last {} ignored",
                     if prim.indices.is_some() { "indices" } else { "vertices" },
@@ -376,21 +366,26 @@ fn check_meshes(
     Ok(())
 }
 
+/// Vertices a primitive's mode walks: its index count, or its POSITION count without indices
+/// (references already checked by [`check_meshes`]).
+fn vertex_count(root: &json::Root, prim: &json::mesh::Primitive) -> Option<u64> {
+    prim.indices
+        .or_else(|| {
+            prim.attributes
+                .get(&json::validation::Checked::Valid(
+                    json::mesh::Semantic::Positions,
+                ))
+                .copied()
+        })
+        .map(|a| root.accessors[a.value()].count.0)
+}
+
 /// Triangles each mesh adds (before degenerate ones are skipped).
 fn mesh_triangles(root: &json::Root, mesh: &json::Mesh) -> u64 {
     mesh.primitives
         .iter()
         .map(|p| {
-            let n = p
-                .indices
-                .or_else(|| {
-                    p.attributes
-                        .get(&json::validation::Checked::Valid(
-                            json::mesh::Semantic::Positions,
-                        ))
-                        .copied()
-                })
-                .map_or(0, |a| root.accessors[a.value()].count.0);
+            let n = vertex_count(root, p).unwrap_or(0);
             match valid(&p.mode) {
                 Some(json::mesh::Mode::Triangles) => n / 3,
                 Some(json::mesh::Mode::TriangleStrip | json::mesh::Mode::TriangleFan) => {

@@ -342,8 +342,8 @@ fn bake_in_pool(
             error,
         })?;
     let source_hash = xxhash_rust::xxh3::xxh3_64(&source_bytes);
+    let scene = scene::load_bytes(scene_path, &source_bytes)?;
     drop(source_bytes);
-    let scene = scene::load(scene_path)?;
     report.warnings.extend(scene.warnings.iter().cloned());
     let winding = diagnostics::winding(&scene.triangles);
     let winding_hint = winding.inconsistent_fraction() > WINDING_WARNING && !settings.double_sided;

@@ -107,7 +107,17 @@ struct Loader<'a> {
 /// crate on input this loader does not check ends as a [`BakeError::Gltf`] naming the file, not
 /// as a crash (the panic message is kept, the default report of it suppressed meanwhile).
 pub fn load(path: &Path) -> Result<Scene, BakeError> {
-    crate::catch_quietly(|| load_checked(path)).unwrap_or_else(|message| {
+    let bytes = prt_format::read_regular_file(path).map_err(|error| BakeError::Io {
+        path: path.to_owned(),
+        error,
+    })?;
+    load_bytes(path, &bytes)
+}
+
+/// [`load`] of the file's bytes, already read (`path` resolves external buffers and images and
+/// names the file in errors): callers that also hash the file read it once.
+pub fn load_bytes(path: &Path, bytes: &[u8]) -> Result<Scene, BakeError> {
+    crate::catch_quietly(|| load_checked(path, bytes)).unwrap_or_else(|message| {
         Err(BakeError::Gltf {
             path: path.to_owned(),
             message: format!("the glTF reader failed on this file ({message})"),
@@ -115,11 +125,7 @@ pub fn load(path: &Path) -> Result<Scene, BakeError> {
     })
 }
 
-fn load_checked(path: &Path) -> Result<Scene, BakeError> {
-    let bytes = prt_format::read_regular_file(path).map_err(|error| BakeError::Io {
-        path: path.to_owned(),
-        error,
-    })?;
+fn load_checked(path: &Path, bytes: &[u8]) -> Result<Scene, BakeError> {
     let gltf_err = |message: String| BakeError::Gltf {
         path: path.to_owned(),
         message,
@@ -127,7 +133,7 @@ fn load_checked(path: &Path) -> Result<Scene, BakeError> {
     // Parsed without the crate's validation first: it indexes some references unchecked (an
     // attribute's accessor), so prt's own checks run before it.
     let gltf =
-        gltf::Gltf::from_slice_without_validation(&bytes).map_err(|e| gltf_err(e.to_string()))?;
+        gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| gltf_err(e.to_string()))?;
     let base = path.parent().unwrap_or(Path::new("."));
     let json = gltf.document.as_json();
     let declared = json

@@ -219,17 +219,14 @@ fn measure(
             .map(|p| sampler.sample(p.position, p.normal))
             .collect();
         let sample_s = t.elapsed().as_secs_f64();
+        let counts = prt_format::Summary::of(&asset, 0);
         let row = Row {
             name: case.name,
             lookup,
             spacing,
             probes: asset.probes.len(),
-            valid: asset
-                .probes
-                .iter()
-                .filter(|p| p.is_valid() && !p.is_dilated())
-                .count(),
-            dilated: asset.probes.iter().filter(|p| p.is_dilated()).count(),
+            valid: counts.valid_probe_count,
+            dilated: counts.dilated_probe_count,
             score: score(&reference.points, &samples),
             bake_s,
             relight_s,

@@ -74,19 +74,13 @@ pub struct RenderReport {
     pub render_seconds: f64,
 }
 
-/// Fails before any GPU work when `path` cannot be written: its directory must exist.
+/// Fails before any GPU work when `path` cannot be written (`prt_format::io::check_replaceable`:
+/// its directory must exist, and it must not be a device or a directory).
 fn check_output(path: &Path) -> Result<(), RenderError> {
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    if !dir.is_dir() {
-        return Err(RenderError::Write {
-            path: path.to_owned(),
-            message: format!("directory {} does not exist", dir.display()),
-        });
-    }
-    Ok(())
+    prt_format::io::check_replaceable(path).map_err(|e| RenderError::Write {
+        path: path.to_owned(),
+        message: e.to_string(),
+    })
 }
 
 /// Fails unless `scene_bytes` are the bytes `asset` was baked from.
@@ -123,7 +117,8 @@ pub fn run(
     for out in std::iter::once(&job.png).chain(&job.exr) {
         check_output(out)?;
     }
-    let scene = prt_bake::scene::load(&job.scene).map_err(|e| RenderError::Scene(e.to_string()))?;
+    let scene = prt_bake::scene::load_bytes(&job.scene, &scene_bytes)
+        .map_err(|e| RenderError::Scene(e.to_string()))?;
     let mut camera = match (&job.camera, scene.cameras.first()) {
         (Some(c), _) => *c,
         (None, Some(c)) => Camera::from_gltf(c),

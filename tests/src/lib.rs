@@ -44,6 +44,19 @@ pub fn bake_err(path: &Path, settings: &BakeSettings) -> prt_bake::BakeError {
     }
 }
 
+/// `lighting` with every light's intensity and a constant sky times `k` (an image sky is left
+/// as it is).
+pub fn brighter(lighting: &prt_runtime::Lighting, k: f32) -> prt_runtime::Lighting {
+    let mut l = lighting.clone();
+    for light in &mut l.rig.lights {
+        light.intensity *= k;
+    }
+    if let prt_runtime::sky::SkyModel::Constant(c) = &mut l.sky {
+        *c = c.map(|x| x * k);
+    }
+    l
+}
+
 /// Bounds that hold exactly one probe, at `p` (a zero-extent grid has one probe per axis,
 /// placed at the centre of the bounds).
 pub fn point_bounds(p: [f32; 3]) -> Option<[f32; 6]> {

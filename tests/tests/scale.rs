@@ -6,21 +6,34 @@ use prt_bake::BakeSettings;
 use prt_format::sh::ShRgb;
 use prt_format::LightKind;
 use prt_runtime::{load_rig, CpuRelighter, Lighting};
-use prt_tests::{bake_ok, fixture, ScratchDir};
+use prt_tests::{bake_ok, brighter, fixture, ScratchDir};
 use serde_json::Value;
+
+/// Puts the default scene of `doc` under one new root `node` (a transform).
+fn under_root(doc: &mut Value, mut node: Value) {
+    let scene = doc["scene"].as_u64().unwrap_or(0) as usize;
+    node["children"] = doc["scenes"][scene]["nodes"].clone();
+    let nodes = doc["nodes"].as_array_mut().unwrap();
+    nodes.push(node);
+    let root = nodes.len() - 1;
+    doc["scenes"][scene]["nodes"] = serde_json::json!([root]);
+}
+
+/// `fixtures/cornell/cornell.gltf` under the root `node`, written to `dir/name`.
+fn cornell_under(dir: &std::path::Path, name: &str, node: Value) -> std::path::PathBuf {
+    let mut doc: Value =
+        serde_json::from_slice(&std::fs::read(fixture("cornell/cornell.gltf")).unwrap()).unwrap();
+    under_root(&mut doc, node);
+    let path = dir.join(name);
+    std::fs::write(&path, serde_json::to_vec(&doc).unwrap()).unwrap();
+    path
+}
 
 /// The Cornell fixture under one more root node scaling it by `s`, and its rig scaled to match.
 fn scaled(dir: &std::path::Path, s: f32) -> (std::path::PathBuf, Lighting) {
-    let mut doc: Value =
-        serde_json::from_slice(&std::fs::read(fixture("cornell/cornell.gltf")).unwrap()).unwrap();
-    let scene = doc["scene"].as_u64().unwrap_or(0) as usize;
-    let roots = doc["scenes"][scene]["nodes"].clone();
-    let nodes = doc["nodes"].as_array_mut().unwrap();
-    nodes.push(serde_json::json!({"name": "scale", "scale": [s, s, s], "children": roots}));
-    let root = nodes.len() - 1;
-    doc["scenes"][scene]["nodes"] = serde_json::json!([root]);
-    let path = dir.join(format!("cornell_{s}.gltf"));
-    std::fs::write(&path, serde_json::to_vec(&doc).unwrap()).unwrap();
+    let path = cornell_under(dir, &format!("cornell_{s}.gltf"), {
+        serde_json::json!({"name": "scale", "scale": [s, s, s]})
+    });
     let mut lighting = load_rig(&fixture("cornell/rig.json")).unwrap();
     for l in &mut lighting.rig.lights {
         l.position = l.position.map(|c| c * s);
@@ -100,16 +113,9 @@ fn relit_sh_do_not_depend_on_the_scene_scale() {
 
 /// The Cornell fixture under a root node translating it by `t`, and its rig moved to match.
 fn translated(dir: &std::path::Path, t: f32) -> (std::path::PathBuf, Lighting) {
-    let mut doc: Value =
-        serde_json::from_slice(&std::fs::read(fixture("cornell/cornell.gltf")).unwrap()).unwrap();
-    let scene = doc["scene"].as_u64().unwrap_or(0) as usize;
-    let roots = doc["scenes"][scene]["nodes"].clone();
-    let nodes = doc["nodes"].as_array_mut().unwrap();
-    nodes.push(serde_json::json!({"name": "move", "translation": [t, 0.0, t], "children": roots}));
-    let root = nodes.len() - 1;
-    doc["scenes"][scene]["nodes"] = serde_json::json!([root]);
-    let path = dir.join(format!("cornell_at_{t}.gltf"));
-    std::fs::write(&path, serde_json::to_vec(&doc).unwrap()).unwrap();
+    let path = cornell_under(dir, &format!("cornell_at_{t}.gltf"), {
+        serde_json::json!({"name": "move", "translation": [t, 0.0, t]})
+    });
     let mut lighting = load_rig(&fixture("cornell/rig.json")).unwrap();
     for l in &mut lighting.rig.lights {
         l.position[0] += t;
@@ -165,14 +171,7 @@ fn relit_sh_are_linear_in_brightness() {
     let mut report = Vec::new();
     for e in -6..=7 {
         let k = 10f32.powi(e);
-        let mut l = base.clone();
-        for light in &mut l.rig.lights {
-            light.intensity *= k;
-        }
-        if let prt_runtime::sky::SkyModel::Constant(c) = &mut l.sky {
-            *c = c.map(|x| x * k);
-        }
-        let sh = relighter.relight(&l, 1).unwrap().sh;
+        let sh = relighter.relight(&brighter(&base, k), 1).unwrap().sh;
         let unscaled: Vec<ShRgb> = sh.iter().map(|c| c.map(|v| v.map(|x| x / k))).collect();
         let w = worst(&unscaled, &reference);
         assert!(w.is_finite() && w < 1e-5, "x{k:e}: {w}");
@@ -187,12 +186,10 @@ fn scaled_glb(src: &std::path::Path, dir: &std::path::Path, s: f32) -> std::path
     let json_len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
     let mut doc: Value = serde_json::from_slice(&bytes[20..20 + json_len]).unwrap();
     let rest = &bytes[20 + json_len..];
-    let scene = doc["scene"].as_u64().unwrap_or(0) as usize;
-    let roots = doc["scenes"][scene]["nodes"].clone();
-    let nodes = doc["nodes"].as_array_mut().unwrap();
-    nodes.push(serde_json::json!({"name": "scale", "scale": [s, s, s], "children": roots}));
-    let root = nodes.len() - 1;
-    doc["scenes"][scene]["nodes"] = serde_json::json!([root]);
+    under_root(
+        &mut doc,
+        serde_json::json!({"name": "scale", "scale": [s, s, s]}),
+    );
     let mut json = serde_json::to_vec(&doc).unwrap();
     while !json.len().is_multiple_of(4) {
         json.push(b' ');

@@ -6,7 +6,7 @@
 use prt_bake::BakeSettings;
 use prt_runtime::gpu::{relight_once, RuntimeSettings};
 use prt_runtime::{load_rig, CpuRelighter};
-use prt_tests::{bake_ok, fixture, point_bounds};
+use prt_tests::{bake_ok, brighter, fixture, point_bounds};
 
 #[test]
 fn gpu_gather_sums_match_the_f64_reference_up_to_100k_factors() {
@@ -59,13 +59,7 @@ fn f16_volume_clamping_is_counted() {
         },
     );
     let base = load_rig(&fixture("cornell/rig.json")).unwrap();
-    let mut bright = base.clone();
-    for l in &mut bright.rig.lights {
-        l.intensity *= 1e6;
-    }
-    if let prt_runtime::sky::SkyModel::Constant(c) = &mut bright.sky {
-        *c = c.map(|x| x * 1e6);
-    }
+    let bright = brighter(&base, 1e6);
     let (sh, counters, _) = relight_once(&asset, &base, RuntimeSettings::default()).unwrap();
     assert_eq!(counters.probes_clamped, 0);
     let (sh_bright, counters, _) =
