@@ -412,12 +412,13 @@ fn bake_in_pool(
                 (index as u32 / nx) % ny,
                 index as u32 / (nx * ny),
             );
-            let outer = [(i, nx), (j, ny), (k, nz)]
-                .iter()
-                .any(|&(c, n)| n > 1 && (c == 0 || c == n - 1));
+            let ijk = [(i, nx), (j, ny), (k, nz)];
+            let outer = ijk.iter().any(|&(c, n)| n > 1 && (c == 0 || c == n - 1));
+            let inwards =
+                Vec3::from_array(ijk.map(|(c, n)| if 2 * c > n - 1 { -1.0 } else { 1.0 }));
             let p = if settings.surface_offset {
                 let centre = outer.then_some((min + max) * 0.5);
-                offset::surface_offset(&tracer, grid_p, spacing, centre)
+                offset::surface_offset(&tracer, grid_p, spacing, inwards, centre)
             } else {
                 grid_p
             };

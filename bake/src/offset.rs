@@ -15,6 +15,11 @@ pub const NEAR_SURFACE: f32 = 0.02;
 /// walls, normal bias 0.05, DDGI's angular facing term): mean error 4.6% at 0.1 spacings, 3.8%
 /// at 0.05, 3.8% at 0.03.
 pub const SURFACE_OFFSET: f32 = 0.05;
+/// Spacings that the on-surface search starts off the grid point, towards the bounds' centre
+/// ([`surface_offset`]): well above float rounding at any scale (1e-3 of a spacing is about
+/// 2^-10 of it, so the grid point's coordinates would need 10 bits of mantissa lost), well below
+/// [`NEAR_SURFACE`].
+pub const NUDGE: f32 = 1e-3;
 
 /// The 26 unit directions to the neighbours of a grid cell, in a fixed order.
 fn near_directions() -> impl Iterator<Item = Vec3> {
@@ -36,9 +41,24 @@ fn near_directions() -> impl Iterator<Item = Vec3> {
 /// building's inside must not sample; Sponza at 1.2 m: 16.3% mean surface error against 19.4% with the side
 /// the probe happened to be on), else the side it is on, else the front. Repeated up to three
 /// times, for corners. Deterministic: fixed directions and order.
-pub fn surface_offset(tracer: &trace::Tracer, p: Vec3, spacing: f32, centre: Option<Vec3>) -> Vec3 {
+///
+/// The search starts [`NUDGE`] spacings along `inwards` (per axis +1 or -1: towards the grid's
+/// middle, by grid index so that rounding cannot flip it): a probe exactly on a
+/// surface's edge (the outer layers lie on the bounds' faces, which the scene's outermost
+/// edges touch) otherwise sits on a knife-edge where rounding decides whether the short rays
+/// hit, and that rounding changes with the scene's scale (Sponza's floor edge: moved at x1, not
+/// at x10, 585% of SH0 apart; tests/tests/scale.rs). A probe that does not move keeps its
+/// position exactly.
+pub fn surface_offset(
+    tracer: &trace::Tracer,
+    p: Vec3,
+    spacing: f32,
+    inwards: Vec3,
+    centre: Option<Vec3>,
+) -> Vec3 {
     let eps = NEAR_SURFACE * spacing;
-    let mut at = p;
+    let start = p + inwards * (NUDGE * spacing);
+    let mut at = start;
     'moves: for _ in 0..3 {
         for d in near_directions() {
             let o = at - d * eps;
@@ -75,7 +95,11 @@ pub fn surface_offset(tracer: &trace::Tracer, p: Vec3, spacing: f32, centre: Opt
         }
         break;
     }
-    at
+    if at == start {
+        p
+    } else {
+        at
+    }
 }
 
 /// Virtual offset of a probe inside geometry: the nearest back face its rays hit is the wall it
