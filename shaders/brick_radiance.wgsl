@@ -1,6 +1,7 @@
 // Stage 3, one thread per dirty brick: the brick's linear radiance model from its surfels, the
 // weighted mean and the gradient sum_s g_s L_s (twin of CpuRelighter::brick_radiance). Four
-// vec4 per brick: mean, then the gradient of red, green and blue.
+// vec4 per brick: mean, then the gradient of red, green and blue. A surfel's radiance is its
+// direct radiance (stage 2) plus its bounce radiance (stage 2b; zero without bounces).
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> bricks: array<Brick>;
@@ -8,6 +9,7 @@
 @group(0) @binding(3) var<storage, read> brick_dirty: array<u32>;
 @group(0) @binding(4) var<storage, read> surfel_radiance: array<vec4<f32>>;
 @group(0) @binding(5) var<storage, read_write> brick_radiance: array<vec4<f32>>;
+@group(0) @binding(6) var<storage, read> surfel_bounce: array<vec4<f32>>;
 
 @compute @workgroup_size(WORKGROUP)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
@@ -22,7 +24,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     var gb = vec3<f32>(0.0);
     var weight = 0.0;
     for (var s = brick.first_surfel; s < brick.first_surfel + brick.surfel_count; s = s + 1u) {
-        let l = surfel_radiance[s].xyz;
+        let l = surfel_radiance[s].xyz + surfel_bounce[s].xyz;
         let surfel = surfels[s];
         mean = mean + surfel.weight * l;
         gr = gr + surfel.gradient * l.x;

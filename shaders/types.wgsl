@@ -118,7 +118,8 @@ struct Params {
     all_bricks_dirty: u32,
     // The scene's length scale for shadow-ray offsets (ray_offset): the probe spacing.
     ray_scale: f32,
-    pad1: u32,
+    // Scales the fed-back bounce light (RuntimeSettings::bounces): 1 for fixed bounce counts.
+    bounce_damping: f32,
 }
 
 const PI: f32 = 3.14159265358979;

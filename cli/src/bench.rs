@@ -10,7 +10,7 @@ use glam::Vec3;
 use prt_bake::{BakeSettings, NoProgress};
 use prt_format::{Asset, Factors, TransferPrecision};
 use prt_runtime::accuracy::{compare, ErrorStats};
-use prt_runtime::gpu::{headless_device, wgpu, PrtRuntime, RuntimeSettings};
+use prt_runtime::gpu::{headless_device, wgpu, Bounces, PrtRuntime, RuntimeSettings};
 use prt_runtime::{CpuRelighter, Lighting};
 use rayon::prelude::*;
 
@@ -365,7 +365,8 @@ fn alternate<'a>(even: &'a Lighting, odd: &'a Lighting) -> impl Fn(u32) -> &'a L
 
 /// GPU runtime costs, all measured in one run on one adapter: full update per probe at several
 /// probe counts, gather against integer atomic accumulation, the update against the prior art's
-/// scheme (every probe relights its own unmerged surfels), and an update when nothing changed.
+/// scheme (every probe relights its own unmerged surfels), an update when nothing changed, and a
+/// multi-bounce update (the volume fed back into every surfel).
 pub fn gpu(scene: &Path, a: &Lighting, spacings: &[f32], rays: u32, cell: f32) -> Result<String> {
     let (device, queue, info) = headless_device()?;
     let baselines = RuntimeSettings {
@@ -391,7 +392,7 @@ pub fn gpu(scene: &Path, a: &Lighting, spacings: &[f32], rays: u32, cell: f32) -
         device.features().contains(wgpu::Features::SUBGROUP),
         scene.display()
     );
-    md.push_str("| probes | factors/probe | full update (lights moved) | per probe | gather only (sky changed) | integer-atomic gather | gather speed-up | nothing changed | prior art: own surfels per probe | speed-up vs prior art |\n|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+    md.push_str("| probes | factors/probe | full update (lights moved) | per probe | gather only (sky changed) | integer-atomic gather | gather speed-up | nothing changed | bounce update (feedback) | bounce / full | prior art: own surfels per probe | speed-up vs prior art |\n|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
     for &spacing in spacings {
         let settings = BakeSettings {
             rays,
@@ -423,6 +424,17 @@ pub fn gpu(scene: &Path, a: &Lighting, spacings: &[f32], rays: u32, cell: f32) -
         runtime.use_atomic_gather(false);
         let idle = time_updates(&device, &queue, &mut runtime, iterations, |_| &sky2)?;
         drop(runtime);
+        // Endless feedback with nothing changed: every update samples the volume at every
+        // surfel, rebuilds every brick and gathers every probe (one more bounce each).
+        let feedback = RuntimeSettings {
+            bounces: Bounces::Feedback { damping: 1.0 },
+            ..RuntimeSettings::default()
+        };
+        let mut runtime = PrtRuntime::new(&device, &queue, &asset, feedback)?;
+        // The first update lights; the second is the first to run the bounce stage.
+        time_updates(&device, &queue, &mut runtime, 2, |_| a)?;
+        let bounce = time_updates(&device, &queue, &mut runtime, iterations, |_| a)?;
+        drop(runtime);
         let prior = if probes <= 2_000 {
             let unmerged = BakeSettings {
                 cell_size: Some(0.0),
@@ -443,7 +455,7 @@ pub fn gpu(scene: &Path, a: &Lighting, spacings: &[f32], rays: u32, cell: f32) -
         };
         writeln!(
             md,
-            "| {probes} | {:.0} | {:.1} ms | {:.2} µs | {:.1} ms | {:.1} ms | {:.2}x | {:.3} ms | {} | {} |",
+            "| {probes} | {:.0} | {:.1} ms | {:.2} µs | {:.1} ms | {:.1} ms | {:.2}x | {:.3} ms | {:.1} ms | {:.2}x | {} | {} |",
             asset.factors.len() as f64 / probes as f64,
             full * 1e3,
             full * 1e6 / probes as f64,
@@ -451,6 +463,8 @@ pub fn gpu(scene: &Path, a: &Lighting, spacings: &[f32], rays: u32, cell: f32) -
             atomic * 1e3,
             atomic / gather,
             idle * 1e3,
+            bounce * 1e3,
+            bounce / full,
             prior.map_or("not run".into(), |p| format!("{:.1} ms", p * 1e3)),
             prior.map_or("-".into(), |p| format!("{:.1}x", p / full)),
         )?;

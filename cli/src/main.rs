@@ -201,7 +201,8 @@ enum Command {
         lights: Option<PathBuf>,
         #[arg(long, value_enum, default_value = "cpu")]
         backend: Backend,
-        /// Light bounces (1 = direct light at surfels only: the one-bounce contract).
+        /// Light bounces (1 = direct light at surfels only: the one-bounce contract; more feed
+        /// the volume back into the surfels, sampled as the engine samples it).
         #[arg(long, default_value_t = 1)]
         bounces: u32,
         /// Output JSON, written atomically.
@@ -407,14 +408,13 @@ fn run(cli: Cli) -> Result<()> {
                     )
                 }
                 Backend::Gpu => {
-                    anyhow::ensure!(
-                        bounces == 1,
-                        "the gpu backend computes one bounce; use --backend cpu for --bounces {bounces}"
-                    );
                     let (sh, counters, info) = prt_runtime::gpu::relight_once(
                         &loaded,
                         &lighting,
-                        prt_runtime::gpu::RuntimeSettings::default(),
+                        prt_runtime::gpu::RuntimeSettings {
+                            bounces: prt_runtime::gpu::Bounces::Fixed(bounces),
+                            ..prt_runtime::gpu::RuntimeSettings::default()
+                        },
                     )?;
                     eprintln!("adapter: {} ({:?})", info.name, info.backend);
                     println!(

@@ -73,7 +73,8 @@ pub struct RenderArgs {
     /// Direct light without shadow rays (to measure their cost).
     #[arg(long)]
     no_shadows: bool,
-    /// Light bounces of the GI (the GPU runtime computes 1).
+    /// Light bounces of the GI (1: direct light at surfels only; each more feeds the volume
+    /// back into the surfels once).
     #[arg(long, default_value_t = 1)]
     bounces: u32,
     /// Move indirect lookups this many probe spacings along the surface normal [default: the
@@ -128,16 +129,11 @@ pub fn parse_size(s: &str) -> Result<(u32, u32), String> {
 }
 
 pub fn run(args: RenderArgs) -> Result<()> {
-    if args.bounces != 1 {
-        bail!(
-            "--bounces {}: the GPU runtime that lights `prt render` computes one bounce (use `prt relight --backend cpu --bounces N` for more)",
-            args.bounces
-        );
-    }
     let camera = camera_of(args.eye, args.target, args.fov)?;
     let runtime = RuntimeSettings {
         visibility: !args.no_visibility,
         normal_bias: crate::normal_bias(args.normal_bias)?,
+        bounces: prt_runtime::gpu::Bounces::Fixed(args.bounces),
         ..RuntimeSettings::default()
     };
     let job = RenderJob {

@@ -94,9 +94,7 @@ fn sample_gpu(
     let (device, queue, info) = prt_runtime::gpu::headless_device()?;
     eprintln!("adapter: {} ({:?})", info.name, info.backend);
     let mut runtime = PrtRuntime::new(&device, &queue, asset, settings)?;
-    let mut encoder = device.create_command_encoder(&Default::default());
-    runtime.update(&mut encoder, lighting, None)?;
-    queue.submit([encoder.finish()]);
+    runtime.settle(lighting)?;
     Ok(prt_runtime::gpu::sample_points(
         &device, &queue, &runtime, points,
     )?)

@@ -154,9 +154,7 @@ pub fn run(
     let start = Instant::now();
     let runtime = if job.output.needs_gi() {
         let mut rt = PrtRuntime::new(&device, &queue, asset, job.runtime)?;
-        let mut encoder = device.create_command_encoder(&Default::default());
-        rt.update(&mut encoder, lighting, None)?;
-        queue.submit([encoder.finish()]);
+        rt.settle(lighting)?;
         rt.wait()?;
         Some(rt)
     } else {

@@ -9,8 +9,9 @@
 //! 4. **Gather**: probe SH9 = sum over its factors of transfer x brick radiance, plus the sky
 //!    term. Invalid probes are skipped (zero, flagged invalid).
 //! 5. **Bounces** (optional, `bounces > 1`): surfels also receive the irradiance of the probe
-//!    volume from the previous iteration, sampled at the surfel with its normal (trilinear over
-//!    valid probes), and steps 2-4 repeat. `bounces = 1` is the one-bounce contract of
+//!    volume from the previous iteration, sampled at the surfel with its normal through the
+//!    engine's lookup (`sample_irradiance`: normal bias, validity and visibility weights), and
+//!    steps 2-4 repeat. `bounces = 1` is the one-bounce contract of
 //!    conventions.md section 5, exactly when the bake did not merge surfels.
 
 use glam::Vec3;
@@ -144,8 +145,22 @@ impl<'a> CpuRelighter<'a> {
         })
     }
 
-    /// Relights with `lighting`; `bounces` >= 1.
+    /// Relights with `lighting`; `bounces` >= 1. Bounces beyond the first sample the volume as
+    /// the GPU runtime does by default ([`crate::gpu::RuntimeSettings::default`]).
     pub fn relight(&self, lighting: &Lighting, bounces: u32) -> Result<Relit, RelightError> {
+        self.relight_with(lighting, bounces, &crate::gpu::RuntimeSettings::default())
+    }
+
+    /// [`CpuRelighter::relight`], with bounces beyond the first sampling the volume as the GPU
+    /// runtime does with `lookup` (its normal bias and visibility: the engine's
+    /// `sample_irradiance`, twin [`VolumeSampler::for_asset`]). Its `bounces` is not read: the
+    /// count is `bounces`.
+    pub fn relight_with(
+        &self,
+        lighting: &Lighting,
+        bounces: u32,
+        lookup: &crate::gpu::RuntimeSettings,
+    ) -> Result<Relit, RelightError> {
         if bounces == 0 || bounces > MAX_BOUNCES {
             return Err(RelightError::Bounces(bounces));
         }
@@ -167,10 +182,8 @@ impl<'a> CpuRelighter<'a> {
             let radiance = if bounce == 0 {
                 self.brick_radiance(&direct)
             } else {
-                // The previous bounce's volume, trilinear over valid probes at the surfel itself
-                // (the engine-side lookup without visibility or normal offset).
-                let g = &self.asset.header.grid;
-                let volume = VolumeSampler::new(g, &self.asset.probes, &sh, 0.0);
+                // The previous bounce's volume at the surfel, through the engine's lookup.
+                let volume = VolumeSampler::for_asset(self.asset, &sh, lookup);
                 let irradiance: Vec<[f32; 3]> = self
                     .asset
                     .surfels

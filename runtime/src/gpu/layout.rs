@@ -137,7 +137,9 @@ pub struct Params {
     pub all_bricks_dirty: u32,
     /// The scene's length scale for shadow-ray offsets (`visibility::ray_offset`): the spacing.
     pub ray_scale: f32,
-    pub _pad: u32,
+    /// Factor on the fed-back bounce light (`shaders/bounce_surfels.wgsl`): 1 for
+    /// [`super::Bounces::Fixed`], the damping of [`super::Bounces::Feedback`].
+    pub bounce_damping: f32,
 }
 const _: () = assert!(std::mem::size_of::<Params>() == 96);
 

@@ -9,7 +9,11 @@
 //! 2. **relight_surfels** (per surfel of a dirty brick): direct irradiance with visibility from
 //!    shadow rays through the asset's BVH; visibility bits are cached per (surfel, light) and
 //!    re-traced only for lights that moved.
-//! 3. **brick_radiance** (per dirty brick): mean and gradient of the brick's radiance.
+//! 2b. **bounce_surfels** (per surfel; multi-bounce only, at the start of a cycle): the volume's
+//!    irradiance at the surfel through the engine's `sample_irradiance`, as bounce radiance;
+//!    every front-face brick becomes dirty ([`Bounces`]).
+//! 3. **brick_radiance** (per dirty brick): mean and gradient of the brick's radiance, direct
+//!    plus bounce.
 //! 4. **mark_probes** (per probe): probes with a factor on a dirty brick (or all, when the sky
 //!    changed) are flagged for gathering.
 //! 5. **gather** (one workgroup per probe of this update's window): the probe's factors and sky
@@ -19,7 +23,7 @@
 //! When nothing changed and no round-robin cycle is pending, `update` records nothing. With a
 //! budget of B probes, the gather visits B probes per update round robin; a probe's texels
 //! always hold one complete gather, and a cycle of `ceil(P / B)` updates converges exactly to the
-//! full update. Only the one-bounce contract runs on the GPU (bounces are CPU-only for now).
+//! full update. With [`Bounces`] beyond one, each such cycle adds one bounce.
 
 pub use sample::sample_points;
 pub use wgpu;
@@ -58,6 +62,8 @@ pub enum GpuError {
     BvhTooDeep { needed: usize, max: usize },
     #[error("reading back from the GPU failed: {0}")]
     Readback(String),
+    #[error("bounces must be Fixed(1..={max}) or Feedback with damping in (0, 1], got {0:?}", max = crate::relight::MAX_BOUNCES)]
+    Bounces(Bounces),
 }
 
 /// Texel format of the SH volume.
@@ -85,6 +91,34 @@ impl VolumeFormat {
             VolumeFormat::F16 => "rgba16float",
             VolumeFormat::F32 => "rgba32float",
         }
+    }
+}
+
+/// Light bounces of the GPU runtime. Bounces beyond the first feed the volume back into the
+/// surfels, as the prior art does (DDGI, Majercik et al. 2019; Lumen's radiance cache): each
+/// pass of the gather over the probes (a *cycle*: one update, or `probes / budget` amortised
+/// updates) starts by sampling the volume at every surfel with the engine's own lookup
+/// ([`RuntimeSettings::normal_bias`], [`RuntimeSettings::visibility`]) and adding albedo / pi
+/// times that irradiance to the surfel's radiance.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Bounces {
+    /// Exactly this many bounces (1: direct light at surfels only, the one-bounce contract).
+    /// After a change of lights or sky the bounce light starts again from zero and one cycle
+    /// adds one bounce: `n` cycles after the change the volume equals
+    /// [`crate::CpuRelighter::relight_with`] with `n` bounces, and the runtime goes idle.
+    Fixed(u32),
+    /// Bounces without end: every cycle feeds the volume back, never idle, and a change of
+    /// lights carries the old bounce light over instead of restarting (no dip in indirect
+    /// light). The fed-back light is multiplied by `damping` in (0, 1]: 1 converges to the
+    /// full multi-bounce solution (a furnace of albedo a to e / (1 - a), geometrically, since
+    /// albedo < 1); lower values settle faster and stay further below it (e / (1 - d a)).
+    Feedback { damping: f32 },
+}
+
+impl Bounces {
+    /// Whether any bounce beyond the first is computed.
+    pub fn feeds_back(self) -> bool {
+        !matches!(self, Bounces::Fixed(0 | 1))
     }
 }
 
@@ -117,11 +151,14 @@ pub struct RuntimeSettings {
     /// for 56 texel loads and 8 visibility words per lookup instead of 7 filtered fetches. Off:
     /// hardware trilinear over the probes' weights only.
     pub visibility: bool,
+    /// Light bounces ([`Bounces`]); default one.
+    pub bounces: Bounces,
 }
 
 impl Default for RuntimeSettings {
     fn default() -> Self {
         RuntimeSettings {
+            bounces: Bounces::Fixed(1),
             volume_format: VolumeFormat::default(),
             benchmark_baselines: false,
             max_factor_chunk_bytes: None,
@@ -141,8 +178,12 @@ pub struct UpdateReport {
     pub sky_changed: bool,
     /// First probe and probe count of the gather window (it wraps around the probe count).
     pub window: (u32, u32),
-    /// Updates still needed to visit every probe since the last change.
+    /// Updates still needed to visit every probe since the last change, times the cycles still
+    /// needed for the bounces ([`Bounces::Fixed`]; 0 with [`Bounces::Feedback`]'s endless cycles
+    /// once the first is done).
     pub pending_windows: u32,
+    /// The volume was fed back into the surfels (stage 2b ran): a cycle of bounces began.
+    pub bounce: bool,
 }
 
 /// The lighting state an update was recorded for (to detect changes).
@@ -347,6 +388,8 @@ pub struct PrtRuntime {
     volume_info: wgpu::Buffer,
     probe_depth: wgpu::Buffer,
     probe_positions: wgpu::Buffer,
+    /// Per surfel, the bounce radiance of stage 2b (one word when bounces are off).
+    surfel_bounce: wgpu::Buffer,
     pipelines: Vec<(Stage, Pipeline)>,
     /// The integer-atomic gather, built only for benchmarks ([`PrtRuntime::use_atomic_gather`]).
     atomic_gather: Option<Pipeline>,
@@ -357,6 +400,10 @@ pub struct PrtRuntime {
     sky_cache: Option<(SkyModel, Vec<[f32; 4]>)>,
     cursor: u32,
     pending_windows: u32,
+    /// Updates done in the current cycle (one pass of the gather over every probe).
+    cycle_window: u32,
+    /// Cycles completed since the last change of lights or sky.
+    cycles_done: u32,
 }
 
 impl PrtRuntime {
@@ -383,6 +430,13 @@ impl PrtRuntime {
         asset: &Asset,
         settings: RuntimeSettings,
     ) -> Result<PrtRuntime, GpuError> {
+        let bounces_ok = match settings.bounces {
+            Bounces::Fixed(n) => (1..=crate::relight::MAX_BOUNCES).contains(&n),
+            Bounces::Feedback { damping } => damping > 0.0 && damping <= 1.0,
+        };
+        if !bounces_ok {
+            return Err(GpuError::Bounces(settings.bounces));
+        }
         let needed = asset.geometry.stack_needed();
         if needed > crate::visibility::MAX_STACK {
             return Err(GpuError::BvhTooDeep {
@@ -528,6 +582,12 @@ impl PrtRuntime {
         let brick_dirty = alloc.zeroed("prt brick dirty", 4 * n_bricks, none)?;
         let surfel_visibility = alloc.zeroed("prt surfel visibility", 4 * n_surfels, none)?;
         let surfel_radiance = alloc.zeroed("prt surfel radiance", 16 * n_surfels, none)?;
+        let feeds_back = settings.bounces.feeds_back();
+        let surfel_bounce = alloc.zeroed(
+            "prt surfel bounce",
+            if feeds_back { 16 * n_surfels } else { 0 },
+            none,
+        )?;
         let brick_radiance = alloc.zeroed("prt brick radiance", 64 * n_bricks, none)?;
         let probe_dirty = alloc.zeroed("prt probe dirty", 4 * n_probes, none)?;
         let probe_sh = alloc.zeroed(
@@ -588,6 +648,11 @@ impl PrtRuntime {
             ..Default::default()
         });
 
+        let volume_info = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("prt volume info"),
+            contents: bytemuck::bytes_of(&volume_info(&g, &settings)),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
         let fixed_accum = alloc.zeroed(
             "prt fixed-point accumulators",
             if settings.benchmark_baselines {
@@ -642,6 +707,24 @@ impl PrtRuntime {
                     ],
                     vec![buf(&bvh_nodes), buf(&triangles)],
                 ],
+                Stage::BounceSurfels => {
+                    let mut volume: Vec<wgpu::BindingResource<'_>> = views
+                        .iter()
+                        .map(wgpu::BindingResource::TextureView)
+                        .collect();
+                    volume.push(wgpu::BindingResource::Sampler(&sampler));
+                    volume.extend([buf(&volume_info), buf(&probe_depth), buf(&probe_positions)]);
+                    vec![
+                        vec![
+                            buf(&params),
+                            buf(&bricks),
+                            buf(&surfels),
+                            buf(&surfel_bounce),
+                            buf(&brick_dirty),
+                        ],
+                        volume,
+                    ]
+                }
                 Stage::BrickRadiance => vec![vec![
                     buf(&params),
                     buf(&bricks),
@@ -649,6 +732,7 @@ impl PrtRuntime {
                     buf(&brick_dirty),
                     buf(&surfel_radiance),
                     buf(&brick_radiance),
+                    buf(&surfel_bounce),
                 ]],
                 Stage::MarkProbes => vec![vec![
                     buf(&params),
@@ -668,6 +752,7 @@ impl PrtRuntime {
         };
         let pipelines: Vec<(Stage, Pipeline)> = Stage::ALL
             .iter()
+            .filter(|&&s| s != Stage::BounceSurfels || feeds_back)
             .chain(
                 [Stage::GatherAtomic]
                     .iter()
@@ -750,11 +835,8 @@ impl PrtRuntime {
             textures,
             views,
             sampler,
-            volume_info: device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("prt volume info"),
-                contents: bytemuck::bytes_of(&volume_info(&g, &settings)),
-                usage: wgpu::BufferUsages::UNIFORM,
-            }),
+            volume_info,
+            surfel_bounce,
             probe_depth,
             probe_positions,
             pipelines,
@@ -764,6 +846,8 @@ impl PrtRuntime {
             sky_cache: None,
             cursor: 0,
             pending_windows: 0,
+            cycle_window: 0,
+            cycles_done: 0,
         })
     }
 
@@ -846,15 +930,35 @@ impl PrtRuntime {
             .clamp(1, self.probe_count.max(1));
         let windows = self.probe_count.div_ceil(budget);
         let lights_changed = changed != 0 || first;
-        if !lights_changed && !sky_changed && self.pending_windows == 0 {
+        let feedback = matches!(self.settings.bounces, Bounces::Feedback { .. });
+        if !lights_changed && !sky_changed && self.pending_windows == 0 && !feedback {
             return Ok(UpdateReport {
                 idle: true,
                 ..UpdateReport::default()
             });
         }
-        if lights_changed || sky_changed {
-            self.pending_windows = windows;
+        let restart = lights_changed || sky_changed;
+        if restart {
+            let cycles = match self.settings.bounces {
+                Bounces::Fixed(n) => n.max(1),
+                Bounces::Feedback { .. } => 1,
+            };
+            self.pending_windows = windows.saturating_mul(cycles);
+            self.cycle_window = 0;
+            self.cycles_done = 0;
         }
+        // A fixed bounce count starts again from direct light: the old bounce light goes, and
+        // every brick is recomputed without it (cached visibility keeps that ray-free).
+        let fixed_restart = restart && self.settings.bounces.feeds_back() && !feedback && !first;
+        if fixed_restart {
+            encoder.clear_buffer(&self.surfel_bounce, 0, None);
+        }
+        // Stage 2b runs at the start of every cycle after the first since the change (fixed), or
+        // of every cycle (feedback).
+        let relight = lights_changed || fixed_restart;
+        let bounce = self.settings.bounces.feeds_back()
+            && self.cycle_window == 0
+            && (self.cycles_done >= 1 || (feedback && !first));
         let window = (self.cursor, budget.min(self.probe_count));
         let params = Params {
             probe_count: self.probe_count,
@@ -864,7 +968,7 @@ impl PrtRuntime {
             light_count: new.lights.len() as u32,
             changed_lights: changed,
             sky_mode: new.sky_mode,
-            all_probes_dirty: u32::from(sky_changed),
+            all_probes_dirty: u32::from(sky_changed || bounce),
             sky_color: new.sky_color,
             ray_weight: directions::direction_weight(self.ray_count),
             grid_counts: self.grid.counts,
@@ -877,9 +981,12 @@ impl PrtRuntime {
             dispatch_width: DISPATCH_WIDTH,
             moved_lights: moved,
             offset_scale: self.offset_scale,
-            all_bricks_dirty: u32::from(first),
+            all_bricks_dirty: u32::from(first || fixed_restart),
             ray_scale: self.grid.spacing,
-            _pad: 0,
+            bounce_damping: match self.settings.bounces {
+                Bounces::Feedback { damping } => damping,
+                Bounces::Fixed(_) => 1.0,
+            },
         };
         let copy = |encoder: &mut wgpu::CommandEncoder, dst: &wgpu::Buffer, bytes: &[u8]| {
             if bytes.is_empty() {
@@ -916,11 +1023,13 @@ impl PrtRuntime {
                     _ => p,
                 };
                 let work = match stage {
-                    Stage::CullLights | Stage::BrickRadiance if lights_changed => {
-                        groups(self.brick_count)
+                    Stage::CullLights if relight => groups(self.brick_count),
+                    Stage::BrickRadiance if relight || bounce => groups(self.brick_count),
+                    Stage::RelightSurfels if relight => groups(self.surfel_count),
+                    Stage::BounceSurfels if bounce => groups(self.surfel_count),
+                    Stage::MarkProbes if lights_changed || sky_changed || bounce => {
+                        groups(self.probe_count)
                     }
-                    Stage::RelightSurfels if lights_changed => groups(self.surfel_count),
-                    Stage::MarkProbes if lights_changed || sky_changed => groups(self.probe_count),
                     Stage::Gather => window.1,
                     _ => 0,
                 };
@@ -939,6 +1048,11 @@ impl PrtRuntime {
         }
         self.cursor = (self.cursor + budget) % self.probe_count.max(1);
         self.pending_windows = self.pending_windows.saturating_sub(1);
+        self.cycle_window += 1;
+        if self.cycle_window >= windows {
+            self.cycle_window = 0;
+            self.cycles_done = self.cycles_done.saturating_add(1);
+        }
         self.state = Some(new);
         Ok(UpdateReport {
             idle: false,
@@ -946,7 +1060,24 @@ impl PrtRuntime {
             sky_changed,
             window,
             pending_windows: self.pending_windows,
+            bounce,
         })
+    }
+
+    /// Records and submits updates (every probe each) until nothing is pending: one for one
+    /// bounce, `n` for [`Bounces::Fixed`]`(n)`, one cycle for [`Bounces::Feedback`] (call again
+    /// to feed back more). Returns the number of updates.
+    pub fn settle(&mut self, lighting: &Lighting) -> Result<u32, GpuError> {
+        let mut updates = 0;
+        loop {
+            let mut encoder = self.device.create_command_encoder(&Default::default());
+            let report = self.update(&mut encoder, lighting, None)?;
+            self.queue.submit([encoder.finish()]);
+            updates += 1;
+            if report.idle || report.pending_windows == 0 {
+                return Ok(updates);
+            }
+        }
     }
 
     /// Benchmarks only: gather with the prior art's integer atomic accumulation (16.16 fixed
@@ -1202,9 +1333,7 @@ pub fn relight_once(
 ) -> Result<(Vec<ShRgb>, Counters, wgpu::AdapterInfo), GpuError> {
     let (device, queue, info) = headless_device()?;
     let mut runtime = PrtRuntime::new(&device, &queue, asset, settings)?;
-    let mut encoder = device.create_command_encoder(&Default::default());
-    runtime.update(&mut encoder, lighting, None)?;
-    queue.submit([encoder.finish()]);
+    runtime.settle(lighting)?;
     let counters = runtime.read_counters()?;
     Ok((runtime.read_probe_sh()?, counters, info))
 }

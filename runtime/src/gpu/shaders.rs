@@ -9,6 +9,8 @@ use super::layout;
 pub enum Stage {
     CullLights,
     RelightSurfels,
+    /// Multi-bounce: the volume's irradiance at the surfels (built only with bounces on).
+    BounceSurfels,
     BrickRadiance,
     MarkProbes,
     Gather,
@@ -17,9 +19,11 @@ pub enum Stage {
 }
 
 impl Stage {
-    pub const ALL: [Stage; 5] = [
+    /// In dispatch order.
+    pub const ALL: [Stage; 6] = [
         Stage::CullLights,
         Stage::RelightSurfels,
+        Stage::BounceSurfels,
         Stage::BrickRadiance,
         Stage::MarkProbes,
         Stage::Gather,
@@ -29,6 +33,7 @@ impl Stage {
         match self {
             Stage::CullLights => "prt cull_lights",
             Stage::RelightSurfels => "prt relight_surfels",
+            Stage::BounceSurfels => "prt bounce_surfels",
             Stage::BrickRadiance => "prt brick_radiance",
             Stage::MarkProbes => "prt mark_probes",
             Stage::Gather => "prt gather",
@@ -41,6 +46,7 @@ const TYPES: &str = include_str!("../../../shaders/types.wgsl");
 const VISIBILITY: &str = include_str!("../../../shaders/visibility.wgsl");
 const CULL_LIGHTS: &str = include_str!("../../../shaders/cull_lights.wgsl");
 const RELIGHT_SURFELS: &str = include_str!("../../../shaders/relight_surfels.wgsl");
+const BOUNCE_SURFELS: &str = include_str!("../../../shaders/bounce_surfels.wgsl");
 const BRICK_RADIANCE: &str = include_str!("../../../shaders/brick_radiance.wgsl");
 const MARK_PROBES: &str = include_str!("../../../shaders/mark_probes.wgsl");
 const GATHER: &str = include_str!("../../../shaders/gather.wgsl");
@@ -79,6 +85,7 @@ pub fn source(stage: Stage, config: &ShaderConfig) -> String {
     let body: Vec<&str> = match stage {
         Stage::CullLights => vec![CULL_LIGHTS],
         Stage::RelightSurfels => vec![VISIBILITY, RELIGHT_SURFELS],
+        Stage::BounceSurfels => vec![BOUNCE_SURFELS],
         Stage::BrickRadiance => vec![BRICK_RADIANCE],
         Stage::MarkProbes => vec![MARK_PROBES],
         Stage::Gather => vec![
@@ -95,6 +102,9 @@ pub fn source(stage: Stage, config: &ShaderConfig) -> String {
     s.push_str(TYPES);
     for b in body {
         s.push_str(b);
+    }
+    if stage == Stage::BounceSurfels {
+        s.push_str(&sample_irradiance_snippet(1));
     }
     s.replace("VOLUME_FORMAT", config.volume_format)
 }
@@ -351,6 +361,7 @@ mod tests {
                         "all_bricks_dirty",
                         offset_of!(layout::Params, all_bricks_dirty),
                     ),
+                    ("bounce_damping", offset_of!(layout::Params, bounce_damping)),
                 ],
             ),
         ];

@@ -1,0 +1,27 @@
+// Stage 2b (multi-bounce only), one thread per surfel of a front-face brick: the irradiance of
+// the current volume at the surfel, through the engine's own lookup (`sample_irradiance`, bind
+// group 1: the same trilinear, validity- and visibility-weighted interpolation with the same
+// normal bias), turned into exitant radiance albedo / pi * damping * E. Stage 3 adds it to the
+// direct radiance, so each pass of the gather over the probes adds one bounce (twin of
+// CpuRelighter::relight_with, bounces > 1). Every front-face brick becomes dirty.
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var<storage, read> bricks: array<Brick>;
+@group(0) @binding(2) var<storage, read> surfels: array<Surfel>;
+@group(0) @binding(3) var<storage, read_write> surfel_bounce: array<vec4<f32>>;
+@group(0) @binding(4) var<storage, read_write> brick_dirty: array<u32>;
+
+@compute @workgroup_size(WORKGROUP)
+fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let s = linear_index(wg, lid, WORKGROUP, params.dispatch_width);
+    if s >= params.surfel_count {
+        return;
+    }
+    let surfel = surfels[s];
+    if (bricks[surfel.brick].flags & BRICK_BACKFACE) != 0u {
+        return;
+    }
+    let e = sample_irradiance(surfel.position, surfel.normal);
+    surfel_bounce[s] = vec4<f32>(surfel.albedo * (params.bounce_damping / PI) * e, 0.0);
+    brick_dirty[surfel.brick] = 1u;
+}

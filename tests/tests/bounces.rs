@@ -1,0 +1,226 @@
+//! GPU multi-bounce (`RuntimeSettings::bounces`) against the CPU reference bounce by bounce,
+//! the analytic furnace, and amortised updates, on lavapipe. A missing adapter fails loudly.
+
+use prt_bake::BakeSettings;
+use prt_format::sh::{self, ShRgb};
+use prt_format::Asset;
+use prt_runtime::gpu::{
+    headless_device, wgpu, Bounces, PrtRuntime, RuntimeSettings, UpdateReport, VolumeFormat,
+};
+use prt_runtime::{load_rig, CpuRelighter, Lighting};
+use prt_tests::{bake_ok as bake, fixture};
+
+fn device() -> (wgpu::Device, wgpu::Queue) {
+    let (device, queue, _) = headless_device().expect("a GPU adapter (lavapipe in CI) is required");
+    (device, queue)
+}
+
+fn settings(bounces: Bounces) -> RuntimeSettings {
+    RuntimeSettings {
+        // f32 texels: the fed-back volume is the CPU's to float rounding, not half-float's.
+        volume_format: VolumeFormat::F32,
+        bounces,
+        ..RuntimeSettings::default()
+    }
+}
+
+fn step(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    runtime: &mut PrtRuntime,
+    lighting: &Lighting,
+    budget: Option<u32>,
+) -> UpdateReport {
+    let mut encoder = device.create_command_encoder(&Default::default());
+    let report = runtime.update(&mut encoder, lighting, budget).unwrap();
+    queue.submit([encoder.finish()]);
+    report
+}
+
+/// Updates until the runtime has nothing pending; returns the probes' SH and the updates run.
+fn settle(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    runtime: &mut PrtRuntime,
+    lighting: &Lighting,
+    budget: Option<u32>,
+) -> (Vec<ShRgb>, u32) {
+    let mut updates = 0;
+    loop {
+        let report = step(device, queue, runtime, lighting, budget);
+        updates += 1;
+        if report.pending_windows == 0 {
+            break;
+        }
+    }
+    (runtime.read_probe_sh().unwrap(), updates)
+}
+
+/// Worst |a - b| over valid probes and coefficients, relative to each probe's SH0 (with a floor
+/// of 1e-7 of the largest SH0, for nearly black probes).
+fn worst(asset: &Asset, a: &[ShRgb], b: &[ShRgb]) -> f32 {
+    let peak = b
+        .iter()
+        .map(|c| c[0].iter().fold(0.0f32, |m, v| m.max(v.abs())))
+        .fold(0.0, f32::max);
+    let mut w = 0.0f32;
+    for (i, (x, y)) in a.iter().zip(b).enumerate() {
+        if !asset.probes[i].is_valid() {
+            continue;
+        }
+        let dc = y[0].iter().fold(0.0f32, |m, v| m.max(v.abs())) + 1e-7 * peak;
+        for k in 0..9 {
+            for c in 0..3 {
+                assert!(x[k][c].is_finite(), "probe {i}: {}", x[k][c]);
+                w = w.max((x[k][c] - y[k][c]).abs() / dc);
+            }
+        }
+    }
+    w
+}
+
+/// GPU = CPU within 1e-4 of SH0 for 1, 2, 4 and 8 bounces on the Cornell fixture and every
+/// shared scene (sun, spot, point and sky), each bounce sampled through the engine's lookup.
+#[test]
+fn gpu_bounces_equal_the_cpu_bounce_by_bounce() {
+    let (device, queue) = device();
+    let cornell = (
+        fixture("cornell/cornell.gltf"),
+        load_rig(&fixture("cornell/rig.json")).unwrap(),
+        BakeSettings::default(),
+    );
+    let shared = [
+        "cornell_box.glb",
+        "room.glb",
+        "sunshadowTest.glb",
+        "sponza_lod4.glb",
+    ]
+    .map(|s| {
+        (
+            fixture(&format!("scenes/{s}")),
+            load_rig(&fixture("rigs/point_spot_sun_sky.json")).unwrap(),
+            BakeSettings {
+                rays: 256,
+                double_sided: true,
+                ..BakeSettings::default()
+            },
+        )
+    });
+    let mut report = Vec::new();
+    for (scene, lighting, bake_settings) in std::iter::once(cornell).chain(shared) {
+        let asset = bake(&scene, &bake_settings);
+        let cpu = CpuRelighter::new(&asset).unwrap();
+        let mut previous: Option<Vec<ShRgb>> = None;
+        for n in [1u32, 2, 4, 8] {
+            let s = settings(Bounces::Fixed(n));
+            let mut runtime = PrtRuntime::new(&device, &queue, &asset, s).unwrap();
+            let (gpu, updates) = settle(&device, &queue, &mut runtime, &lighting, None);
+            assert_eq!(updates, n, "one update per bounce");
+            let reference = cpu.relight_with(&lighting, n, &s).unwrap().sh;
+            let w = worst(&asset, &gpu, &reference);
+            let name = scene.file_name().unwrap().to_string_lossy().to_string();
+            let gain = previous.as_ref().map(|p| {
+                let e = |sh: &[ShRgb]| sh.iter().map(|c| c[0][1]).sum::<f32>();
+                e(&gpu) / e(p)
+            });
+            report.push((name.clone(), n, w, gain));
+            assert!(
+                w <= 1e-4,
+                "{name}, {n} bounces: worst |gpu - cpu| / SH0 = {w}"
+            );
+            previous = Some(gpu);
+        }
+    }
+    eprintln!(
+        "bounces (scene, n, worst |gpu - cpu| / SH0, green SH0 sum vs previous n): {report:?}"
+    );
+}
+
+/// The GPU furnace: a closed box of albedo a = 0.5 emitting e = 0.5. N fixed bounces give
+/// e (1 - a^N) / (1 - a); endless feedback rises to e / (1 - a) without overshoot.
+#[test]
+fn gpu_furnace_matches_the_geometric_series() {
+    let (device, queue) = device();
+    let asset = bake(
+        &fixture("closed_box_inward.gltf"),
+        &BakeSettings {
+            spacing: Some(0.6),
+            bounds: Some([-0.9, -0.9, -0.9, 0.9, 0.9, 0.9]),
+            ..BakeSettings::default()
+        },
+    );
+    let lighting = load_rig(&fixture("rigs/no_lights.json")).unwrap();
+    let (a, e) = (0.5f32, 0.5f32);
+    let c0 = |sum: f32| 4.0 * std::f32::consts::PI * sh::Y00 * sum;
+    let check = |label: &str, sh: &[ShRgb], expect: f32| {
+        for (i, c) in sh.iter().enumerate() {
+            for &v in &c[0] {
+                let rel = (v - expect).abs() / expect;
+                assert!(rel < 0.01, "{label} probe {i}: {v} vs {expect}");
+            }
+        }
+    };
+    for n in [1u32, 2, 4, 8] {
+        let mut runtime =
+            PrtRuntime::new(&device, &queue, &asset, settings(Bounces::Fixed(n))).unwrap();
+        let (sh, _) = settle(&device, &queue, &mut runtime, &lighting, None);
+        check(
+            &format!("{n} bounces"),
+            &sh,
+            c0(e * (1.0 - a.powi(n as i32)) / (1.0 - a)),
+        );
+    }
+    let feedback = Bounces::Feedback { damping: 1.0 };
+    let mut runtime = PrtRuntime::new(&device, &queue, &asset, settings(feedback)).unwrap();
+    let mut last = 0.0f32;
+    for update in 0..24 {
+        let report = step(&device, &queue, &mut runtime, &lighting, None);
+        assert!(!report.idle, "feedback never idles");
+        let sh = runtime.read_probe_sh().unwrap();
+        let mean = sh.iter().map(|c| c[0][0]).sum::<f32>() / sh.len() as f32;
+        assert!(
+            mean >= last * (1.0 - 1e-5),
+            "update {update}: {mean} after {last}"
+        );
+        assert!(
+            mean <= c0(e / (1.0 - a)) * 1.01,
+            "update {update}: overshoot {mean}"
+        );
+        last = mean;
+        if update == 23 {
+            check("feedback", &sh, c0(e / (1.0 - a)));
+        }
+    }
+}
+
+/// Amortised updates (a third of the probes per update) reach the full-update result: each
+/// cycle of updates adds one bounce, and a light change restarts the count.
+#[test]
+fn amortised_bounces_converge_to_the_full_update() {
+    let (device, queue) = device();
+    let asset = bake(&fixture("cornell/cornell.gltf"), &BakeSettings::default());
+    let lighting = load_rig(&fixture("cornell/rig.json")).unwrap();
+    let s = settings(Bounces::Fixed(4));
+    let mut full = PrtRuntime::new(&device, &queue, &asset, s).unwrap();
+    let (reference, _) = settle(&device, &queue, &mut full, &lighting, None);
+    let budget = (asset.probes.len() as u32).div_ceil(3);
+    let mut amortised = PrtRuntime::new(&device, &queue, &asset, s).unwrap();
+    let (sh, updates) = settle(&device, &queue, &mut amortised, &lighting, Some(budget));
+    assert_eq!(updates, 12, "4 cycles of 3 windows");
+    let w = worst(&asset, &sh, &reference);
+    assert!(w <= 1e-6, "amortised against full: {w}");
+    // A moved light restarts the bounce count from direct light and converges again.
+    let mut moved = lighting.clone();
+    moved.rig.lights[0].position[0] += 0.2;
+    let (sh, updates) = settle(&device, &queue, &mut amortised, &moved, Some(budget));
+    assert_eq!(updates, 12);
+    let expect = CpuRelighter::new(&asset)
+        .unwrap()
+        .relight_with(&moved, 4, &s)
+        .unwrap()
+        .sh;
+    let w = worst(&asset, &sh, &expect);
+    assert!(w <= 1e-4, "after the move: {w}");
+    let idle = step(&device, &queue, &mut amortised, &moved, Some(budget));
+    assert!(idle.idle, "settled: nothing left to do");
+}
