@@ -1,7 +1,7 @@
-// Stage 3, one thread per dirty brick: the brick's linear radiance model from its surfels, the
+// Stage 4, one thread per dirty brick: the brick's linear radiance model from its surfels, the
 // weighted mean and the gradient sum_s g_s L_s (twin of CpuRelighter::brick_radiance). Four
 // vec4 per brick: mean, then the gradient of red, green and blue. A surfel's radiance is its
-// direct radiance (stage 2) plus its bounce radiance (stage 2b; zero without bounces).
+// direct radiance (stage 2) plus its bounce radiance (stage 3; zero without bounces).
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> bricks: array<Brick>;

@@ -1,16 +1,30 @@
-// Stage 1, one thread per brick: which lights can reach the brick (range, cone and facing tests
-// in world space against the brick's bounds and normal bounds, twin of PreparedLight::cull), and
-// whether a changed light reaches it now or reached it before (then the brick must be relit; on
-// the first update every brick is, so that emissive bricks no light reaches get their radiance).
-// Back-face bricks are black: they cost nothing and are never dirty.
+// Stage 1, one thread per brick: which lights reach the brick (range, cone and facing tests
+// in world space against the brick's bounds and normal bounds, twin of PreparedLight::cull),
+// kept as a bit per light in the brick's light mask (MASK_STRIDE words; lights that reach no
+// part of the brick cost its surfels one bit test, nothing more). Only the lights that changed
+// since the last update are tested again (light_changes: the changed and moved bitsets, then
+// the changed indices), so moving one light of a thousand costs one test per brick. The brick
+// is dirty (relit) when a changed light reaches it now or did before (every brick on the first
+// update, so that emissive bricks no light reaches get their radiance).
+//
+// Each brick then takes room in this update's half of the visibility pool for one bit per
+// (surfel, reaching light) pair, rounded to words per surfel: the cache is sized by the pairs
+// that can see each other, not by surfels x lights. Past the pool's capacity a brick is left
+// uncached (NO_CACHE: its lights are traced every time it is relit; counted). Back-face bricks
+// are black: they cost nothing and are never dirty.
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> lights: array<Light>;
 @group(0) @binding(2) var<storage, read> bricks: array<Brick>;
 @group(0) @binding(3) var<storage, read> normal_bounds: array<NormalBounds>;
-@group(0) @binding(4) var<storage, read_write> brick_light_mask: array<u32>;
+// Per brick MASK_STRIDE words of the current mask, then (from brick_count * MASK_STRIDE) the
+// previous update's.
+@group(0) @binding(4) var<storage, read_write> brick_lights: array<u32>;
 @group(0) @binding(5) var<storage, read_write> brick_dirty: array<u32>;
 @group(0) @binding(6) var<storage, read_write> counters: Counters;
+@group(0) @binding(7) var<storage, read> light_changes: array<u32>;
+// Per brick two visibility offsets, one per pool half (params.vis_parity is this update's).
+@group(0) @binding(8) var<storage, read_write> brick_vis: array<u32>;
 
 // Upper bound of dot(n, v) for n in the normal box and v in the box [a, b] (per-axis interval
 // arithmetic).
@@ -62,17 +76,43 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         brick_dirty[b] = 0u;
         return;
     }
-    var mask = 0u;
-    for (var i = 0u; i < params.light_count; i = i + 1u) {
-        if reaches(lights[i], brick, normal_bounds[b]) {
-            mask = mask | (1u << i);
-        }
+    let base = b * MASK_STRIDE;
+    let prev = params.brick_count * MASK_STRIDE + base;
+    for (var w = 0u; w < MASK_STRIDE; w = w + 1u) {
+        brick_lights[prev + w] = brick_lights[base + w];
     }
-    let old = brick_light_mask[b];
-    brick_light_mask[b] = mask;
-    let dirty = ((old | mask) & params.changed_lights) != 0u || params.all_bricks_dirty != 0u;
+    var dirty = params.all_bricks_dirty != 0u;
+    let changed_list = 2u * MASK_STRIDE;
+    for (var k = 0u; k < params.changed_count; k = k + 1u) {
+        let i = light_changes[changed_list + k];
+        let bit = 1u << (i & 31u);
+        let w = base + (i >> 5u);
+        let was = (brick_lights[w] & bit) != 0u;
+        let now = i < params.light_count && reaches(lights[i], brick, normal_bounds[b]);
+        dirty = dirty || was || now;
+        brick_lights[w] = select(brick_lights[w] & ~bit, brick_lights[w] | bit, now);
+    }
+    atomicAdd(&counters.light_tests, params.changed_count);
     brick_dirty[b] = select(0u, 1u, dirty);
     if dirty {
         atomicAdd(&counters.bricks_relit, 1u);
     }
+    var n = 0u;
+    for (var w = 0u; w < params.light_words; w = w + 1u) {
+        n = n + countOneBits(brick_lights[base + w]);
+    }
+    // A brick uncached before and not relit now has nothing to keep: it stays uncached.
+    let old = brick_vis[2u * b + 1u - params.vis_parity];
+    var offset = NO_CACHE;
+    if old != NO_CACHE || dirty {
+        let words = brick.surfel_count * ((n + 31u) / 32u);
+        let at = atomicAdd(&counters.visibility_words, words);
+        if at + words <= params.vis_capacity {
+            offset = params.vis_parity * params.vis_capacity + at;
+        }
+    }
+    if offset == NO_CACHE && n > 0u {
+        atomicAdd(&counters.bricks_uncached, 1u);
+    }
+    brick_vis[2u * b + params.vis_parity] = offset;
 }

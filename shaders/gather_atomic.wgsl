@@ -1,4 +1,4 @@
-// Benchmark baseline for stage 5 (not used by the runtime): the prior art's integer atomic
+// Benchmark baseline for stage 6 (not used by the runtime): the prior art's integer atomic
 // accumulation (CasualPRT). Each thread converts its share of the probe's SH to 16.16 fixed
 // point and adds it to global accumulators with atomicAdd; after a storage barrier thread 0
 // reads them back (resetting them for the next update) and stores the probe as the real gather

@@ -1,7 +1,7 @@
 // Shared by every prt compute stage: the GPU twins of the Rust structs (prt_format::asset and
 // prt_runtime::gpu::layout; a unit test checks that sizes and offsets agree) and the functions
 // whose CPU reference lives in prt_runtime::{lights, visibility, relight}. Constants such as
-// MAX_LIGHTS, WORKGROUP and the flag bits are injected from Rust before this file.
+// MASK_STRIDE, NO_CACHE, WORKGROUP and the flag bits are injected from Rust before this file.
 
 struct Probe {
     position: vec3<f32>,
@@ -85,6 +85,12 @@ struct Counters {
     shadow_rays: atomic<u32>,
     probes_gathered: atomic<u32>,
     probes_clamped: atomic<u32>,
+    // Light-brick reach tests of stage 1 (changed lights x front-face bricks).
+    light_tests: atomic<u32>,
+    // Visibility pool words handed out this update (stage 1).
+    visibility_words: atomic<u32>,
+    // Bricks with lights left without a visibility cache (the pool was full).
+    bricks_uncached: atomic<u32>,
 }
 
 struct Params {
@@ -93,8 +99,9 @@ struct Params {
     surfel_count: u32,
     ray_count: u32,
     light_count: u32,
-    // Lights whose parameters changed since the last update (bit i = light i).
-    changed_lights: u32,
+    // Lights whose parameters changed since the last update: their indices follow the changed
+    // and moved bitsets in light_changes.
+    changed_count: u32,
     // 0: black, 1: constant (sky_color), 2: per-direction radiance in sky_radiance.
     sky_mode: u32,
     // 1 when every valid probe must be re-gathered (sky changed, first update).
@@ -109,9 +116,8 @@ struct Params {
     texel_limit: f32,
     // Workgroups along x of 2D dispatches (linear index = x + y * dispatch_width).
     dispatch_width: u32,
-    // Lights whose cached visibility is stale: anything but their colour or intensity changed,
-    // or they were dark before.
-    moved_lights: u32,
+    // Words of a brick's light mask in use: ceil(light_count / 32) (at most MASK_STRIDE).
+    light_words: u32,
     // Metres per unit of 8-bit factor offsets (FACTOR_U8 only).
     offset_scale: f32,
     // 1 on the first update: every brick is relit (emissive bricks no light reaches too).
@@ -120,6 +126,11 @@ struct Params {
     ray_scale: f32,
     // Scales the fed-back bounce light (RuntimeSettings::bounces): 1 for fixed bounce counts.
     bounce_damping: f32,
+    // This update's half of the visibility pool (0 or 1), and the words in each half.
+    vis_parity: u32,
+    vis_capacity: u32,
+    pad0: u32,
+    pad1: u32,
 }
 
 const PI: f32 = 3.14159265358979;

@@ -3,6 +3,7 @@
 
 mod bench;
 mod bench_fuzz;
+mod bench_lights;
 mod bench_render;
 mod bench_surface;
 mod progress;
@@ -56,6 +57,8 @@ enum Backend {
 enum BenchKind {
     /// Mutation fuzzing of the glTF path or the asset loader for a fixed time (issue 8).
     Fuzz(bench_fuzz::FuzzArgs),
+    /// GPU update cost against light count: every light moved, and one light moved.
+    Lights(bench_lights::LightsArgs),
     /// Bake throughput against bare obvhs tracing of the same rays, and bytes per probe.
     Bake {
         scene: PathBuf,
@@ -540,6 +543,7 @@ fn run(cli: Cli) -> Result<()> {
             }
             BenchKind::Surface(args) => bench_surface::run(args),
             BenchKind::Fuzz(args) => bench_fuzz::run(args),
+            BenchKind::Lights(args) => bench_lights::run(args),
         },
         Command::Sample(args) => sample::run(args),
         Command::Render(args) => render::run(args),

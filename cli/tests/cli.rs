@@ -476,6 +476,13 @@ fn render_bad_input_fails_cleanly() {
     let asset = bake_cornell(&dir);
     let out = dir.0.join("out.png");
     let many = fixture("rigs/cornell_256.json");
+    // 4,097 lights: one more than the GI runtime (and the Forward+ stage) can be built for.
+    let too_many = dir.0.join("rig_4097.json");
+    let mut doc: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&many).unwrap()).unwrap();
+    let first = doc["lights"][0].clone();
+    doc["lights"] = serde_json::Value::Array(vec![first; 4097]);
+    std::fs::write(&too_many, serde_json::to_vec(&doc).unwrap()).unwrap();
     let other = fixture("lights.gltf");
     let empty = fixture("empty.gltf");
     let (scene, rig) = (cornell(), cornell_rig());
@@ -499,7 +506,12 @@ fn render_bad_input_fails_cleanly() {
         (&scene, &rig, vec!["--tile", "8"], vec!["--tile", "8"]),
         (&other, &rig, vec![], vec!["lights.gltf", "--force"]),
         (&empty, &rig, vec!["--force"], vec!["no triangles"]),
-        (&scene, &many, vec!["--view", "lit"], vec!["257", "32"]),
+        (
+            &scene,
+            &too_many,
+            vec!["--view", "lit"],
+            vec!["4097", "4096"],
+        ),
     ];
     for (s, r, args, needles) in cases {
         let o = render(s, &asset, r, &out, &args);
@@ -516,10 +528,10 @@ fn render_bad_input_fails_cleanly() {
             assert!(lines[0].contains(n), "{args:?}: {n:?} not in {stderr:?}");
         }
         assert!(!out.exists(), "{args:?} left {}", out.display());
-        assert_eq!(dir.entries(), ["cornell.prt"], "{args:?}");
+        assert_eq!(dir.entries(), ["cornell.prt", "rig_4097.json"], "{args:?}");
     }
-    // The direct view takes the 257 lights (the GI's limit does not apply).
-    let o = render(&scene, &asset, &many, &out, &["--view", "direct"]);
+    // The lit view takes the 257 lights, GI included.
+    let o = render(&scene, &asset, &many, &out, &["--view", "lit"]);
     assert!(o.status.success(), "{}", text(&o.stderr));
 }
 

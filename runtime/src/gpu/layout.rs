@@ -14,8 +14,13 @@ pub const WORKGROUP: u32 = 64;
 /// lavapipe at 13.8k probes, 74 factors each: 64 threads 243 ms, 32 threads 151 ms, 16 threads
 /// 133 ms per gather; 32 keeps hardware GPUs busy.
 pub const GATHER_WORKGROUP: u32 = 32;
-/// Lights per rig: a brick's light mask and a surfel's visibility cache are one u32 each.
-pub const MAX_LIGHTS: usize = 32;
+/// Most lights a runtime can be built for ([`super::RuntimeSettings::max_lights`]): what sets
+/// it is the per-brick light mask, `max_lights / 32` words per brick (twice: this update's and
+/// the last), 32 MB for 64k bricks at this limit, and the CPU reference's own limit
+/// ([`crate::relight::MAX_CPU_LIGHTS`]), which every GPU result is checked against.
+pub const MAX_LIGHTS: usize = 4096;
+/// A brick without room in the visibility pool (its lights are traced whenever it is relit).
+pub const NO_CACHE: u32 = u32::MAX;
 /// Workgroups along x of every dispatch; more work continues along y.
 pub const DISPATCH_WIDTH: u32 = 32768;
 /// `Params::sky_mode` values.
@@ -110,8 +115,16 @@ pub struct Counters {
     /// Probes whose SH exceeded the volume texture's range (`VolumeFormat::F16`: +-65504) and
     /// were clamped in it (the probes' f32 SH stay exact).
     pub probes_clamped: u32,
+    /// Light-brick reach tests of the cull stage: changed lights x front-face bricks.
+    pub light_tests: u32,
+    /// Visibility pool words handed out (one bit per surfel and reaching light, rounded to
+    /// words per surfel).
+    pub visibility_words: u32,
+    /// Bricks with lights left uncached because the pool was full
+    /// ([`super::RuntimeSettings::visibility_words`]): they trace every light when relit.
+    pub bricks_uncached: u32,
 }
-const _: () = assert!(std::mem::size_of::<Counters>() == 20);
+const _: () = assert!(std::mem::size_of::<Counters>() == 32);
 
 /// The uniform block of every stage.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
@@ -122,7 +135,8 @@ pub struct Params {
     pub surfel_count: u32,
     pub ray_count: u32,
     pub light_count: u32,
-    pub changed_lights: u32,
+    /// Changed lights listed in the light-changes buffer after its two bitsets.
+    pub changed_count: u32,
     pub sky_mode: u32,
     pub all_probes_dirty: u32,
     pub sky_color: [f32; 3],
@@ -132,7 +146,8 @@ pub struct Params {
     pub window_count: u32,
     pub texel_limit: f32,
     pub dispatch_width: u32,
-    pub moved_lights: u32,
+    /// Words of a brick's light mask in use, `ceil(light_count / 32)`.
+    pub light_words: u32,
     pub offset_scale: f32,
     pub all_bricks_dirty: u32,
     /// The scene's length scale for shadow-ray offsets (`visibility::ray_offset`): the spacing.
@@ -140,8 +155,13 @@ pub struct Params {
     /// Factor on the fed-back bounce light (`shaders/bounce_surfels.wgsl`): 1 for
     /// [`super::Bounces::Fixed`], the damping of [`super::Bounces::Feedback`].
     pub bounce_damping: f32,
+    /// This update's half of the visibility pool (0 or 1).
+    pub vis_parity: u32,
+    /// Words in each half of the visibility pool.
+    pub vis_capacity: u32,
+    pub _pad: [u32; 2],
 }
-const _: () = assert!(std::mem::size_of::<Params>() == 96);
+const _: () = assert!(std::mem::size_of::<Params>() == 112);
 
 /// The uniform of the engine-side sampling snippet (`PrtVolumeInfo` in
 /// `shaders/sample_irradiance.wgsl`): the grid the volume covers and the sampling bias.
@@ -184,6 +204,7 @@ pub fn wgsl_constants() -> Vec<(&'static str, String)> {
     use prt_format::sh::{Y00, Y1, Y20, Y22, Y2_OFF};
     vec![
         ("WORKGROUP", format!("{WORKGROUP}u")),
+        ("NO_CACHE", format!("{NO_CACHE}u")),
         ("GATHER_WORKGROUP", format!("{GATHER_WORKGROUP}u")),
         ("BVH_STACK", format!("{}u", crate::visibility::MAX_STACK)),
         (

@@ -3,22 +3,28 @@
 //! [`PrtRuntime::update`] records, into a command encoder the engine owns, one dispatch per
 //! stage (each stage is one WGSL file in `shaders/`, and a CPU twin in [`crate::relight`]):
 //!
-//! 1. **cull_lights** (per brick): which lights reach the brick (range, cone, facing, in world
-//!    space; never through screen-space clusters), and whether a changed light reaches it now or
-//!    did before: only then is the brick *dirty*.
-//! 2. **relight_surfels** (per surfel of a dirty brick): direct irradiance with visibility from
-//!    shadow rays through the asset's BVH; visibility bits are cached per (surfel, light) and
-//!    re-traced only for lights that moved.
-//! 2b. **bounce_surfels** (per surfel; multi-bounce only, at the start of a cycle): the volume's
+//! 1. **cull_lights** (per brick): which of the lights that changed reach the brick (range,
+//!    cone, facing, in world space; never through screen-space clusters), kept as one bit per
+//!    light in the brick's light mask, and whether a changed light reaches it now or did before:
+//!    only then is the brick *dirty*. Each brick takes one bit per (surfel, reaching light) pair
+//!    in the visibility pool (two halves, written in turn).
+//! 2. **relight_surfels** (per surfel of a dirty brick): direct irradiance from the brick's
+//!    lights with visibility from shadow rays through the asset's BVH, cached per pair and
+//!    re-traced only for lights that moved; other bricks' bits move to the new half.
+//! 3. **bounce_surfels** (per surfel; multi-bounce only, at the start of a cycle): the volume's
 //!    irradiance at the surfel through the engine's `sample_irradiance`, as bounce radiance;
 //!    every front-face brick becomes dirty ([`Bounces`]).
-//! 3. **brick_radiance** (per dirty brick): mean and gradient of the brick's radiance, direct
+//! 4. **brick_radiance** (per dirty brick): mean and gradient of the brick's radiance, direct
 //!    plus bounce.
-//! 4. **mark_probes** (per probe): probes with a factor on a dirty brick (or all, when the sky
+//! 5. **mark_probes** (per probe): probes with a factor on a dirty brick (or all, when the sky
 //!    changed) are flagged for gathering.
-//! 5. **gather** (one workgroup per probe of this update's window): the probe's factors and sky
+//! 6. **gather** (one workgroup per probe of this update's window): the probe's factors and sky
 //!    term reduced into SH9 RGB (subgroup adds where the adapter has them, a shared-memory tree
 //!    otherwise), written with its validity into the seven volume textures at once.
+//!
+//! A light costs a brick's surfels one bit test where it does not reach, and moving one light
+//! of a thousand tests it against every brick once and traces only its own pairs
+//! (`tests/tests/lights.rs`). Up to [`RuntimeSettings::max_lights`] lights ([`MAX_LIGHTS`]).
 //!
 //! When nothing changed and no round-robin cycle is pending, `update` records nothing. With a
 //! budget of B probes, the gather visits B probes per update round robin; a probe's texels
@@ -50,8 +56,10 @@ pub enum GpuError {
     NoAdapter(String),
     #[error("cannot open the GPU device: {0}")]
     Device(String),
-    #[error("the rig has {count} lights; the GPU runtime handles at most {MAX_LIGHTS}")]
-    TooManyLights { count: usize },
+    #[error("the rig has {count} lights; this GPU runtime was built for at most {max} (RuntimeSettings::max_lights, up to {MAX_LIGHTS})")]
+    TooManyLights { count: usize, max: usize },
+    #[error("RuntimeSettings::max_lights must be in 1..={MAX_LIGHTS}, got {0}")]
+    MaxLights(usize),
     #[error("{what} needs {needed}, beyond the device limit {limit}")]
     Limit {
         what: &'static str,
@@ -153,12 +161,22 @@ pub struct RuntimeSettings {
     pub visibility: bool,
     /// Light bounces ([`Bounces`]); default one.
     pub bounces: Bounces,
+    /// Most lights a rig may have (1 to [`MAX_LIGHTS`], default 1,024): each brick keeps a mask
+    /// of `max_lights / 32` words (twice), so lower values save memory.
+    pub max_lights: usize,
+    /// Words in each half of the visibility pool, one bit per (surfel, light that reaches its
+    /// brick) pair, rounded to words per surfel [default: 2 words per surfel, for bricks reached
+    /// by up to 64 lights on average]. Bricks past it are left uncached (traced every time they
+    /// are relit; `Counters::bricks_uncached`), never wrong.
+    pub visibility_words: Option<u64>,
 }
 
 impl Default for RuntimeSettings {
     fn default() -> Self {
         RuntimeSettings {
             bounces: Bounces::Fixed(1),
+            max_lights: 1024,
+            visibility_words: None,
             volume_format: VolumeFormat::default(),
             benchmark_baselines: false,
             max_factor_chunk_bytes: None,
@@ -173,7 +191,7 @@ impl Default for RuntimeSettings {
 pub struct UpdateReport {
     /// Nothing changed and no cycle was pending: no command was recorded.
     pub idle: bool,
-    /// Lights whose parameters changed (bit per light index).
+    /// Lights whose parameters changed (or that were added or removed).
     pub changed_lights: u32,
     pub sky_changed: bool,
     /// First probe and probe count of the gather window (it wraps around the probe count).
@@ -182,7 +200,7 @@ pub struct UpdateReport {
     /// needed for the bounces ([`Bounces::Fixed`]; 0 with [`Bounces::Feedback`]'s endless cycles
     /// once the first is done).
     pub pending_windows: u32,
-    /// The volume was fed back into the surfels (stage 2b ran): a cycle of bounces began.
+    /// The volume was fed back into the surfels (stage 3 ran): a cycle of bounces began.
     pub bounce: bool,
 }
 
@@ -193,6 +211,31 @@ struct State {
     sky_mode: u32,
     sky_color: [f32; 3],
     sky_directions: Vec<[f32; 4]>,
+}
+
+/// What changed between the lights of two updates (`old` is `None` on the first): the changed
+/// lights' bitset (`stride` words), the moved lights' bitset (lights whose cached visibility is
+/// stale), then the changed lights' indices in ascending order, as the cull and relight stages
+/// read them. Only a change of colour or intensity of a light that was lit keeps its
+/// visibility: anything else can light surfels never traced for it.
+fn light_changes(old: Option<&[GpuLight]>, new: &[GpuLight], stride: usize) -> Vec<u32> {
+    let mut words = vec![0u32; 2 * stride];
+    let count = old.map_or(new.len(), |o| o.len().max(new.len()));
+    for i in 0..count {
+        let (a, b) = (old.and_then(|o| o.get(i)), new.get(i));
+        if old.is_some() && a == b {
+            continue;
+        }
+        words[i / 32] |= 1 << (i % 32);
+        let only_brightness = matches!((a, b), (Some(a), Some(b))
+            if a.radiant.iter().any(|&c| c > 0.0)
+                && GpuLight { radiant: b.radiant, ..*a } == *b);
+        if !only_brightness {
+            words[stride + i / 32] |= 1 << (i % 32);
+        }
+        words.push(i as u32);
+    }
+    words
 }
 
 /// Opens a headless device on the first adapter (lavapipe where there is no GPU), with subgroup
@@ -388,8 +431,14 @@ pub struct PrtRuntime {
     volume_info: wgpu::Buffer,
     probe_depth: wgpu::Buffer,
     probe_positions: wgpu::Buffer,
-    /// Per surfel, the bounce radiance of stage 2b (one word when bounces are off).
+    /// Per surfel, the bounce radiance of stage 3 (one word when bounces are off).
     surfel_bounce: wgpu::Buffer,
+    /// Per update: the changed and moved light bitsets, then the changed lights' indices.
+    light_changes: wgpu::Buffer,
+    mask_stride: u32,
+    vis_capacity: u32,
+    /// The half of the visibility pool the last relight wrote.
+    vis_parity: u32,
     pipelines: Vec<(Stage, Pipeline)>,
     /// The integer-atomic gather, built only for benchmarks ([`PrtRuntime::use_atomic_gather`]).
     atomic_gather: Option<Pipeline>,
@@ -437,6 +486,10 @@ impl PrtRuntime {
         if !bounces_ok {
             return Err(GpuError::Bounces(settings.bounces));
         }
+        if !(1..=MAX_LIGHTS).contains(&settings.max_lights) {
+            return Err(GpuError::MaxLights(settings.max_lights));
+        }
+        let mask_stride = settings.max_lights.div_ceil(32) as u32;
         let needed = asset.geometry.stack_needed();
         if needed > crate::visibility::MAX_STACK {
             return Err(GpuError::BvhTooDeep {
@@ -464,7 +517,7 @@ impl PrtRuntime {
         for (what, needed, limit) in [
             (
                 "storage buffers per shader stage",
-                9,
+                12,
                 limits.max_storage_buffers_per_shader_stage,
             ),
             (
@@ -487,6 +540,7 @@ impl PrtRuntime {
             factors: asset.factors.precision(),
             volume_format: settings.volume_format.wgsl(),
             subgroups,
+            mask_stride,
         };
         let none = wgpu::BufferUsages::empty();
         let probes = alloc.storage("prt probes", bytemuck::cast_slice(&asset.probes), none)?;
@@ -578,9 +632,24 @@ impl PrtRuntime {
         let n_bricks = asset.bricks.len() as u64;
         let n_surfels = asset.surfels.len() as u64;
         let n_probes = asset.probes.len() as u64;
-        let brick_light_mask = alloc.zeroed("prt brick light mask", 4 * n_bricks, none)?;
+        let stride = u64::from(mask_stride);
+        let brick_lights = alloc.zeroed("prt brick light masks", 8 * stride * n_bricks, none)?;
         let brick_dirty = alloc.zeroed("prt brick dirty", 4 * n_bricks, none)?;
-        let surfel_visibility = alloc.zeroed("prt surfel visibility", 4 * n_surfels, none)?;
+        let brick_vis = alloc.storage(
+            "prt brick visibility offsets",
+            bytemuck::cast_slice(&vec![NO_CACHE; 2 * asset.bricks.len()]),
+            none,
+        )?;
+        let vis_capacity = settings
+            .visibility_words
+            .unwrap_or(2 * n_surfels)
+            .clamp(1, (max_binding / 8).min(u64::from(u32::MAX / 2)));
+        let visibility = alloc.zeroed("prt visibility pool", 8 * vis_capacity, none)?;
+        let light_changes = alloc.zeroed(
+            "prt light changes",
+            4 * (2 * stride + settings.max_lights as u64),
+            wgpu::BufferUsages::COPY_DST,
+        )?;
         let surfel_radiance = alloc.zeroed("prt surfel radiance", 16 * n_surfels, none)?;
         let feeds_back = settings.bounces.feeds_back();
         let surfel_bounce = alloc.zeroed(
@@ -600,7 +669,7 @@ impl PrtRuntime {
             std::mem::size_of::<Counters>() as u64,
             wgpu::BufferUsages::COPY_SRC,
         )?;
-        let lights = alloc.zeroed("prt lights", (64 * MAX_LIGHTS) as u64, none)?;
+        let lights = alloc.zeroed("prt lights", 64 * settings.max_lights as u64, none)?;
         let sky_directions = alloc.zeroed(
             "prt sky directions",
             32 * u64::from(asset.header.ray_count),
@@ -690,18 +759,23 @@ impl PrtRuntime {
                     buf(&lights),
                     buf(&bricks),
                     buf(&normal_bounds),
-                    buf(&brick_light_mask),
+                    buf(&brick_lights),
                     buf(&brick_dirty),
                     buf(&counters),
+                    buf(&light_changes),
+                    buf(&brick_vis),
                 ]],
                 Stage::RelightSurfels => vec![
                     vec![
                         buf(&params),
                         buf(&lights),
                         buf(&surfels),
-                        buf(&brick_light_mask),
+                        buf(&bricks),
+                        buf(&brick_lights),
                         buf(&brick_dirty),
-                        buf(&surfel_visibility),
+                        buf(&brick_vis),
+                        buf(&visibility),
+                        buf(&light_changes),
                         buf(&surfel_radiance),
                         buf(&counters),
                     ],
@@ -837,6 +911,10 @@ impl PrtRuntime {
             sampler,
             volume_info,
             surfel_bounce,
+            light_changes,
+            mask_stride,
+            vis_capacity: vis_capacity as u32,
+            vis_parity: 1,
             probe_depth,
             probe_positions,
             pipelines,
@@ -853,9 +931,10 @@ impl PrtRuntime {
 
     fn state_for(&mut self, lighting: &Lighting) -> Result<State, GpuError> {
         let lights = &lighting.rig.lights;
-        if lights.len() > MAX_LIGHTS {
+        if lights.len() > self.settings.max_lights {
             return Err(GpuError::TooManyLights {
                 count: lights.len(),
+                max: self.settings.max_lights,
             });
         }
         let lights = lights
@@ -900,36 +979,22 @@ impl PrtRuntime {
     ) -> Result<UpdateReport, GpuError> {
         let new = self.state_for(lighting)?;
         let first = self.state.is_none();
-        let (changed, moved, sky_changed) = match &self.state {
-            None => (u32::MAX, u32::MAX, true),
-            Some(old) => {
-                let mut changed = 0u32;
-                let mut moved = 0u32;
-                for i in 0..old.lights.len().max(new.lights.len()) {
-                    let (a, b) = (old.lights.get(i), new.lights.get(i));
-                    if a != b {
-                        changed |= 1 << i;
-                        // Only a change of colour or intensity of a light that was lit keeps
-                        // its visibility: anything else can light surfels never traced for it.
-                        let only_brightness = matches!((a, b), (Some(a), Some(b))
-                            if a.radiant.iter().any(|&c| c > 0.0)
-                                && GpuLight { radiant: b.radiant, ..*a } == *b);
-                        if !only_brightness {
-                            moved |= 1 << i;
-                        }
-                    }
-                }
-                let sky_changed = old.sky_mode != new.sky_mode
-                    || old.sky_color != new.sky_color
-                    || old.sky_directions != new.sky_directions;
-                (changed, moved, sky_changed)
-            }
-        };
+        let changes = light_changes(
+            self.state.as_ref().map(|s| &s.lights[..]),
+            &new.lights,
+            self.mask_stride as usize,
+        );
+        let changed = changes.len() as u32 - 2 * self.mask_stride;
+        let sky_changed = self.state.as_ref().is_none_or(|old| {
+            old.sky_mode != new.sky_mode
+                || old.sky_color != new.sky_color
+                || old.sky_directions != new.sky_directions
+        });
         let budget = budget
             .unwrap_or(self.probe_count)
             .clamp(1, self.probe_count.max(1));
         let windows = self.probe_count.div_ceil(budget);
-        let lights_changed = changed != 0 || first;
+        let lights_changed = changed > 0 || first;
         let feedback = matches!(self.settings.bounces, Bounces::Feedback { .. });
         if !lights_changed && !sky_changed && self.pending_windows == 0 && !feedback {
             return Ok(UpdateReport {
@@ -953,7 +1018,7 @@ impl PrtRuntime {
         if fixed_restart {
             encoder.clear_buffer(&self.surfel_bounce, 0, None);
         }
-        // Stage 2b runs at the start of every cycle after the first since the change (fixed), or
+        // Stage 3 runs at the start of every cycle after the first since the change (fixed), or
         // of every cycle (feedback).
         let relight = lights_changed || fixed_restart;
         let bounce = self.settings.bounces.feeds_back()
@@ -966,7 +1031,7 @@ impl PrtRuntime {
             surfel_count: self.surfel_count,
             ray_count: self.ray_count,
             light_count: new.lights.len() as u32,
-            changed_lights: changed,
+            changed_count: changed,
             sky_mode: new.sky_mode,
             all_probes_dirty: u32::from(sky_changed || bounce),
             sky_color: new.sky_color,
@@ -979,7 +1044,7 @@ impl PrtRuntime {
                 VolumeFormat::F32 => f32::MAX,
             },
             dispatch_width: DISPATCH_WIDTH,
-            moved_lights: moved,
+            light_words: (new.lights.len() as u32).div_ceil(32),
             offset_scale: self.offset_scale,
             all_bricks_dirty: u32::from(first || fixed_restart),
             ray_scale: self.grid.spacing,
@@ -987,7 +1052,17 @@ impl PrtRuntime {
                 Bounces::Feedback { damping } => damping,
                 Bounces::Fixed(_) => 1.0,
             },
+            vis_parity: if relight {
+                1 - self.vis_parity
+            } else {
+                self.vis_parity
+            },
+            vis_capacity: self.vis_capacity,
+            _pad: [0; 2],
         };
+        if relight {
+            self.vis_parity = params.vis_parity;
+        }
         let copy = |encoder: &mut wgpu::CommandEncoder, dst: &wgpu::Buffer, bytes: &[u8]| {
             if bytes.is_empty() {
                 return;
@@ -1003,6 +1078,9 @@ impl PrtRuntime {
         };
         copy(encoder, &self.params, bytemuck::bytes_of(&params));
         copy(encoder, &self.lights, bytemuck::cast_slice(&new.lights));
+        if relight {
+            copy(encoder, &self.light_changes, bytemuck::cast_slice(&changes));
+        }
         if sky_changed {
             copy(
                 encoder,

@@ -64,6 +64,8 @@ pub struct ShaderConfig {
     pub volume_format: &'static str,
     /// Reduce with subgroup operations (the adapter has `Features::SUBGROUP`).
     pub subgroups: bool,
+    /// Words per brick light mask: `ceil(RuntimeSettings::max_lights / 32)`.
+    pub mask_stride: u32,
 }
 
 /// `const NAME = value;` lines for every shared constant plus the configuration.
@@ -73,9 +75,10 @@ pub fn prelude(config: &ShaderConfig) -> String {
         s.push_str(&format!("const {name} = {value};\n"));
     }
     s.push_str(&format!(
-        "const FACTOR_WORDS = {}u;\nconst FACTOR_FORMAT = {}u;\n",
+        "const FACTOR_WORDS = {}u;\nconst FACTOR_FORMAT = {}u;\nconst MASK_STRIDE = {}u;\n",
         layout::factor_words(config.factors),
-        layout::factor_format_code(config.factors)
+        layout::factor_format_code(config.factors),
+        config.mask_stride
     ));
     s
 }
@@ -118,6 +121,7 @@ pub fn light_model_source() -> String {
         factors: prt_format::TransferPrecision::U8,
         volume_format: "rgba16float",
         subgroups: false,
+        mask_stride: 1,
     };
     let mut s = prelude(&config);
     s.push_str(TYPES);
@@ -214,6 +218,7 @@ mod tests {
                         factors,
                         volume_format,
                         subgroups,
+                        mask_stride: 32,
                     });
                 }
             }
@@ -323,6 +328,10 @@ mod tests {
                         "probes_clamped",
                         offset_of!(layout::Counters, probes_clamped),
                     ),
+                    (
+                        "bricks_uncached",
+                        offset_of!(layout::Counters, bricks_uncached),
+                    ),
                 ],
             ),
             (
@@ -349,19 +358,21 @@ mod tests {
                 size_of::<layout::Params>(),
                 vec![
                     ("ray_count", offset_of!(layout::Params, ray_count)),
-                    ("changed_lights", offset_of!(layout::Params, changed_lights)),
+                    ("changed_count", offset_of!(layout::Params, changed_count)),
                     ("sky_color", offset_of!(layout::Params, sky_color)),
                     ("ray_weight", offset_of!(layout::Params, ray_weight)),
                     ("grid_counts", offset_of!(layout::Params, grid_counts)),
                     ("window_start", offset_of!(layout::Params, window_start)),
                     ("texel_limit", offset_of!(layout::Params, texel_limit)),
-                    ("moved_lights", offset_of!(layout::Params, moved_lights)),
+                    ("light_words", offset_of!(layout::Params, light_words)),
                     ("offset_scale", offset_of!(layout::Params, offset_scale)),
                     (
                         "all_bricks_dirty",
                         offset_of!(layout::Params, all_bricks_dirty),
                     ),
                     ("bounce_damping", offset_of!(layout::Params, bounce_damping)),
+                    ("vis_parity", offset_of!(layout::Params, vis_parity)),
+                    ("vis_capacity", offset_of!(layout::Params, vis_capacity)),
                 ],
             ),
         ];

@@ -1,0 +1,162 @@
+//! `prt bench lights`: GPU update cost against light count (issue 9). Scattered point and spot
+//! lights (ranges 3-12% of the scene's diagonal, `bench_render::scattered_lights`) relight a
+//! baked scene: a full update (every light moved) and an update where one light moved, with
+//! the work counters that explain them. The goal is cost linear in the (light, brick) pairs
+//! that reach each other, not in all lights.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::Result;
+use glam::Vec3;
+use prt_bake::BakeSettings;
+use prt_runtime::gpu::{headless_device, layout::Counters, wgpu, PrtRuntime, RuntimeSettings};
+use prt_runtime::{Lighting, SkyModel};
+
+use prt_bake::NoProgress;
+
+#[derive(clap::Args)]
+pub struct LightsArgs {
+    scene: PathBuf,
+    /// Light counts, one row each.
+    #[arg(long, value_delimiter = ',', default_value = "1,32,256,1024")]
+    lights: Vec<usize>,
+    /// Probe spacing of the bake [default: about 1,000 probes].
+    #[arg(long)]
+    spacing: Option<f32>,
+    #[arg(long, default_value_t = 256)]
+    rays: u32,
+    /// Bake treating every material as double-sided.
+    #[arg(long)]
+    double_sided: bool,
+    /// Timed updates per figure (the median is reported).
+    #[arg(long, default_value_t = 5)]
+    repeats: usize,
+}
+
+fn lighting(lights: Vec<prt_format::Light>) -> Lighting {
+    Lighting {
+        rig: prt_format::LightRig { lights, sky: None },
+        sky: SkyModel::Black,
+    }
+}
+
+/// Median wall time of `repeats` updates (record, submit, wait) with `lighting(i)`, and the
+/// counters of the last.
+fn timed(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    runtime: &mut PrtRuntime,
+    repeats: usize,
+    lighting: impl Fn(usize) -> Lighting,
+) -> Result<(f64, Counters)> {
+    let mut times = Vec::with_capacity(repeats);
+    for i in 0..repeats {
+        let l = lighting(i);
+        let t = Instant::now();
+        let mut encoder = device.create_command_encoder(&Default::default());
+        runtime.update(&mut encoder, &l, None)?;
+        queue.submit([encoder.finish()]);
+        runtime.wait()?;
+        times.push(t.elapsed().as_secs_f64());
+    }
+    times.sort_by(f64::total_cmp);
+    Ok((times[times.len() / 2], runtime.read_counters()?))
+}
+
+pub fn run(args: LightsArgs) -> Result<()> {
+    let settings = BakeSettings {
+        rays: args.rays,
+        spacing: args.spacing,
+        double_sided: args.double_sided,
+        ..BakeSettings::default()
+    };
+    let (asset, _) = prt_bake::bake(&args.scene, &settings, &NoProgress)?;
+    let (device, queue, info) = headless_device()?;
+    let g = asset.header.grid;
+    let lo = Vec3::from(g.origin);
+    let hi = lo + Vec3::from(g.step) * Vec3::from(g.counts.map(|c| c.saturating_sub(1) as f32));
+    let front = asset
+        .bricks
+        .iter()
+        .filter(|b| b.flags & prt_format::BRICK_BACKFACE == 0)
+        .count();
+    println!(
+        "Adapter: {} ({:?}). Scene {}: {} probes, {front} front-face bricks, {} surfels, {} rays \
+         per probe. Median of {} updates each; lavapipe runs on the CPU, so compare ratios.\n",
+        info.name,
+        info.backend,
+        args.scene.display(),
+        asset.probes.len(),
+        asset.surfels.len(),
+        args.rays,
+        args.repeats
+    );
+    println!("| lights | full update (all moved) | reaching (light, brick) pairs | shadow rays | per 1k pairs | one light moved (the widest) | its bricks | rays traced | bricks relit | visibility pool |");
+    println!("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    for &count in &args.lights {
+        let base = crate::bench_render::scattered_lights(count, lo, hi);
+        let shifted = |k: usize, which: Option<usize>| {
+            let mut l = base.clone();
+            for (i, light) in l.iter_mut().enumerate() {
+                if which.is_none_or(|w| w == i) {
+                    light.position[0] += 1e-3 * (k % 2) as f32 * (hi - lo).length();
+                }
+            }
+            lighting(l)
+        };
+        let runtime_settings = RuntimeSettings {
+            max_lights: count.max(1),
+            ..RuntimeSettings::default()
+        };
+        let mut runtime = PrtRuntime::new(&device, &queue, &asset, runtime_settings)?;
+        // Every update moves every light (odd: shifted, even: back).
+        let (full, _) = timed(&device, &queue, &mut runtime, args.repeats, |i| {
+            shifted(i + 1, None)
+        })?;
+        let prepared: Vec<_> = base
+            .iter()
+            .map(prt_runtime::lights::PreparedLight::new)
+            .collect();
+        let normals = prt_runtime::relight::brick_normal_bounds(&asset);
+        // Front-face bricks each light reaches (the CPU twin of the cull stage).
+        let reach: Vec<usize> = prepared
+            .iter()
+            .map(|l| {
+                asset
+                    .bricks
+                    .iter()
+                    .zip(&normals)
+                    .filter(|(b, nb)| {
+                        b.flags & prt_format::BRICK_BACKFACE == 0 && l.cull(b, nb).is_none()
+                    })
+                    .count()
+            })
+            .collect();
+        let pairs: usize = reach.iter().sum();
+        let (_, all) = timed(&device, &queue, &mut runtime, 1, |_| shifted(0, None))?;
+        // The light that reaches the most bricks moves.
+        let one = (0..count)
+            .max_by_key(|&i| (reach[i], usize::MAX - i))
+            .unwrap_or(0);
+        let (moved, c) = timed(&device, &queue, &mut runtime, args.repeats, |i| {
+            shifted(i + 1, Some(one))
+        })?;
+        println!(
+            "| {count} | {:.1} ms | {pairs} | {} | {} | {:.1} ms | {} | {} | {} | {} words |",
+            full * 1e3,
+            all.shadow_rays,
+            if pairs == 0 {
+                "-".to_string()
+            } else {
+                format!("{:.2} ms", full * 1e3 / (pairs as f64 / 1e3))
+            },
+            moved * 1e3,
+            reach.get(one).copied().unwrap_or(0),
+            c.shadow_rays,
+            c.bricks_relit,
+            all.visibility_words,
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,199 @@
+//! The GPU runtime with many lights (per-brick light masks, a visibility cache sized by the
+//! (surfel, light) pairs that can reach each other) against the CPU reference, on lavapipe.
+
+use std::path::Path;
+
+use prt_bake::BakeSettings;
+use prt_format::sh::ShRgb;
+use prt_format::{Asset, Light, LightKind, LightRig};
+use prt_runtime::gpu::{headless_device, wgpu, GpuError, PrtRuntime, RuntimeSettings};
+use prt_runtime::lights::PreparedLight;
+use prt_runtime::{CpuRelighter, Lighting};
+use prt_tests::{bake_ok as bake, fixture};
+
+fn device() -> (wgpu::Device, wgpu::Queue) {
+    let (device, queue, _) = headless_device().expect("a GPU adapter (lavapipe in CI) is required");
+    (device, queue)
+}
+
+/// `count` ranged point and spot lights scattered through the Cornell room (a fixed
+/// low-discrepancy sequence), each reaching a part of it.
+fn many_lights(count: usize) -> Lighting {
+    let lights = (0..count)
+        .map(|i| {
+            let f = |k: f32| ((i as f32 + 0.5) * k).fract();
+            let spot = i % 3 == 0;
+            Light {
+                kind: if spot {
+                    LightKind::Spot
+                } else {
+                    LightKind::Point
+                },
+                position: [
+                    -0.9 + 1.8 * f(0.618_034),
+                    0.1 + 1.8 * f(0.754_877_7),
+                    -0.9 + 1.8 * f(0.569_840_3),
+                ],
+                direction: [f(0.31) - 0.5, -1.0, f(0.47) - 0.5],
+                color: [
+                    0.5 + 0.5 * f(0.13),
+                    0.5 + 0.5 * f(0.29),
+                    0.5 + 0.5 * f(0.41),
+                ],
+                intensity: 0.02 + 0.05 * f(0.83),
+                range: Some(0.25 + 0.5 * f(0.91)),
+                inner_cone_angle: 0.2,
+                outer_cone_angle: 0.7,
+            }
+        })
+        .collect();
+    let rig = LightRig { lights, sky: None };
+    Lighting::from_rig(rig, Path::new("."), Path::new("many lights")).unwrap()
+}
+
+fn update(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    runtime: &mut PrtRuntime,
+    lighting: &Lighting,
+) -> (Vec<ShRgb>, prt_runtime::gpu::layout::Counters) {
+    let mut encoder = device.create_command_encoder(&Default::default());
+    runtime.update(&mut encoder, lighting, None).unwrap();
+    queue.submit([encoder.finish()]);
+    (
+        runtime.read_probe_sh().unwrap(),
+        runtime.read_counters().unwrap(),
+    )
+}
+
+/// Worst |gpu - cpu| over valid probes, relative to each probe's SH0 (floor 1e-7 of the peak).
+fn worst(asset: &Asset, gpu: &[ShRgb], cpu: &[ShRgb]) -> f32 {
+    let peak = cpu
+        .iter()
+        .map(|c| c[0].iter().fold(0.0f32, |m, v| m.max(v.abs())))
+        .fold(0.0, f32::max);
+    let mut w = 0.0f32;
+    for (i, (g, c)) in gpu.iter().zip(cpu).enumerate() {
+        if !asset.probes[i].is_valid() {
+            continue;
+        }
+        let dc = c[0].iter().fold(0.0f32, |m, v| m.max(v.abs())) + 1e-7 * peak;
+        for k in 0..9 {
+            for ch in 0..3 {
+                assert!(g[k][ch].is_finite());
+                w = w.max((g[k][ch] - c[k][ch]).abs() / dc);
+            }
+        }
+    }
+    w
+}
+
+/// Shadow rays the CPU reference traces for `light` alone: one per (surfel, light) pair that
+/// the light reaches with non-zero irradiance, the pairs the GPU must trace when it moves.
+fn pairs_of(cpu: &CpuRelighter, light: &Light) -> u64 {
+    cpu.direct_irradiance(&[PreparedLight::new(light)])
+        .1
+        .shadow_rays
+}
+
+/// 1,024 point and spot lights relight on the GPU as on the CPU; moving one of them re-traces
+/// exactly that light's pairs and tests one light per brick; a pool too small for the cache
+/// leaves bricks uncached but the result unchanged.
+#[test]
+fn a_thousand_lights_equal_the_cpu_and_one_moved_light_costs_its_pairs() {
+    let (device, queue) = device();
+    let asset = bake(&fixture("cornell/cornell.gltf"), &BakeSettings::default());
+    let front = asset
+        .bricks
+        .iter()
+        .filter(|b| b.flags & prt_format::BRICK_BACKFACE == 0)
+        .count() as u32;
+    let cpu = CpuRelighter::new(&asset).unwrap();
+    let mut lighting = many_lights(1024);
+    let settings = RuntimeSettings::default();
+    let mut runtime = PrtRuntime::new(&device, &queue, &asset, settings).unwrap();
+    let (gpu, first) = update(&device, &queue, &mut runtime, &lighting);
+    let reference = cpu.relight(&lighting, 1).unwrap();
+    let w = worst(&asset, &gpu, &reference.sh);
+    assert!(w <= 1e-4, "1,024 lights: worst |gpu - cpu| / SH0 = {w}");
+    assert_eq!(
+        first.light_tests,
+        1024 * front,
+        "first update: every light x brick"
+    );
+    assert_eq!(
+        u64::from(first.shadow_rays),
+        reference.stats.shadow_rays,
+        "first update: every reaching pair traced once"
+    );
+    let pairs: u64 = (0..1024)
+        .map(|i| pairs_of(&cpu, &lighting.rig.lights[i]))
+        .sum();
+    assert_eq!(pairs, reference.stats.shadow_rays);
+
+    // Move light 517: only its pairs are traced again.
+    lighting.rig.lights[517].position[0] += 0.15;
+    let (gpu, moved) = update(&device, &queue, &mut runtime, &lighting);
+    let reference = cpu.relight(&lighting, 1).unwrap();
+    let w = worst(&asset, &gpu, &reference.sh);
+    assert!(w <= 1e-4, "after the move: {w}");
+    assert_eq!(moved.light_tests, front, "one light tested per brick");
+    assert_eq!(
+        u64::from(moved.shadow_rays),
+        pairs_of(&cpu, &lighting.rig.lights[517]),
+        "only the moved light's pairs are traced"
+    );
+    assert!(moved.bricks_uncached == 0 && moved.visibility_words > 0);
+    eprintln!(
+        "1,024 lights: first update {} rays, {} visibility words (surfels {}); one moved: {} rays, {} bricks relit of {front}",
+        first.shadow_rays,
+        first.visibility_words,
+        asset.surfels.len(),
+        moved.shadow_rays,
+        moved.bricks_relit
+    );
+
+    // A pool of 1,000 words: most bricks stay uncached, the light is the same.
+    let small = RuntimeSettings {
+        visibility_words: Some(1000),
+        ..settings
+    };
+    let mut runtime = PrtRuntime::new(&device, &queue, &asset, small).unwrap();
+    update(&device, &queue, &mut runtime, &many_lights(1024));
+    let (gpu, counters) = update(&device, &queue, &mut runtime, &lighting);
+    assert!(counters.bricks_uncached > 0, "the pool overflowed");
+    let w = worst(&asset, &gpu, &reference.sh);
+    assert!(w <= 1e-4, "uncached bricks: {w}");
+}
+
+/// A rig beyond `max_lights` is refused with both numbers; so is a limit beyond MAX_LIGHTS.
+#[test]
+fn light_limits_are_errors_with_values() {
+    let (device, queue) = device();
+    let asset = bake(&fixture("cornell/cornell.gltf"), &BakeSettings::default());
+    let settings = RuntimeSettings {
+        max_lights: 40,
+        ..RuntimeSettings::default()
+    };
+    let mut runtime = PrtRuntime::new(&device, &queue, &asset, settings).unwrap();
+    let mut encoder = device.create_command_encoder(&Default::default());
+    let err = runtime
+        .update(&mut encoder, &many_lights(41), None)
+        .unwrap_err();
+    assert!(
+        matches!(err, GpuError::TooManyLights { count: 41, max: 40 }),
+        "{err}"
+    );
+    let err = PrtRuntime::new(
+        &device,
+        &queue,
+        &asset,
+        RuntimeSettings {
+            max_lights: 5000,
+            ..RuntimeSettings::default()
+        },
+    )
+    .err()
+    .expect("refused");
+    assert!(err.to_string().contains("5000"), "{err}");
+}
