@@ -10,18 +10,20 @@
 @group(0) @binding(2) var<storage, read> surfels: array<Surfel>;
 @group(0) @binding(3) var<storage, read_write> surfel_bounce: array<vec4<f32>>;
 @group(0) @binding(4) var<storage, read_write> brick_dirty: array<u32>;
+// surfels and surfel_bounce hold this chunk's surfels only (dispatched once per chunk).
+@group(0) @binding(5) var<uniform> chunk: SurfelChunk;
 
 @compute @workgroup_size(WORKGROUP)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
-    let s = linear_index(wg, lid, WORKGROUP, params.dispatch_width);
-    if s >= params.surfel_count {
+    let c = linear_index(wg, lid, WORKGROUP, params.dispatch_width);
+    if c >= chunk.surfel_end - chunk.surfel_begin {
         return;
     }
-    let surfel = surfels[s];
+    let surfel = surfels[c];
     if (bricks[surfel.brick].flags & BRICK_BACKFACE) != 0u {
         return;
     }
     let e = sample_irradiance(surfel.position, surfel.normal);
-    surfel_bounce[s] = vec4<f32>(surfel.albedo * (params.bounce_damping / PI) * e, 0.0);
+    surfel_bounce[c] = vec4<f32>(surfel.albedo * (params.bounce_damping / PI) * e, 0.0);
     brick_dirty[surfel.brick] = 1u;
 }

@@ -10,11 +10,13 @@
 @group(0) @binding(4) var<storage, read> surfel_radiance: array<vec4<f32>>;
 @group(0) @binding(5) var<storage, read_write> brick_radiance: array<vec4<f32>>;
 @group(0) @binding(6) var<storage, read> surfel_bounce: array<vec4<f32>>;
+// The per-surfel arrays hold this chunk's surfels only (dispatched once per chunk).
+@group(0) @binding(7) var<uniform> chunk: SurfelChunk;
 
 @compute @workgroup_size(WORKGROUP)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
-    let b = linear_index(wg, lid, WORKGROUP, params.dispatch_width);
-    if b >= params.brick_count || brick_dirty[b] == 0u {
+    let b = chunk.brick_begin + linear_index(wg, lid, WORKGROUP, params.dispatch_width);
+    if b >= chunk.brick_end || brick_dirty[b] == 0u {
         return;
     }
     let brick = bricks[b];
@@ -23,7 +25,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     var gg = vec3<f32>(0.0);
     var gb = vec3<f32>(0.0);
     var weight = 0.0;
-    for (var s = brick.first_surfel; s < brick.first_surfel + brick.surfel_count; s = s + 1u) {
+    let first = brick.first_surfel - chunk.surfel_begin;
+    for (var s = first; s < first + brick.surfel_count; s = s + 1u) {
         let l = surfel_radiance[s].xyz + surfel_bounce[s].xyz;
         let surfel = surfels[s];
         mean = mean + surfel.weight * l;

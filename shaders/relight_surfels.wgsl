@@ -17,14 +17,17 @@
 @group(0) @binding(8) var<storage, read> light_changes: array<u32>;
 @group(0) @binding(9) var<storage, read_write> surfel_radiance: array<vec4<f32>>;
 @group(0) @binding(10) var<storage, read_write> counters: Counters;
+// surfels and surfel_radiance hold this chunk's surfels only (dispatched once per chunk).
+@group(0) @binding(11) var<uniform> chunk: SurfelChunk;
 
 @compute @workgroup_size(WORKGROUP)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
-    let s = linear_index(wg, lid, WORKGROUP, params.dispatch_width);
-    if s >= params.surfel_count {
+    let c = linear_index(wg, lid, WORKGROUP, params.dispatch_width);
+    if c >= chunk.surfel_end - chunk.surfel_begin {
         return;
     }
-    let surfel = surfels[s];
+    let s = chunk.surfel_begin + c;
+    let surfel = surfels[c];
     let b = surfel.brick;
     let brick = bricks[b];
     if (brick.flags & BRICK_BACKFACE) != 0u {
@@ -101,7 +104,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     if rank_new % 32u != 0u && new_at != NO_CACHE {
         visibility[new_first + rank_new / 32u] = word;
     }
-    surfel_radiance[s] = vec4<f32>(surfel.emission + surfel.albedo * (1.0 / PI) * e, 0.0);
+    surfel_radiance[c] = vec4<f32>(surfel.emission + surfel.albedo * (1.0 / PI) * e, 0.0);
     atomicAdd(&counters.surfels_relit, 1u);
     if rays > 0u {
         atomicAdd(&counters.shadow_rays, rays);

@@ -72,6 +72,15 @@ struct FactorChunk {
     pad0: u32,
 }
 
+// Whole bricks brick_begin..brick_end and their surfels surfel_begin..surfel_end: the slice of
+// the surfel arrays bound to this dispatch (indexed from surfel_begin).
+struct SurfelChunk {
+    brick_begin: u32,
+    brick_end: u32,
+    surfel_begin: u32,
+    surfel_end: u32,
+}
+
 struct NormalBounds {
     nmin: vec3<f32>,
     pad0: u32,

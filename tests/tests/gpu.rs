@@ -461,6 +461,52 @@ fn chunked_factor_tables_match_the_unsplit_result() {
     assert!(err.to_string().contains("factor table"), "{err}");
 }
 
+/// Surfel arrays larger than one storage binding are split into chunks of whole bricks: a
+/// runtime limited to 256 KiB of surfels per binding (dozens of chunks) gives exactly the
+/// unsplit result, with two bounces (the bounce stage reads the chunks too), and equals the
+/// CPU; a brick whose own surfels exceed the limit is a typed error.
+#[test]
+fn chunked_surfels_match_the_unsplit_result() {
+    let (device, queue) = device();
+    let asset = bake(&fixture("cornell/cornell.gltf"), &BakeSettings::default());
+    let lighting = load_rig(&fixture("cornell/rig_spot_range.json")).unwrap();
+    let bytes = std::mem::size_of_val(&asset.surfels[..]);
+    assert!(
+        bytes > 16 * 256 * 1024,
+        "the asset needs many chunks ({bytes} bytes)"
+    );
+    let settings = RuntimeSettings {
+        bounces: prt_runtime::gpu::Bounces::Fixed(2),
+        volume_format: VolumeFormat::F32,
+        ..RuntimeSettings::default()
+    };
+    let mut whole = PrtRuntime::new(&device, &queue, &asset, settings).unwrap();
+    whole.settle(&lighting).unwrap();
+    let expect = whole.read_probe_sh().unwrap();
+    let small = RuntimeSettings {
+        max_surfel_chunk_bytes: Some(256 * 1024),
+        ..settings
+    };
+    let mut chunked = PrtRuntime::new(&device, &queue, &asset, small).unwrap();
+    chunked.settle(&lighting).unwrap();
+    let got = chunked.read_probe_sh().unwrap();
+    assert_eq!(got, expect, "chunked surfels change nothing");
+    let cpu = CpuRelighter::new(&asset)
+        .unwrap()
+        .relight_with(&lighting, 2, &settings)
+        .unwrap()
+        .sh;
+    assert_close("chunked surfels, 2 bounces", &asset, &got, &cpu, 1e-4);
+    let tiny = RuntimeSettings {
+        max_surfel_chunk_bytes: Some(80),
+        ..RuntimeSettings::default()
+    };
+    let err = PrtRuntime::new(&device, &queue, &asset, tiny)
+        .err()
+        .expect("a brick exceeds 80 bytes");
+    assert!(err.to_string().contains("one brick's surfels"), "{err}");
+}
+
 /// The engine-side snippet, run for real in a compute shader: at a probe's texel centre,
 /// `sample_irradiance` equals the CPU irradiance of that probe's SH (half-float rounding); between
 /// a valid probe and an invalid neighbour, hardware trilinear filtering over the

@@ -83,6 +83,19 @@ pub struct FactorChunk {
 }
 const _: () = assert!(std::mem::size_of::<FactorChunk>() == 16);
 
+/// One storage binding's worth of surfels: whole bricks `brick_begin..brick_end`, whose
+/// surfels are `surfel_begin..surfel_end` (`SurfelChunk` in WGSL). The per-surfel arrays
+/// (surfels, direct and bounce radiance) are split alike.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+#[repr(C)]
+pub struct SurfelChunk {
+    pub brick_begin: u32,
+    pub brick_end: u32,
+    pub surfel_begin: u32,
+    pub surfel_end: u32,
+}
+const _: () = assert!(std::mem::size_of::<SurfelChunk>() == 16);
+
 /// Component-wise bounds of a brick's surfel normals.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 #[repr(C)]

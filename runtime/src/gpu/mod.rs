@@ -141,6 +141,10 @@ pub struct RuntimeSettings {
     /// device's storage binding limit). Lower values trade one extra mark and gather dispatch
     /// per chunk for smaller buffers.
     pub max_factor_chunk_bytes: Option<u64>,
+    /// Split the surfel arrays into storage bindings of at most this many bytes of surfels
+    /// (default: the device's storage binding limit), whole bricks each. Each chunk costs one
+    /// more dispatch of the per-surfel and per-brick stages.
+    pub max_surfel_chunk_bytes: Option<u64>,
     /// How far the sampling snippet moves a point along its normal before sampling, in probe
     /// spacings (relative to the scene, so one value suits every grid; [`PrtRuntime::volume_info`]
     /// turns it into metres). Probes just behind a surface see its back faces: they are invalid
@@ -180,6 +184,7 @@ impl Default for RuntimeSettings {
             volume_format: VolumeFormat::default(),
             benchmark_baselines: false,
             max_factor_chunk_bytes: None,
+            max_surfel_chunk_bytes: None,
             normal_bias: 0.2,
             visibility: true,
         }
@@ -306,6 +311,39 @@ fn factor_chunks(asset: &Asset, limit: u64) -> Result<Vec<FactorChunk>, GpuError
     Ok(chunks)
 }
 
+/// Splits the bricks into runs whose surfels take at most `limit` bytes each (whole bricks,
+/// since a brick's stage reads all its surfels).
+fn surfel_chunks(asset: &Asset, limit: u64) -> Result<Vec<SurfelChunk>, GpuError> {
+    let per_surfel = std::mem::size_of::<prt_format::Surfel>() as u64;
+    let mut chunks = Vec::new();
+    let mut current = SurfelChunk::default();
+    for (i, b) in asset.bricks.iter().enumerate() {
+        let own = u64::from(b.surfel_count) * per_surfel;
+        if own > limit {
+            return Err(GpuError::Limit {
+                what: "one brick's surfels",
+                needed: own,
+                limit,
+            });
+        }
+        let end = u64::from(b.first_surfel) + u64::from(b.surfel_count);
+        if (end - u64::from(current.surfel_begin)) * per_surfel > limit {
+            current.brick_end = i as u32;
+            current.surfel_end = b.first_surfel;
+            chunks.push(current);
+            current = SurfelChunk {
+                brick_begin: i as u32,
+                surfel_begin: b.first_surfel,
+                ..SurfelChunk::default()
+            };
+        }
+    }
+    current.brick_end = asset.bricks.len() as u32;
+    current.surfel_end = asset.surfels.len() as u32;
+    chunks.push(current);
+    Ok(chunks)
+}
+
 fn buf(b: &wgpu::Buffer) -> wgpu::BindingResource<'_> {
     b.as_entire_binding()
 }
@@ -405,6 +443,9 @@ fn dispatch_size(groups: u32) -> (u32, u32) {
 struct Pipeline {
     pipeline: wgpu::ComputePipeline,
     bind_group_sets: Vec<Vec<wgpu::BindGroup>>,
+    /// Per set, the work items of a surfel-chunked stage (its chunk's surfels or bricks);
+    /// `None`: the stage's own count.
+    set_work: Vec<Option<u32>>,
 }
 
 /// The GPU relighting runtime of one asset.
@@ -431,8 +472,8 @@ pub struct PrtRuntime {
     volume_info: wgpu::Buffer,
     probe_depth: wgpu::Buffer,
     probe_positions: wgpu::Buffer,
-    /// Per surfel, the bounce radiance of stage 3 (one word when bounces are off).
-    surfel_bounce: wgpu::Buffer,
+    /// Per surfel chunk, the bounce radiance of stage 3 (one word when bounces are off).
+    surfel_bounces: Vec<wgpu::Buffer>,
     /// Per update: the changed and moved light bitsets, then the changed lights' indices.
     light_changes: wgpu::Buffer,
     mask_stride: u32,
@@ -582,7 +623,40 @@ impl PrtRuntime {
             })
             .collect();
         let bricks = alloc.storage("prt bricks", bytemuck::cast_slice(&asset.bricks), none)?;
-        let surfels = alloc.storage("prt surfels", bytemuck::cast_slice(&asset.surfels), none)?;
+        let surfel_chunks = surfel_chunks(
+            asset,
+            settings
+                .max_surfel_chunk_bytes
+                .unwrap_or(max_binding)
+                .min(max_binding),
+        )?;
+        let feeds_back = settings.bounces.feeds_back();
+        // Per chunk: its surfels, their direct radiance and their bounce radiance.
+        let chunk_surfels: Vec<[wgpu::Buffer; 4]> = surfel_chunks
+            .iter()
+            .map(|c| {
+                let range = c.surfel_begin as usize..c.surfel_end as usize;
+                let n = range.len() as u64;
+                Ok([
+                    alloc.storage(
+                        "prt surfels",
+                        bytemuck::cast_slice(&asset.surfels[range]),
+                        none,
+                    )?,
+                    alloc.zeroed("prt surfel radiance", 16 * n, none)?,
+                    alloc.zeroed(
+                        "prt surfel bounce",
+                        if feeds_back { 16 * n } else { 0 },
+                        none,
+                    )?,
+                    device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                        label: Some("prt surfel chunk"),
+                        contents: bytemuck::bytes_of(c),
+                        usage: wgpu::BufferUsages::UNIFORM,
+                    }),
+                ])
+            })
+            .collect::<Result<_, GpuError>>()?;
         let normal_bounds: Vec<GpuNormalBounds> = brick_normal_bounds(asset)
             .iter()
             .map(GpuNormalBounds::from)
@@ -649,13 +723,6 @@ impl PrtRuntime {
             "prt light changes",
             4 * (2 * stride + settings.max_lights as u64),
             wgpu::BufferUsages::COPY_DST,
-        )?;
-        let surfel_radiance = alloc.zeroed("prt surfel radiance", 16 * n_surfels, none)?;
-        let feeds_back = settings.bounces.feeds_back();
-        let surfel_bounce = alloc.zeroed(
-            "prt surfel bounce",
-            if feeds_back { 16 * n_surfels } else { 0 },
-            none,
         )?;
         let brick_radiance = alloc.zeroed("prt brick radiance", 64 * n_bricks, none)?;
         let probe_dirty = alloc.zeroed("prt probe dirty", 4 * n_probes, none)?;
@@ -769,15 +836,16 @@ impl PrtRuntime {
                     vec![
                         buf(&params),
                         buf(&lights),
-                        buf(&surfels),
+                        buf(&chunk_surfels[c][0]),
                         buf(&bricks),
                         buf(&brick_lights),
                         buf(&brick_dirty),
                         buf(&brick_vis),
                         buf(&visibility),
                         buf(&light_changes),
-                        buf(&surfel_radiance),
+                        buf(&chunk_surfels[c][1]),
                         buf(&counters),
+                        buf(&chunk_surfels[c][3]),
                     ],
                     vec![buf(&bvh_nodes), buf(&triangles)],
                 ],
@@ -792,9 +860,10 @@ impl PrtRuntime {
                         vec![
                             buf(&params),
                             buf(&bricks),
-                            buf(&surfels),
-                            buf(&surfel_bounce),
+                            buf(&chunk_surfels[c][0]),
+                            buf(&chunk_surfels[c][2]),
                             buf(&brick_dirty),
+                            buf(&chunk_surfels[c][3]),
                         ],
                         volume,
                     ]
@@ -802,11 +871,12 @@ impl PrtRuntime {
                 Stage::BrickRadiance => vec![vec![
                     buf(&params),
                     buf(&bricks),
-                    buf(&surfels),
+                    buf(&chunk_surfels[c][0]),
                     buf(&brick_dirty),
-                    buf(&surfel_radiance),
+                    buf(&chunk_surfels[c][1]),
                     buf(&brick_radiance),
-                    buf(&surfel_bounce),
+                    buf(&chunk_surfels[c][2]),
+                    buf(&chunk_surfels[c][3]),
                 ]],
                 Stage::MarkProbes => vec![vec![
                     buf(&params),
@@ -849,7 +919,29 @@ impl PrtRuntime {
                     stage,
                     Stage::MarkProbes | Stage::Gather | Stage::GatherAtomic
                 );
-                let sets = if uses_factors { chunks.len() } else { 1 };
+                let uses_surfels = matches!(
+                    stage,
+                    Stage::RelightSurfels | Stage::BounceSurfels | Stage::BrickRadiance
+                );
+                let sets = if uses_factors {
+                    chunks.len()
+                } else if uses_surfels {
+                    surfel_chunks.len()
+                } else {
+                    1
+                };
+                let set_work = (0..sets)
+                    .map(|c| {
+                        let s = surfel_chunks[c.min(surfel_chunks.len() - 1)];
+                        match stage {
+                            Stage::RelightSurfels | Stage::BounceSurfels => {
+                                Some(s.surfel_end - s.surfel_begin)
+                            }
+                            Stage::BrickRadiance => Some(s.brick_end - s.brick_begin),
+                            _ => None,
+                        }
+                    })
+                    .collect();
                 let bind_group_sets = (0..sets)
                     .map(|c| {
                         stage_groups(stage, c)
@@ -878,6 +970,7 @@ impl PrtRuntime {
                     Pipeline {
                         pipeline,
                         bind_group_sets,
+                        set_work,
                     },
                 )
             })
@@ -910,7 +1003,7 @@ impl PrtRuntime {
             views,
             sampler,
             volume_info,
-            surfel_bounce,
+            surfel_bounces: chunk_surfels.into_iter().map(|[_, _, b, _]| b).collect(),
             light_changes,
             mask_stride,
             vis_capacity: vis_capacity as u32,
@@ -1016,7 +1109,9 @@ impl PrtRuntime {
         // every brick is recomputed without it (cached visibility keeps that ray-free).
         let fixed_restart = restart && self.settings.bounces.feeds_back() && !feedback && !first;
         if fixed_restart {
-            encoder.clear_buffer(&self.surfel_bounce, 0, None);
+            for b in &self.surfel_bounces {
+                encoder.clear_buffer(b, 0, None);
+            }
         }
         // Stage 3 runs at the start of every cycle after the first since the change (fixed), or
         // of every cycle (feedback).
@@ -1115,11 +1210,15 @@ impl PrtRuntime {
                     continue;
                 }
                 pass.set_pipeline(&p.pipeline);
-                let (x, y) = dispatch_size(work);
-                for set in &p.bind_group_sets {
+                for (set, chunk_work) in p.bind_group_sets.iter().zip(&p.set_work) {
+                    let work = chunk_work.map_or(work, groups);
+                    if work == 0 {
+                        continue;
+                    }
                     for (i, bg) in set.iter().enumerate() {
                         pass.set_bind_group(i as u32, bg, &[]);
                     }
+                    let (x, y) = dispatch_size(work);
                     pass.dispatch_workgroups(x, y, 1);
                 }
             }

@@ -312,6 +312,14 @@ mod tests {
                 ],
             ),
             (
+                "SurfelChunk",
+                size_of::<layout::SurfelChunk>(),
+                vec![
+                    ("brick_end", offset_of!(layout::SurfelChunk, brick_end)),
+                    ("surfel_end", offset_of!(layout::SurfelChunk, surfel_end)),
+                ],
+            ),
+            (
                 "NormalBounds",
                 size_of::<layout::GpuNormalBounds>(),
                 vec![("nmax", offset_of!(layout::GpuNormalBounds, max))],
