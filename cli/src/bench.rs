@@ -8,8 +8,8 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use glam::Vec3;
 use prt_bake::{BakeSettings, NoProgress};
+use prt_eval::{compare, ErrorStats};
 use prt_format::{Asset, Factors, TransferPrecision};
-use prt_runtime::accuracy::{compare, ErrorStats};
 use prt_runtime::gpu::{headless_device, wgpu, Bounces, PrtRuntime, RuntimeSettings};
 use prt_runtime::{CpuRelighter, Lighting};
 use rayon::prelude::*;
@@ -364,15 +364,12 @@ fn alternate<'a>(even: &'a Lighting, odd: &'a Lighting) -> impl Fn(u32) -> &'a L
 }
 
 /// GPU runtime costs, all measured in one run on one adapter: full update per probe at several
-/// probe counts, gather against integer atomic accumulation, the update against the prior art's
+/// probe counts, the gather alone, the update against the prior art's
 /// scheme (every probe relights its own unmerged surfels), an update when nothing changed, and a
 /// multi-bounce update (the volume fed back into every surfel).
 pub fn gpu(scene: &Path, a: &Lighting, spacings: &[f32], rays: u32, cell: f32) -> Result<String> {
     let (device, queue, info) = headless_device()?;
-    let baselines = RuntimeSettings {
-        benchmark_baselines: true,
-        ..RuntimeSettings::default()
-    };
+    let baselines = RuntimeSettings::default();
     let sky = |c: f32| Lighting {
         rig: a.rig.clone(),
         sky: prt_runtime::SkyModel::Constant([c, c, c]),
@@ -392,7 +389,7 @@ pub fn gpu(scene: &Path, a: &Lighting, spacings: &[f32], rays: u32, cell: f32) -
         device.features().contains(wgpu::Features::SUBGROUP),
         scene.display()
     );
-    md.push_str("| probes | factors/probe | full update (lights moved) | per probe | gather only (sky changed) | integer-atomic gather | gather speed-up | nothing changed | bounce update (feedback) | bounce / full | prior art: own surfels per probe | speed-up vs prior art |\n|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+    md.push_str("| probes | factors/probe | full update (lights moved) | per probe | gather only (sky changed) | nothing changed | bounce update (feedback) | bounce / full | prior art: own surfels per probe | speed-up vs prior art |\n|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
     for &spacing in spacings {
         let settings = BakeSettings {
             rays,
@@ -413,15 +410,6 @@ pub fn gpu(scene: &Path, a: &Lighting, spacings: &[f32], rays: u32, cell: f32) -
             iterations,
             alternate(&sky1, &sky2),
         )?;
-        runtime.use_atomic_gather(true);
-        let atomic = time_updates(
-            &device,
-            &queue,
-            &mut runtime,
-            iterations,
-            alternate(&sky1, &sky2),
-        )?;
-        runtime.use_atomic_gather(false);
         let idle = time_updates(&device, &queue, &mut runtime, iterations, |_| &sky2)?;
         drop(runtime);
         // Endless feedback with nothing changed: every update samples the volume at every
@@ -455,13 +443,11 @@ pub fn gpu(scene: &Path, a: &Lighting, spacings: &[f32], rays: u32, cell: f32) -
         };
         writeln!(
             md,
-            "| {probes} | {:.0} | {:.1} ms | {:.2} µs | {:.1} ms | {:.1} ms | {:.2}x | {:.3} ms | {:.1} ms | {:.2}x | {} | {} |",
+            "| {probes} | {:.0} | {:.1} ms | {:.2} µs | {:.1} ms | {:.3} ms | {:.1} ms | {:.2}x | {} | {} |",
             asset.factors.len() as f64 / probes as f64,
             full * 1e3,
             full * 1e6 / probes as f64,
             gather * 1e3,
-            atomic * 1e3,
-            atomic / gather,
             idle * 1e3,
             bounce * 1e3,
             bounce / full,

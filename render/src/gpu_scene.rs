@@ -144,7 +144,7 @@ impl GpuScene {
             .collect();
 
         let create = |label, bytes: &[u8], usage, limit| {
-            prt_runtime::gpu::buffer_with(device, label, bytes, usage, limit)
+            prt_runtime::gpu::resources::buffer_with(device, label, bytes, usage, limit)
         };
         let storage = wgpu::BufferUsages::STORAGE;
         Ok(GpuScene {

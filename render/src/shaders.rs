@@ -4,9 +4,7 @@
 
 use crate::layout;
 
-const TYPES: &str = include_str!("../../shaders/render_types.wgsl");
-const CULL: &str = include_str!("../../shaders/render_cull.wgsl");
-const SHADE: &str = include_str!("../../shaders/render_shade.wgsl");
+use prt_shaders::{RENDER_CULL as CULL, RENDER_SHADE as SHADE, RENDER_TYPES as TYPES};
 
 /// Bind group of the probe volume in the shading pass.
 pub const VOLUME_GROUP: u32 = 2;

@@ -7,7 +7,6 @@
 // SH and colour maths index several parallel arrays with one index; range loops read best.
 #![allow(clippy::needless_range_loop)]
 
-pub mod accuracy;
 pub mod gpu;
 pub mod lights;
 pub mod output;

@@ -4,9 +4,9 @@
 use std::path::Path;
 
 use prt_bake::BakeSettings;
+use prt_eval::{compare, ErrorStats};
 use prt_format::sh::{self, ShRgb};
 use prt_format::Asset;
-use prt_runtime::accuracy::{compare, ErrorStats};
 use prt_runtime::output::read_probe_sh;
 use prt_runtime::{load_rig, CpuRelighter};
 use prt_tests::{bake_ok as bake, fixture};

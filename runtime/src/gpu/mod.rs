@@ -35,18 +35,20 @@ pub use sample::sample_points;
 pub use wgpu;
 
 pub mod layout;
+pub mod resources;
 pub mod sample;
 pub mod shaders;
+pub mod stages;
 
 use prt_format::sh::{ShRgb, SH_COUNT};
 use prt_format::{directions, Asset, Factors};
 use wgpu::util::DeviceExt;
 
 use crate::lights::PreparedLight;
-use crate::relight::brick_normal_bounds;
 use crate::rig::Lighting;
 use crate::sky::SkyModel;
 use layout::*;
+use resources::Resources;
 use shaders::{ShaderConfig, Stage};
 
 /// Why the GPU runtime could not start or update.
@@ -134,9 +136,6 @@ impl Bounces {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RuntimeSettings {
     pub volume_format: VolumeFormat,
-    /// Also build the benchmark baselines (the integer-atomic gather and its 108 bytes per
-    /// probe of accumulators); see [`PrtRuntime::use_atomic_gather`].
-    pub benchmark_baselines: bool,
     /// Split the factor tables into storage bindings of at most this many bytes (default: the
     /// device's storage binding limit). Lower values trade one extra mark and gather dispatch
     /// per chunk for smaller buffers.
@@ -182,7 +181,6 @@ impl Default for RuntimeSettings {
             max_lights: 1024,
             visibility_words: None,
             volume_format: VolumeFormat::default(),
-            benchmark_baselines: false,
             max_factor_chunk_bytes: None,
             max_surfel_chunk_bytes: None,
             normal_bias: 0.2,
@@ -265,187 +263,10 @@ pub fn headless_device() -> Result<(wgpu::Device, wgpu::Queue, wgpu::AdapterInfo
     Ok((device, queue, adapter.get_info()))
 }
 
-/// The sampling snippet's uniform for `grid` and `settings`.
-fn volume_info(grid: &prt_format::Grid, settings: &RuntimeSettings) -> VolumeInfo {
-    VolumeInfo {
-        normal_bias: settings.normal_bias * grid.spacing,
-        flags: if settings.visibility {
-            VOLUME_VISIBILITY
-        } else {
-            0
-        },
-        ..VolumeInfo::from(grid)
-    }
-}
-
-/// Smallest buffer the runtime creates: larger than every element type it binds.
-const MIN_BUFFER: u64 = 256;
-
-/// Splits the probes into runs whose factor tables fit `limit` bytes each (at least one chunk).
-fn factor_chunks(asset: &Asset, limit: u64) -> Result<Vec<FactorChunk>, GpuError> {
-    let per_factor = asset.factors.bytes_per_factor() as u64;
-    let mut chunks = Vec::new();
-    let mut current = FactorChunk::default();
-    for (i, p) in asset.probes.iter().enumerate() {
-        let own = u64::from(p.factor_count) * per_factor;
-        if own > limit {
-            return Err(GpuError::Limit {
-                what: "one probe's factor table",
-                needed: own,
-                limit,
-            });
-        }
-        let end = u64::from(p.first_factor) + u64::from(p.factor_count);
-        if (end - u64::from(current.first_factor)) * per_factor > limit {
-            current.probe_end = i as u32;
-            chunks.push(current);
-            current = FactorChunk {
-                first_factor: p.first_factor,
-                probe_begin: i as u32,
-                ..FactorChunk::default()
-            };
-        }
-    }
-    current.probe_end = asset.probes.len() as u32;
-    chunks.push(current);
-    Ok(chunks)
-}
-
-/// Splits the bricks into runs whose surfels take at most `limit` bytes each (whole bricks,
-/// since a brick's stage reads all its surfels).
-fn surfel_chunks(asset: &Asset, limit: u64) -> Result<Vec<SurfelChunk>, GpuError> {
-    let per_surfel = std::mem::size_of::<prt_format::Surfel>() as u64;
-    let mut chunks = Vec::new();
-    let mut current = SurfelChunk::default();
-    for (i, b) in asset.bricks.iter().enumerate() {
-        let own = u64::from(b.surfel_count) * per_surfel;
-        if own > limit {
-            return Err(GpuError::Limit {
-                what: "one brick's surfels",
-                needed: own,
-                limit,
-            });
-        }
-        let end = u64::from(b.first_surfel) + u64::from(b.surfel_count);
-        if (end - u64::from(current.surfel_begin)) * per_surfel > limit {
-            current.brick_end = i as u32;
-            current.surfel_end = b.first_surfel;
-            chunks.push(current);
-            current = SurfelChunk {
-                brick_begin: i as u32,
-                surfel_begin: b.first_surfel,
-                ..SurfelChunk::default()
-            };
-        }
-    }
-    current.brick_end = asset.bricks.len() as u32;
-    current.surfel_end = asset.surfels.len() as u32;
-    chunks.push(current);
-    Ok(chunks)
-}
-
-fn buf(b: &wgpu::Buffer) -> wgpu::BindingResource<'_> {
-    b.as_entire_binding()
-}
-
-/// A buffer holding `bytes`, refused with [`GpuError::Limit`] beyond `limit` bytes (a device
-/// limit: one storage binding, or the largest buffer). wgpu cannot bind empty buffers, nor ones
-/// smaller than one element: an empty array gets [`MIN_BUFFER`] zero bytes.
-pub fn buffer_with(
-    device: &wgpu::Device,
-    label: &'static str,
-    bytes: &[u8],
-    usage: wgpu::BufferUsages,
-    limit: u64,
-) -> Result<wgpu::Buffer, GpuError> {
-    if bytes.len() as u64 > limit {
-        return Err(GpuError::Limit {
-            what: label,
-            needed: bytes.len() as u64,
-            limit,
-        });
-    }
-    let padded;
-    let contents = if bytes.is_empty() {
-        padded = [0u8; MIN_BUFFER as usize];
-        &padded[..]
-    } else {
-        bytes
-    };
-    Ok(
-        device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some(label),
-            contents,
-            usage,
-        }),
-    )
-}
-
-/// Creates the runtime's storage buffers, refusing any larger than one storage binding.
-struct Alloc<'a> {
-    device: &'a wgpu::Device,
-    max_binding: u64,
-}
-
-impl Alloc<'_> {
-    fn check(&self, label: &'static str, size: u64) -> Result<(), GpuError> {
-        if size > self.max_binding {
-            return Err(GpuError::Limit {
-                what: label,
-                needed: size,
-                limit: self.max_binding,
-            });
-        }
-        Ok(())
-    }
-
-    /// A storage buffer holding `bytes`.
-    fn storage(
-        &self,
-        label: &'static str,
-        bytes: &[u8],
-        extra: wgpu::BufferUsages,
-    ) -> Result<wgpu::Buffer, GpuError> {
-        buffer_with(
-            self.device,
-            label,
-            bytes,
-            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | extra,
-            self.max_binding,
-        )
-    }
-
-    /// A zero-initialised storage buffer of `size` bytes.
-    fn zeroed(
-        &self,
-        label: &'static str,
-        size: u64,
-        extra: wgpu::BufferUsages,
-    ) -> Result<wgpu::Buffer, GpuError> {
-        self.check(label, size)?;
-        Ok(self.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some(label),
-            size: size.max(MIN_BUFFER),
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | extra,
-            mapped_at_creation: false,
-        }))
-    }
-}
-
 /// Workgroup counts `(x, y)` covering `groups` linear workgroups.
 fn dispatch_size(groups: u32) -> (u32, u32) {
     let x = groups.clamp(1, DISPATCH_WIDTH);
     (x, groups.div_ceil(x).max(1))
-}
-
-/// A stage's pipeline and its bind groups: one set, or one per factor chunk for the stages that
-/// read factors (each set is dispatched in turn).
-struct Pipeline {
-    pipeline: wgpu::ComputePipeline,
-    bind_group_sets: Vec<Vec<wgpu::BindGroup>>,
-    /// Per set, the work items of a surfel-chunked stage (its chunk's surfels or bricks);
-    /// `None`: the stage's own count.
-    set_work: Vec<Option<u32>>,
 }
 
 /// The GPU relighting runtime of one asset.
@@ -459,31 +280,12 @@ pub struct PrtRuntime {
     grid: prt_format::Grid,
     offset_scale: f32,
     settings: RuntimeSettings,
-    params: wgpu::Buffer,
-    lights: wgpu::Buffer,
-    sky_directions: wgpu::Buffer,
-    probe_sh: wgpu::Buffer,
-    counters: wgpu::Buffer,
-    textures: Vec<wgpu::Texture>,
-    views: Vec<wgpu::TextureView>,
-    sampler: wgpu::Sampler,
-    /// The sampling snippet's uniform (binding 8), visibility maps (binding 9) and probe
-    /// positions (binding 10).
-    volume_info: wgpu::Buffer,
-    probe_depth: wgpu::Buffer,
-    probe_positions: wgpu::Buffer,
-    /// Per surfel chunk, the bounce radiance of stage 3 (one word when bounces are off).
-    surfel_bounces: Vec<wgpu::Buffer>,
-    /// Per update: the changed and moved light bitsets, then the changed lights' indices.
-    light_changes: wgpu::Buffer,
-    mask_stride: u32,
+    /// Every buffer and texture, bound by name ([`stages`]).
+    res: Resources,
     vis_capacity: u32,
     /// The half of the visibility pool the last relight wrote.
     vis_parity: u32,
-    pipelines: Vec<(Stage, Pipeline)>,
-    /// The integer-atomic gather, built only for benchmarks ([`PrtRuntime::use_atomic_gather`]).
-    atomic_gather: Option<Pipeline>,
-    use_atomic: bool,
+    pipelines: Vec<(Stage, stages::Pipeline)>,
     state: Option<State>,
     /// The last equirect sky and its lattice radiance (`SkyModel::lattice` averages the map over
     /// every direction's cell: computed again only when the sky changes, not every update).
@@ -538,44 +340,6 @@ impl PrtRuntime {
                 max: crate::visibility::MAX_STACK,
             });
         }
-        let limits = device.limits();
-        let g = asset.header.grid;
-        let dim = u64::from(g.counts.iter().copied().max().unwrap_or(1));
-        if dim > u64::from(limits.max_texture_dimension_3d) {
-            return Err(GpuError::Limit {
-                what: "the probe grid's largest dimension",
-                needed: dim,
-                limit: u64::from(limits.max_texture_dimension_3d),
-            });
-        }
-        let max_binding = limits
-            .max_storage_buffer_binding_size
-            .min(limits.max_buffer_size);
-        let alloc = Alloc {
-            device,
-            max_binding,
-        };
-        for (what, needed, limit) in [
-            (
-                "storage buffers per shader stage",
-                12,
-                limits.max_storage_buffers_per_shader_stage,
-            ),
-            (
-                "storage textures per shader stage",
-                7,
-                limits.max_storage_textures_per_shader_stage,
-            ),
-            ("bind groups", 3, limits.max_bind_groups),
-        ] {
-            if needed > limit {
-                return Err(GpuError::Limit {
-                    what,
-                    needed: u64::from(needed),
-                    limit: u64::from(limit),
-                });
-            }
-        }
         let subgroups = device.features().contains(wgpu::Features::SUBGROUP);
         let config = ShaderConfig {
             factors: asset.factors.precision(),
@@ -583,404 +347,12 @@ impl PrtRuntime {
             subgroups,
             mask_stride,
         };
-        let none = wgpu::BufferUsages::empty();
-        let probes = alloc.storage("prt probes", bytemuck::cast_slice(&asset.probes), none)?;
-        let factor_bytes: &[u8] = match &asset.factors {
-            Factors::F16(f) => bytemuck::cast_slice(f),
-            Factors::F32(f) => bytemuck::cast_slice(f),
-            Factors::U8 { factors, .. } => bytemuck::cast_slice(factors),
-        };
-        let chunks = factor_chunks(
-            asset,
-            settings
-                .max_factor_chunk_bytes
-                .unwrap_or(max_binding)
-                .min(max_binding),
-        )?;
-        let per_factor = asset.factors.bytes_per_factor();
-        let chunk_factors: Vec<wgpu::Buffer> = chunks
+        let res = Resources::new(device, asset, &settings, mask_stride)?;
+        let pipelines = Stage::ALL
             .iter()
-            .map(|c| {
-                let first = c.first_factor as usize;
-                let end = asset.probes[c.probe_begin as usize..c.probe_end as usize]
-                    .last()
-                    .map_or(first, |p| (p.first_factor + p.factor_count) as usize);
-                alloc.storage(
-                    "prt factors",
-                    &factor_bytes[first * per_factor..end * per_factor],
-                    none,
-                )
-            })
-            .collect::<Result<_, _>>()?;
-        let chunk_uniforms: Vec<wgpu::Buffer> = chunks
-            .iter()
-            .map(|c| {
-                device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                    label: Some("prt factor chunk"),
-                    contents: bytemuck::bytes_of(c),
-                    usage: wgpu::BufferUsages::UNIFORM,
-                })
-            })
-            .collect();
-        let bricks = alloc.storage("prt bricks", bytemuck::cast_slice(&asset.bricks), none)?;
-        let surfel_chunks = surfel_chunks(
-            asset,
-            settings
-                .max_surfel_chunk_bytes
-                .unwrap_or(max_binding)
-                .min(max_binding),
-        )?;
-        let feeds_back = settings.bounces.feeds_back();
-        // Per chunk: its surfels, their direct radiance and their bounce radiance.
-        let chunk_surfels: Vec<[wgpu::Buffer; 4]> = surfel_chunks
-            .iter()
-            .map(|c| {
-                let range = c.surfel_begin as usize..c.surfel_end as usize;
-                let n = range.len() as u64;
-                Ok([
-                    alloc.storage(
-                        "prt surfels",
-                        bytemuck::cast_slice(&asset.surfels[range]),
-                        none,
-                    )?,
-                    alloc.zeroed("prt surfel radiance", 16 * n, none)?,
-                    alloc.zeroed(
-                        "prt surfel bounce",
-                        if feeds_back { 16 * n } else { 0 },
-                        none,
-                    )?,
-                    device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                        label: Some("prt surfel chunk"),
-                        contents: bytemuck::bytes_of(c),
-                        usage: wgpu::BufferUsages::UNIFORM,
-                    }),
-                ])
-            })
+            .filter(|&&s| s != Stage::BounceSurfels || settings.bounces.feeds_back())
+            .map(|&stage| Ok((stage, stages::build(device, &res, stage, &config)?)))
             .collect::<Result<_, GpuError>>()?;
-        let normal_bounds: Vec<GpuNormalBounds> = brick_normal_bounds(asset)
-            .iter()
-            .map(GpuNormalBounds::from)
-            .collect();
-        let normal_bounds = alloc.storage(
-            "prt normal bounds",
-            bytemuck::cast_slice(&normal_bounds),
-            none,
-        )?;
-        // A scene without triangles gets one leaf holding a degenerate triangle: no ray hits it.
-        let empty_node = [prt_format::BvhNode {
-            min: [f32::MAX; 3],
-            max: [f32::MIN; 3],
-            count: 1,
-            first: 0,
-        }];
-        let empty_triangle = [prt_format::Triangle::default()];
-        let (nodes, tris) = if asset.geometry.nodes.is_empty() {
-            (&empty_node[..], &empty_triangle[..])
-        } else {
-            (&asset.geometry.nodes[..], &asset.geometry.triangles[..])
-        };
-        let bvh_nodes = alloc.storage("prt bvh nodes", bytemuck::cast_slice(nodes), none)?;
-        let triangles = alloc.storage("prt triangles", bytemuck::cast_slice(tris), none)?;
-        let sky_transfer = alloc.storage(
-            "prt sky transfer",
-            bytemuck::cast_slice(&asset.sky_transfer),
-            none,
-        )?;
-        let sky_mask =
-            alloc.storage("prt sky mask", bytemuck::cast_slice(&asset.sky_mask), none)?;
-        let probe_depth = alloc.storage(
-            "prt probe visibility",
-            bytemuck::cast_slice(&asset.probe_depth),
-            none,
-        )?;
-        let positions: Vec<[f32; 4]> = asset
-            .probes
-            .iter()
-            .map(|p| [p.position[0], p.position[1], p.position[2], 0.0])
-            .collect();
-        let probe_positions = alloc.storage(
-            "prt probe positions",
-            bytemuck::cast_slice(&positions),
-            none,
-        )?;
-        let n_bricks = asset.bricks.len() as u64;
-        let n_surfels = asset.surfels.len() as u64;
-        let n_probes = asset.probes.len() as u64;
-        let stride = u64::from(mask_stride);
-        let brick_lights = alloc.zeroed("prt brick light masks", 8 * stride * n_bricks, none)?;
-        let brick_dirty = alloc.zeroed("prt brick dirty", 4 * n_bricks, none)?;
-        let brick_vis = alloc.storage(
-            "prt brick visibility offsets",
-            bytemuck::cast_slice(&vec![NO_CACHE; 2 * asset.bricks.len()]),
-            none,
-        )?;
-        let vis_capacity = settings
-            .visibility_words
-            .unwrap_or(2 * n_surfels)
-            .clamp(1, (max_binding / 8).min(u64::from(u32::MAX / 2)));
-        let visibility = alloc.zeroed("prt visibility pool", 8 * vis_capacity, none)?;
-        let light_changes = alloc.zeroed(
-            "prt light changes",
-            4 * (2 * stride + settings.max_lights as u64),
-            wgpu::BufferUsages::COPY_DST,
-        )?;
-        let brick_radiance = alloc.zeroed("prt brick radiance", 64 * n_bricks, none)?;
-        let probe_dirty = alloc.zeroed("prt probe dirty", 4 * n_probes, none)?;
-        let probe_sh = alloc.zeroed(
-            "prt probe sh",
-            16 * 9 * n_probes,
-            wgpu::BufferUsages::COPY_SRC,
-        )?;
-        let counters = alloc.zeroed(
-            "prt counters",
-            std::mem::size_of::<Counters>() as u64,
-            wgpu::BufferUsages::COPY_SRC,
-        )?;
-        let lights = alloc.zeroed("prt lights", 64 * settings.max_lights as u64, none)?;
-        let sky_directions = alloc.zeroed(
-            "prt sky directions",
-            32 * u64::from(asset.header.ray_count),
-            none,
-        )?;
-        let params = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("prt params"),
-            size: std::mem::size_of::<Params>() as u64,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-
-        let size = wgpu::Extent3d {
-            width: g.counts[0],
-            height: g.counts[1],
-            depth_or_array_layers: g.counts[2],
-        };
-        let textures: Vec<wgpu::Texture> = (0..7)
-            .map(|i| {
-                device.create_texture(&wgpu::TextureDescriptor {
-                    label: Some(&format!("prt sh volume {i}")),
-                    size,
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D3,
-                    format: settings.volume_format.texture_format(),
-                    usage: wgpu::TextureUsages::STORAGE_BINDING
-                        | wgpu::TextureUsages::TEXTURE_BINDING
-                        | wgpu::TextureUsages::COPY_SRC,
-                    view_formats: &[],
-                })
-            })
-            .collect();
-        let views: Vec<wgpu::TextureView> = textures
-            .iter()
-            .map(|t| t.create_view(&wgpu::TextureViewDescriptor::default()))
-            .collect();
-        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
-            label: Some("prt sh volume sampler"),
-            address_mode_u: wgpu::AddressMode::ClampToEdge,
-            address_mode_v: wgpu::AddressMode::ClampToEdge,
-            address_mode_w: wgpu::AddressMode::ClampToEdge,
-            mag_filter: wgpu::FilterMode::Linear,
-            min_filter: wgpu::FilterMode::Linear,
-            ..Default::default()
-        });
-
-        let volume_info = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("prt volume info"),
-            contents: bytemuck::bytes_of(&volume_info(&g, &settings)),
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
-        let fixed_accum = alloc.zeroed(
-            "prt fixed-point accumulators",
-            if settings.benchmark_baselines {
-                4 * 27 * n_probes
-            } else {
-                0
-            },
-            none,
-        )?;
-        let gather_groups = |c: usize| -> Vec<Vec<wgpu::BindingResource<'_>>> {
-            vec![
-                vec![
-                    buf(&params),
-                    buf(&probes),
-                    buf(&chunk_factors[c]),
-                    buf(&brick_radiance),
-                    buf(&sky_transfer),
-                    buf(&sky_mask),
-                    buf(&sky_directions),
-                    buf(&probe_dirty),
-                    buf(&probe_sh),
-                    buf(&counters),
-                    buf(&chunk_uniforms[c]),
-                ],
-                views
-                    .iter()
-                    .map(wgpu::BindingResource::TextureView)
-                    .collect(),
-            ]
-        };
-        let stage_groups = |stage: Stage, c: usize| -> Vec<Vec<wgpu::BindingResource<'_>>> {
-            match stage {
-                Stage::CullLights => vec![vec![
-                    buf(&params),
-                    buf(&lights),
-                    buf(&bricks),
-                    buf(&normal_bounds),
-                    buf(&brick_lights),
-                    buf(&brick_dirty),
-                    buf(&counters),
-                    buf(&light_changes),
-                    buf(&brick_vis),
-                ]],
-                Stage::RelightSurfels => vec![
-                    vec![
-                        buf(&params),
-                        buf(&lights),
-                        buf(&chunk_surfels[c][0]),
-                        buf(&bricks),
-                        buf(&brick_lights),
-                        buf(&brick_dirty),
-                        buf(&brick_vis),
-                        buf(&visibility),
-                        buf(&light_changes),
-                        buf(&chunk_surfels[c][1]),
-                        buf(&counters),
-                        buf(&chunk_surfels[c][3]),
-                    ],
-                    vec![buf(&bvh_nodes), buf(&triangles)],
-                ],
-                Stage::BounceSurfels => {
-                    let mut volume: Vec<wgpu::BindingResource<'_>> = views
-                        .iter()
-                        .map(wgpu::BindingResource::TextureView)
-                        .collect();
-                    volume.push(wgpu::BindingResource::Sampler(&sampler));
-                    volume.extend([buf(&volume_info), buf(&probe_depth), buf(&probe_positions)]);
-                    vec![
-                        vec![
-                            buf(&params),
-                            buf(&bricks),
-                            buf(&chunk_surfels[c][0]),
-                            buf(&chunk_surfels[c][2]),
-                            buf(&brick_dirty),
-                            buf(&chunk_surfels[c][3]),
-                        ],
-                        volume,
-                    ]
-                }
-                Stage::BrickRadiance => vec![vec![
-                    buf(&params),
-                    buf(&bricks),
-                    buf(&chunk_surfels[c][0]),
-                    buf(&brick_dirty),
-                    buf(&chunk_surfels[c][1]),
-                    buf(&brick_radiance),
-                    buf(&chunk_surfels[c][2]),
-                    buf(&chunk_surfels[c][3]),
-                ]],
-                Stage::MarkProbes => vec![vec![
-                    buf(&params),
-                    buf(&probes),
-                    buf(&chunk_factors[c]),
-                    buf(&brick_dirty),
-                    buf(&probe_dirty),
-                    buf(&chunk_uniforms[c]),
-                ]],
-                Stage::Gather => gather_groups(c),
-                Stage::GatherAtomic => {
-                    let mut groups = gather_groups(c);
-                    groups.push(vec![buf(&fixed_accum)]);
-                    groups
-                }
-            }
-        };
-        let pipelines: Vec<(Stage, Pipeline)> = Stage::ALL
-            .iter()
-            .filter(|&&s| s != Stage::BounceSurfels || feeds_back)
-            .chain(
-                [Stage::GatherAtomic]
-                    .iter()
-                    .filter(|_| settings.benchmark_baselines),
-            )
-            .map(|&stage| {
-                let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-                    label: Some(stage.label()),
-                    source: wgpu::ShaderSource::Wgsl(shaders::source(stage, &config).into()),
-                });
-                let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                    label: Some(stage.label()),
-                    layout: None,
-                    module: &module,
-                    entry_point: Some("main"),
-                    compilation_options: Default::default(),
-                    cache: None,
-                });
-                let uses_factors = matches!(
-                    stage,
-                    Stage::MarkProbes | Stage::Gather | Stage::GatherAtomic
-                );
-                let uses_surfels = matches!(
-                    stage,
-                    Stage::RelightSurfels | Stage::BounceSurfels | Stage::BrickRadiance
-                );
-                let sets = if uses_factors {
-                    chunks.len()
-                } else if uses_surfels {
-                    surfel_chunks.len()
-                } else {
-                    1
-                };
-                let set_work = (0..sets)
-                    .map(|c| {
-                        let s = surfel_chunks[c.min(surfel_chunks.len() - 1)];
-                        match stage {
-                            Stage::RelightSurfels | Stage::BounceSurfels => {
-                                Some(s.surfel_end - s.surfel_begin)
-                            }
-                            Stage::BrickRadiance => Some(s.brick_end - s.brick_begin),
-                            _ => None,
-                        }
-                    })
-                    .collect();
-                let bind_group_sets = (0..sets)
-                    .map(|c| {
-                        stage_groups(stage, c)
-                            .into_iter()
-                            .enumerate()
-                            .map(|(i, resources)| {
-                                let entries: Vec<wgpu::BindGroupEntry> = resources
-                                    .into_iter()
-                                    .enumerate()
-                                    .map(|(b, resource)| wgpu::BindGroupEntry {
-                                        binding: b as u32,
-                                        resource,
-                                    })
-                                    .collect();
-                                device.create_bind_group(&wgpu::BindGroupDescriptor {
-                                    label: Some(stage.label()),
-                                    layout: &pipeline.get_bind_group_layout(i as u32),
-                                    entries: &entries,
-                                })
-                            })
-                            .collect()
-                    })
-                    .collect();
-                (
-                    stage,
-                    Pipeline {
-                        pipeline,
-                        bind_group_sets,
-                        set_work,
-                    },
-                )
-            })
-            .collect();
-        let mut pipelines = pipelines;
-        let atomic_gather = if settings.benchmark_baselines {
-            pipelines.pop().map(|(_, p)| p)
-        } else {
-            None
-        };
         Ok(PrtRuntime {
             device: device.clone(),
             queue: queue.clone(),
@@ -988,31 +360,16 @@ impl PrtRuntime {
             brick_count: asset.bricks.len() as u32,
             surfel_count: asset.surfels.len() as u32,
             ray_count: asset.header.ray_count,
-            grid: g,
+            grid: asset.header.grid,
             offset_scale: match &asset.factors {
                 Factors::U8 { offset_scale, .. } => *offset_scale,
                 _ => 1.0,
             },
             settings,
-            params,
-            lights,
-            sky_directions,
-            probe_sh,
-            counters,
-            textures,
-            views,
-            sampler,
-            volume_info,
-            surfel_bounces: chunk_surfels.into_iter().map(|[_, _, b, _]| b).collect(),
-            light_changes,
-            mask_stride,
-            vis_capacity: vis_capacity as u32,
+            vis_capacity: res.vis_capacity as u32,
+            res,
             vis_parity: 1,
-            probe_depth,
-            probe_positions,
             pipelines,
-            atomic_gather,
-            use_atomic: false,
             state: None,
             sky_cache: None,
             cursor: 0,
@@ -1075,9 +432,9 @@ impl PrtRuntime {
         let changes = light_changes(
             self.state.as_ref().map(|s| &s.lights[..]),
             &new.lights,
-            self.mask_stride as usize,
+            self.res.mask_stride as usize,
         );
-        let changed = changes.len() as u32 - 2 * self.mask_stride;
+        let changed = changes.len() as u32 - 2 * self.res.mask_stride;
         let sky_changed = self.state.as_ref().is_none_or(|old| {
             old.sky_mode != new.sky_mode
                 || old.sky_color != new.sky_color
@@ -1109,8 +466,8 @@ impl PrtRuntime {
         // every brick is recomputed without it (cached visibility keeps that ray-free).
         let fixed_restart = restart && self.settings.bounces.feeds_back() && !feedback && !first;
         if fixed_restart {
-            for b in &self.surfel_bounces {
-                encoder.clear_buffer(b, 0, None);
+            for [_, _, bounce, _] in &self.res.chunk_surfels {
+                encoder.clear_buffer(bounce, 0, None);
             }
         }
         // Stage 3 runs at the start of every cycle after the first since the change (fixed), or
@@ -1171,19 +528,23 @@ impl PrtRuntime {
                 });
             encoder.copy_buffer_to_buffer(&src, 0, dst, 0, bytes.len() as u64);
         };
-        copy(encoder, &self.params, bytemuck::bytes_of(&params));
-        copy(encoder, &self.lights, bytemuck::cast_slice(&new.lights));
+        copy(encoder, &self.res.params, bytemuck::bytes_of(&params));
+        copy(encoder, &self.res.lights, bytemuck::cast_slice(&new.lights));
         if relight {
-            copy(encoder, &self.light_changes, bytemuck::cast_slice(&changes));
+            copy(
+                encoder,
+                &self.res.light_changes,
+                bytemuck::cast_slice(&changes),
+            );
         }
         if sky_changed {
             copy(
                 encoder,
-                &self.sky_directions,
+                &self.res.sky_directions,
                 bytemuck::cast_slice(&new.sky_directions),
             );
         }
-        encoder.clear_buffer(&self.counters, 0, None);
+        encoder.clear_buffer(&self.res.counters, 0, None);
         {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("prt update"),
@@ -1191,10 +552,6 @@ impl PrtRuntime {
             });
             let groups = |n: u32| n.div_ceil(WORKGROUP);
             for (stage, p) in &self.pipelines {
-                let p = match (stage, &self.atomic_gather) {
-                    (Stage::Gather, Some(atomic)) if self.use_atomic => atomic,
-                    _ => p,
-                };
                 let work = match stage {
                     Stage::CullLights if relight => groups(self.brick_count),
                     Stage::BrickRadiance if relight || bounce => groups(self.brick_count),
@@ -1257,13 +614,6 @@ impl PrtRuntime {
         }
     }
 
-    /// Benchmarks only: gather with the prior art's integer atomic accumulation (16.16 fixed
-    /// point: it loses precision and overflows beyond 32768) instead of the parallel reduction.
-    /// Has no effect unless the runtime was built with `benchmark_baselines`.
-    pub fn use_atomic_gather(&mut self, atomic: bool) {
-        self.use_atomic = atomic;
-    }
-
     /// Blocks until all submitted work is done.
     pub fn wait(&self) -> Result<(), GpuError> {
         self.device
@@ -1274,12 +624,12 @@ impl PrtRuntime {
 
     /// The seven volume texture views (layout in `shaders/gather.wgsl`).
     pub fn volume_views(&self) -> &[wgpu::TextureView] {
-        &self.views
+        &self.res.views
     }
 
     /// A trilinear, clamp-to-edge sampler for the volume.
     pub fn sampler(&self) -> &wgpu::Sampler {
-        &self.sampler
+        &self.res.sampler
     }
 
     /// The grid the volume covers (origin, spacing, per-axis step, counts).
@@ -1289,7 +639,7 @@ impl PrtRuntime {
 
     /// The contents of the sampling snippet's `PrtVolumeInfo` uniform (binding 8 of its group).
     pub fn volume_info(&self) -> VolumeInfo {
-        volume_info(&self.grid, &self.settings)
+        resources::volume_info(&self.grid, &self.settings)
     }
 
     /// The settings the runtime was created with.
@@ -1343,6 +693,7 @@ impl PrtRuntime {
     /// [`PrtRuntime::volume_layout_entries`] or taken from a pipeline built with the snippet).
     pub fn volume_bind_group(&self, layout: &wgpu::BindGroupLayout) -> wgpu::BindGroup {
         let mut entries: Vec<wgpu::BindGroupEntry> = self
+            .res
             .views
             .iter()
             .enumerate()
@@ -1353,19 +704,19 @@ impl PrtRuntime {
             .collect();
         entries.push(wgpu::BindGroupEntry {
             binding: 7,
-            resource: wgpu::BindingResource::Sampler(&self.sampler),
+            resource: wgpu::BindingResource::Sampler(&self.res.sampler),
         });
         entries.push(wgpu::BindGroupEntry {
             binding: 8,
-            resource: self.volume_info.as_entire_binding(),
+            resource: self.res.volume_info.as_entire_binding(),
         });
         entries.push(wgpu::BindGroupEntry {
             binding: 9,
-            resource: self.probe_depth.as_entire_binding(),
+            resource: self.res.probe_depth.as_entire_binding(),
         });
         entries.push(wgpu::BindGroupEntry {
             binding: 10,
-            resource: self.probe_positions.as_entire_binding(),
+            resource: self.res.probe_positions.as_entire_binding(),
         });
         self.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("prt volume"),
@@ -1385,7 +736,7 @@ impl PrtRuntime {
         let bytes = read_buffer(
             &self.device,
             &self.queue,
-            &self.probe_sh,
+            &self.res.probe_sh,
             16 * 9 * u64::from(self.probe_count.max(1)),
         )?;
         let v: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
@@ -1397,7 +748,7 @@ impl PrtRuntime {
     /// Blocks and returns the work counters of the last submitted update.
     pub fn read_counters(&self) -> Result<Counters, GpuError> {
         let size = std::mem::size_of::<Counters>() as u64;
-        let bytes = read_buffer(&self.device, &self.queue, &self.counters, size)?;
+        let bytes = read_buffer(&self.device, &self.queue, &self.res.counters, size)?;
         Ok(*bytemuck::from_bytes(&bytes))
     }
 
@@ -1412,7 +763,7 @@ impl PrtRuntime {
         let row = (w * texel).div_ceil(256) * 256;
         let size = u64::from(row) * u64::from(h) * u64::from(d);
         let mut out = Vec::new();
-        for t in &self.textures {
+        for t in &self.res.textures {
             let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("prt volume readback"),
                 size,

@@ -1,8 +1,12 @@
 //! Assembles each stage's WGSL: constants generated from Rust ([`super::layout`]), the shared
-//! `types.wgsl`, the BVH traversal where a stage traces rays, and the stage's own file. All
-//! sources live in `shaders/` at the top of the repository.
+//! `types.wgsl`, the BVH traversal where a stage traces rays, and the stage's own file. The
+//! sources are the `prt-shaders` crate's (`shaders/` at the top of the repository).
 
 use super::layout;
+use prt_shaders::{
+    BOUNCE_SURFELS, BRICK_RADIANCE, CULL_LIGHTS, GATHER, GATHER_SUBGROUP, GATHER_TREE, MARK_PROBES,
+    RELIGHT_SURFELS, SAMPLE_IRRADIANCE, TYPES, VISIBILITY,
+};
 
 /// The compute stages, one WGSL file each (the gather has two reduction variants).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -14,8 +18,6 @@ pub enum Stage {
     BrickRadiance,
     MarkProbes,
     Gather,
-    /// Benchmark baseline: the gather with integer atomic accumulation.
-    GatherAtomic,
 }
 
 impl Stage {
@@ -37,23 +39,9 @@ impl Stage {
             Stage::BrickRadiance => "prt brick_radiance",
             Stage::MarkProbes => "prt mark_probes",
             Stage::Gather => "prt gather",
-            Stage::GatherAtomic => "prt gather (atomic baseline)",
         }
     }
 }
-
-const TYPES: &str = include_str!("../../../shaders/types.wgsl");
-const VISIBILITY: &str = include_str!("../../../shaders/visibility.wgsl");
-const CULL_LIGHTS: &str = include_str!("../../../shaders/cull_lights.wgsl");
-const RELIGHT_SURFELS: &str = include_str!("../../../shaders/relight_surfels.wgsl");
-const BOUNCE_SURFELS: &str = include_str!("../../../shaders/bounce_surfels.wgsl");
-const BRICK_RADIANCE: &str = include_str!("../../../shaders/brick_radiance.wgsl");
-const MARK_PROBES: &str = include_str!("../../../shaders/mark_probes.wgsl");
-const GATHER: &str = include_str!("../../../shaders/gather.wgsl");
-const GATHER_SUBGROUP: &str = include_str!("../../../shaders/gather_subgroup.wgsl");
-const GATHER_TREE: &str = include_str!("../../../shaders/gather_tree.wgsl");
-const GATHER_ATOMIC: &str = include_str!("../../../shaders/gather_atomic.wgsl");
-const SAMPLE_IRRADIANCE: &str = include_str!("../../../shaders/sample_irradiance.wgsl");
 
 /// Choices that change shader source.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -99,7 +87,6 @@ pub fn source(stage: Stage, config: &ShaderConfig) -> String {
                 GATHER_TREE
             },
         ],
-        Stage::GatherAtomic => vec![GATHER, GATHER_ATOMIC],
     };
     let mut s = prelude(config);
     s.push_str(TYPES);
@@ -201,11 +188,12 @@ pub mod validation {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::validation::{assert_layouts, validate, Expected};
     use super::*;
 
-    fn configs() -> Vec<ShaderConfig> {
+    /// Every shader configuration the runtime can build.
+    pub(crate) fn configs() -> Vec<ShaderConfig> {
         let mut out = Vec::new();
         for factors in [
             prt_format::TransferPrecision::F32,
@@ -230,7 +218,7 @@ mod tests {
     #[test]
     fn every_shader_validates() {
         for config in configs() {
-            for stage in Stage::ALL.into_iter().chain([Stage::GatherAtomic]) {
+            for stage in Stage::ALL {
                 validate(&source(stage, &config), &format!("{stage:?} {config:?}"));
             }
         }

@@ -1,0 +1,519 @@
+//! Every buffer and texture of the GPU runtime, created from one asset: the asset's arrays as
+//! they are (factor tables and surfel arrays split into chunks that fit one storage binding
+//! each), the runtime's own state (light masks, visibility pool, brick radiance, probe SH,
+//! counters) and the SH volume. Sizes are checked against the device's limits before anything
+//! is allocated.
+
+use prt_format::{Asset, Factors};
+use wgpu::util::DeviceExt;
+
+use super::layout::*;
+use super::{GpuError, RuntimeSettings};
+use crate::relight::brick_normal_bounds;
+
+/// Every GPU object of one asset's runtime, named after the WGSL variables that bind them
+/// ([`super::stages`] binds them by those names).
+pub struct Resources {
+    pub probes: wgpu::Buffer,
+    /// Factor tables split over bindings: whole probes each.
+    pub chunks: Vec<FactorChunk>,
+    /// Per factor chunk, its factors.
+    pub chunk_factors: Vec<wgpu::Buffer>,
+    /// Per factor chunk, its `FactorChunk` uniform.
+    pub chunk_uniforms: Vec<wgpu::Buffer>,
+    pub bricks: wgpu::Buffer,
+    /// Surfel arrays split over bindings: whole bricks each.
+    pub surfel_chunks: Vec<SurfelChunk>,
+    /// Per surfel chunk: its surfels, their direct radiance, their bounce radiance (one word without bounces) and its `SurfelChunk` uniform.
+    pub chunk_surfels: Vec<[wgpu::Buffer; 4]>,
+    pub normal_bounds: wgpu::Buffer,
+    pub bvh_nodes: wgpu::Buffer,
+    pub triangles: wgpu::Buffer,
+    pub sky_transfer: wgpu::Buffer,
+    pub sky_mask: wgpu::Buffer,
+    /// Visibility maps (`Asset::probe_depth`).
+    pub probe_depth: wgpu::Buffer,
+    /// Where each probe's rays started (xyz, w unused).
+    pub probe_positions: wgpu::Buffer,
+    /// Per brick, `mask_stride` words of light mask, then as many of the previous mask.
+    pub brick_lights: wgpu::Buffer,
+    pub brick_dirty: wgpu::Buffer,
+    /// Per brick, its offsets in the two halves of the visibility pool.
+    pub brick_vis: wgpu::Buffer,
+    /// Words in each half of the visibility pool.
+    pub vis_capacity: u64,
+    /// The visibility pool: one bit per (surfel, reaching light) pair, two halves.
+    pub visibility: wgpu::Buffer,
+    /// Per update: changed and moved light bitsets, then the changed lights' indices.
+    pub light_changes: wgpu::Buffer,
+    pub brick_radiance: wgpu::Buffer,
+    pub probe_dirty: wgpu::Buffer,
+    pub probe_sh: wgpu::Buffer,
+    pub counters: wgpu::Buffer,
+    pub lights: wgpu::Buffer,
+    pub sky_directions: wgpu::Buffer,
+    pub params: wgpu::Buffer,
+    /// The seven SH volume textures.
+    pub textures: Vec<wgpu::Texture>,
+    /// Views of `textures` (storage in the gather, sampled by the snippet).
+    pub views: Vec<wgpu::TextureView>,
+    pub sampler: wgpu::Sampler,
+    /// The sampling snippet's uniform (`PrtVolumeInfo`).
+    pub volume_info: wgpu::Buffer,
+    /// Words per brick light mask, `ceil(max_lights / 32)`.
+    pub mask_stride: u32,
+}
+
+impl Resources {
+    /// Uploads `asset` and allocates every buffer and texture for `settings` (already checked
+    /// by the caller), within `device`'s limits: past them a [`GpuError::Limit`] names the
+    /// array, its size and the limit.
+    pub fn new(
+        device: &wgpu::Device,
+        asset: &Asset,
+        settings: &RuntimeSettings,
+        mask_stride: u32,
+    ) -> Result<Resources, GpuError> {
+        let limits = device.limits();
+        let g = asset.header.grid;
+        let dim = u64::from(g.counts.iter().copied().max().unwrap_or(1));
+        if dim > u64::from(limits.max_texture_dimension_3d) {
+            return Err(GpuError::Limit {
+                what: "the probe grid's largest dimension",
+                needed: dim,
+                limit: u64::from(limits.max_texture_dimension_3d),
+            });
+        }
+        let max_binding = limits
+            .max_storage_buffer_binding_size
+            .min(limits.max_buffer_size);
+        let alloc = Alloc {
+            device,
+            max_binding,
+        };
+        for (what, needed, limit) in [
+            (
+                "storage buffers per shader stage",
+                12,
+                limits.max_storage_buffers_per_shader_stage,
+            ),
+            (
+                "storage textures per shader stage",
+                7,
+                limits.max_storage_textures_per_shader_stage,
+            ),
+            ("bind groups", 3, limits.max_bind_groups),
+        ] {
+            if needed > limit {
+                return Err(GpuError::Limit {
+                    what,
+                    needed: u64::from(needed),
+                    limit: u64::from(limit),
+                });
+            }
+        }
+        let none = wgpu::BufferUsages::empty();
+        let probes = alloc.storage("prt probes", bytemuck::cast_slice(&asset.probes), none)?;
+        let factor_bytes: &[u8] = match &asset.factors {
+            Factors::F16(f) => bytemuck::cast_slice(f),
+            Factors::F32(f) => bytemuck::cast_slice(f),
+            Factors::U8 { factors, .. } => bytemuck::cast_slice(factors),
+        };
+        let chunks = factor_chunks(
+            asset,
+            settings
+                .max_factor_chunk_bytes
+                .unwrap_or(max_binding)
+                .min(max_binding),
+        )?;
+        let per_factor = asset.factors.bytes_per_factor();
+        let chunk_factors: Vec<wgpu::Buffer> = chunks
+            .iter()
+            .map(|c| {
+                let first = c.first_factor as usize;
+                let end = asset.probes[c.probe_begin as usize..c.probe_end as usize]
+                    .last()
+                    .map_or(first, |p| (p.first_factor + p.factor_count) as usize);
+                alloc.storage(
+                    "prt factors",
+                    &factor_bytes[first * per_factor..end * per_factor],
+                    none,
+                )
+            })
+            .collect::<Result<_, _>>()?;
+        let chunk_uniforms: Vec<wgpu::Buffer> = chunks
+            .iter()
+            .map(|c| {
+                device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("prt factor chunk"),
+                    contents: bytemuck::bytes_of(c),
+                    usage: wgpu::BufferUsages::UNIFORM,
+                })
+            })
+            .collect();
+        let bricks = alloc.storage("prt bricks", bytemuck::cast_slice(&asset.bricks), none)?;
+        let surfel_chunks = surfel_chunks(
+            asset,
+            settings
+                .max_surfel_chunk_bytes
+                .unwrap_or(max_binding)
+                .min(max_binding),
+        )?;
+        let feeds_back = settings.bounces.feeds_back();
+        // Per chunk: its surfels, their direct radiance and their bounce radiance.
+        let chunk_surfels: Vec<[wgpu::Buffer; 4]> = surfel_chunks
+            .iter()
+            .map(|c| {
+                let range = c.surfel_begin as usize..c.surfel_end as usize;
+                let n = range.len() as u64;
+                Ok([
+                    alloc.storage(
+                        "prt surfels",
+                        bytemuck::cast_slice(&asset.surfels[range]),
+                        none,
+                    )?,
+                    alloc.zeroed("prt surfel radiance", 16 * n, none)?,
+                    alloc.zeroed(
+                        "prt surfel bounce",
+                        if feeds_back { 16 * n } else { 0 },
+                        none,
+                    )?,
+                    device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                        label: Some("prt surfel chunk"),
+                        contents: bytemuck::bytes_of(c),
+                        usage: wgpu::BufferUsages::UNIFORM,
+                    }),
+                ])
+            })
+            .collect::<Result<_, GpuError>>()?;
+        let normal_bounds: Vec<GpuNormalBounds> = brick_normal_bounds(asset)
+            .iter()
+            .map(GpuNormalBounds::from)
+            .collect();
+        let normal_bounds = alloc.storage(
+            "prt normal bounds",
+            bytemuck::cast_slice(&normal_bounds),
+            none,
+        )?;
+        // A scene without triangles gets one leaf holding a degenerate triangle: no ray hits it.
+        let empty_node = [prt_format::BvhNode {
+            min: [f32::MAX; 3],
+            max: [f32::MIN; 3],
+            count: 1,
+            first: 0,
+        }];
+        let empty_triangle = [prt_format::Triangle::default()];
+        let (nodes, tris) = if asset.geometry.nodes.is_empty() {
+            (&empty_node[..], &empty_triangle[..])
+        } else {
+            (&asset.geometry.nodes[..], &asset.geometry.triangles[..])
+        };
+        let bvh_nodes = alloc.storage("prt bvh nodes", bytemuck::cast_slice(nodes), none)?;
+        let triangles = alloc.storage("prt triangles", bytemuck::cast_slice(tris), none)?;
+        let sky_transfer = alloc.storage(
+            "prt sky transfer",
+            bytemuck::cast_slice(&asset.sky_transfer),
+            none,
+        )?;
+        let sky_mask =
+            alloc.storage("prt sky mask", bytemuck::cast_slice(&asset.sky_mask), none)?;
+        let probe_depth = alloc.storage(
+            "prt probe visibility",
+            bytemuck::cast_slice(&asset.probe_depth),
+            none,
+        )?;
+        let positions: Vec<[f32; 4]> = asset
+            .probes
+            .iter()
+            .map(|p| [p.position[0], p.position[1], p.position[2], 0.0])
+            .collect();
+        let probe_positions = alloc.storage(
+            "prt probe positions",
+            bytemuck::cast_slice(&positions),
+            none,
+        )?;
+        let n_bricks = asset.bricks.len() as u64;
+        let n_surfels = asset.surfels.len() as u64;
+        let n_probes = asset.probes.len() as u64;
+        let stride = u64::from(mask_stride);
+        let brick_lights = alloc.zeroed("prt brick light masks", 8 * stride * n_bricks, none)?;
+        let brick_dirty = alloc.zeroed("prt brick dirty", 4 * n_bricks, none)?;
+        let brick_vis = alloc.storage(
+            "prt brick visibility offsets",
+            bytemuck::cast_slice(&vec![NO_CACHE; 2 * asset.bricks.len()]),
+            none,
+        )?;
+        let vis_capacity = settings
+            .visibility_words
+            .unwrap_or(2 * n_surfels)
+            .clamp(1, (max_binding / 8).min(u64::from(u32::MAX / 2)));
+        let visibility = alloc.zeroed("prt visibility pool", 8 * vis_capacity, none)?;
+        let light_changes = alloc.zeroed(
+            "prt light changes",
+            4 * (2 * stride + settings.max_lights as u64),
+            wgpu::BufferUsages::COPY_DST,
+        )?;
+        let brick_radiance = alloc.zeroed("prt brick radiance", 64 * n_bricks, none)?;
+        let probe_dirty = alloc.zeroed("prt probe dirty", 4 * n_probes, none)?;
+        let probe_sh = alloc.zeroed(
+            "prt probe sh",
+            16 * 9 * n_probes,
+            wgpu::BufferUsages::COPY_SRC,
+        )?;
+        let counters = alloc.zeroed(
+            "prt counters",
+            std::mem::size_of::<Counters>() as u64,
+            wgpu::BufferUsages::COPY_SRC,
+        )?;
+        let lights = alloc.zeroed("prt lights", 64 * settings.max_lights as u64, none)?;
+        let sky_directions = alloc.zeroed(
+            "prt sky directions",
+            32 * u64::from(asset.header.ray_count),
+            none,
+        )?;
+        let params = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("prt params"),
+            size: std::mem::size_of::<Params>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+
+        let size = wgpu::Extent3d {
+            width: g.counts[0],
+            height: g.counts[1],
+            depth_or_array_layers: g.counts[2],
+        };
+        let textures: Vec<wgpu::Texture> = (0..7)
+            .map(|i| {
+                device.create_texture(&wgpu::TextureDescriptor {
+                    label: Some(&format!("prt sh volume {i}")),
+                    size,
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D3,
+                    format: settings.volume_format.texture_format(),
+                    usage: wgpu::TextureUsages::STORAGE_BINDING
+                        | wgpu::TextureUsages::TEXTURE_BINDING
+                        | wgpu::TextureUsages::COPY_SRC,
+                    view_formats: &[],
+                })
+            })
+            .collect();
+        let views: Vec<wgpu::TextureView> = textures
+            .iter()
+            .map(|t| t.create_view(&wgpu::TextureViewDescriptor::default()))
+            .collect();
+        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("prt sh volume sampler"),
+            address_mode_u: wgpu::AddressMode::ClampToEdge,
+            address_mode_v: wgpu::AddressMode::ClampToEdge,
+            address_mode_w: wgpu::AddressMode::ClampToEdge,
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            ..Default::default()
+        });
+
+        let volume_info = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("prt volume info"),
+            contents: bytemuck::bytes_of(&volume_info(&g, settings)),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        Ok(Resources {
+            probes,
+            chunks,
+            chunk_factors,
+            chunk_uniforms,
+            bricks,
+            surfel_chunks,
+            chunk_surfels,
+            normal_bounds,
+            bvh_nodes,
+            triangles,
+            sky_transfer,
+            sky_mask,
+            probe_depth,
+            probe_positions,
+            brick_lights,
+            brick_dirty,
+            brick_vis,
+            vis_capacity,
+            visibility,
+            light_changes,
+            brick_radiance,
+            probe_dirty,
+            probe_sh,
+            counters,
+            lights,
+            sky_directions,
+            params,
+            textures,
+            views,
+            sampler,
+            volume_info,
+            mask_stride,
+        })
+    }
+}
+
+/// The sampling snippet's uniform for `grid` and `settings`.
+pub fn volume_info(grid: &prt_format::Grid, settings: &RuntimeSettings) -> VolumeInfo {
+    VolumeInfo {
+        normal_bias: settings.normal_bias * grid.spacing,
+        flags: if settings.visibility {
+            VOLUME_VISIBILITY
+        } else {
+            0
+        },
+        ..VolumeInfo::from(grid)
+    }
+}
+
+/// Smallest buffer the runtime creates: larger than every element type it binds.
+const MIN_BUFFER: u64 = 256;
+
+/// Splits the probes into runs whose factor tables fit `limit` bytes each (at least one chunk).
+pub fn factor_chunks(asset: &Asset, limit: u64) -> Result<Vec<FactorChunk>, GpuError> {
+    let per_factor = asset.factors.bytes_per_factor() as u64;
+    let mut chunks = Vec::new();
+    let mut current = FactorChunk::default();
+    for (i, p) in asset.probes.iter().enumerate() {
+        let own = u64::from(p.factor_count) * per_factor;
+        if own > limit {
+            return Err(GpuError::Limit {
+                what: "one probe's factor table",
+                needed: own,
+                limit,
+            });
+        }
+        let end = u64::from(p.first_factor) + u64::from(p.factor_count);
+        if (end - u64::from(current.first_factor)) * per_factor > limit {
+            current.probe_end = i as u32;
+            chunks.push(current);
+            current = FactorChunk {
+                first_factor: p.first_factor,
+                probe_begin: i as u32,
+                ..FactorChunk::default()
+            };
+        }
+    }
+    current.probe_end = asset.probes.len() as u32;
+    chunks.push(current);
+    Ok(chunks)
+}
+
+/// Splits the bricks into runs whose surfels take at most `limit` bytes each (whole bricks,
+/// since a brick's stage reads all its surfels).
+pub fn surfel_chunks(asset: &Asset, limit: u64) -> Result<Vec<SurfelChunk>, GpuError> {
+    let per_surfel = std::mem::size_of::<prt_format::Surfel>() as u64;
+    let mut chunks = Vec::new();
+    let mut current = SurfelChunk::default();
+    for (i, b) in asset.bricks.iter().enumerate() {
+        let own = u64::from(b.surfel_count) * per_surfel;
+        if own > limit {
+            return Err(GpuError::Limit {
+                what: "one brick's surfels",
+                needed: own,
+                limit,
+            });
+        }
+        let end = u64::from(b.first_surfel) + u64::from(b.surfel_count);
+        if (end - u64::from(current.surfel_begin)) * per_surfel > limit {
+            current.brick_end = i as u32;
+            current.surfel_end = b.first_surfel;
+            chunks.push(current);
+            current = SurfelChunk {
+                brick_begin: i as u32,
+                surfel_begin: b.first_surfel,
+                ..SurfelChunk::default()
+            };
+        }
+    }
+    current.brick_end = asset.bricks.len() as u32;
+    current.surfel_end = asset.surfels.len() as u32;
+    chunks.push(current);
+    Ok(chunks)
+}
+
+/// A buffer holding `bytes`, refused with [`GpuError::Limit`] beyond `limit` bytes (a device
+/// limit: one storage binding, or the largest buffer). wgpu cannot bind empty buffers, nor ones
+/// smaller than one element: an empty array gets [`MIN_BUFFER`] zero bytes.
+pub fn buffer_with(
+    device: &wgpu::Device,
+    label: &'static str,
+    bytes: &[u8],
+    usage: wgpu::BufferUsages,
+    limit: u64,
+) -> Result<wgpu::Buffer, GpuError> {
+    if bytes.len() as u64 > limit {
+        return Err(GpuError::Limit {
+            what: label,
+            needed: bytes.len() as u64,
+            limit,
+        });
+    }
+    let padded;
+    let contents = if bytes.is_empty() {
+        padded = [0u8; MIN_BUFFER as usize];
+        &padded[..]
+    } else {
+        bytes
+    };
+    Ok(
+        device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents,
+            usage,
+        }),
+    )
+}
+
+/// Creates the runtime's storage buffers, refusing any larger than one storage binding.
+struct Alloc<'a> {
+    device: &'a wgpu::Device,
+    max_binding: u64,
+}
+
+impl Alloc<'_> {
+    fn check(&self, label: &'static str, size: u64) -> Result<(), GpuError> {
+        if size > self.max_binding {
+            return Err(GpuError::Limit {
+                what: label,
+                needed: size,
+                limit: self.max_binding,
+            });
+        }
+        Ok(())
+    }
+
+    /// A storage buffer holding `bytes`.
+    fn storage(
+        &self,
+        label: &'static str,
+        bytes: &[u8],
+        extra: wgpu::BufferUsages,
+    ) -> Result<wgpu::Buffer, GpuError> {
+        buffer_with(
+            self.device,
+            label,
+            bytes,
+            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | extra,
+            self.max_binding,
+        )
+    }
+
+    /// A zero-initialised storage buffer of `size` bytes.
+    fn zeroed(
+        &self,
+        label: &'static str,
+        size: u64,
+        extra: wgpu::BufferUsages,
+    ) -> Result<wgpu::Buffer, GpuError> {
+        self.check(label, size)?;
+        Ok(self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: size.max(MIN_BUFFER),
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | extra,
+            mapped_at_creation: false,
+        }))
+    }
+}

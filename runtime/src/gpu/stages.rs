@@ -1,0 +1,305 @@
+//! The compute stages' pipelines and bind groups. Nothing here lists bindings by number: each
+//! stage's assembled WGSL declares its bindings (`@group(g) @binding(b) var ... name`), and
+//! every bind group is built from those declarations, binding each variable to the resource of
+//! [`Resources`] that carries its name ([`Binding::of`]). A shader can therefore reorder, add
+//! or drop bindings without a Rust change, and a unit test checks that every name any stage
+//! declares is one the runtime provides.
+//!
+//! The split arrays make a stage's bind groups come in *sets*, dispatched in turn: one per
+//! factor chunk for the stages that read factors (`mark_probes`, `gather`), one per surfel
+//! chunk for those that read surfels (`relight_surfels`, `bounce_surfels`, `brick_radiance`).
+
+use super::resources::Resources;
+use super::shaders::{self, ShaderConfig, Stage};
+use super::GpuError;
+
+/// A stage's pipeline and its bind-group sets.
+pub struct Pipeline {
+    pub pipeline: wgpu::ComputePipeline,
+    pub bind_group_sets: Vec<Vec<wgpu::BindGroup>>,
+    /// Per set, the work items of a surfel-chunked stage (its chunk's surfels or bricks);
+    /// `None`: the stage's own count.
+    pub set_work: Vec<Option<u32>>,
+}
+
+/// Which slice of the split arrays a bind-group set binds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Set {
+    Whole,
+    Factors(usize),
+    Surfels(usize),
+}
+
+/// A resource of the runtime, by the WGSL variable name that binds it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Binding {
+    Params,
+    Lights,
+    Probes,
+    Factors,
+    Chunk,
+    Bricks,
+    NormalBounds,
+    Surfels,
+    SurfelRadiance,
+    SurfelBounce,
+    BrickLights,
+    BrickDirty,
+    BrickVis,
+    Visibility,
+    LightChanges,
+    BrickRadiance,
+    ProbeDirty,
+    ProbeSh,
+    Counters,
+    SkyTransfer,
+    SkyMask,
+    SkyDirections,
+    BvhNodes,
+    Triangles,
+    /// A volume texture as the gather writes it (`volume0`..`volume6`).
+    Volume(usize),
+    /// A volume texture as the sampling snippet reads it (`prt_volume0`..`prt_volume6`).
+    SampledVolume(usize),
+    Sampler,
+    VolumeInfo,
+    Depth,
+    ProbePositions,
+}
+
+impl Binding {
+    /// The resource a WGSL variable named `name` binds to.
+    fn of(name: &str) -> Option<Binding> {
+        let volume = |prefix: &str| {
+            name.strip_prefix(prefix)
+                .and_then(|i| i.parse::<usize>().ok())
+                .filter(|&i| i < 7)
+        };
+        if let Some(i) = volume("prt_volume") {
+            return Some(Binding::SampledVolume(i));
+        }
+        if let Some(i) = volume("volume") {
+            return Some(Binding::Volume(i));
+        }
+        Some(match name {
+            "params" => Binding::Params,
+            "lights" => Binding::Lights,
+            "probes" => Binding::Probes,
+            "factors" => Binding::Factors,
+            "chunk" => Binding::Chunk,
+            "bricks" => Binding::Bricks,
+            "normal_bounds" => Binding::NormalBounds,
+            "surfels" => Binding::Surfels,
+            "surfel_radiance" => Binding::SurfelRadiance,
+            "surfel_bounce" => Binding::SurfelBounce,
+            "brick_lights" => Binding::BrickLights,
+            "brick_dirty" => Binding::BrickDirty,
+            "brick_vis" => Binding::BrickVis,
+            "visibility" => Binding::Visibility,
+            "light_changes" => Binding::LightChanges,
+            "brick_radiance" => Binding::BrickRadiance,
+            "probe_dirty" => Binding::ProbeDirty,
+            "probe_sh" => Binding::ProbeSh,
+            "counters" => Binding::Counters,
+            "sky_transfer" => Binding::SkyTransfer,
+            "sky_mask" => Binding::SkyMask,
+            "sky_directions" => Binding::SkyDirections,
+            "bvh_nodes" => Binding::BvhNodes,
+            "triangles" => Binding::Triangles,
+            "prt_sampler" => Binding::Sampler,
+            "prt_volume" => Binding::VolumeInfo,
+            "prt_depth" => Binding::Depth,
+            "prt_probe_positions" => Binding::ProbePositions,
+            _ => return None,
+        })
+    }
+
+    /// The resource itself, for the bind-group set `set`.
+    fn resource<'a>(self, r: &'a Resources, set: Set) -> wgpu::BindingResource<'a> {
+        let (f, s) = match set {
+            Set::Whole => (0, 0),
+            Set::Factors(c) => (c, 0),
+            Set::Surfels(c) => (0, c),
+        };
+        let b = |buffer: &'a wgpu::Buffer| buffer.as_entire_binding();
+        match self {
+            Binding::Params => b(&r.params),
+            Binding::Lights => b(&r.lights),
+            Binding::Probes => b(&r.probes),
+            Binding::Factors => b(&r.chunk_factors[f]),
+            Binding::Chunk => match set {
+                Set::Surfels(c) => b(&r.chunk_surfels[c][3]),
+                _ => b(&r.chunk_uniforms[f]),
+            },
+            Binding::Bricks => b(&r.bricks),
+            Binding::NormalBounds => b(&r.normal_bounds),
+            Binding::Surfels => b(&r.chunk_surfels[s][0]),
+            Binding::SurfelRadiance => b(&r.chunk_surfels[s][1]),
+            Binding::SurfelBounce => b(&r.chunk_surfels[s][2]),
+            Binding::BrickLights => b(&r.brick_lights),
+            Binding::BrickDirty => b(&r.brick_dirty),
+            Binding::BrickVis => b(&r.brick_vis),
+            Binding::Visibility => b(&r.visibility),
+            Binding::LightChanges => b(&r.light_changes),
+            Binding::BrickRadiance => b(&r.brick_radiance),
+            Binding::ProbeDirty => b(&r.probe_dirty),
+            Binding::ProbeSh => b(&r.probe_sh),
+            Binding::Counters => b(&r.counters),
+            Binding::SkyTransfer => b(&r.sky_transfer),
+            Binding::SkyMask => b(&r.sky_mask),
+            Binding::SkyDirections => b(&r.sky_directions),
+            Binding::BvhNodes => b(&r.bvh_nodes),
+            Binding::Triangles => b(&r.triangles),
+            Binding::Volume(i) | Binding::SampledVolume(i) => {
+                wgpu::BindingResource::TextureView(&r.views[i])
+            }
+            Binding::Sampler => wgpu::BindingResource::Sampler(&r.sampler),
+            Binding::VolumeInfo => b(&r.volume_info),
+            Binding::Depth => b(&r.probe_depth),
+            Binding::ProbePositions => b(&r.probe_positions),
+        }
+    }
+}
+
+/// The `(group, binding, name)` of every resource variable `src` declares, in source order.
+pub fn declared_bindings(src: &str) -> Vec<(u32, u32, String)> {
+    let number = |line: &str, key: &str| -> Option<u32> {
+        let rest = &line[line.find(key)? + key.len()..];
+        rest[..rest.find(')')?].trim().parse().ok()
+    };
+    src.lines()
+        .filter_map(|line| {
+            let group = number(line, "@group(")?;
+            let binding = number(line, "@binding(")?;
+            let rest = line[line.find(" var")? + 4..].trim_start();
+            let rest = match rest.strip_prefix('<') {
+                Some(r) => &r[r.find('>')? + 1..],
+                None => rest,
+            };
+            let name = rest.split(':').next()?.trim();
+            Some((group, binding, name.to_string()))
+        })
+        .collect()
+}
+
+/// The bind-group sets `stage` is dispatched with, and each set's work items where the set
+/// fixes them (a surfel chunk's surfels or bricks).
+fn sets(stage: Stage, r: &Resources) -> Vec<(Set, Option<u32>)> {
+    match stage {
+        Stage::MarkProbes | Stage::Gather => (0..r.chunks.len())
+            .map(|c| (Set::Factors(c), None))
+            .collect(),
+        Stage::RelightSurfels | Stage::BounceSurfels | Stage::BrickRadiance => r
+            .surfel_chunks
+            .iter()
+            .enumerate()
+            .map(|(c, s)| {
+                let work = if stage == Stage::BrickRadiance {
+                    s.brick_end - s.brick_begin
+                } else {
+                    s.surfel_end - s.surfel_begin
+                };
+                (Set::Surfels(c), Some(work))
+            })
+            .collect(),
+        Stage::CullLights => vec![(Set::Whole, None)],
+    }
+}
+
+/// Builds `stage`'s pipeline from its WGSL and binds every variable it declares by name.
+pub fn build(
+    device: &wgpu::Device,
+    r: &Resources,
+    stage: Stage,
+    config: &ShaderConfig,
+) -> Result<Pipeline, GpuError> {
+    let source = shaders::source(stage, config);
+    let declared = declared_bindings(&source);
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some(stage.label()),
+        source: wgpu::ShaderSource::Wgsl(source.into()),
+    });
+    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(stage.label()),
+        layout: None,
+        module: &module,
+        entry_point: Some("main"),
+        compilation_options: Default::default(),
+        cache: None,
+    });
+    let groups = declared.iter().map(|d| d.0 + 1).max().unwrap_or(0);
+    let mut bind_group_sets = Vec::new();
+    let mut set_work = Vec::new();
+    for (set, work) in sets(stage, r) {
+        let mut bind_groups = Vec::new();
+        for g in 0..groups {
+            let entries = declared
+                .iter()
+                .filter(|d| d.0 == g)
+                .map(|(_, binding, name)| {
+                    let resource = Binding::of(name)
+                        .ok_or_else(|| {
+                            GpuError::Device(format!(
+                                "{} declares `{name}`, which the runtime does not provide",
+                                stage.label()
+                            ))
+                        })?
+                        .resource(r, set);
+                    Ok(wgpu::BindGroupEntry {
+                        binding: *binding,
+                        resource,
+                    })
+                })
+                .collect::<Result<Vec<_>, GpuError>>()?;
+            bind_groups.push(device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some(stage.label()),
+                layout: &pipeline.get_bind_group_layout(g),
+                entries: &entries,
+            }));
+        }
+        bind_group_sets.push(bind_groups);
+        set_work.push(work);
+    }
+    Ok(Pipeline {
+        pipeline,
+        bind_group_sets,
+        set_work,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every binding every stage declares (with every shader configuration) is one the runtime
+    /// provides, no (group, binding) is declared twice, and the parser reads each declaration
+    /// form in use.
+    #[test]
+    fn every_declared_binding_has_a_resource() {
+        assert_eq!(
+            declared_bindings(
+                "@group(1) @binding(3) var<storage, read_write> visibility: array<u32>;\n\
+                 @group(0) @binding(12) var prt_volume4: texture_3d<f32>;\n\
+                 fn f() { var x = 1; }"
+            ),
+            vec![
+                (1, 3, "visibility".to_string()),
+                (0, 12, "prt_volume4".to_string())
+            ]
+        );
+        for config in shaders::tests::configs() {
+            for stage in Stage::ALL {
+                let declared = declared_bindings(&shaders::source(stage, &config));
+                assert!(!declared.is_empty(), "{stage:?}");
+                let mut seen = std::collections::HashSet::new();
+                for (g, b, name) in declared {
+                    assert!(
+                        Binding::of(&name).is_some(),
+                        "{stage:?} declares unknown `{name}`"
+                    );
+                    assert!(seen.insert((g, b)), "{stage:?}: ({g}, {b}) twice");
+                }
+            }
+        }
+    }
+}

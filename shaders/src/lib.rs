@@ -1,0 +1,35 @@
+//! The WGSL sources of prt's GPU runtime and of its reference Forward+ renderer, embedded as
+//! strings so that `prt-runtime` and `prt-render` build from their published packages (each
+//! file lives in this crate's own folder). The sources are fragments: `prt_runtime::gpu::shaders`
+//! prepends the constants generated from Rust and joins a stage's files; its unit tests
+//! validate every assembled stage with naga and check struct layouts and `@binding` numbers
+//! against the Rust side.
+
+/// `bounce_surfels.wgsl`: Runtime stage 3 (multi-bounce): the volume's irradiance at surfels.
+pub const BOUNCE_SURFELS: &str = include_str!("../bounce_surfels.wgsl");
+/// `brick_radiance.wgsl`: Runtime stage 4: brick radiance (mean and gradient) from its surfels.
+pub const BRICK_RADIANCE: &str = include_str!("../brick_radiance.wgsl");
+/// `cull_lights.wgsl`: Runtime stage 1: per-brick light masks, dirty bricks, visibility pool room.
+pub const CULL_LIGHTS: &str = include_str!("../cull_lights.wgsl");
+/// `gather.wgsl`: Runtime stage 6: factors and sky reduced into probe SH, written to the volume.
+pub const GATHER: &str = include_str!("../gather.wgsl");
+/// `gather_subgroup.wgsl`: Stage 6 entry point with subgroup reductions.
+pub const GATHER_SUBGROUP: &str = include_str!("../gather_subgroup.wgsl");
+/// `gather_tree.wgsl`: Stage 6 entry point with a shared-memory tree reduction.
+pub const GATHER_TREE: &str = include_str!("../gather_tree.wgsl");
+/// `mark_probes.wgsl`: Runtime stage 5: probes whose bricks changed.
+pub const MARK_PROBES: &str = include_str!("../mark_probes.wgsl");
+/// `relight_surfels.wgsl`: Runtime stage 2: direct irradiance at surfels with cached shadow rays.
+pub const RELIGHT_SURFELS: &str = include_str!("../relight_surfels.wgsl");
+/// `render_cull.wgsl`: Reference renderer: tiled light culling (Forward+).
+pub const RENDER_CULL: &str = include_str!("../render_cull.wgsl");
+/// `render_shade.wgsl`: Reference renderer: shading with direct light and indirect diffuse.
+pub const RENDER_SHADE: &str = include_str!("../render_shade.wgsl");
+/// `render_types.wgsl`: Reference renderer: shared structs.
+pub const RENDER_TYPES: &str = include_str!("../render_types.wgsl");
+/// `sample_irradiance.wgsl`: The engine-side snippet: `sample_irradiance(world_pos, normal)` over the volume.
+pub const SAMPLE_IRRADIANCE: &str = include_str!("../sample_irradiance.wgsl");
+/// `types.wgsl`: Structs and helpers every runtime stage shares (Params, Counters, the asset's arrays).
+pub const TYPES: &str = include_str!("../types.wgsl");
+/// `visibility.wgsl`: The light model (`light_sample`) and the any-hit shadow-ray BVH traversal (`occluded`).
+pub const VISIBILITY: &str = include_str!("../visibility.wgsl");
