@@ -369,7 +369,7 @@ fn alternate<'a>(even: &'a Lighting, odd: &'a Lighting) -> impl Fn(u32) -> &'a L
 /// multi-bounce update (the volume fed back into every surfel).
 pub fn gpu(scene: &Path, a: &Lighting, spacings: &[f32], rays: u32, cell: f32) -> Result<String> {
     let (device, queue, info) = headless_device()?;
-    let baselines = RuntimeSettings::default();
+    let baselines = RuntimeSettings::default().with_room_for(a.rig.lights.len());
     let sky = |c: f32| Lighting {
         rig: a.rig.clone(),
         sky: prt_runtime::SkyModel::Constant([c, c, c]),
@@ -416,7 +416,7 @@ pub fn gpu(scene: &Path, a: &Lighting, spacings: &[f32], rays: u32, cell: f32) -
         // surfel, rebuilds every brick and gathers every probe (one more bounce each).
         let feedback = RuntimeSettings {
             bounces: Bounces::Feedback { damping: 1.0 },
-            ..RuntimeSettings::default()
+            ..baselines
         };
         let mut runtime = PrtRuntime::new(&device, &queue, &asset, feedback)?;
         // The first update lights; the second is the first to run the bounce stage.

@@ -105,10 +105,7 @@ pub fn run(args: LightsArgs) -> Result<()> {
             }
             lighting(l)
         };
-        let runtime_settings = RuntimeSettings {
-            max_lights: count.max(1),
-            ..RuntimeSettings::default()
-        };
+        let runtime_settings = RuntimeSettings::default().with_room_for(count);
         let mut runtime = PrtRuntime::new(&device, &queue, &asset, runtime_settings)?;
         // Every update moves every light (odd: shifted, even: back).
         let (full, _) = timed(&device, &queue, &mut runtime, args.repeats, |i| {

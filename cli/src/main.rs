@@ -417,7 +417,8 @@ fn run(cli: Cli) -> Result<()> {
                         prt_runtime::gpu::RuntimeSettings {
                             bounces: prt_runtime::gpu::Bounces::Fixed(bounces),
                             ..prt_runtime::gpu::RuntimeSettings::default()
-                        },
+                        }
+                        .with_room_for(lighting.rig.lights.len()),
                     )?;
                     eprintln!("adapter: {} ({:?})", info.name, info.backend);
                     println!(

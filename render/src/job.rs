@@ -153,15 +153,7 @@ pub fn run(
 
     let start = Instant::now();
     let runtime = if job.output.needs_gi() {
-        // Room for every light of the rig (the mask memory grows with the limit, not the rig).
-        let settings = prt_runtime::gpu::RuntimeSettings {
-            max_lights: lighting
-                .rig
-                .lights
-                .len()
-                .clamp(job.runtime.max_lights, max_gi),
-            ..job.runtime
-        };
+        let settings = job.runtime.with_room_for(lighting.rig.lights.len());
         let mut rt = PrtRuntime::new(&device, &queue, asset, settings)?;
         rt.settle(lighting)?;
         rt.wait()?;

@@ -110,7 +110,8 @@ fn a_thousand_lights_equal_the_cpu_and_one_moved_light_costs_its_pairs() {
         .count() as u32;
     let cpu = CpuRelighter::new(&asset).unwrap();
     let mut lighting = many_lights(1024);
-    let settings = RuntimeSettings::default();
+    let settings = RuntimeSettings::default().with_room_for(1024);
+    assert_eq!(settings.max_lights, 1024);
     let mut runtime = PrtRuntime::new(&device, &queue, &asset, settings).unwrap();
     let (gpu, first) = update(&device, &queue, &mut runtime, &lighting);
     let reference = cpu.relight(&lighting, 1).unwrap();

@@ -24,7 +24,8 @@
 //!
 //! A light costs a brick's surfels one bit test where it does not reach, and moving one light
 //! of a thousand tests it against every brick once and traces only its own pairs
-//! (`tests/tests/lights.rs`). Up to [`RuntimeSettings::max_lights`] lights ([`MAX_LIGHTS`]).
+//! (`tests/tests/lights.rs`). Up to [`RuntimeSettings::max_lights`] lights (default 256, at
+//! most [`MAX_LIGHTS`]).
 //!
 //! When nothing changed and no round-robin cycle is pending, `update` records nothing. With a
 //! budget of B probes, the gather visits B probes per update round robin; a probe's texels
@@ -164,8 +165,10 @@ pub struct RuntimeSettings {
     pub visibility: bool,
     /// Light bounces ([`Bounces`]); default one.
     pub bounces: Bounces,
-    /// Most lights a rig may have (1 to [`MAX_LIGHTS`], default 1,024): each brick keeps a mask
-    /// of `max_lights / 32` words (twice), so lower values save memory.
+    /// Most lights a rig may have (1 to [`MAX_LIGHTS`], default 256; see
+    /// [`RuntimeSettings::with_room_for`]): each brick keeps a mask of `max_lights / 32` words,
+    /// twice, so the masks take `bricks x max_lights / 4` bytes in one storage binding (128 MiB
+    /// on lavapipe: 2 M bricks at 256 lights, 524k at 1,024).
     pub max_lights: usize,
     /// Words in each half of the visibility pool, one bit per (surfel, light that reaches its
     /// brick) pair, rounded to words per surfel [default: 2 words per surfel, for bricks reached
@@ -174,11 +177,22 @@ pub struct RuntimeSettings {
     pub visibility_words: Option<u64>,
 }
 
+impl RuntimeSettings {
+    /// These settings with `max_lights` raised to fit a rig of `lights` lights (up to
+    /// [`MAX_LIGHTS`]; a larger rig is refused at `update`).
+    pub fn with_room_for(self, lights: usize) -> RuntimeSettings {
+        RuntimeSettings {
+            max_lights: lights.clamp(self.max_lights, MAX_LIGHTS.max(self.max_lights)),
+            ..self
+        }
+    }
+}
+
 impl Default for RuntimeSettings {
     fn default() -> Self {
         RuntimeSettings {
             bounces: Bounces::Fixed(1),
-            max_lights: 1024,
+            max_lights: 256,
             visibility_words: None,
             volume_format: VolumeFormat::default(),
             max_factor_chunk_bytes: None,
