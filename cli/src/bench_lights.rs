@@ -17,21 +17,21 @@ use prt_bake::NoProgress;
 
 #[derive(clap::Args)]
 pub struct LightsArgs {
-    scene: PathBuf,
+    pub scene: PathBuf,
     /// Light counts, one row each.
     #[arg(long, value_delimiter = ',', default_value = "1,32,256,1024")]
-    lights: Vec<usize>,
+    pub lights: Vec<usize>,
     /// Probe spacing of the bake [default: about 1,000 probes].
     #[arg(long)]
-    spacing: Option<f32>,
+    pub spacing: Option<f32>,
     #[arg(long, default_value_t = 256)]
-    rays: u32,
+    pub rays: u32,
     /// Bake treating every material as double-sided.
     #[arg(long)]
-    double_sided: bool,
+    pub double_sided: bool,
     /// Timed updates per figure (the median is reported).
     #[arg(long, default_value_t = 5)]
-    repeats: usize,
+    pub repeats: usize,
 }
 
 fn lighting(lights: Vec<prt_format::Light>) -> Lighting {
@@ -65,6 +65,14 @@ fn timed(
 }
 
 pub fn run(args: LightsArgs) -> Result<()> {
+    print!("{}", table(&args)?);
+    Ok(())
+}
+
+/// The light-count table for `args`, as markdown.
+pub fn table(args: &LightsArgs) -> Result<String> {
+    use std::fmt::Write;
+    let mut md = String::new();
     let settings = BakeSettings {
         rays: args.rays,
         spacing: args.spacing,
@@ -81,7 +89,8 @@ pub fn run(args: LightsArgs) -> Result<()> {
         .iter()
         .filter(|b| b.flags & prt_format::BRICK_BACKFACE == 0)
         .count();
-    println!(
+    writeln!(
+        md,
         "Adapter: {} ({:?}). Scene {}: {} probes, {front} front-face bricks, {} surfels, {} rays \
          per probe. Median of {} updates each; lavapipe runs on the CPU, so compare ratios.\n",
         info.name,
@@ -91,9 +100,9 @@ pub fn run(args: LightsArgs) -> Result<()> {
         asset.surfels.len(),
         args.rays,
         args.repeats
-    );
-    println!("| lights | full update (all moved) | reaching (light, brick) pairs | shadow rays | per 1k pairs | one light moved (the widest) | its bricks | rays traced | bricks relit | visibility pool |");
-    println!("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    )?;
+    writeln!(md, "| lights | full update (all moved) | reaching (light, brick) pairs | shadow rays | per 1k pairs | one light moved (the widest) | its bricks | rays traced | bricks relit | visibility pool |")?;
+    writeln!(md, "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")?;
     for &count in &args.lights {
         let base = crate::bench_render::scattered_lights(count, lo, hi);
         let shifted = |k: usize, which: Option<usize>| {
@@ -139,7 +148,8 @@ pub fn run(args: LightsArgs) -> Result<()> {
         let (moved, c) = timed(&device, &queue, &mut runtime, args.repeats, |i| {
             shifted(i + 1, Some(one))
         })?;
-        println!(
+        writeln!(
+            md,
             "| {count} | {:.1} ms | {pairs} | {} | {} | {:.1} ms | {} | {} | {} | {} words |",
             full * 1e3,
             all.shadow_rays,
@@ -153,7 +163,7 @@ pub fn run(args: LightsArgs) -> Result<()> {
             c.shadow_rays,
             c.bricks_relit,
             all.visibility_words,
-        );
+        )?;
     }
-    Ok(())
+    Ok(md)
 }

@@ -93,8 +93,9 @@ enum BenchKind {
         #[arg(long, default_value = ".")]
         out: PathBuf,
     },
-    /// GPU runtime costs: update per probe at several probe counts, gather vs integer atomics,
-    /// vs the prior art's per-probe surfels, and an update when nothing changed.
+    /// GPU runtime costs: update per probe at several probe counts, the gather alone, vs the
+    /// prior art's per-probe surfels, an update when nothing changed, a multi-bounce update, and
+    /// cost against light count (1, 32, 256, 1,024 lights).
     Gpu {
         scene: PathBuf,
         #[arg(long)]
@@ -539,6 +540,18 @@ fn run(cli: Cli) -> Result<()> {
                 println!(
                     "{}",
                     bench::gpu(&scene, &lighting, &spacings, rays, cell_size)?
+                );
+                // Cost against light count, on the same scene (`prt bench lights` alone).
+                println!(
+                    "{}",
+                    bench_lights::table(&bench_lights::LightsArgs {
+                        scene,
+                        lights: vec![1, 32, 256, 1024],
+                        spacing: None,
+                        rays,
+                        double_sided: false,
+                        repeats: 5,
+                    })?
                 );
                 Ok(())
             }

@@ -35,19 +35,23 @@
 pub use sample::sample_points;
 pub use wgpu;
 
+mod changes;
 pub mod layout;
 pub mod resources;
 pub mod sample;
 pub mod shaders;
 pub mod stages;
+mod volume;
 
-use prt_format::sh::{ShRgb, SH_COUNT};
+pub use volume::{read_buffer, sh_from_texels};
+
+use prt_format::sh::ShRgb;
 use prt_format::{directions, Asset, Factors};
 use wgpu::util::DeviceExt;
 
-use crate::lights::PreparedLight;
 use crate::rig::Lighting;
 use crate::sky::SkyModel;
+use changes::{light_changes, Plan, State};
 use layout::*;
 use resources::Resources;
 use shaders::{ShaderConfig, Stage};
@@ -221,40 +225,6 @@ pub struct UpdateReport {
     pub bounce: bool,
 }
 
-/// The lighting state an update was recorded for (to detect changes).
-#[derive(Clone, Debug, Default, PartialEq)]
-struct State {
-    lights: Vec<GpuLight>,
-    sky_mode: u32,
-    sky_color: [f32; 3],
-    sky_directions: Vec<[f32; 4]>,
-}
-
-/// What changed between the lights of two updates (`old` is `None` on the first): the changed
-/// lights' bitset (`stride` words), the moved lights' bitset (lights whose cached visibility is
-/// stale), then the changed lights' indices in ascending order, as the cull and relight stages
-/// read them. Only a change of colour or intensity of a light that was lit keeps its
-/// visibility: anything else can light surfels never traced for it.
-fn light_changes(old: Option<&[GpuLight]>, new: &[GpuLight], stride: usize) -> Vec<u32> {
-    let mut words = vec![0u32; 2 * stride];
-    let count = old.map_or(new.len(), |o| o.len().max(new.len()));
-    for i in 0..count {
-        let (a, b) = (old.and_then(|o| o.get(i)), new.get(i));
-        if old.is_some() && a == b {
-            continue;
-        }
-        words[i / 32] |= 1 << (i % 32);
-        let only_brightness = matches!((a, b), (Some(a), Some(b))
-            if a.radiant.iter().any(|&c| c > 0.0)
-                && GpuLight { radiant: b.radiant, ..*a } == *b);
-        if !only_brightness {
-            words[stride + i / 32] |= 1 << (i % 32);
-        }
-        words.push(i as u32);
-    }
-    words
-}
-
 /// Opens a headless device on the first adapter (lavapipe where there is no GPU), with subgroup
 /// operations and the highest limits the adapter offers. Fails loudly when there is no adapter.
 pub fn headless_device() -> Result<(wgpu::Device, wgpu::Queue, wgpu::AdapterInfo), GpuError> {
@@ -393,46 +363,6 @@ impl PrtRuntime {
         })
     }
 
-    fn state_for(&mut self, lighting: &Lighting) -> Result<State, GpuError> {
-        let lights = &lighting.rig.lights;
-        if lights.len() > self.settings.max_lights {
-            return Err(GpuError::TooManyLights {
-                count: lights.len(),
-                max: self.settings.max_lights,
-            });
-        }
-        let lights = lights
-            .iter()
-            .map(|l| GpuLight::from(&PreparedLight::new(l)))
-            .collect();
-        let (sky_mode, sky_color, sky_directions) = match &lighting.sky {
-            SkyModel::Black => (SKY_BLACK, [0.0; 3], Vec::new()),
-            SkyModel::Constant(c) => (SKY_CONSTANT, *c, Vec::new()),
-            sky @ SkyModel::Equirect { .. } => {
-                let cached = self.sky_cache.as_ref().filter(|(s, _)| s == sky);
-                let directions = match cached {
-                    Some((_, d)) => d.clone(),
-                    None => {
-                        let d: Vec<[f32; 4]> = sky
-                            .lattice(self.ray_count)
-                            .into_iter()
-                            .flat_map(|(d, l)| [[d[0], d[1], d[2], 0.0], [l[0], l[1], l[2], 0.0]])
-                            .collect();
-                        self.sky_cache = Some((sky.clone(), d.clone()));
-                        d
-                    }
-                };
-                (SKY_DIRECTIONS, [0.0; 3], directions)
-            }
-        };
-        Ok(State {
-            lights,
-            sky_mode,
-            sky_color,
-            sky_directions,
-        })
-    }
-
     /// Records this update's compute work into `encoder`. `budget` is the number of probes
     /// gathered per update (`None`: all). Submit the encoder before the next `update`.
     pub fn update(
@@ -442,91 +372,25 @@ impl PrtRuntime {
         budget: Option<u32>,
     ) -> Result<UpdateReport, GpuError> {
         let new = self.state_for(lighting)?;
-        let first = self.state.is_none();
         let changes = light_changes(
             self.state.as_ref().map(|s| &s.lights[..]),
             &new.lights,
             self.res.mask_stride as usize,
         );
         let changed = changes.len() as u32 - 2 * self.res.mask_stride;
-        let sky_changed = self.state.as_ref().is_none_or(|old| {
-            old.sky_mode != new.sky_mode
-                || old.sky_color != new.sky_color
-                || old.sky_directions != new.sky_directions
-        });
-        let budget = budget
-            .unwrap_or(self.probe_count)
-            .clamp(1, self.probe_count.max(1));
-        let windows = self.probe_count.div_ceil(budget);
-        let lights_changed = changed > 0 || first;
-        let feedback = matches!(self.settings.bounces, Bounces::Feedback { .. });
-        if !lights_changed && !sky_changed && self.pending_windows == 0 && !feedback {
+        let Some(plan) = self.plan(&new, changed, budget) else {
             return Ok(UpdateReport {
                 idle: true,
                 ..UpdateReport::default()
             });
-        }
-        let restart = lights_changed || sky_changed;
-        if restart {
-            let cycles = match self.settings.bounces {
-                Bounces::Fixed(n) => n.max(1),
-                Bounces::Feedback { .. } => 1,
-            };
-            self.pending_windows = windows.saturating_mul(cycles);
-            self.cycle_window = 0;
-            self.cycles_done = 0;
-        }
-        // A fixed bounce count starts again from direct light: the old bounce light goes, and
-        // every brick is recomputed without it (cached visibility keeps that ray-free).
-        let fixed_restart = restart && self.settings.bounces.feeds_back() && !feedback && !first;
-        if fixed_restart {
+        };
+        if plan.fixed_restart {
             for [_, _, bounce, _] in &self.res.chunk_surfels {
                 encoder.clear_buffer(bounce, 0, None);
             }
         }
-        // Stage 3 runs at the start of every cycle after the first since the change (fixed), or
-        // of every cycle (feedback).
-        let relight = lights_changed || fixed_restart;
-        let bounce = self.settings.bounces.feeds_back()
-            && self.cycle_window == 0
-            && (self.cycles_done >= 1 || (feedback && !first));
-        let window = (self.cursor, budget.min(self.probe_count));
-        let params = Params {
-            probe_count: self.probe_count,
-            brick_count: self.brick_count,
-            surfel_count: self.surfel_count,
-            ray_count: self.ray_count,
-            light_count: new.lights.len() as u32,
-            changed_count: changed,
-            sky_mode: new.sky_mode,
-            all_probes_dirty: u32::from(sky_changed || bounce),
-            sky_color: new.sky_color,
-            ray_weight: directions::direction_weight(self.ray_count),
-            grid_counts: self.grid.counts,
-            window_start: window.0,
-            window_count: window.1,
-            texel_limit: match self.settings.volume_format {
-                VolumeFormat::F16 => HALF_MAX,
-                VolumeFormat::F32 => f32::MAX,
-            },
-            dispatch_width: DISPATCH_WIDTH,
-            light_words: (new.lights.len() as u32).div_ceil(32),
-            offset_scale: self.offset_scale,
-            all_bricks_dirty: u32::from(first || fixed_restart),
-            ray_scale: self.grid.spacing,
-            bounce_damping: match self.settings.bounces {
-                Bounces::Feedback { damping } => damping,
-                Bounces::Fixed(_) => 1.0,
-            },
-            vis_parity: if relight {
-                1 - self.vis_parity
-            } else {
-                self.vis_parity
-            },
-            vis_capacity: self.vis_capacity,
-            _pad: [0; 2],
-        };
-        if relight {
+        let params = self.params(&new, changed, &plan);
+        if plan.relight {
             self.vis_parity = params.vis_parity;
         }
         let copy = |encoder: &mut wgpu::CommandEncoder, dst: &wgpu::Buffer, bytes: &[u8]| {
@@ -544,14 +408,14 @@ impl PrtRuntime {
         };
         copy(encoder, &self.res.params, bytemuck::bytes_of(&params));
         copy(encoder, &self.res.lights, bytemuck::cast_slice(&new.lights));
-        if relight {
+        if plan.relight {
             copy(
                 encoder,
                 &self.res.light_changes,
                 bytemuck::cast_slice(&changes),
             );
         }
-        if sky_changed {
+        if plan.sky_changed {
             copy(
                 encoder,
                 &self.res.sky_directions,
@@ -559,45 +423,11 @@ impl PrtRuntime {
             );
         }
         encoder.clear_buffer(&self.res.counters, 0, None);
-        {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("prt update"),
-                timestamp_writes: None,
-            });
-            let groups = |n: u32| n.div_ceil(WORKGROUP);
-            for (stage, p) in &self.pipelines {
-                let work = match stage {
-                    Stage::CullLights if relight => groups(self.brick_count),
-                    Stage::BrickRadiance if relight || bounce => groups(self.brick_count),
-                    Stage::RelightSurfels if relight => groups(self.surfel_count),
-                    Stage::BounceSurfels if bounce => groups(self.surfel_count),
-                    Stage::MarkProbes if lights_changed || sky_changed || bounce => {
-                        groups(self.probe_count)
-                    }
-                    Stage::Gather => window.1,
-                    _ => 0,
-                };
-                if work == 0 {
-                    continue;
-                }
-                pass.set_pipeline(&p.pipeline);
-                for (set, chunk_work) in p.bind_group_sets.iter().zip(&p.set_work) {
-                    let work = chunk_work.map_or(work, groups);
-                    if work == 0 {
-                        continue;
-                    }
-                    for (i, bg) in set.iter().enumerate() {
-                        pass.set_bind_group(i as u32, bg, &[]);
-                    }
-                    let (x, y) = dispatch_size(work);
-                    pass.dispatch_workgroups(x, y, 1);
-                }
-            }
-        }
-        self.cursor = (self.cursor + budget) % self.probe_count.max(1);
+        self.record(encoder, &plan);
+        self.cursor = (self.cursor + plan.window.1) % self.probe_count.max(1);
         self.pending_windows = self.pending_windows.saturating_sub(1);
         self.cycle_window += 1;
-        if self.cycle_window >= windows {
+        if self.cycle_window >= plan.windows {
             self.cycle_window = 0;
             self.cycles_done = self.cycles_done.saturating_add(1);
         }
@@ -605,11 +435,87 @@ impl PrtRuntime {
         Ok(UpdateReport {
             idle: false,
             changed_lights: changed,
-            sky_changed,
-            window,
+            sky_changed: plan.sky_changed,
+            window: plan.window,
             pending_windows: self.pending_windows,
-            bounce,
+            bounce: plan.bounce,
         })
+    }
+
+    /// The uniform block of this update.
+    fn params(&self, new: &State, changed: u32, plan: &Plan) -> Params {
+        Params {
+            probe_count: self.probe_count,
+            brick_count: self.brick_count,
+            surfel_count: self.surfel_count,
+            ray_count: self.ray_count,
+            light_count: new.lights.len() as u32,
+            changed_count: changed,
+            sky_mode: new.sky_mode,
+            all_probes_dirty: u32::from(plan.sky_changed || plan.bounce),
+            sky_color: new.sky_color,
+            ray_weight: directions::direction_weight(self.ray_count),
+            grid_counts: self.grid.counts,
+            window_start: plan.window.0,
+            window_count: plan.window.1,
+            texel_limit: match self.settings.volume_format {
+                VolumeFormat::F16 => HALF_MAX,
+                VolumeFormat::F32 => f32::MAX,
+            },
+            dispatch_width: DISPATCH_WIDTH,
+            light_words: (new.lights.len() as u32).div_ceil(32),
+            offset_scale: self.offset_scale,
+            all_bricks_dirty: u32::from(plan.first || plan.fixed_restart),
+            ray_scale: self.grid.spacing,
+            bounce_damping: match self.settings.bounces {
+                Bounces::Feedback { damping } => damping,
+                Bounces::Fixed(_) => 1.0,
+            },
+            vis_parity: if plan.relight {
+                1 - self.vis_parity
+            } else {
+                self.vis_parity
+            },
+            vis_capacity: self.vis_capacity,
+            _pad: [0; 2],
+        }
+    }
+
+    /// One compute pass: each stage that has work this update, once per bind-group set.
+    fn record(&self, encoder: &mut wgpu::CommandEncoder, plan: &Plan) {
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("prt update"),
+            timestamp_writes: None,
+        });
+        let groups = |n: u32| n.div_ceil(WORKGROUP);
+        for (stage, p) in &self.pipelines {
+            let work = match stage {
+                Stage::CullLights if plan.relight => groups(self.brick_count),
+                Stage::BrickRadiance if plan.relight || plan.bounce => groups(self.brick_count),
+                Stage::RelightSurfels if plan.relight => groups(self.surfel_count),
+                Stage::BounceSurfels if plan.bounce => groups(self.surfel_count),
+                Stage::MarkProbes if plan.lights_changed || plan.sky_changed || plan.bounce => {
+                    groups(self.probe_count)
+                }
+                Stage::Gather => plan.window.1,
+                _ => 0,
+            };
+            if work == 0 {
+                continue;
+            }
+            pass.set_pipeline(&p.pipeline);
+            for (set, chunk_work) in p.bind_group_sets.iter().zip(&p.set_work) {
+                let work = chunk_work.map_or(work, groups);
+                if work == 0 {
+                    continue;
+                }
+                for (i, bg) in set.iter().enumerate() {
+                    pass.set_bind_group(i as u32, bg, &[]);
+                }
+                let (x, y) = dispatch_size(work);
+                pass.dispatch_workgroups(x, y, 1);
+            }
+        }
     }
 
     /// Records and submits updates (every probe each) until nothing is pending: one for one
@@ -635,234 +541,6 @@ impl PrtRuntime {
             .map(|_| ())
             .map_err(|e| GpuError::Readback(e.to_string()))
     }
-
-    /// The seven volume texture views (layout in `shaders/gather.wgsl`).
-    pub fn volume_views(&self) -> &[wgpu::TextureView] {
-        &self.res.views
-    }
-
-    /// A trilinear, clamp-to-edge sampler for the volume.
-    pub fn sampler(&self) -> &wgpu::Sampler {
-        &self.res.sampler
-    }
-
-    /// The grid the volume covers (origin, spacing, per-axis step, counts).
-    pub fn grid(&self) -> prt_format::Grid {
-        self.grid
-    }
-
-    /// The contents of the sampling snippet's `PrtVolumeInfo` uniform (binding 8 of its group).
-    pub fn volume_info(&self) -> VolumeInfo {
-        resources::volume_info(&self.grid, &self.settings)
-    }
-
-    /// The settings the runtime was created with.
-    pub fn settings(&self) -> &RuntimeSettings {
-        &self.settings
-    }
-
-    /// The bind group layout entries of the sampling snippet (`wgsl_snippet`), visible to
-    /// `stages`: textures 0-6, sampler 7, uniform 8, visibility maps 9, probe positions 10.
-    /// The textures are declared filterable: a [`VolumeFormat::F32`] volume needs a device with
-    /// `Features::FLOAT32_FILTERABLE` (as its trilinear sampler does anyway).
-    pub fn volume_layout_entries(stages: wgpu::ShaderStages) -> Vec<wgpu::BindGroupLayoutEntry> {
-        let entry = |binding, ty| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: stages,
-            ty,
-            count: None,
-        };
-        let buffer = |ty| wgpu::BindingType::Buffer {
-            ty,
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        };
-        let mut e: Vec<_> = (0..7)
-            .map(|b| {
-                entry(
-                    b,
-                    wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
-                        view_dimension: wgpu::TextureViewDimension::D3,
-                        multisampled: false,
-                    },
-                )
-            })
-            .collect();
-        e.push(entry(
-            7,
-            wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-        ));
-        e.push(entry(8, buffer(wgpu::BufferBindingType::Uniform)));
-        for b in [9, 10] {
-            e.push(entry(
-                b,
-                buffer(wgpu::BufferBindingType::Storage { read_only: true }),
-            ));
-        }
-        e
-    }
-
-    /// The bind group of the sampling snippet for `layout` (made from
-    /// [`PrtRuntime::volume_layout_entries`] or taken from a pipeline built with the snippet).
-    pub fn volume_bind_group(&self, layout: &wgpu::BindGroupLayout) -> wgpu::BindGroup {
-        let mut entries: Vec<wgpu::BindGroupEntry> = self
-            .res
-            .views
-            .iter()
-            .enumerate()
-            .map(|(b, v)| wgpu::BindGroupEntry {
-                binding: b as u32,
-                resource: wgpu::BindingResource::TextureView(v),
-            })
-            .collect();
-        entries.push(wgpu::BindGroupEntry {
-            binding: 7,
-            resource: wgpu::BindingResource::Sampler(&self.res.sampler),
-        });
-        entries.push(wgpu::BindGroupEntry {
-            binding: 8,
-            resource: self.res.volume_info.as_entire_binding(),
-        });
-        entries.push(wgpu::BindGroupEntry {
-            binding: 9,
-            resource: self.res.probe_depth.as_entire_binding(),
-        });
-        entries.push(wgpu::BindGroupEntry {
-            binding: 10,
-            resource: self.res.probe_positions.as_entire_binding(),
-        });
-        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("prt volume"),
-            layout,
-            entries: &entries,
-        })
-    }
-
-    /// WGSL defining `sample_irradiance(world_pos, normal)` and `prt_sample_sh(world_pos,
-    /// normal)` with their bindings at `group`.
-    pub fn wgsl_snippet(group: u32) -> String {
-        shaders::sample_irradiance_snippet(group)
-    }
-
-    /// Blocks until the GPU is done and returns every probe's SH as last gathered.
-    pub fn read_probe_sh(&self) -> Result<Vec<ShRgb>, GpuError> {
-        let bytes = read_buffer(
-            &self.device,
-            &self.queue,
-            &self.res.probe_sh,
-            16 * 9 * u64::from(self.probe_count.max(1)),
-        )?;
-        let v: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
-        Ok((0..self.probe_count as usize)
-            .map(|p| std::array::from_fn(|k| [v[9 * p + k][0], v[9 * p + k][1], v[9 * p + k][2]]))
-            .collect())
-    }
-
-    /// Blocks and returns the work counters of the last submitted update.
-    pub fn read_counters(&self) -> Result<Counters, GpuError> {
-        let size = std::mem::size_of::<Counters>() as u64;
-        let bytes = read_buffer(&self.device, &self.queue, &self.res.counters, size)?;
-        Ok(*bytemuck::from_bytes(&bytes))
-    }
-
-    /// Blocks and returns the 28 channels of every texel (texture-major then texel order x, y,
-    /// z), as f32.
-    pub fn read_volume(&self) -> Result<Vec<Vec<[f32; 4]>>, GpuError> {
-        let [w, h, d] = self.grid.counts;
-        let texel = match self.settings.volume_format {
-            VolumeFormat::F16 => 8u32,
-            VolumeFormat::F32 => 16,
-        };
-        let row = (w * texel).div_ceil(256) * 256;
-        let size = u64::from(row) * u64::from(h) * u64::from(d);
-        let mut out = Vec::new();
-        for t in &self.res.textures {
-            let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("prt volume readback"),
-                size,
-                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            });
-            let mut encoder = self.device.create_command_encoder(&Default::default());
-            encoder.copy_texture_to_buffer(
-                t.as_image_copy(),
-                wgpu::TexelCopyBufferInfo {
-                    buffer: &staging,
-                    layout: wgpu::TexelCopyBufferLayout {
-                        offset: 0,
-                        bytes_per_row: Some(row),
-                        rows_per_image: Some(h),
-                    },
-                },
-                t.size(),
-            );
-            self.queue.submit([encoder.finish()]);
-            let bytes = map_read(&self.device, &staging, size)?;
-            let mut texels = Vec::with_capacity((w * h * d) as usize);
-            for z in 0..d {
-                for y in 0..h {
-                    let start = (u64::from(row) * u64::from(y + z * h)) as usize;
-                    for x in 0..w as usize {
-                        let at = start + x * texel as usize;
-                        texels.push(match self.settings.volume_format {
-                            VolumeFormat::F16 => std::array::from_fn(|c| {
-                                prt_format::f16_to_f32(u16::from_le_bytes([
-                                    bytes[at + 2 * c],
-                                    bytes[at + 2 * c + 1],
-                                ]))
-                            }),
-                            VolumeFormat::F32 => {
-                                *bytemuck::from_bytes::<[f32; 4]>(&bytes[at..at + 16])
-                            }
-                        });
-                    }
-                }
-            }
-            out.push(texels);
-        }
-        Ok(out)
-    }
-}
-
-/// Blocks until the GPU is done and returns the first `size` bytes of `src` (which needs
-/// `COPY_SRC` usage).
-pub fn read_buffer(
-    device: &wgpu::Device,
-    queue: &wgpu::Queue,
-    src: &wgpu::Buffer,
-    size: u64,
-) -> Result<Vec<u8>, GpuError> {
-    let staging = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("prt readback"),
-        size,
-        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
-    let mut encoder = device.create_command_encoder(&Default::default());
-    encoder.copy_buffer_to_buffer(src, 0, &staging, 0, size);
-    queue.submit([encoder.finish()]);
-    map_read(device, &staging, size)
-}
-
-fn map_read(device: &wgpu::Device, staging: &wgpu::Buffer, size: u64) -> Result<Vec<u8>, GpuError> {
-    let slice = staging.slice(..size);
-    let (tx, rx) = std::sync::mpsc::channel();
-    slice.map_async(wgpu::MapMode::Read, move |r| {
-        let _ = tx.send(r);
-    });
-    device
-        .poll(wgpu::PollType::wait_indefinitely())
-        .map_err(|e| GpuError::Readback(e.to_string()))?;
-    rx.recv()
-        .map_err(|e| GpuError::Readback(e.to_string()))?
-        .map_err(|e| GpuError::Readback(e.to_string()))?;
-    let data = slice
-        .get_mapped_range()
-        .map_err(|e| GpuError::Readback(e.to_string()))?
-        .to_vec();
-    staging.unmap();
-    Ok(data)
 }
 
 /// Relights `asset` once on the GPU (all probes, blocking) and returns every probe's SH, the
@@ -878,24 +556,4 @@ pub fn relight_once(
     runtime.settle(lighting)?;
     let counters = runtime.read_counters()?;
     Ok((runtime.read_probe_sh()?, counters, info))
-}
-
-/// Rebuilds SH from the seven texels of one probe (undoing the validity premultiplication);
-/// `None` where the texel's validity is 0.
-pub fn sh_from_texels(t: [[f32; 4]; 7]) -> Option<ShRgb> {
-    let v = t[0][3];
-    if v <= 0.0 {
-        return None;
-    }
-    let flat: Vec<f32> = t[1..].iter().flatten().map(|x| x / v).collect();
-    let mut c = [[0.0f32; 3]; SH_COUNT];
-    c[0] = [t[0][0] / v, t[0][1] / v, t[0][2] / v];
-    for k in 1..SH_COUNT {
-        c[k] = [
-            flat[3 * (k - 1)],
-            flat[3 * (k - 1) + 1],
-            flat[3 * (k - 1) + 2],
-        ];
-    }
-    Some(c)
 }

@@ -4,7 +4,8 @@
 
 use wgpu::util::DeviceExt;
 
-use super::{dispatch_size, map_read, GpuError, PrtRuntime};
+use super::volume::map_read;
+use super::{dispatch_size, GpuError, PrtRuntime};
 use crate::sample::Sample;
 
 /// Threads per workgroup of the sampling kernel.

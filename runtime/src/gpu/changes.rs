@@ -1,0 +1,150 @@
+//! What changed since the last update, and what this update must therefore do: the lights'
+//! changed and moved sets (the moved ones lose their cached visibility), the sky, and the
+//! cycle accounting of amortised updates and bounces ([`super::Bounces`]).
+
+use super::layout::*;
+use super::{Bounces, GpuError, PrtRuntime};
+use crate::lights::PreparedLight;
+use crate::rig::Lighting;
+use crate::sky::SkyModel;
+
+/// The lighting state an update was recorded for (to detect changes).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub(super) struct State {
+    pub(super) lights: Vec<GpuLight>,
+    pub(super) sky_mode: u32,
+    pub(super) sky_color: [f32; 3],
+    pub(super) sky_directions: Vec<[f32; 4]>,
+}
+
+/// What one update does ([`PrtRuntime::plan`]).
+pub(super) struct Plan {
+    pub(super) first: bool,
+    pub(super) lights_changed: bool,
+    pub(super) sky_changed: bool,
+    /// Fixed bounces restart from direct light: bounce radiance cleared, every brick relit.
+    pub(super) fixed_restart: bool,
+    /// Cull and relight surfels (lights changed, or a fixed restart).
+    pub(super) relight: bool,
+    /// Feed the volume back into the surfels (stage 3).
+    pub(super) bounce: bool,
+    /// First probe and probe count gathered.
+    pub(super) window: (u32, u32),
+    /// Updates per cycle.
+    pub(super) windows: u32,
+}
+
+/// What changed between the lights of two updates (`old` is `None` on the first): the changed
+/// lights' bitset (`stride` words), the moved lights' bitset (lights whose cached visibility is
+/// stale), then the changed lights' indices in ascending order, as the cull and relight stages
+/// read them. Only a change of colour or intensity of a light that was lit keeps its
+/// visibility: anything else can light surfels never traced for it.
+pub(super) fn light_changes(old: Option<&[GpuLight]>, new: &[GpuLight], stride: usize) -> Vec<u32> {
+    let mut words = vec![0u32; 2 * stride];
+    let count = old.map_or(new.len(), |o| o.len().max(new.len()));
+    for i in 0..count {
+        let (a, b) = (old.and_then(|o| o.get(i)), new.get(i));
+        if old.is_some() && a == b {
+            continue;
+        }
+        words[i / 32] |= 1 << (i % 32);
+        let only_brightness = matches!((a, b), (Some(a), Some(b))
+            if a.radiant.iter().any(|&c| c > 0.0)
+                && GpuLight { radiant: b.radiant, ..*a } == *b);
+        if !only_brightness {
+            words[stride + i / 32] |= 1 << (i % 32);
+        }
+        words.push(i as u32);
+    }
+    words
+}
+
+impl PrtRuntime {
+    pub(super) fn state_for(&mut self, lighting: &Lighting) -> Result<State, GpuError> {
+        let lights = &lighting.rig.lights;
+        if lights.len() > self.settings.max_lights {
+            return Err(GpuError::TooManyLights {
+                count: lights.len(),
+                max: self.settings.max_lights,
+            });
+        }
+        let lights = lights
+            .iter()
+            .map(|l| GpuLight::from(&PreparedLight::new(l)))
+            .collect();
+        let (sky_mode, sky_color, sky_directions) = match &lighting.sky {
+            SkyModel::Black => (SKY_BLACK, [0.0; 3], Vec::new()),
+            SkyModel::Constant(c) => (SKY_CONSTANT, *c, Vec::new()),
+            sky @ SkyModel::Equirect { .. } => {
+                let cached = self.sky_cache.as_ref().filter(|(s, _)| s == sky);
+                let directions = match cached {
+                    Some((_, d)) => d.clone(),
+                    None => {
+                        let d: Vec<[f32; 4]> = sky
+                            .lattice(self.ray_count)
+                            .into_iter()
+                            .flat_map(|(d, l)| [[d[0], d[1], d[2], 0.0], [l[0], l[1], l[2], 0.0]])
+                            .collect();
+                        self.sky_cache = Some((sky.clone(), d.clone()));
+                        d
+                    }
+                };
+                (SKY_DIRECTIONS, [0.0; 3], directions)
+            }
+        };
+        Ok(State {
+            lights,
+            sky_mode,
+            sky_color,
+            sky_directions,
+        })
+    }
+
+    /// What this update does, given the new lighting state and the number of changed lights;
+    /// `None` when there is nothing to do. Starts a new round of cycles on a change.
+    pub(super) fn plan(&mut self, new: &State, changed: u32, budget: Option<u32>) -> Option<Plan> {
+        let first = self.state.is_none();
+        let sky_changed = self.state.as_ref().is_none_or(|old| {
+            old.sky_mode != new.sky_mode
+                || old.sky_color != new.sky_color
+                || old.sky_directions != new.sky_directions
+        });
+        let budget = budget
+            .unwrap_or(self.probe_count)
+            .clamp(1, self.probe_count.max(1));
+        let windows = self.probe_count.div_ceil(budget);
+        let lights_changed = changed > 0 || first;
+        let feedback = matches!(self.settings.bounces, Bounces::Feedback { .. });
+        if !lights_changed && !sky_changed && self.pending_windows == 0 && !feedback {
+            return None;
+        }
+        let restart = lights_changed || sky_changed;
+        if restart {
+            let cycles = match self.settings.bounces {
+                Bounces::Fixed(n) => n.max(1),
+                Bounces::Feedback { .. } => 1,
+            };
+            self.pending_windows = windows.saturating_mul(cycles);
+            self.cycle_window = 0;
+            self.cycles_done = 0;
+        }
+        // A fixed bounce count starts again from direct light: the old bounce light goes, and
+        // every brick is recomputed without it (cached visibility keeps that ray-free).
+        let fixed_restart = restart && self.settings.bounces.feeds_back() && !feedback && !first;
+        // Stage 3 runs at the start of every cycle after the first since the change (fixed), or
+        // of every cycle (feedback).
+        let bounce = self.settings.bounces.feeds_back()
+            && self.cycle_window == 0
+            && (self.cycles_done >= 1 || (feedback && !first));
+        Some(Plan {
+            first,
+            lights_changed,
+            sky_changed,
+            fixed_restart,
+            relight: lights_changed || fixed_restart,
+            bounce,
+            window: (self.cursor, budget.min(self.probe_count)),
+            windows,
+        })
+    }
+}

@@ -1,0 +1,262 @@
+//! What an engine reads from the runtime: the SH volume (views, sampler, the sampling snippet
+//! with its bind group and layout), and readbacks of probe SH, counters and texels for tests
+//! and tools.
+
+use prt_format::sh::{ShRgb, SH_COUNT};
+
+use super::layout::{Counters, VolumeInfo};
+use super::{resources, shaders, GpuError, PrtRuntime, RuntimeSettings, VolumeFormat};
+
+impl PrtRuntime {
+    /// The seven volume texture views (layout in `shaders/gather.wgsl`).
+    pub fn volume_views(&self) -> &[wgpu::TextureView] {
+        &self.res.views
+    }
+
+    /// A trilinear, clamp-to-edge sampler for the volume.
+    pub fn sampler(&self) -> &wgpu::Sampler {
+        &self.res.sampler
+    }
+
+    /// The grid the volume covers (origin, spacing, per-axis step, counts).
+    pub fn grid(&self) -> prt_format::Grid {
+        self.grid
+    }
+
+    /// The contents of the sampling snippet's `PrtVolumeInfo` uniform (binding 8 of its group).
+    pub fn volume_info(&self) -> VolumeInfo {
+        resources::volume_info(&self.grid, &self.settings)
+    }
+
+    /// The settings the runtime was created with.
+    pub fn settings(&self) -> &RuntimeSettings {
+        &self.settings
+    }
+
+    /// The bind group layout entries of the sampling snippet (`wgsl_snippet`), visible to
+    /// `stages`: textures 0-6, sampler 7, uniform 8, visibility maps 9, probe positions 10.
+    /// The textures are declared filterable: a [`VolumeFormat::F32`] volume needs a device with
+    /// `Features::FLOAT32_FILTERABLE` (as its trilinear sampler does anyway).
+    pub fn volume_layout_entries(stages: wgpu::ShaderStages) -> Vec<wgpu::BindGroupLayoutEntry> {
+        let entry = |binding, ty| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: stages,
+            ty,
+            count: None,
+        };
+        let buffer = |ty| wgpu::BindingType::Buffer {
+            ty,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        };
+        let mut e: Vec<_> = (0..7)
+            .map(|b| {
+                entry(
+                    b,
+                    wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                        view_dimension: wgpu::TextureViewDimension::D3,
+                        multisampled: false,
+                    },
+                )
+            })
+            .collect();
+        e.push(entry(
+            7,
+            wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+        ));
+        e.push(entry(8, buffer(wgpu::BufferBindingType::Uniform)));
+        for b in [9, 10] {
+            e.push(entry(
+                b,
+                buffer(wgpu::BufferBindingType::Storage { read_only: true }),
+            ));
+        }
+        e
+    }
+
+    /// The bind group of the sampling snippet for `layout` (made from
+    /// [`PrtRuntime::volume_layout_entries`] or taken from a pipeline built with the snippet).
+    pub fn volume_bind_group(&self, layout: &wgpu::BindGroupLayout) -> wgpu::BindGroup {
+        let mut entries: Vec<wgpu::BindGroupEntry> = self
+            .res
+            .views
+            .iter()
+            .enumerate()
+            .map(|(b, v)| wgpu::BindGroupEntry {
+                binding: b as u32,
+                resource: wgpu::BindingResource::TextureView(v),
+            })
+            .collect();
+        entries.push(wgpu::BindGroupEntry {
+            binding: 7,
+            resource: wgpu::BindingResource::Sampler(&self.res.sampler),
+        });
+        entries.push(wgpu::BindGroupEntry {
+            binding: 8,
+            resource: self.res.volume_info.as_entire_binding(),
+        });
+        entries.push(wgpu::BindGroupEntry {
+            binding: 9,
+            resource: self.res.probe_depth.as_entire_binding(),
+        });
+        entries.push(wgpu::BindGroupEntry {
+            binding: 10,
+            resource: self.res.probe_positions.as_entire_binding(),
+        });
+        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("prt volume"),
+            layout,
+            entries: &entries,
+        })
+    }
+
+    /// WGSL defining `sample_irradiance(world_pos, normal)` and `prt_sample_sh(world_pos,
+    /// normal)` with their bindings at `group`.
+    pub fn wgsl_snippet(group: u32) -> String {
+        shaders::sample_irradiance_snippet(group)
+    }
+
+    /// Blocks until the GPU is done and returns every probe's SH as last gathered.
+    pub fn read_probe_sh(&self) -> Result<Vec<ShRgb>, GpuError> {
+        let bytes = read_buffer(
+            &self.device,
+            &self.queue,
+            &self.res.probe_sh,
+            16 * 9 * u64::from(self.probe_count.max(1)),
+        )?;
+        let v: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
+        Ok((0..self.probe_count as usize)
+            .map(|p| std::array::from_fn(|k| [v[9 * p + k][0], v[9 * p + k][1], v[9 * p + k][2]]))
+            .collect())
+    }
+
+    /// Blocks and returns the work counters of the last submitted update.
+    pub fn read_counters(&self) -> Result<Counters, GpuError> {
+        let size = std::mem::size_of::<Counters>() as u64;
+        let bytes = read_buffer(&self.device, &self.queue, &self.res.counters, size)?;
+        Ok(*bytemuck::from_bytes(&bytes))
+    }
+
+    /// Blocks and returns the 28 channels of every texel (texture-major then texel order x, y,
+    /// z), as f32.
+    pub fn read_volume(&self) -> Result<Vec<Vec<[f32; 4]>>, GpuError> {
+        let [w, h, d] = self.grid.counts;
+        let texel = match self.settings.volume_format {
+            VolumeFormat::F16 => 8u32,
+            VolumeFormat::F32 => 16,
+        };
+        let row = (w * texel).div_ceil(256) * 256;
+        let size = u64::from(row) * u64::from(h) * u64::from(d);
+        let mut out = Vec::new();
+        for t in &self.res.textures {
+            let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("prt volume readback"),
+                size,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            let mut encoder = self.device.create_command_encoder(&Default::default());
+            encoder.copy_texture_to_buffer(
+                t.as_image_copy(),
+                wgpu::TexelCopyBufferInfo {
+                    buffer: &staging,
+                    layout: wgpu::TexelCopyBufferLayout {
+                        offset: 0,
+                        bytes_per_row: Some(row),
+                        rows_per_image: Some(h),
+                    },
+                },
+                t.size(),
+            );
+            self.queue.submit([encoder.finish()]);
+            let bytes = map_read(&self.device, &staging, size)?;
+            let mut texels = Vec::with_capacity((w * h * d) as usize);
+            for z in 0..d {
+                for y in 0..h {
+                    let start = (u64::from(row) * u64::from(y + z * h)) as usize;
+                    for x in 0..w as usize {
+                        let at = start + x * texel as usize;
+                        texels.push(match self.settings.volume_format {
+                            VolumeFormat::F16 => std::array::from_fn(|c| {
+                                prt_format::f16_to_f32(u16::from_le_bytes([
+                                    bytes[at + 2 * c],
+                                    bytes[at + 2 * c + 1],
+                                ]))
+                            }),
+                            VolumeFormat::F32 => {
+                                *bytemuck::from_bytes::<[f32; 4]>(&bytes[at..at + 16])
+                            }
+                        });
+                    }
+                }
+            }
+            out.push(texels);
+        }
+        Ok(out)
+    }
+}
+
+/// Blocks until the GPU is done and returns the first `size` bytes of `src` (which needs
+/// `COPY_SRC` usage).
+pub fn read_buffer(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    src: &wgpu::Buffer,
+    size: u64,
+) -> Result<Vec<u8>, GpuError> {
+    let staging = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("prt readback"),
+        size,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let mut encoder = device.create_command_encoder(&Default::default());
+    encoder.copy_buffer_to_buffer(src, 0, &staging, 0, size);
+    queue.submit([encoder.finish()]);
+    map_read(device, &staging, size)
+}
+
+pub(super) fn map_read(
+    device: &wgpu::Device,
+    staging: &wgpu::Buffer,
+    size: u64,
+) -> Result<Vec<u8>, GpuError> {
+    let slice = staging.slice(..size);
+    let (tx, rx) = std::sync::mpsc::channel();
+    slice.map_async(wgpu::MapMode::Read, move |r| {
+        let _ = tx.send(r);
+    });
+    device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .map_err(|e| GpuError::Readback(e.to_string()))?;
+    rx.recv()
+        .map_err(|e| GpuError::Readback(e.to_string()))?
+        .map_err(|e| GpuError::Readback(e.to_string()))?;
+    let data = slice
+        .get_mapped_range()
+        .map_err(|e| GpuError::Readback(e.to_string()))?
+        .to_vec();
+    staging.unmap();
+    Ok(data)
+}
+
+/// Rebuilds SH from the seven texels of one probe (undoing the validity premultiplication);
+/// `None` where the texel's validity is 0.
+pub fn sh_from_texels(t: [[f32; 4]; 7]) -> Option<ShRgb> {
+    let v = t[0][3];
+    if v <= 0.0 {
+        return None;
+    }
+    let flat: Vec<f32> = t[1..].iter().flatten().map(|x| x / v).collect();
+    let mut c = [[0.0f32; 3]; SH_COUNT];
+    c[0] = [t[0][0] / v, t[0][1] / v, t[0][2] / v];
+    for k in 1..SH_COUNT {
+        c[k] = [
+            flat[3 * (k - 1)],
+            flat[3 * (k - 1) + 1],
+            flat[3 * (k - 1) + 2],
+        ];
+    }
+    Some(c)
+}
