@@ -291,6 +291,13 @@ fn parse_bounds(s: &str) -> Result<[f32; 6], String> {
         .map_err(|v: Vec<f32>| format!("expected 6 comma-separated numbers, got {}", v.len()))
 }
 
+/// The process's peak resident set size in KiB (`VmHWM` of `/proc/self/status`; Linux only).
+fn peak_rss_kib() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    line.split_whitespace().nth(1)?.parse().ok()
+}
+
 fn main() {
     // Mesa's Vulkan drivers print "error: XDG_RUNTIME_DIR is invalid or not set" on every device
     // they open when the variable is unset (headless machines, CI); point it at the temp dir.
@@ -383,6 +390,9 @@ fn run(cli: Cli) -> Result<()> {
                 .map(|(stage, d)| format!("{stage} {:.3} s", d.as_secs_f64()))
                 .collect();
             println!("time             {}", times.join(" | "));
+            if let Some(kb) = peak_rss_kib() {
+                println!("peak memory      {:.1} MiB resident", kb as f64 / 1024.0);
+            }
             println!("wrote            {}", output.display());
             Ok(())
         }
