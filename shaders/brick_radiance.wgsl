@@ -1,7 +1,7 @@
 // Stage 4, one thread per dirty brick: the brick's linear radiance model from its surfels, the
 // weighted mean and the gradient sum_s g_s L_s (twin of CpuRelighter::brick_radiance). Four
 // vec4 per brick: mean, then the gradient of red, green and blue. A surfel's radiance is its
-// direct radiance (stage 2) plus its bounce radiance (stage 3; zero without bounces).
+// direct radiance (stage 2) plus, with bounces (BOUNCES), its bounce radiance (stage 3).
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> bricks: array<Brick>;
@@ -16,10 +16,14 @@
 @compute @workgroup_size(WORKGROUP)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let b = chunk.brick_begin + linear_index(wg, lid, WORKGROUP, params.dispatch_width);
-    if b >= chunk.brick_end || brick_dirty[b] == 0u {
+    if b >= chunk.brick_end {
         return;
     }
     let brick = bricks[b];
+    let all = params.all_radiance_dirty != 0u && (brick.flags & BRICK_BACKFACE) == 0u;
+    if brick_dirty[b] == 0u && !all {
+        return;
+    }
     var mean = vec3<f32>(0.0);
     var gr = vec3<f32>(0.0);
     var gg = vec3<f32>(0.0);
@@ -27,7 +31,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     var weight = 0.0;
     let first = brick.first_surfel - chunk.surfel_begin;
     for (var s = first; s < first + brick.surfel_count; s = s + 1u) {
-        let l = surfel_radiance[s].xyz + surfel_bounce[s].xyz;
+        var l = surfel_radiance[s].xyz;
+        if BOUNCES {
+            l = l + surfel_bounce[s].xyz;
+        }
         let surfel = surfels[s];
         mean = mean + surfel.weight * l;
         gr = gr + surfel.gradient * l.x;

@@ -2,8 +2,8 @@
 // in world space against the brick's bounds and normal bounds, twin of PreparedLight::cull),
 // kept as a bit per light in the brick's light mask (MASK_STRIDE words; lights that reach no
 // part of the brick cost its surfels one bit test, nothing more). Only the lights that changed
-// since the last update are tested again (light_changes: the changed and moved bitsets, then
-// the changed indices), so moving one light of a thousand costs one test per brick. The brick
+// since the last update are tested again (light_changes: the moved bitset, then the changed
+// indices), so moving one light of a thousand costs one test per brick. The brick
 // is dirty (relit) when a changed light reaches it now or did before (every brick on the first
 // update, so that emissive bricks no light reaches get their radiance).
 //
@@ -78,11 +78,12 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     }
     let base = b * MASK_STRIDE;
     let prev = params.brick_count * MASK_STRIDE + base;
-    for (var w = 0u; w < MASK_STRIDE; w = w + 1u) {
+    // The words in use (params.light_words covers the old lights and the new).
+    for (var w = 0u; w < params.light_words; w = w + 1u) {
         brick_lights[prev + w] = brick_lights[base + w];
     }
     var dirty = params.all_bricks_dirty != 0u;
-    let changed_list = 2u * MASK_STRIDE;
+    let changed_list = MASK_STRIDE;
     for (var k = 0u; k < params.changed_count; k = k + 1u) {
         let i = light_changes[changed_list + k];
         let bit = 1u << (i & 31u);
@@ -105,10 +106,20 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     let old = brick_vis[2u * b + 1u - params.vis_parity];
     var offset = NO_CACHE;
     if old != NO_CACHE || dirty {
+        // A compare-and-swap loop, not atomicAdd: failed requests must not move the counter
+        // (it would wrap past 2^32 on a huge asset and hand out overlapping room).
         let words = brick.surfel_count * ((n + 31u) / 32u);
-        let at = atomicAdd(&counters.visibility_words, words);
-        if at + words <= params.vis_capacity {
-            offset = params.vis_parity * params.vis_capacity + at;
+        var at = atomicLoad(&counters.visibility_words);
+        loop {
+            if at > params.vis_capacity || words > params.vis_capacity - at {
+                break;
+            }
+            let r = atomicCompareExchangeWeak(&counters.visibility_words, at, at + words);
+            if r.exchanged {
+                offset = params.vis_parity * params.vis_capacity + at;
+                break;
+            }
+            at = r.old_value;
         }
     }
     if offset == NO_CACHE && n > 0u {

@@ -64,7 +64,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     for (var w = 0u; w < params.light_words; w = w + 1u) {
         var bits = brick_lights[base + w];
         let old_bits = brick_lights[prev + w];
-        let moved_bits = light_changes[MASK_STRIDE + w];
+        let moved_bits = light_changes[w];
         while bits != 0u {
             let t = firstTrailingBit(bits);
             let bit = 1u << t;

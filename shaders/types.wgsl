@@ -105,11 +105,13 @@ struct Counters {
 struct Params {
     probe_count: u32,
     brick_count: u32,
-    surfel_count: u32,
+    // 1 when every front-face brick's radiance is rebuilt (a fixed bounce count restarts: the
+    // bounce light is cleared), whether or not a light reaches it.
+    all_radiance_dirty: u32,
     ray_count: u32,
     light_count: u32,
-    // Lights whose parameters changed since the last update: their indices follow the changed
-    // and moved bitsets in light_changes.
+    // Lights whose parameters changed since the last update: their indices follow the moved
+    // lights' bitset (MASK_STRIDE words) in light_changes.
     changed_count: u32,
     // 0: black, 1: constant (sky_color), 2: per-direction radiance in sky_radiance.
     sky_mode: u32,

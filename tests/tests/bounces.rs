@@ -223,4 +223,34 @@ fn amortised_bounces_converge_to_the_full_update() {
     assert!(w <= 1e-4, "after the move: {w}");
     let idle = step(&device, &queue, &mut amortised, &moved, Some(budget));
     assert!(idle.idle, "settled: nothing left to do");
+
+    // A budget that changes between updates (an engine scaling it with frame time): still
+    // exactly 4 bounces, every probe gathered, then idle.
+    let mut again = moved.clone();
+    again.rig.lights[0].position[2] += 0.15;
+    let budgets = [
+        Some(budget),
+        None,
+        Some(budget / 2 + 7),
+        Some(budget * 2),
+        None,
+    ];
+    let mut updates = 0;
+    loop {
+        let b = budgets[updates % budgets.len()];
+        let report = step(&device, &queue, &mut amortised, &again, b);
+        updates += 1;
+        assert!(updates < 100, "never settles");
+        if report.pending_windows == 0 {
+            break;
+        }
+    }
+    let expect = CpuRelighter::new(&asset)
+        .unwrap()
+        .relight_with(&again, 4, &s)
+        .unwrap()
+        .sh;
+    let w = worst(&asset, &amortised.read_probe_sh().unwrap(), &expect);
+    assert!(w <= 1e-4, "changing budgets: {w} after {updates} updates");
+    assert!(step(&device, &queue, &mut amortised, &again, Some(budget)).idle);
 }

@@ -198,3 +198,37 @@ fn light_limits_are_errors_with_values() {
     .expect("refused");
     assert!(err.to_string().contains("5000"), "{err}");
 }
+
+/// Rigs that shrink and grow across a multiple of 32 lights, a moved light after the shrink (its
+/// neighbours' cached bits are read at their old slots), a brightness change (no ray) and a third
+/// relight that reads bits the non-dirty copy path moved: the GPU stays equal to the CPU.
+#[test]
+fn shrinking_and_growing_rigs_keep_the_cache_exact() {
+    let (device, queue) = device();
+    let asset = bake(&fixture("cornell/cornell.gltf"), &BakeSettings::default());
+    let cpu = CpuRelighter::new(&asset).unwrap();
+    let mut runtime = PrtRuntime::new(&device, &queue, &asset, RuntimeSettings::default()).unwrap();
+    let forty = many_lights(40);
+    let mut lighting = forty.clone();
+    let mut check = |label: &str, lighting: &Lighting| {
+        let (gpu, counters) = update(&device, &queue, &mut runtime, lighting);
+        let w = worst(&asset, &gpu, &cpu.relight(lighting, 1).unwrap().sh);
+        assert!(w <= 1e-4, "{label}: worst |gpu - cpu| / SH0 = {w}");
+        counters
+    };
+    check("40 lights", &lighting);
+    lighting.rig.lights.truncate(32);
+    check("down to 32", &lighting);
+    lighting.rig.lights[5].position[0] += 0.2;
+    let moved = check("one moved after the shrink", &lighting);
+    assert!(moved.shadow_rays > 0);
+    lighting.rig.lights[20].intensity *= 2.0;
+    let brighter = check("one brighter", &lighting);
+    assert_eq!(brighter.shadow_rays, 0, "brightness keeps the cache");
+    lighting.rig.lights[11].position[2] -= 0.2;
+    check("another moved (bits copied twice)", &lighting);
+    lighting.rig.lights.push(forty.rig.lights[35].clone());
+    check("up to 33", &lighting);
+    lighting.rig.lights.truncate(1);
+    check("down to 1", &lighting);
+}

@@ -22,37 +22,40 @@ pub(super) struct Plan {
     pub(super) first: bool,
     pub(super) lights_changed: bool,
     pub(super) sky_changed: bool,
-    /// Fixed bounces restart from direct light: bounce radiance cleared, every brick relit.
+    /// Fixed bounces restart from direct light: bounce radiance cleared, every brick's
+    /// radiance rebuilt, every probe gathered again.
     pub(super) fixed_restart: bool,
-    /// Cull and relight surfels (lights changed, or a fixed restart).
-    pub(super) relight: bool,
     /// Feed the volume back into the surfels (stage 3).
     pub(super) bounce: bool,
     /// First probe and probe count gathered.
     pub(super) window: (u32, u32),
-    /// Updates per cycle.
-    pub(super) windows: u32,
 }
 
-/// What changed between the lights of two updates (`old` is `None` on the first): the changed
-/// lights' bitset (`stride` words), the moved lights' bitset (lights whose cached visibility is
-/// stale), then the changed lights' indices in ascending order, as the cull and relight stages
-/// read them. Only a change of colour or intensity of a light that was lit keeps its
-/// visibility: anything else can light surfels never traced for it.
+impl Plan {
+    /// Lights changed: cull and relight surfels (stages 1 and 2).
+    pub(super) fn relight(&self) -> bool {
+        self.lights_changed
+    }
+}
+
+/// What changed between the lights of two updates (`old` is `None` on the first), as the cull
+/// and relight stages read it: the moved lights' bitset (`stride` words: lights whose cached
+/// visibility is stale), then the changed lights' indices in ascending order. Only a change of
+/// colour or intensity of a light that was lit keeps its visibility: anything else can light
+/// surfels never traced for it.
 pub(super) fn light_changes(old: Option<&[GpuLight]>, new: &[GpuLight], stride: usize) -> Vec<u32> {
-    let mut words = vec![0u32; 2 * stride];
+    let mut words = vec![0u32; stride];
     let count = old.map_or(new.len(), |o| o.len().max(new.len()));
     for i in 0..count {
         let (a, b) = (old.and_then(|o| o.get(i)), new.get(i));
         if old.is_some() && a == b {
             continue;
         }
-        words[i / 32] |= 1 << (i % 32);
         let only_brightness = matches!((a, b), (Some(a), Some(b))
             if a.radiant.iter().any(|&c| c > 0.0)
                 && GpuLight { radiant: b.radiant, ..*a } == *b);
         if !only_brightness {
-            words[stride + i / 32] |= 1 << (i % 32);
+            words[i / 32] |= 1 << (i % 32);
         }
         words.push(i as u32);
     }
@@ -100,8 +103,37 @@ impl PrtRuntime {
         })
     }
 
+    /// Cycles (passes of the gather over every probe) a change of lighting owes: `n` for
+    /// [`Bounces::Fixed`]`(n)`, no end for [`Bounces::Feedback`].
+    fn cycles_owed(&self) -> u32 {
+        match self.settings.bounces {
+            Bounces::Fixed(n) => n.max(1),
+            Bounces::Feedback { .. } => u32::MAX,
+        }
+    }
+
+    /// Updates still owed at `budget` probes per update: the rest of this cycle and the cycles
+    /// after it (with [`Bounces::Feedback`] only the first cycle after a change counts).
+    pub(super) fn pending(&self, budget: u32) -> u32 {
+        let owed = self.cycles_owed();
+        if self.cycles_done >= owed {
+            return 0;
+        }
+        let budget = budget.max(1);
+        let rest = (self.probe_count - self.cycle_gathered.min(self.probe_count)).div_ceil(budget);
+        match self.settings.bounces {
+            Bounces::Feedback { .. } if self.cycles_done > 0 => 0,
+            Bounces::Feedback { .. } => rest,
+            Bounces::Fixed(_) => rest.saturating_add(
+                (owed - self.cycles_done - 1).saturating_mul(self.probe_count.div_ceil(budget)),
+            ),
+        }
+    }
+
     /// What this update does, given the new lighting state and the number of changed lights;
-    /// `None` when there is nothing to do. Starts a new round of cycles on a change.
+    /// `None` when there is nothing to do. A change starts the cycles again. Cycles are counted
+    /// in probes gathered, so a budget that changes between updates neither skips probes nor
+    /// miscounts bounces.
     pub(super) fn plan(&mut self, new: &State, changed: u32, budget: Option<u32>) -> Option<Plan> {
         let first = self.state.is_none();
         let sky_changed = self.state.as_ref().is_none_or(|old| {
@@ -112,39 +144,30 @@ impl PrtRuntime {
         let budget = budget
             .unwrap_or(self.probe_count)
             .clamp(1, self.probe_count.max(1));
-        let windows = self.probe_count.div_ceil(budget);
         let lights_changed = changed > 0 || first;
-        let feedback = matches!(self.settings.bounces, Bounces::Feedback { .. });
-        if !lights_changed && !sky_changed && self.pending_windows == 0 && !feedback {
-            return None;
-        }
         let restart = lights_changed || sky_changed;
         if restart {
-            let cycles = match self.settings.bounces {
-                Bounces::Fixed(n) => n.max(1),
-                Bounces::Feedback { .. } => 1,
-            };
-            self.pending_windows = windows.saturating_mul(cycles);
-            self.cycle_window = 0;
+            self.cycle_gathered = 0;
             self.cycles_done = 0;
+        } else if self.cycles_done >= self.cycles_owed() {
+            return None;
         }
+        let feedback = matches!(self.settings.bounces, Bounces::Feedback { .. });
         // A fixed bounce count starts again from direct light: the old bounce light goes, and
-        // every brick is recomputed without it (cached visibility keeps that ray-free).
+        // every brick's radiance is rebuilt without it (its direct radiance stays).
         let fixed_restart = restart && self.settings.bounces.feeds_back() && !feedback && !first;
         // Stage 3 runs at the start of every cycle after the first since the change (fixed), or
-        // of every cycle (feedback).
+        // of every cycle but the very first (feedback).
         let bounce = self.settings.bounces.feeds_back()
-            && self.cycle_window == 0
+            && self.cycle_gathered == 0
             && (self.cycles_done >= 1 || (feedback && !first));
         Some(Plan {
             first,
             lights_changed,
             sky_changed,
             fixed_restart,
-            relight: lights_changed || fixed_restart,
             bounce,
             window: (self.cursor, budget.min(self.probe_count)),
-            windows,
         })
     }
 }

@@ -126,18 +126,35 @@ pub struct Counters {
     pub shadow_rays: u32,
     pub probes_gathered: u32,
     /// Probes whose SH exceeded the volume texture's range (`VolumeFormat::F16`: +-65504) and
-    /// were clamped in it (the probes' f32 SH stay exact).
+    /// were clamped in it (the probes' f32 SH stay exact); `plus` keeps the larger.
     pub probes_clamped: u32,
     /// Light-brick reach tests of the cull stage: changed lights x front-face bricks.
     pub light_tests: u32,
     /// Visibility pool words handed out (one bit per surfel and reaching light, rounded to
-    /// words per surfel).
+    /// words per surfel); `plus` keeps the larger.
     pub visibility_words: u32,
     /// Bricks with lights left uncached because the pool was full
-    /// ([`super::RuntimeSettings::visibility_words`]): they trace every light when relit.
+    /// ([`super::RuntimeSettings::visibility_words`]): from the next relight on they trace all
+    /// their lights whenever relit; `plus` keeps the larger.
     pub bricks_uncached: u32,
 }
 const _: () = assert!(std::mem::size_of::<Counters>() == 32);
+
+impl Counters {
+    /// Field-wise sum (saturating), for work over several updates.
+    pub fn plus(&self, o: &Counters) -> Counters {
+        Counters {
+            bricks_relit: self.bricks_relit.saturating_add(o.bricks_relit),
+            surfels_relit: self.surfels_relit.saturating_add(o.surfels_relit),
+            shadow_rays: self.shadow_rays.saturating_add(o.shadow_rays),
+            probes_gathered: self.probes_gathered.saturating_add(o.probes_gathered),
+            probes_clamped: self.probes_clamped.max(o.probes_clamped),
+            light_tests: self.light_tests.saturating_add(o.light_tests),
+            visibility_words: self.visibility_words.max(o.visibility_words),
+            bricks_uncached: self.bricks_uncached.max(o.bricks_uncached),
+        }
+    }
+}
 
 /// The uniform block of every stage.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
@@ -145,10 +162,11 @@ const _: () = assert!(std::mem::size_of::<Counters>() == 32);
 pub struct Params {
     pub probe_count: u32,
     pub brick_count: u32,
-    pub surfel_count: u32,
+    /// 1 when every front-face brick's radiance is rebuilt (a fixed bounce count restarts).
+    pub all_radiance_dirty: u32,
     pub ray_count: u32,
     pub light_count: u32,
-    /// Changed lights listed in the light-changes buffer after its two bitsets.
+    /// Changed lights listed in the light-changes buffer after its moved-lights bitset.
     pub changed_count: u32,
     pub sky_mode: u32,
     pub all_probes_dirty: u32,

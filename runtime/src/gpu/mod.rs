@@ -67,6 +67,11 @@ pub enum GpuError {
     TooManyLights { count: usize, max: usize },
     #[error("RuntimeSettings::max_lights must be in 1..={MAX_LIGHTS}, got {0}")]
     MaxLights(usize),
+    #[error("{what} needs the device feature {feature}, which this adapter lacks")]
+    Feature {
+        what: &'static str,
+        feature: &'static str,
+    },
     #[error("{what} needs {needed}, beyond the device limit {limit}")]
     Limit {
         what: &'static str,
@@ -275,9 +280,8 @@ pub struct PrtRuntime {
     /// every direction's cell: computed again only when the sky changes, not every update).
     sky_cache: Option<(SkyModel, Vec<[f32; 4]>)>,
     cursor: u32,
-    pending_windows: u32,
-    /// Updates done in the current cycle (one pass of the gather over every probe).
-    cycle_window: u32,
+    /// Probes gathered in the current cycle (one pass of the gather over every probe).
+    cycle_gathered: u32,
     /// Cycles completed since the last change of lights or sky.
     cycles_done: u32,
 }
@@ -317,6 +321,18 @@ impl PrtRuntime {
             return Err(GpuError::MaxLights(settings.max_lights));
         }
         let mask_stride = settings.max_lights.div_ceil(32) as u32;
+        // Stage 3 samples the volume with the engine's filtering sampler.
+        if settings.bounces.feeds_back()
+            && settings.volume_format == VolumeFormat::F32
+            && !device
+                .features()
+                .contains(wgpu::Features::FLOAT32_FILTERABLE)
+        {
+            return Err(GpuError::Feature {
+                what: "bounces with an f32 volume (filtered sampling)",
+                feature: "FLOAT32_FILTERABLE",
+            });
+        }
         let needed = asset.geometry.stack_needed();
         if needed > crate::visibility::MAX_STACK {
             return Err(GpuError::BvhTooDeep {
@@ -330,6 +346,7 @@ impl PrtRuntime {
             volume_format: settings.volume_format.wgsl(),
             subgroups,
             mask_stride,
+            bounces: settings.bounces.feeds_back(),
         };
         let res = Resources::new(device, asset, &settings, mask_stride)?;
         let pipelines = Stage::ALL
@@ -357,8 +374,7 @@ impl PrtRuntime {
             state: None,
             sky_cache: None,
             cursor: 0,
-            pending_windows: 0,
-            cycle_window: 0,
+            cycle_gathered: 0,
             cycles_done: 0,
         })
     }
@@ -377,7 +393,12 @@ impl PrtRuntime {
             &new.lights,
             self.res.mask_stride as usize,
         );
-        let changed = changes.len() as u32 - 2 * self.res.mask_stride;
+        let changed = changes.len() as u32 - self.res.mask_stride;
+        // Words of the light masks in use: the old lights' too, so that removed lights' bits
+        // are cleared and the old masks counted in full.
+        let light_words = (new.lights.len())
+            .max(self.state.as_ref().map_or(0, |s| s.lights.len()))
+            .div_ceil(32) as u32;
         let Some(plan) = self.plan(&new, changed, budget) else {
             return Ok(UpdateReport {
                 idle: true,
@@ -389,8 +410,8 @@ impl PrtRuntime {
                 encoder.clear_buffer(bounce, 0, None);
             }
         }
-        let params = self.params(&new, changed, &plan);
-        if plan.relight {
+        let params = self.params(&new, changed, light_words, &plan);
+        if plan.relight() {
             self.vis_parity = params.vis_parity;
         }
         let copy = |encoder: &mut wgpu::CommandEncoder, dst: &wgpu::Buffer, bytes: &[u8]| {
@@ -408,7 +429,7 @@ impl PrtRuntime {
         };
         copy(encoder, &self.res.params, bytemuck::bytes_of(&params));
         copy(encoder, &self.res.lights, bytemuck::cast_slice(&new.lights));
-        if plan.relight {
+        if plan.relight() {
             copy(
                 encoder,
                 &self.res.light_changes,
@@ -425,10 +446,9 @@ impl PrtRuntime {
         encoder.clear_buffer(&self.res.counters, 0, None);
         self.record(encoder, &plan);
         self.cursor = (self.cursor + plan.window.1) % self.probe_count.max(1);
-        self.pending_windows = self.pending_windows.saturating_sub(1);
-        self.cycle_window += 1;
-        if self.cycle_window >= plan.windows {
-            self.cycle_window = 0;
+        self.cycle_gathered += plan.window.1;
+        if self.cycle_gathered >= self.probe_count {
+            self.cycle_gathered = 0;
             self.cycles_done = self.cycles_done.saturating_add(1);
         }
         self.state = Some(new);
@@ -437,22 +457,21 @@ impl PrtRuntime {
             changed_lights: changed,
             sky_changed: plan.sky_changed,
             window: plan.window,
-            pending_windows: self.pending_windows,
+            pending_windows: self.pending(plan.window.1),
             bounce: plan.bounce,
         })
     }
 
     /// The uniform block of this update.
-    fn params(&self, new: &State, changed: u32, plan: &Plan) -> Params {
+    fn params(&self, new: &State, changed: u32, light_words: u32, plan: &Plan) -> Params {
         Params {
             probe_count: self.probe_count,
             brick_count: self.brick_count,
-            surfel_count: self.surfel_count,
             ray_count: self.ray_count,
             light_count: new.lights.len() as u32,
             changed_count: changed,
             sky_mode: new.sky_mode,
-            all_probes_dirty: u32::from(plan.sky_changed || plan.bounce),
+            all_probes_dirty: u32::from(plan.sky_changed || plan.bounce || plan.fixed_restart),
             sky_color: new.sky_color,
             ray_weight: directions::direction_weight(self.ray_count),
             grid_counts: self.grid.counts,
@@ -463,15 +482,16 @@ impl PrtRuntime {
                 VolumeFormat::F32 => f32::MAX,
             },
             dispatch_width: DISPATCH_WIDTH,
-            light_words: (new.lights.len() as u32).div_ceil(32),
+            light_words,
             offset_scale: self.offset_scale,
-            all_bricks_dirty: u32::from(plan.first || plan.fixed_restart),
+            all_bricks_dirty: u32::from(plan.first),
+            all_radiance_dirty: u32::from(plan.fixed_restart),
             ray_scale: self.grid.spacing,
             bounce_damping: match self.settings.bounces {
                 Bounces::Feedback { damping } => damping,
                 Bounces::Fixed(_) => 1.0,
             },
-            vis_parity: if plan.relight {
+            vis_parity: if plan.relight() {
                 1 - self.vis_parity
             } else {
                 self.vis_parity
@@ -490,9 +510,11 @@ impl PrtRuntime {
         let groups = |n: u32| n.div_ceil(WORKGROUP);
         for (stage, p) in &self.pipelines {
             let work = match stage {
-                Stage::CullLights if plan.relight => groups(self.brick_count),
-                Stage::BrickRadiance if plan.relight || plan.bounce => groups(self.brick_count),
-                Stage::RelightSurfels if plan.relight => groups(self.surfel_count),
+                Stage::CullLights if plan.relight() => groups(self.brick_count),
+                Stage::BrickRadiance if plan.relight() || plan.bounce || plan.fixed_restart => {
+                    groups(self.brick_count)
+                }
+                Stage::RelightSurfels if plan.relight() => groups(self.surfel_count),
                 Stage::BounceSurfels if plan.bounce => groups(self.surfel_count),
                 Stage::MarkProbes if plan.lights_changed || plan.sky_changed || plan.bounce => {
                     groups(self.probe_count)
@@ -543,9 +565,9 @@ impl PrtRuntime {
     }
 }
 
-/// Relights `asset` once on the GPU (all probes, blocking) and returns every probe's SH, the
-/// work counters, and whether subgroup operations were used: what `prt relight --backend gpu`
-/// runs.
+/// Relights `asset` on the GPU until settled (all probes, blocking: one update per bounce) and
+/// returns every probe's SH, the work counters summed over the updates, and the adapter: what
+/// `prt relight --backend gpu` runs.
 pub fn relight_once(
     asset: &Asset,
     lighting: &Lighting,
@@ -553,7 +575,15 @@ pub fn relight_once(
 ) -> Result<(Vec<ShRgb>, Counters, wgpu::AdapterInfo), GpuError> {
     let (device, queue, info) = headless_device()?;
     let mut runtime = PrtRuntime::new(&device, &queue, asset, settings)?;
-    runtime.settle(lighting)?;
-    let counters = runtime.read_counters()?;
-    Ok((runtime.read_probe_sh()?, counters, info))
+    let mut total = Counters::default();
+    loop {
+        let mut encoder = device.create_command_encoder(&Default::default());
+        let report = runtime.update(&mut encoder, lighting, None)?;
+        queue.submit([encoder.finish()]);
+        total = total.plus(&runtime.read_counters()?);
+        if report.idle || report.pending_windows == 0 {
+            break;
+        }
+    }
+    Ok((runtime.read_probe_sh()?, total, info))
 }

@@ -44,7 +44,7 @@ pub struct Resources {
     pub vis_capacity: u64,
     /// The visibility pool: one bit per (surfel, reaching light) pair, two halves.
     pub visibility: wgpu::Buffer,
-    /// Per update: changed and moved light bitsets, then the changed lights' indices.
+    /// Per update: the moved lights' bitset, then the changed lights' indices.
     pub light_changes: wgpu::Buffer,
     pub brick_radiance: wgpu::Buffer,
     pub probe_dirty: wgpu::Buffer,
@@ -250,7 +250,7 @@ impl Resources {
         let visibility = alloc.zeroed("prt visibility pool", 8 * vis_capacity, none)?;
         let light_changes = alloc.zeroed(
             "prt light changes",
-            4 * (2 * stride + settings.max_lights as u64),
+            4 * (stride + settings.max_lights as u64),
             wgpu::BufferUsages::COPY_DST,
         )?;
         let brick_radiance = alloc.zeroed("prt brick radiance", 64 * n_bricks, none)?;

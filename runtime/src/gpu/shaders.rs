@@ -54,6 +54,8 @@ pub struct ShaderConfig {
     pub subgroups: bool,
     /// Words per brick light mask: `ceil(RuntimeSettings::max_lights / 32)`.
     pub mask_stride: u32,
+    /// Bounces beyond the first: stage 4 adds the bounce radiance of stage 3.
+    pub bounces: bool,
 }
 
 /// `const NAME = value;` lines for every shared constant plus the configuration.
@@ -63,10 +65,11 @@ pub fn prelude(config: &ShaderConfig) -> String {
         s.push_str(&format!("const {name} = {value};\n"));
     }
     s.push_str(&format!(
-        "const FACTOR_WORDS = {}u;\nconst FACTOR_FORMAT = {}u;\nconst MASK_STRIDE = {}u;\n",
+        "const FACTOR_WORDS = {}u;\nconst FACTOR_FORMAT = {}u;\nconst MASK_STRIDE = {}u;\nconst BOUNCES = {};\n",
         layout::factor_words(config.factors),
         layout::factor_format_code(config.factors),
-        config.mask_stride
+        config.mask_stride,
+        config.bounces
     ));
     s
 }
@@ -109,6 +112,7 @@ pub fn light_model_source() -> String {
         volume_format: "rgba16float",
         subgroups: false,
         mask_stride: 1,
+        bounces: false,
     };
     let mut s = prelude(&config);
     s.push_str(TYPES);
@@ -207,6 +211,7 @@ pub(crate) mod tests {
                         volume_format,
                         subgroups,
                         mask_stride: 32,
+                        bounces: subgroups,
                     });
                 }
             }

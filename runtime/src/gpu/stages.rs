@@ -1,9 +1,11 @@
 //! The compute stages' pipelines and bind groups. Nothing here lists bindings by number: each
 //! stage's assembled WGSL declares its bindings (`@group(g) @binding(b) var ... name`), and
 //! every bind group is built from those declarations, binding each variable to the resource of
-//! [`Resources`] that carries its name ([`Binding::of`]). A shader can therefore reorder, add
-//! or drop bindings without a Rust change, and a unit test checks that every name any stage
-//! declares is one the runtime provides.
+//! [`Resources`] that carries its name ([`Binding::of`]). A shader can therefore renumber,
+//! reorder or drop bindings without a Rust change (a new resource name takes one line in
+//! [`Binding::of`]), and a unit test checks, for every stage and shader configuration, that
+//! every name is one the runtime provides, that naga reads the same declarations, and that
+//! `main` uses each of them (the pipeline layout is derived from what it uses).
 //!
 //! The split arrays make a stage's bind groups come in *sets*, dispatched in turn: one per
 //! factor chunk for the stages that read factors (`mark_probes`, `gather`), one per surfel
@@ -289,16 +291,46 @@ mod tests {
         );
         for config in shaders::tests::configs() {
             for stage in Stage::ALL {
-                let declared = declared_bindings(&shaders::source(stage, &config));
+                let src = shaders::source(stage, &config);
+                let declared = declared_bindings(&src);
                 assert!(!declared.is_empty(), "{stage:?}");
                 let mut seen = std::collections::HashSet::new();
-                for (g, b, name) in declared {
+                for (g, b, name) in &declared {
                     assert!(
-                        Binding::of(&name).is_some(),
+                        Binding::of(name).is_some(),
                         "{stage:?} declares unknown `{name}`"
                     );
-                    assert!(seen.insert((g, b)), "{stage:?}: ({g}, {b}) twice");
+                    assert!(seen.insert((*g, *b)), "{stage:?}: ({g}, {b}) twice");
                 }
+                // naga agrees with the line parser, and `main` uses every binding (the
+                // pipeline's layout is derived from what it uses: an unused one would make
+                // the bind group invalid).
+                let module = naga::front::wgsl::parse_str(&src).expect("parses");
+                let info = naga::valid::Validator::new(
+                    naga::valid::ValidationFlags::all(),
+                    naga::valid::Capabilities::all(),
+                )
+                .validate(&module)
+                .expect("valid");
+                let main = module
+                    .entry_points
+                    .iter()
+                    .position(|e| e.name == "main")
+                    .expect("main");
+                let mut from_naga = Vec::new();
+                for (handle, var) in module.global_variables.iter() {
+                    let Some(rb) = &var.binding else { continue };
+                    let name = var.name.clone().unwrap_or_default();
+                    assert!(
+                        !info.get_entry_point(main)[handle].is_empty(),
+                        "{stage:?}: `{name}` declared but unused"
+                    );
+                    from_naga.push((rb.group, rb.binding, name));
+                }
+                let mut parsed = declared.clone();
+                parsed.sort();
+                from_naga.sort();
+                assert_eq!(parsed, from_naga, "{stage:?}");
             }
         }
     }
