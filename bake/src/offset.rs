@@ -42,13 +42,14 @@ fn near_directions() -> impl Iterator<Item = Vec3> {
 /// the probe happened to be on), else the side it is on, else the front. Repeated up to three
 /// times, for corners. Deterministic: fixed directions and order.
 ///
-/// The search starts [`NUDGE`] spacings along `inwards` (per axis +1 or -1: towards the grid's
-/// middle, by grid index so that rounding cannot flip it): a probe exactly on a
+/// The short rays start [`NUDGE`] spacings (or two float steps of the coordinates, if more)
+/// along `inwards` (per axis +1 or -1: towards the grid's middle, by grid index so that rounding
+/// cannot flip it) from the probe: a probe exactly on a
 /// surface's edge (the outer layers lie on the bounds' faces, which the scene's outermost
 /// edges touch) otherwise sits on a knife-edge where rounding decides whether the short rays
 /// hit, and that rounding changes with the scene's scale (Sponza's floor edge: moved at x1, not
-/// at x10, 585% of SH0 apart; tests/tests/scale.rs). A probe that does not move keeps its
-/// position exactly.
+/// at x10, 585% of SH0 apart; tests/tests/scale.rs). Which side and where the probe moves are
+/// decided from the probe itself; a probe that does not move keeps its position exactly.
 pub fn surface_offset(
     tracer: &trace::Tracer,
     p: Vec3,
@@ -57,11 +58,16 @@ pub fn surface_offset(
     centre: Option<Vec3>,
 ) -> Vec3 {
     let eps = NEAR_SURFACE * spacing;
-    let start = p + inwards * (NUDGE * spacing);
-    let mut at = start;
+    // At least two float steps of the coordinates, so that far from the origin the nudge is
+    // not rounded away, and at most half the on-surface distance.
+    let ulp = p.abs().max_element() * f32::EPSILON;
+    let nudge = inwards * (NUDGE * spacing).max(2.0 * ulp).min(0.5 * eps);
+    // `at` is where the probe is; the short rays start from `at + nudge`, off any edge.
+    let mut at = p;
     'moves: for _ in 0..3 {
+        let search = at + nudge;
         for d in near_directions() {
-            let o = at - d * eps;
+            let o = search - d * eps;
             let Some(h) = tracer.bvh.closest_hit(o, d) else {
                 continue;
             };
@@ -95,11 +101,7 @@ pub fn surface_offset(
         }
         break;
     }
-    if at == start {
-        p
-    } else {
-        at
-    }
+    at
 }
 
 /// Virtual offset of a probe inside geometry: the nearest back face its rays hit is the wall it

@@ -77,9 +77,9 @@ fn worst(a: &[ShRgb], b: &[ShRgb]) -> f32 {
 /// of two, every float operation of the bake and relight scales exactly, so the SH are
 /// identical (any absolute length, such as obvhs's box epsilon or a fixed ray offset, breaks
 /// that: before, 122% at 1/1000 and 58% at 1/100). At other scales only rounding differs:
-/// within 1e-3 of SH0 (measured 3e-6 to 4e-5), since the surfel cell lattice starts half a
-/// cell off the origin (walls at round coordinates no longer lie on cell boundaries, where rounding split their hits
-/// differently at every scale: 1.6-2.1% before).
+/// within 1e-3 of SH0 (measured 4.8e-6 to 3.7e-4), since the surfel cell lattice starts half
+/// a cell off the origin (walls at round coordinates no longer lie on cell boundaries, where
+/// rounding split their hits differently at every scale: 1.6-2.1% before).
 #[test]
 fn relit_sh_do_not_depend_on_the_scene_scale() {
     let dir = ScratchDir::new("scale");
@@ -126,7 +126,7 @@ fn translated(dir: &std::path::Path, t: f32) -> (std::path::PathBuf, Lighting) {
 
 /// Far from the origin f32 positions lose precision (at 1e4 m floats are 1 mm apart, at 1e5 m
 /// 8 mm): the relit SH of the 1 m Cornell room moved by (t, 0, t) against at the origin.
-/// Measured 0.5% of SH0 at 1 km, 6.3% at 10 km, 9.5% at 100 km (with shadow-ray offsets of 1e-4
+/// Measured 0.5% of SH0 at 1 km, 2.4% at 10 km, 9.5% at 100 km (with shadow-ray offsets of 1e-4
 /// of the coordinates' magnitude before: 9%, 85%, 129%). The rest is f32 world coordinates: hit
 /// points rounded to a millimetre fall into other surfel cells (2 cm here). No local origin yet.
 #[test]
@@ -150,7 +150,13 @@ fn relit_sh_far_from_the_origin() {
     }
     eprintln!("far from the origin: worst |dSH| / SH0 {report:?}");
     for (t, w) in report {
-        let bound = if t < 5e3 { 0.01 } else { 0.15 };
+        let bound = if t < 5e3 {
+            0.01
+        } else if t < 5e4 {
+            0.05
+        } else {
+            0.15
+        };
         assert!(w.is_finite() && w <= bound, "at {t} m: {w} (bound {bound})");
     }
 }
@@ -231,10 +237,10 @@ fn worst_of_mean(a: &[ShRgb], b: &[ShRgb]) -> f32 {
 /// centre, scaled to match) relight within 1e-3 of each probe's SH0 of their unscaled selves.
 ///
 /// Sponza is checked twice. Unmerged (`cell_size` 0), within 1e-3 of each probe's SH0
-/// (measured 1.2e-5). Merged, within 1e-3 of the scene's mean SH0 (measured 1.1e-4 to 4.3e-4): a ray hit
+/// (measured 1.7e-5). Merged, within 1e-3 of the scene's mean SH0 (measured 1.3e-4 to 4.4e-4): a ray hit
 /// within rounding of a surfel cell's wall joins the cell on the other side at another scale,
 /// and among its 109k hits about fifty do. That moves a few dark probes (SH0 1-2% of the
-/// mean) by up to 2% of their own SH0. A different but equally valid merge, smaller than
+/// mean) by up to 2.6% of their own SH0. A different but equally valid merge, smaller than
 /// the merge's own effect. Its probes on the floor's outer edge were moved off it at x1 and
 /// not at x10 (585% of SH0) until the on-surface search started off the grid point
 /// (`prt_bake::offset::NUDGE`).
