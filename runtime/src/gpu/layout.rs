@@ -16,7 +16,7 @@ pub const WORKGROUP: u32 = 64;
 pub const GATHER_WORKGROUP: u32 = 32;
 /// Most lights a runtime can be built for ([`super::RuntimeSettings::max_lights`]): what sets
 /// it is the per-brick light mask, `max_lights / 32` words per brick (twice: this update's and
-/// the last), 32 MB for 64k bricks at this limit, and the CPU reference's own limit
+/// the last), 64 MiB for 64k bricks at this limit, and the CPU reference's own limit
 /// ([`crate::relight::MAX_CPU_LIGHTS`]), which every GPU result is checked against.
 pub const MAX_LIGHTS: usize = 4096;
 /// A brick without room in the visibility pool (its lights are traced whenever it is relit).

@@ -1,14 +1,15 @@
 //! # The GPU runtime: relight bricks and gather probes into a 3D SH volume, in wgpu compute
 //!
 //! [`PrtRuntime::update`] records, into a command encoder the engine owns, one dispatch per
-//! stage (each stage is one WGSL file in `shaders/`, and a CPU twin in [`crate::relight`]):
+//! stage and chunk of the split arrays ([`stages`]; each stage is one WGSL file in `shaders/`,
+//! and a CPU twin in [`crate::relight`]):
 //!
 //! 1. **cull_lights** (per brick): which of the lights that changed reach the brick (range,
 //!    cone, facing, in world space; never through screen-space clusters), kept as one bit per
 //!    light in the brick's light mask, and whether a changed light reaches it now or did before:
 //!    only then is the brick *dirty*. Each brick takes one bit per (surfel, reaching light) pair
 //!    in the visibility pool (two halves, written in turn).
-//! 2. **relight_surfels** (per surfel of a dirty brick): direct irradiance from the brick's
+//! 2. **relight_surfels** (per surfel; for a dirty brick's): direct irradiance from the brick's
 //!    lights with visibility from shadow rays through the asset's BVH, cached per pair and
 //!    re-traced only for lights that moved; other bricks' bits move to the new half.
 //! 3. **bounce_surfels** (per surfel; multi-bounce only, at the start of a cycle): the volume's
@@ -27,7 +28,8 @@
 //! (`tests/tests/lights.rs`). Up to [`RuntimeSettings::max_lights`] lights (default 256, at
 //! most [`MAX_LIGHTS`]).
 //!
-//! When nothing changed and no round-robin cycle is pending, `update` records nothing. With a
+//! When nothing changed and no round-robin cycle is pending, `update` records nothing (with
+//! [`Bounces::Feedback`] there is always one: it feeds back for ever). With a
 //! budget of B probes, the gather visits B probes per update round robin; a probe's texels
 //! always hold one complete gather, and a cycle of `ceil(P / B)` updates converges exactly to the
 //! full update. With [`Bounces`] beyond one, each such cycle adds one bounce.
@@ -287,7 +289,7 @@ pub struct PrtRuntime {
 }
 
 impl PrtRuntime {
-    /// Uploads `asset` and builds the pipelines. The device needs 9 storage buffers and 7 storage
+    /// Uploads `asset` and builds the pipelines. The device needs 12 storage buffers and 7 storage
     /// textures per shader stage (above WebGPU's defaults: request the adapter's limits, as
     /// [`headless_device`] does); a device or asset beyond its limits is a [`GpuError::Limit`].
     pub fn new(
