@@ -445,7 +445,11 @@ fn bake_in_pool(
     for r in &traced {
         hit_offsets.push(hit_offsets.last().copied().unwrap_or(0) + r.hits.len());
     }
-    let hits: Vec<trace::Hit> = traced.iter().flat_map(|r| r.hits.iter().copied()).collect();
+    // Sized once: collecting a flat_map grows by doubling, copying the hits several times.
+    let mut hits: Vec<trace::Hit> = Vec::with_capacity(hit_offsets.last().copied().unwrap_or(0));
+    for r in &traced {
+        hits.extend_from_slice(&r.hits);
+    }
     if hits.len() > u32::MAX as usize {
         return Err(BakeError::Setting {
             name: "rays",
@@ -484,7 +488,7 @@ fn bake_in_pool(
                 reason: "the 8-bit factor encoding addresses at most 16,777,216 bricks; use f16",
             });
         }
-        tables.into_iter().map(split_rows_for_u8).collect()
+        tables.into_par_iter().map(split_rows_for_u8).collect()
     } else {
         tables
     };
@@ -576,8 +580,19 @@ fn assemble_probes(
     sources: &[Option<usize>],
 ) -> Assembled {
     let mut probes = Vec::with_capacity(traced.len());
-    let mut rows: Vec<FactorRow> = Vec::new();
-    let (mut sky_mask, mut sky_transfer) = (Vec::new(), Vec::new());
+    // Sized once (a growing vector copied the factor rows several times: 0.8 s of 1.0 s here at
+    // 16,758 Sponza probes).
+    let total: usize = (0..positions.len())
+        .map(|p| match (valid[p], sources[p]) {
+            (true, _) => tables[p].len(),
+            (false, Some(q)) => tables[q].len(),
+            (false, None) => 0,
+        })
+        .sum();
+    let mut rows: Vec<FactorRow> = Vec::with_capacity(total);
+    let mask_words = traced.first().map_or(0, |r| r.sky_mask.len());
+    let mut sky_mask = Vec::with_capacity(mask_words * positions.len());
+    let mut sky_transfer = Vec::with_capacity(positions.len());
     for (p, &(pos, moved)) in positions.iter().enumerate() {
         let (flags, from) = match (valid[p], sources[p]) {
             (true, _) => (PROBE_VALID, p),

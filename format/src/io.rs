@@ -67,13 +67,24 @@ impl Sections<'_> {
 
 /// Serializes an asset into the bytes of a `.prt` file.
 pub fn encode(asset: &Asset) -> Result<Vec<u8>, FormatError> {
-    let payload = bincode::serde::encode_to_vec(asset, config())
+    // The payload's size first (a pass that writes nothing), then the payload straight into the
+    // output after its prefix: no second copy of a file of hundreds of megabytes, no growth.
+    let mut size = bincode::enc::write::SizeWriter::default();
+    bincode::serde::encode_into_writer(asset, &mut size, config())
         .map_err(|e| FormatError::Encode(e.to_string()))?;
-    let mut out = Vec::with_capacity(PREFIX + payload.len() + SUFFIX);
+    let mut out = Vec::with_capacity(PREFIX + size.bytes_written + SUFFIX);
     out.extend_from_slice(&MAGIC);
     out.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
-    out.extend_from_slice(&(payload.len() as u64).to_le_bytes());
-    out.extend_from_slice(&payload);
+    out.extend_from_slice(&(size.bytes_written as u64).to_le_bytes());
+    bincode::serde::encode_into_std_write(asset, &mut out, config())
+        .map_err(|e| FormatError::Encode(e.to_string()))?;
+    if out.len() != PREFIX + size.bytes_written {
+        return Err(FormatError::Encode(format!(
+            "payload of {} bytes, {} expected",
+            out.len() - PREFIX,
+            size.bytes_written
+        )));
+    }
     let checksum = xxhash_rust::xxh3::xxh3_64(&out);
     out.extend_from_slice(&checksum.to_le_bytes());
     Ok(out)
