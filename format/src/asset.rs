@@ -326,6 +326,37 @@ pub enum Factors {
     },
 }
 
+impl Factors {
+    /// Joins tables encoded separately, in order (all of one precision and, for u8, built with
+    /// one brick size). No parts give the default (empty u8).
+    pub fn concat(parts: Vec<Factors>) -> Factors {
+        let total: usize = parts.iter().map(Factors::len).sum();
+        let mut parts = parts.into_iter();
+        let Some(mut all) = parts.next() else {
+            return Factors::default();
+        };
+        let more = total - all.len();
+        match &mut all {
+            Factors::F32(a) => a.reserve_exact(more),
+            Factors::F16(a) => a.reserve_exact(more),
+            Factors::U8 { factors, .. } => factors.reserve_exact(more),
+        }
+        for part in parts {
+            match (&mut all, part) {
+                (Factors::F32(a), Factors::F32(b)) => a.extend(b),
+                (Factors::F16(a), Factors::F16(b)) => a.extend(b),
+                (Factors::U8 { factors: a, .. }, Factors::U8 { factors: b, .. }) => a.extend(b),
+                (a, b) => panic!(
+                    "Factors::concat of {:?} and {:?} tables",
+                    a.precision(),
+                    b.precision()
+                ),
+            }
+        }
+        all
+    }
+}
+
 impl Default for Factors {
     fn default() -> Self {
         Factors::U8 {
