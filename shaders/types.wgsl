@@ -115,7 +115,8 @@ struct Params {
     changed_count: u32,
     // 0: black, 1: constant (sky_color), 2: per-direction radiance in sky_radiance.
     sky_mode: u32,
-    // 1 when every valid probe must be re-gathered (sky changed, first update).
+    // 1 when every valid probe must be re-gathered (sky changed, first update, a bounce, a fixed
+    // bounce count restarting).
     all_probes_dirty: u32,
     sky_color: vec3<f32>,
     // Solid angle of one lattice direction, 4 pi / N.
@@ -127,7 +128,8 @@ struct Params {
     texel_limit: f32,
     // Workgroups along x of 2D dispatches (linear index = x + y * dispatch_width).
     dispatch_width: u32,
-    // Words of a brick's light mask in use: ceil(light_count / 32) (at most MASK_STRIDE).
+    // Words of the light masks in use: ceil(max(previous, current light count) / 32), at most
+    // MASK_STRIDE (the previous count clears removed lights' bits and counts old masks in full).
     light_words: u32,
     // Metres per unit of 8-bit factor offsets (FACTOR_U8 only).
     offset_scale: f32,

@@ -16,9 +16,11 @@ pub const NEAR_SURFACE: f32 = 0.02;
 /// at 0.05, 3.8% at 0.03.
 pub const SURFACE_OFFSET: f32 = 0.05;
 /// Spacings that the on-surface search starts off the grid point, towards the bounds' centre
-/// ([`surface_offset`]): well above float rounding at any scale (1e-3 of a spacing is about
-/// 2^-10 of it, so the grid point's coordinates would need 10 bits of mantissa lost), well below
-/// [`NEAR_SURFACE`].
+/// ([`surface_offset`]): above float rounding near the origin (1e-3 of a spacing is about 2^-10
+/// of it), well below [`NEAR_SURFACE`]. Far from the origin the search raises it to two float
+/// steps of the coordinates, up to half of [`NEAR_SURFACE`] per axis; beyond about 80,000
+/// spacings from the origin a float step exceeds that and the search runs below float
+/// resolution (tests/tests/scale.rs: 9.5% of SH0 for a 1 m room at 100 km).
 pub const NUDGE: f32 = 1e-3;
 
 /// The 26 unit directions to the neighbours of a grid cell, in a fixed order.

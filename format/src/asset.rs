@@ -329,6 +329,10 @@ pub enum Factors {
 impl Factors {
     /// Joins tables encoded separately, in order (all of one precision and, for u8, built with
     /// one brick size). No parts give the default (empty u8).
+    ///
+    /// # Panics
+    /// When the parts mix precisions or u8 offset scales: they come from one
+    /// [`Factors::build`] call site with fixed arguments, never from input.
     pub fn concat(parts: Vec<Factors>) -> Factors {
         let total: usize = parts.iter().map(Factors::len).sum();
         let mut parts = parts.into_iter();
@@ -345,7 +349,19 @@ impl Factors {
             match (&mut all, part) {
                 (Factors::F32(a), Factors::F32(b)) => a.extend(b),
                 (Factors::F16(a), Factors::F16(b)) => a.extend(b),
-                (Factors::U8 { factors: a, .. }, Factors::U8 { factors: b, .. }) => a.extend(b),
+                (
+                    Factors::U8 {
+                        factors: a,
+                        offset_scale,
+                    },
+                    Factors::U8 {
+                        factors: b,
+                        offset_scale: scale,
+                    },
+                ) => {
+                    assert_eq!(*offset_scale, scale, "Factors::concat of u8 offset scales");
+                    a.extend(b)
+                }
                 (a, b) => panic!(
                     "Factors::concat of {:?} and {:?} tables",
                     a.precision(),

@@ -1,5 +1,5 @@
-//! What changed since the last update, and what this update must therefore do: the lights'
-//! changed and moved sets (the moved ones lose their cached visibility), the sky, and the
+//! What changed since the last update, and what this update must therefore do: the changed
+//! lights (listed) and the moved ones (a bitset: they lose their cached visibility), the sky, and the
 //! cycle accounting of amortised updates and bounces ([`super::Bounces`]).
 
 use super::layout::*;

@@ -177,7 +177,9 @@ pub struct Params {
     pub window_count: u32,
     pub texel_limit: f32,
     pub dispatch_width: u32,
-    /// Words of a brick's light mask in use, `ceil(light_count / 32)`.
+    /// Words of the light masks in use: `ceil(max(previous, current light count) / 32)`. The
+    /// previous count matters: removed lights' bits must be cleared and the old masks counted
+    /// in full, or cached-visibility slots shift (`tests/tests/lights.rs`).
     pub light_words: u32,
     pub offset_scale: f32,
     pub all_bricks_dirty: u32,

@@ -15,10 +15,10 @@
 //! 3. **bounce_surfels** (per surfel; multi-bounce only, at the start of a cycle): the volume's
 //!    irradiance at the surfel through the engine's `sample_irradiance`, as bounce radiance;
 //!    every front-face brick becomes dirty ([`Bounces`]).
-//! 4. **brick_radiance** (per dirty brick): mean and gradient of the brick's radiance, direct
-//!    plus bounce.
+//! 4. **brick_radiance** (per dirty brick; every front-face brick when a fixed bounce count
+//!    restarts): mean and gradient of the brick's radiance, direct plus bounce.
 //! 5. **mark_probes** (per probe): probes with a factor on a dirty brick (or all, when the sky
-//!    changed) are flagged for gathering.
+//!    changed, a bounce began or a fixed bounce count restarted) are flagged for gathering.
 //! 6. **gather** (one workgroup per probe of this update's window): the probe's factors and sky
 //!    term reduced into SH9 RGB (subgroup adds where the adapter has them, a shared-memory tree
 //!    otherwise), written with its validity into the seven volume textures at once.
@@ -69,6 +69,8 @@ pub enum GpuError {
     TooManyLights { count: usize, max: usize },
     #[error("RuntimeSettings::max_lights must be in 1..={MAX_LIGHTS}, got {0}")]
     MaxLights(usize),
+    #[error("the asset has no probes")]
+    NoProbes,
     #[error("{what} needs the device feature {feature}, which this adapter lacks")]
     Feature {
         what: &'static str,
@@ -335,6 +337,9 @@ impl PrtRuntime {
                 feature: "FLOAT32_FILTERABLE",
             });
         }
+        if asset.probes.is_empty() {
+            return Err(GpuError::NoProbes);
+        }
         let needed = asset.geometry.stack_needed();
         if needed > crate::visibility::MAX_STACK {
             return Err(GpuError::BvhTooDeep {
@@ -451,7 +456,11 @@ impl PrtRuntime {
         self.cycle_gathered += plan.window.1;
         if self.cycle_gathered >= self.probe_count {
             self.cycle_gathered = 0;
-            self.cycles_done = self.cycles_done.saturating_add(1);
+            // Feedback needs only "the first cycle is done": stop counting there, so that it
+            // never reaches the owed (unbounded) count and goes idle.
+            if matches!(self.settings.bounces, Bounces::Fixed(_)) || self.cycles_done == 0 {
+                self.cycles_done += 1;
+            }
         }
         self.state = Some(new);
         Ok(UpdateReport {
@@ -582,8 +591,11 @@ pub fn relight_once(
         let mut encoder = device.create_command_encoder(&Default::default());
         let report = runtime.update(&mut encoder, lighting, None)?;
         queue.submit([encoder.finish()]);
+        if report.idle {
+            break;
+        }
         total = total.plus(&runtime.read_counters()?);
-        if report.idle || report.pending_windows == 0 {
+        if report.pending_windows == 0 {
             break;
         }
     }
