@@ -50,6 +50,60 @@ fn key(h: &Hit, anchor: Vec3, brick_size: f32) -> Key {
     (c.x as i32, c.y as i32, c.z as i32, flags)
 }
 
+/// Hit indices in key order (ties by index), as `(sort key, hit index)`. Where the cell
+/// coordinates span less than 2^20 per axis (always, short of a cell size a million times
+/// below the scene) the key packs into one u64 that sorts in the tuple's order: 20 bits per
+/// axis from the smallest cell, 4 for the flags (axis | backface < 16), and equal keys compare
+/// as one integer when grouping. Sponza at 1.0 m (6.2 M hits, 2 threads): the merge stage took
+/// 1.65-1.70 s against 2.0 s sorting the 20-byte tuples, with the same bytes out.
+fn sorted(keys: &[Key]) -> Vec<(u64, u32)> {
+    let (lo, hi) = keys
+        .par_iter()
+        .fold(
+            || ([i32::MAX; 3], [i32::MIN; 3]),
+            |(lo, hi), k| {
+                let c = [k.0, k.1, k.2];
+                (
+                    std::array::from_fn(|a| lo[a].min(c[a])),
+                    std::array::from_fn(|a| hi[a].max(c[a])),
+                )
+            },
+        )
+        .reduce(
+            || ([i32::MAX; 3], [i32::MIN; 3]),
+            |a, b| {
+                (
+                    std::array::from_fn(|i| a.0[i].min(b.0[i])),
+                    std::array::from_fn(|i| a.1[i].max(b.1[i])),
+                )
+            },
+        );
+    let packable = keys.is_empty()
+        || (0..3).all(|a| i64::from(hi[a]) - i64::from(lo[a]) < 1 << 20)
+            && keys.iter().all(|k| k.3 < 16);
+    let mut order: Vec<(u64, u32)> = if packable {
+        keys.par_iter()
+            .enumerate()
+            .map(|(i, k)| {
+                let c = |v: i32, a: usize| (i64::from(v) - i64::from(lo[a])) as u64;
+                let packed = c(k.0, 0) << 44 | c(k.1, 1) << 24 | c(k.2, 2) << 4 | u64::from(k.3);
+                (packed, i as u32)
+            })
+            .collect()
+    } else {
+        // Rank the distinct keys (a sort of the tuples), then sort by rank.
+        let mut distinct: Vec<Key> = keys.to_vec();
+        distinct.par_sort_unstable();
+        distinct.dedup();
+        keys.par_iter()
+            .enumerate()
+            .map(|(i, k)| (distinct.binary_search(k).unwrap_or(0) as u64, i as u32))
+            .collect()
+    };
+    order.par_sort_unstable();
+    order
+}
+
 /// Groups `hits` into bricks (see the module docs). The cell lattice starts at `anchor`: the
 /// bake puts it half a cell off the world origin, so that walls at round coordinates (whole
 /// numbers of cells from the origin) lie in the middle of cells. Anchored at the origin itself,
@@ -63,12 +117,11 @@ pub fn build(hits: &[Hit], cell_size: f32, merge_normal_cos: f32, anchor: Vec3) 
         return unmerged(hits);
     }
     let brick_size = 4.0 * cell_size;
-    let mut order: Vec<(Key, u32)> = hits
+    let keys: Vec<Key> = hits
         .par_iter()
-        .enumerate()
-        .map(|(i, h)| (key(h, anchor, brick_size), i as u32))
+        .map(|h| key(h, anchor, brick_size))
         .collect();
-    order.par_sort_unstable();
+    let order = sorted(&keys);
     let mut groups: Vec<std::ops::Range<usize>> = Vec::new();
     let mut start = 0;
     for i in 1..=order.len() {
@@ -82,7 +135,7 @@ pub fn build(hits: &[Hit], cell_size: f32, merge_normal_cos: f32, anchor: Vec3) 
         .par_iter()
         .enumerate()
         .map(|(b, g)| {
-            let k = order[g.start].0;
+            let k = keys[order[g.start].1 as usize];
             let origin = anchor + Vec3::new(k.0 as f32, k.1 as f32, k.2 as f32) * brick_size;
             let members = order[g.clone()].iter().map(|&(_, i)| &hits[i as usize]);
             let mut surfels = merge_brick(members, origin, cell_size, merge_normal_cos);
@@ -322,5 +375,37 @@ mod tests {
         let b = build(&hits, 0.0, 0.9, Vec3::ZERO);
         assert_eq!(b.bricks.len(), 2);
         assert_eq!(b.hit_brick, vec![0, 1]);
+    }
+
+    /// The packed u64 order and the fallback (cells spanning 2^20 or more) both give the order
+    /// of the key tuples, ties broken by hit index.
+    #[test]
+    fn sorted_keys_follow_the_tuple_order() {
+        let mut state = 12345u64;
+        let mut next = |m: i32| {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1);
+            ((state >> 33) % m as u64) as i32
+        };
+        for span in [100, 3_000_000] {
+            let keys: Vec<Key> = (0..2000)
+                .map(|_| {
+                    (
+                        next(span) - span / 2,
+                        next(7) - 3,
+                        next(5),
+                        (next(6) as u32) | if next(2) == 1 { BRICK_BACKFACE } else { 0 },
+                    )
+                })
+                .collect();
+            let mut expect: Vec<(Key, u32)> = keys
+                .iter()
+                .enumerate()
+                .map(|(i, k)| (*k, i as u32))
+                .collect();
+            expect.sort_unstable();
+            let got: Vec<u32> = sorted(&keys).iter().map(|&(_, i)| i).collect();
+            let expect: Vec<u32> = expect.iter().map(|&(_, i)| i).collect();
+            assert_eq!(got, expect, "span {span}");
+        }
     }
 }
