@@ -686,3 +686,29 @@ fn sigterm_during_the_write_leaves_no_temporary_file() {
     }
     panic!("three bakes finished before their temporary file was seen");
 }
+
+/// `--quality fast` is the 512-direction default exactly: the same bytes.
+#[test]
+fn quality_fast_is_todays_default() {
+    let dir = Scratch::new("quality-fast");
+    let scene = cornell();
+    let bake = |name: &str, extra: &[&str]| {
+        let asset = dir.0.join(name);
+        let mut args: Vec<&std::ffi::OsStr> = vec![
+            "bake".as_ref(),
+            scene.as_os_str(),
+            "-o".as_ref(),
+            asset.as_os_str(),
+            "--spacing".as_ref(),
+            "0.5".as_ref(),
+        ];
+        args.extend(extra.iter().map(std::ffi::OsStr::new));
+        let out = prt(&args, None);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        std::fs::read(asset).unwrap()
+    };
+    assert_eq!(
+        bake("default.prt", &[]),
+        bake("fast.prt", &["--quality", "fast"])
+    );
+}
