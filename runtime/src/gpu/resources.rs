@@ -74,118 +74,17 @@ impl Resources {
         settings: &RuntimeSettings,
         mask_stride: u32,
     ) -> Result<Resources, GpuError> {
-        let limits = device.limits();
         let g = asset.header.grid;
-        let dim = u64::from(g.counts.iter().copied().max().unwrap_or(1));
-        if dim > u64::from(limits.max_texture_dimension_3d) {
-            return Err(GpuError::Limit {
-                what: "the probe grid's largest dimension",
-                needed: dim,
-                limit: u64::from(limits.max_texture_dimension_3d),
-            });
-        }
-        let max_binding = limits
-            .max_storage_buffer_binding_size
-            .min(limits.max_buffer_size);
+        let max_binding = check_limits(&device.limits(), &g)?;
         let alloc = Alloc {
             device,
             max_binding,
         };
-        for (what, needed, limit) in [
-            (
-                "storage buffers per shader stage",
-                12,
-                limits.max_storage_buffers_per_shader_stage,
-            ),
-            (
-                "storage textures per shader stage",
-                7,
-                limits.max_storage_textures_per_shader_stage,
-            ),
-            ("bind groups", 3, limits.max_bind_groups),
-        ] {
-            if needed > limit {
-                return Err(GpuError::Limit {
-                    what,
-                    needed: u64::from(needed),
-                    limit: u64::from(limit),
-                });
-            }
-        }
         let none = wgpu::BufferUsages::empty();
         let probes = alloc.storage("prt probes", bytemuck::cast_slice(&asset.probes), none)?;
-        let factor_bytes: &[u8] = match &asset.factors {
-            Factors::F16(f) => bytemuck::cast_slice(f),
-            Factors::F32(f) => bytemuck::cast_slice(f),
-            Factors::U8 { factors, .. } => bytemuck::cast_slice(factors),
-        };
-        let chunks = factor_chunks(
-            asset,
-            settings
-                .max_factor_chunk_bytes
-                .unwrap_or(max_binding)
-                .min(max_binding),
-        )?;
-        let per_factor = asset.factors.bytes_per_factor();
-        let chunk_factors: Vec<wgpu::Buffer> = chunks
-            .iter()
-            .map(|c| {
-                let first = c.first_factor as usize;
-                let end = asset.probes[c.probe_begin as usize..c.probe_end as usize]
-                    .last()
-                    .map_or(first, |p| (p.first_factor + p.factor_count) as usize);
-                alloc.storage(
-                    "prt factors",
-                    &factor_bytes[first * per_factor..end * per_factor],
-                    none,
-                )
-            })
-            .collect::<Result<_, _>>()?;
-        let chunk_uniforms: Vec<wgpu::Buffer> = chunks
-            .iter()
-            .map(|c| {
-                device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                    label: Some("prt factor chunk"),
-                    contents: bytemuck::bytes_of(c),
-                    usage: wgpu::BufferUsages::UNIFORM,
-                })
-            })
-            .collect();
+        let (chunks, chunk_factors, chunk_uniforms) = factor_buffers(&alloc, asset, settings)?;
         let bricks = alloc.storage("prt bricks", bytemuck::cast_slice(&asset.bricks), none)?;
-        let surfel_chunks = surfel_chunks(
-            asset,
-            settings
-                .max_surfel_chunk_bytes
-                .unwrap_or(max_binding)
-                .min(max_binding),
-        )?;
-        let feeds_back = settings.bounces.feeds_back();
-        // Per chunk: its surfels, their direct radiance and their bounce radiance.
-        let chunk_surfels: Vec<[wgpu::Buffer; 4]> = surfel_chunks
-            .iter()
-            .map(|c| {
-                let range = c.surfel_begin as usize..c.surfel_end as usize;
-                let n = range.len() as u64;
-                Ok([
-                    alloc.storage(
-                        "prt surfels",
-                        bytemuck::cast_slice(&asset.surfels[range]),
-                        none,
-                    )?,
-                    alloc.zeroed("prt surfel radiance", 16 * n, none)?,
-                    alloc.zeroed(
-                        "prt surfel bounce",
-                        if feeds_back { 16 * n } else { 0 },
-                        none,
-                    )?,
-                    device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                        label: Some("prt surfel chunk"),
-                        contents: bytemuck::bytes_of(c),
-                        usage: wgpu::BufferUsages::UNIFORM,
-                    }),
-                ])
-            })
-            .collect::<Result<_, GpuError>>()?;
+        let (surfel_chunks, chunk_surfels) = surfel_buffers(&alloc, asset, settings)?;
         let normal_bounds: Vec<GpuNormalBounds> = brick_normal_bounds(asset)
             .iter()
             .map(GpuNormalBounds::from)
@@ -278,41 +177,7 @@ impl Resources {
             mapped_at_creation: false,
         });
 
-        let size = wgpu::Extent3d {
-            width: g.counts[0],
-            height: g.counts[1],
-            depth_or_array_layers: g.counts[2],
-        };
-        let textures: Vec<wgpu::Texture> = (0..7)
-            .map(|i| {
-                device.create_texture(&wgpu::TextureDescriptor {
-                    label: Some(&format!("prt sh volume {i}")),
-                    size,
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D3,
-                    format: settings.volume_format.texture_format(),
-                    usage: wgpu::TextureUsages::STORAGE_BINDING
-                        | wgpu::TextureUsages::TEXTURE_BINDING
-                        | wgpu::TextureUsages::COPY_SRC,
-                    view_formats: &[],
-                })
-            })
-            .collect();
-        let views: Vec<wgpu::TextureView> = textures
-            .iter()
-            .map(|t| t.create_view(&wgpu::TextureViewDescriptor::default()))
-            .collect();
-        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
-            label: Some("prt sh volume sampler"),
-            address_mode_u: wgpu::AddressMode::ClampToEdge,
-            address_mode_v: wgpu::AddressMode::ClampToEdge,
-            address_mode_w: wgpu::AddressMode::ClampToEdge,
-            mag_filter: wgpu::FilterMode::Linear,
-            min_filter: wgpu::FilterMode::Linear,
-            ..Default::default()
-        });
-
+        let (textures, views, sampler) = volume(device, &g, settings);
         let volume_info = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("prt volume info"),
             contents: bytemuck::bytes_of(&volume_info(&g, settings)),
@@ -353,6 +218,188 @@ impl Resources {
             mask_stride,
         })
     }
+}
+
+/// The device limits the runtime needs, checked before anything is allocated; returns the
+/// largest storage binding.
+fn check_limits(limits: &wgpu::Limits, g: &prt_format::Grid) -> Result<u64, GpuError> {
+    let dim = u64::from(g.counts.iter().copied().max().unwrap_or(1));
+    if dim > u64::from(limits.max_texture_dimension_3d) {
+        return Err(GpuError::Limit {
+            what: "the probe grid's largest dimension",
+            needed: dim,
+            limit: u64::from(limits.max_texture_dimension_3d),
+        });
+    }
+    let max_binding = limits
+        .max_storage_buffer_binding_size
+        .min(limits.max_buffer_size);
+    for (what, needed, limit) in [
+        (
+            "storage buffers per shader stage",
+            12,
+            limits.max_storage_buffers_per_shader_stage,
+        ),
+        (
+            "storage textures per shader stage",
+            7,
+            limits.max_storage_textures_per_shader_stage,
+        ),
+        ("bind groups", 3, limits.max_bind_groups),
+    ] {
+        if needed > limit {
+            return Err(GpuError::Limit {
+                what,
+                needed: u64::from(needed),
+                limit: u64::from(limit),
+            });
+        }
+    }
+    Ok(max_binding)
+}
+
+/// The factor tables split into chunks of whole probes, each chunk's buffer and uniform.
+fn factor_buffers(
+    alloc: &Alloc,
+    asset: &Asset,
+    settings: &RuntimeSettings,
+) -> Result<FactorBuffers, GpuError> {
+    let (device, max_binding) = (alloc.device, alloc.max_binding);
+    let none = wgpu::BufferUsages::empty();
+    let factor_bytes: &[u8] = match &asset.factors {
+        Factors::F16(f) => bytemuck::cast_slice(f),
+        Factors::F32(f) => bytemuck::cast_slice(f),
+        Factors::U8 { factors, .. } => bytemuck::cast_slice(factors),
+    };
+    let chunks = factor_chunks(
+        asset,
+        settings
+            .max_factor_chunk_bytes
+            .unwrap_or(max_binding)
+            .min(max_binding),
+    )?;
+    let per_factor = asset.factors.bytes_per_factor();
+    let chunk_factors: Vec<wgpu::Buffer> = chunks
+        .iter()
+        .map(|c| {
+            let first = c.first_factor as usize;
+            let end = asset.probes[c.probe_begin as usize..c.probe_end as usize]
+                .last()
+                .map_or(first, |p| (p.first_factor + p.factor_count) as usize);
+            alloc.storage(
+                "prt factors",
+                &factor_bytes[first * per_factor..end * per_factor],
+                none,
+            )
+        })
+        .collect::<Result<_, _>>()?;
+    let chunk_uniforms: Vec<wgpu::Buffer> = chunks
+        .iter()
+        .map(|c| {
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("prt factor chunk"),
+                contents: bytemuck::bytes_of(c),
+                usage: wgpu::BufferUsages::UNIFORM,
+            })
+        })
+        .collect();
+    Ok((chunks, chunk_factors, chunk_uniforms))
+}
+
+/// The surfel arrays split into chunks of whole bricks: per chunk its surfels, their direct
+/// radiance, their bounce radiance (one word without bounces) and its uniform.
+fn surfel_buffers(
+    alloc: &Alloc,
+    asset: &Asset,
+    settings: &RuntimeSettings,
+) -> Result<SurfelBuffers, GpuError> {
+    let (device, max_binding) = (alloc.device, alloc.max_binding);
+    let none = wgpu::BufferUsages::empty();
+    let surfel_chunks = surfel_chunks(
+        asset,
+        settings
+            .max_surfel_chunk_bytes
+            .unwrap_or(max_binding)
+            .min(max_binding),
+    )?;
+    let feeds_back = settings.bounces.feeds_back();
+    // Per chunk: its surfels, their direct radiance and their bounce radiance.
+    let chunk_surfels: Vec<[wgpu::Buffer; 4]> = surfel_chunks
+        .iter()
+        .map(|c| {
+            let range = c.surfel_begin as usize..c.surfel_end as usize;
+            let n = range.len() as u64;
+            Ok([
+                alloc.storage(
+                    "prt surfels",
+                    bytemuck::cast_slice(&asset.surfels[range]),
+                    none,
+                )?,
+                alloc.zeroed("prt surfel radiance", 16 * n, none)?,
+                alloc.zeroed(
+                    "prt surfel bounce",
+                    if feeds_back { 16 * n } else { 0 },
+                    none,
+                )?,
+                device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("prt surfel chunk"),
+                    contents: bytemuck::bytes_of(c),
+                    usage: wgpu::BufferUsages::UNIFORM,
+                }),
+            ])
+        })
+        .collect::<Result<_, GpuError>>()?;
+    Ok((surfel_chunks, chunk_surfels))
+}
+
+/// Factor chunks and, per chunk, its factors and its uniform.
+type FactorBuffers = (Vec<FactorChunk>, Vec<wgpu::Buffer>, Vec<wgpu::Buffer>);
+
+/// Surfel chunks and, per chunk, its surfels, direct and bounce radiance, and uniform.
+type SurfelBuffers = (Vec<SurfelChunk>, Vec<[wgpu::Buffer; 4]>);
+
+/// The seven SH volume textures (storage in the gather, sampled by the snippet), their views and
+/// the trilinear clamp-to-edge sampler.
+fn volume(
+    device: &wgpu::Device,
+    g: &prt_format::Grid,
+    settings: &RuntimeSettings,
+) -> (Vec<wgpu::Texture>, Vec<wgpu::TextureView>, wgpu::Sampler) {
+    let size = wgpu::Extent3d {
+        width: g.counts[0],
+        height: g.counts[1],
+        depth_or_array_layers: g.counts[2],
+    };
+    let textures: Vec<wgpu::Texture> = (0..7)
+        .map(|i| {
+            device.create_texture(&wgpu::TextureDescriptor {
+                label: Some(&format!("prt sh volume {i}")),
+                size,
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D3,
+                format: settings.volume_format.texture_format(),
+                usage: wgpu::TextureUsages::STORAGE_BINDING
+                    | wgpu::TextureUsages::TEXTURE_BINDING
+                    | wgpu::TextureUsages::COPY_SRC,
+                view_formats: &[],
+            })
+        })
+        .collect();
+    let views: Vec<wgpu::TextureView> = textures
+        .iter()
+        .map(|t| t.create_view(&wgpu::TextureViewDescriptor::default()))
+        .collect();
+    let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+        label: Some("prt sh volume sampler"),
+        address_mode_u: wgpu::AddressMode::ClampToEdge,
+        address_mode_v: wgpu::AddressMode::ClampToEdge,
+        address_mode_w: wgpu::AddressMode::ClampToEdge,
+        mag_filter: wgpu::FilterMode::Linear,
+        min_filter: wgpu::FilterMode::Linear,
+        ..Default::default()
+    });
+    (textures, views, sampler)
 }
 
 /// The sampling snippet's uniform for `grid` and `settings`.
