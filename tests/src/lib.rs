@@ -5,7 +5,41 @@
 use std::path::{Path, PathBuf};
 
 use prt_bake::{BakeSettings, NoProgress};
+use prt_format::sh::ShRgb;
 use prt_format::Asset;
+use prt_runtime::gpu::wgpu;
+
+/// The headless GPU device the GPU tests run on (lavapipe in CI); no adapter fails the test,
+/// never skips it.
+pub fn gpu_device() -> (wgpu::Device, wgpu::Queue) {
+    let (device, queue, _) =
+        prt_runtime::gpu::headless_device().expect("a GPU adapter (lavapipe in CI) is required");
+    (device, queue)
+}
+
+/// Worst |got - reference| over `asset`'s valid probes and every coefficient, relative to each
+/// probe's largest |SH0| channel plus 1e-7 of the largest in `reference` (so nearly black probes,
+/// where float rounding dominates, do not fail on noise). Every value of `got` must be finite.
+pub fn worst_of_sh0(asset: &Asset, got: &[ShRgb], reference: &[ShRgb]) -> f32 {
+    let peak = reference
+        .iter()
+        .map(|c| c[0].iter().fold(0.0f32, |m, v| m.max(v.abs())))
+        .fold(0.0, f32::max);
+    let mut w = 0.0f32;
+    for (i, (x, y)) in got.iter().zip(reference).enumerate() {
+        if !asset.probes[i].is_valid() {
+            continue;
+        }
+        let dc = y[0].iter().fold(0.0f32, |m, v| m.max(v.abs())) + 1e-7 * peak;
+        for k in 0..9 {
+            for c in 0..3 {
+                assert!(x[k][c].is_finite(), "probe {i}: {}", x[k][c]);
+                w = w.max((x[k][c] - y[k][c]).abs() / dc);
+            }
+        }
+    }
+    w
+}
 
 /// `fixtures/<rel>` of this repository.
 pub fn fixture(rel: &str) -> PathBuf {

@@ -3,17 +3,9 @@
 
 use prt_bake::BakeSettings;
 use prt_format::sh::{self, ShRgb};
-use prt_format::Asset;
-use prt_runtime::gpu::{
-    headless_device, wgpu, Bounces, PrtRuntime, RuntimeSettings, UpdateReport, VolumeFormat,
-};
+use prt_runtime::gpu::{wgpu, Bounces, PrtRuntime, RuntimeSettings, UpdateReport, VolumeFormat};
 use prt_runtime::{load_rig, CpuRelighter, Lighting};
-use prt_tests::{bake_ok as bake, fixture};
-
-fn device() -> (wgpu::Device, wgpu::Queue) {
-    let (device, queue, _) = headless_device().expect("a GPU adapter (lavapipe in CI) is required");
-    (device, queue)
-}
+use prt_tests::{bake_ok as bake, fixture, gpu_device, worst_of_sh0};
 
 fn settings(bounces: Bounces) -> RuntimeSettings {
     RuntimeSettings {
@@ -56,34 +48,11 @@ fn settle(
     (runtime.read_probe_sh().unwrap(), updates)
 }
 
-/// Worst |a - b| over valid probes and coefficients, relative to each probe's SH0 (with a floor
-/// of 1e-7 of the largest SH0, for nearly black probes).
-fn worst(asset: &Asset, a: &[ShRgb], b: &[ShRgb]) -> f32 {
-    let peak = b
-        .iter()
-        .map(|c| c[0].iter().fold(0.0f32, |m, v| m.max(v.abs())))
-        .fold(0.0, f32::max);
-    let mut w = 0.0f32;
-    for (i, (x, y)) in a.iter().zip(b).enumerate() {
-        if !asset.probes[i].is_valid() {
-            continue;
-        }
-        let dc = y[0].iter().fold(0.0f32, |m, v| m.max(v.abs())) + 1e-7 * peak;
-        for k in 0..9 {
-            for c in 0..3 {
-                assert!(x[k][c].is_finite(), "probe {i}: {}", x[k][c]);
-                w = w.max((x[k][c] - y[k][c]).abs() / dc);
-            }
-        }
-    }
-    w
-}
-
 /// GPU = CPU within 1e-4 of SH0 for 1, 2, 4 and 8 bounces on the Cornell fixture and every
 /// shared scene (sun, spot, point and sky), each bounce sampled through the engine's lookup.
 #[test]
 fn gpu_bounces_equal_the_cpu_bounce_by_bounce() {
-    let (device, queue) = device();
+    let (device, queue) = gpu_device();
     let cornell = (
         fixture("cornell/cornell.gltf"),
         load_rig(&fixture("cornell/rig.json")).unwrap(),
@@ -117,7 +86,7 @@ fn gpu_bounces_equal_the_cpu_bounce_by_bounce() {
             let (gpu, updates) = settle(&device, &queue, &mut runtime, &lighting, None);
             assert_eq!(updates, n, "one update per bounce");
             let reference = cpu.relight_with(&lighting, n, &s).unwrap().sh;
-            let w = worst(&asset, &gpu, &reference);
+            let w = worst_of_sh0(&asset, &gpu, &reference);
             let name = scene.file_name().unwrap().to_string_lossy().to_string();
             let gain = previous.as_ref().map(|p| {
                 let e = |sh: &[ShRgb]| sh.iter().map(|c| c[0][1]).sum::<f32>();
@@ -140,7 +109,7 @@ fn gpu_bounces_equal_the_cpu_bounce_by_bounce() {
 /// e (1 - a^N) / (1 - a); endless feedback rises to e / (1 - a) without overshoot.
 #[test]
 fn gpu_furnace_matches_the_geometric_series() {
-    let (device, queue) = device();
+    let (device, queue) = gpu_device();
     let asset = bake(
         &fixture("closed_box_inward.gltf"),
         &BakeSettings {
@@ -197,7 +166,7 @@ fn gpu_furnace_matches_the_geometric_series() {
 /// cycle of updates adds one bounce, and a light change restarts the count.
 #[test]
 fn amortised_bounces_converge_to_the_full_update() {
-    let (device, queue) = device();
+    let (device, queue) = gpu_device();
     let asset = bake(&fixture("cornell/cornell.gltf"), &BakeSettings::default());
     let lighting = load_rig(&fixture("cornell/rig.json")).unwrap();
     let s = settings(Bounces::Fixed(4));
@@ -207,7 +176,7 @@ fn amortised_bounces_converge_to_the_full_update() {
     let mut amortised = PrtRuntime::new(&device, &queue, &asset, s).unwrap();
     let (sh, updates) = settle(&device, &queue, &mut amortised, &lighting, Some(budget));
     assert_eq!(updates, 12, "4 cycles of 3 windows");
-    let w = worst(&asset, &sh, &reference);
+    let w = worst_of_sh0(&asset, &sh, &reference);
     assert!(w <= 1e-6, "amortised against full: {w}");
     // A moved light restarts the bounce count from direct light and converges again.
     let mut moved = lighting.clone();
@@ -219,7 +188,7 @@ fn amortised_bounces_converge_to_the_full_update() {
         .relight_with(&moved, 4, &s)
         .unwrap()
         .sh;
-    let w = worst(&asset, &sh, &expect);
+    let w = worst_of_sh0(&asset, &sh, &expect);
     assert!(w <= 1e-4, "after the move: {w}");
     let idle = step(&device, &queue, &mut amortised, &moved, Some(budget));
     assert!(idle.idle, "settled: nothing left to do");
@@ -250,7 +219,7 @@ fn amortised_bounces_converge_to_the_full_update() {
         .relight_with(&again, 4, &s)
         .unwrap()
         .sh;
-    let w = worst(&asset, &amortised.read_probe_sh().unwrap(), &expect);
+    let w = worst_of_sh0(&asset, &amortised.read_probe_sh().unwrap(), &expect);
     assert!(w <= 1e-4, "changing budgets: {w} after {updates} updates");
     assert!(step(&device, &queue, &mut amortised, &again, Some(budget)).idle);
 }

@@ -7,15 +7,10 @@ use prt_bake::BakeSettings;
 use prt_format::sh::ShRgb;
 use prt_format::{Asset, Light, LightKind, LightRig, Sky};
 use prt_runtime::gpu::{
-    headless_device, sample_points, sh_from_texels, wgpu, PrtRuntime, RuntimeSettings, VolumeFormat,
+    sample_points, sh_from_texels, wgpu, PrtRuntime, RuntimeSettings, VolumeFormat,
 };
 use prt_runtime::{load_rig, CpuRelighter, Lighting, SkyModel, VolumeSampler};
-use prt_tests::{bake_ok as bake, fixture};
-
-fn device() -> (wgpu::Device, wgpu::Queue) {
-    let (device, queue, _) = headless_device().expect("a GPU adapter (lavapipe in CI) is required");
-    (device, queue)
-}
+use prt_tests::{bake_ok as bake, fixture, gpu_device};
 
 fn cpu(asset: &Asset, lighting: &Lighting) -> Vec<ShRgb> {
     CpuRelighter::new(asset)
@@ -86,7 +81,7 @@ fn volume_sh(runtime: &PrtRuntime) -> Vec<Option<ShRgb>> {
 /// back equals the probe SH exactly, the f16 volume within half-float rounding.
 #[test]
 fn gpu_equals_cpu_on_cornell() {
-    let (device, queue) = device();
+    let (device, queue) = gpu_device();
     let scene = fixture("cornell/cornell.gltf");
     let reference_grid = BakeSettings {
         spacing: Some(0.6),
@@ -145,7 +140,7 @@ fn gpu_equals_cpu_on_cornell() {
 /// GPU equals CPU on every shared scene with a rig of every light type and a sky.
 #[test]
 fn gpu_equals_cpu_on_shared_scenes() {
-    let (device, queue) = device();
+    let (device, queue) = gpu_device();
     let lighting = load_rig(&fixture("rigs/point_spot_sun_sky.json")).unwrap();
     for scene in [
         "cornell_box.glb",
@@ -205,7 +200,7 @@ fn rig(intensity: f32, point_x: f32) -> Lighting {
 /// nothing is recomputed when nothing changed, and an intensity change traces no shadow ray.
 #[test]
 fn amortised_updates_and_skipped_work() {
-    let (device, queue) = device();
+    let (device, queue) = gpu_device();
     let asset = bake(&fixture("cornell/cornell.gltf"), &BakeSettings::default());
     let settings = RuntimeSettings {
         volume_format: VolumeFormat::F32,
@@ -274,7 +269,7 @@ fn amortised_updates_and_skipped_work() {
 /// 3D texture dimension.
 #[test]
 fn hostile_values_stay_finite() {
-    let (device, queue) = device();
+    let (device, queue) = gpu_device();
     let cornell = bake(&fixture("cornell/cornell.gltf"), &BakeSettings::default());
     let most = cornell
         .probes
@@ -375,7 +370,7 @@ fn hostile_values_stay_finite() {
 /// new surfels: a dark light turned on, a longer range.
 #[test]
 fn emission_and_visibility_cache_follow_every_change() {
-    let (device, queue) = device();
+    let (device, queue) = gpu_device();
     let settings = BakeSettings {
         spacing: Some(0.6),
         bounds: Some([-0.9, -0.9, -0.9, 0.9, 0.9, 0.9]),
@@ -418,7 +413,7 @@ fn emission_and_visibility_cache_follow_every_change() {
 /// and a probe whose own table exceeds the limit is a typed error.
 #[test]
 fn chunked_factor_tables_match_the_unsplit_result() {
-    let (device, queue) = device();
+    let (device, queue) = gpu_device();
     let asset = bake(&fixture("cornell/cornell.gltf"), &BakeSettings::default());
     let lighting = load_rig(&fixture("cornell/rig_spot_range.json")).unwrap();
     let bytes = asset.factors.len() * asset.factors.bytes_per_factor();
@@ -453,7 +448,7 @@ fn chunked_factor_tables_match_the_unsplit_result() {
 /// CPU; a brick whose own surfels exceed the limit is a typed error.
 #[test]
 fn chunked_surfels_match_the_unsplit_result() {
-    let (device, queue) = device();
+    let (device, queue) = gpu_device();
     let asset = bake(&fixture("cornell/cornell.gltf"), &BakeSettings::default());
     let lighting = load_rig(&fixture("cornell/rig_spot_range.json")).unwrap();
     let bytes = std::mem::size_of_val(&asset.surfels[..]);
@@ -500,7 +495,7 @@ fn chunked_surfels_match_the_unsplit_result() {
 /// texel centres themselves.
 #[test]
 fn sample_irradiance_snippet_matches_the_cpu() {
-    let (device, queue) = device();
+    let (device, queue) = gpu_device();
     // Without dilation, so that probes inside the boxes stay invalid.
     let asset = bake(
         &fixture("cornell/cornell.gltf"),
@@ -627,7 +622,7 @@ fn sample_queries(asset: &Asset, count: usize) -> Vec<([f32; 3], [f32; 3])> {
 /// relative to the point's brightness: see the constants.
 #[test]
 fn sample_points_matches_the_cpu_sampler() {
-    let (device, queue) = device();
+    let (device, queue) = gpu_device();
     let asset = bake(&fixture("cornell/cornell.gltf"), &BakeSettings::default());
     let lighting = load_rig(&fixture("cornell/rig.json")).unwrap();
     for visibility in [true, false] {

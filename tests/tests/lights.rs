@@ -5,16 +5,11 @@ use std::path::Path;
 
 use prt_bake::BakeSettings;
 use prt_format::sh::ShRgb;
-use prt_format::{Asset, Light, LightKind, LightRig};
-use prt_runtime::gpu::{headless_device, wgpu, GpuError, PrtRuntime, RuntimeSettings};
+use prt_format::{Light, LightKind, LightRig};
+use prt_runtime::gpu::{wgpu, GpuError, PrtRuntime, RuntimeSettings};
 use prt_runtime::lights::PreparedLight;
 use prt_runtime::{CpuRelighter, Lighting};
-use prt_tests::{bake_ok as bake, fixture};
-
-fn device() -> (wgpu::Device, wgpu::Queue) {
-    let (device, queue, _) = headless_device().expect("a GPU adapter (lavapipe in CI) is required");
-    (device, queue)
-}
+use prt_tests::{bake_ok as bake, fixture, gpu_device, worst_of_sh0};
 
 /// `count` ranged point and spot lights scattered through the Cornell room (a fixed
 /// low-discrepancy sequence), each reaching a part of it.
@@ -66,28 +61,6 @@ fn update(
     )
 }
 
-/// Worst |gpu - cpu| over valid probes, relative to each probe's SH0 (floor 1e-7 of the peak).
-fn worst(asset: &Asset, gpu: &[ShRgb], cpu: &[ShRgb]) -> f32 {
-    let peak = cpu
-        .iter()
-        .map(|c| c[0].iter().fold(0.0f32, |m, v| m.max(v.abs())))
-        .fold(0.0, f32::max);
-    let mut w = 0.0f32;
-    for (i, (g, c)) in gpu.iter().zip(cpu).enumerate() {
-        if !asset.probes[i].is_valid() {
-            continue;
-        }
-        let dc = c[0].iter().fold(0.0f32, |m, v| m.max(v.abs())) + 1e-7 * peak;
-        for k in 0..9 {
-            for ch in 0..3 {
-                assert!(g[k][ch].is_finite());
-                w = w.max((g[k][ch] - c[k][ch]).abs() / dc);
-            }
-        }
-    }
-    w
-}
-
 /// Shadow rays the CPU reference traces for `light` alone: one per (surfel, light) pair that
 /// the light reaches with non-zero irradiance, the pairs the GPU must trace when it moves.
 fn pairs_of(cpu: &CpuRelighter, light: &Light) -> u64 {
@@ -101,7 +74,7 @@ fn pairs_of(cpu: &CpuRelighter, light: &Light) -> u64 {
 /// leaves bricks uncached but the result unchanged.
 #[test]
 fn a_thousand_lights_equal_the_cpu_and_one_moved_light_costs_its_pairs() {
-    let (device, queue) = device();
+    let (device, queue) = gpu_device();
     let asset = bake(&fixture("cornell/cornell.gltf"), &BakeSettings::default());
     let front = asset
         .bricks
@@ -115,7 +88,7 @@ fn a_thousand_lights_equal_the_cpu_and_one_moved_light_costs_its_pairs() {
     let mut runtime = PrtRuntime::new(&device, &queue, &asset, settings).unwrap();
     let (gpu, first) = update(&device, &queue, &mut runtime, &lighting);
     let reference = cpu.relight(&lighting, 1).unwrap();
-    let w = worst(&asset, &gpu, &reference.sh);
+    let w = worst_of_sh0(&asset, &gpu, &reference.sh);
     assert!(w <= 1e-4, "1,024 lights: worst |gpu - cpu| / SH0 = {w}");
     assert_eq!(
         first.light_tests,
@@ -136,7 +109,7 @@ fn a_thousand_lights_equal_the_cpu_and_one_moved_light_costs_its_pairs() {
     lighting.rig.lights[517].position[0] += 0.15;
     let (gpu, moved) = update(&device, &queue, &mut runtime, &lighting);
     let reference = cpu.relight(&lighting, 1).unwrap();
-    let w = worst(&asset, &gpu, &reference.sh);
+    let w = worst_of_sh0(&asset, &gpu, &reference.sh);
     assert!(w <= 1e-4, "after the move: {w}");
     assert_eq!(moved.light_tests, front, "one light tested per brick");
     assert_eq!(
@@ -163,14 +136,14 @@ fn a_thousand_lights_equal_the_cpu_and_one_moved_light_costs_its_pairs() {
     update(&device, &queue, &mut runtime, &many_lights(1024));
     let (gpu, counters) = update(&device, &queue, &mut runtime, &lighting);
     assert!(counters.bricks_uncached > 0, "the pool overflowed");
-    let w = worst(&asset, &gpu, &reference.sh);
+    let w = worst_of_sh0(&asset, &gpu, &reference.sh);
     assert!(w <= 1e-4, "uncached bricks: {w}");
 }
 
 /// A rig beyond `max_lights` is refused with both numbers; so is a limit beyond MAX_LIGHTS.
 #[test]
 fn light_limits_are_errors_with_values() {
-    let (device, queue) = device();
+    let (device, queue) = gpu_device();
     let asset = bake(&fixture("cornell/cornell.gltf"), &BakeSettings::default());
     let settings = RuntimeSettings {
         max_lights: 40,
@@ -204,7 +177,7 @@ fn light_limits_are_errors_with_values() {
 /// relight that reads bits the non-dirty copy path moved: the GPU stays equal to the CPU.
 #[test]
 fn shrinking_and_growing_rigs_keep_the_cache_exact() {
-    let (device, queue) = device();
+    let (device, queue) = gpu_device();
     let asset = bake(&fixture("cornell/cornell.gltf"), &BakeSettings::default());
     let cpu = CpuRelighter::new(&asset).unwrap();
     let mut runtime = PrtRuntime::new(&device, &queue, &asset, RuntimeSettings::default()).unwrap();
@@ -212,7 +185,7 @@ fn shrinking_and_growing_rigs_keep_the_cache_exact() {
     let mut lighting = forty.clone();
     let mut check = |label: &str, lighting: &Lighting| {
         let (gpu, counters) = update(&device, &queue, &mut runtime, lighting);
-        let w = worst(&asset, &gpu, &cpu.relight(lighting, 1).unwrap().sh);
+        let w = worst_of_sh0(&asset, &gpu, &cpu.relight(lighting, 1).unwrap().sh);
         assert!(w <= 1e-4, "{label}: worst |gpu - cpu| / SH0 = {w}");
         counters
     };

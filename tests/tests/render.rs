@@ -15,12 +15,7 @@ use prt_render::{Camera, Culling, Frame, RenderSettings, Renderer, View};
 use prt_runtime::gpu::{PrtRuntime, RuntimeSettings};
 use prt_runtime::lights::PreparedLight;
 use prt_runtime::{load_rig, Lighting, VolumeSampler};
-use prt_tests::{bake_ok, fixture, ScratchDir};
-
-fn device() -> (wgpu::Device, wgpu::Queue) {
-    let (d, q, _) = prt_runtime::gpu::headless_device().expect("a GPU adapter (lavapipe on CI)");
-    (d, q)
-}
+use prt_tests::{bake_ok, fixture, gpu_device, ScratchDir};
 
 use prt_runtime::gpu::wgpu;
 
@@ -57,7 +52,7 @@ struct Setup {
 }
 
 fn setup() -> Setup {
-    let (device, queue) = device();
+    let (device, queue) = gpu_device();
     let scene = prt_bake::scene::load(&cornell_scene()).unwrap();
     let asset = bake_ok(&cornell_scene(), &BakeSettings::default());
     Setup {

@@ -555,13 +555,26 @@ impl PrtRuntime {
     /// bounce, `n` for [`Bounces::Fixed`]`(n)`, one cycle for [`Bounces::Feedback`] (call again
     /// to feed back more). Returns the number of updates.
     pub fn settle(&mut self, lighting: &Lighting) -> Result<u32, GpuError> {
+        self.settle_each(lighting, |_| Ok(()))
+    }
+
+    /// [`PrtRuntime::settle`], calling `after` once each non-idle update is submitted.
+    fn settle_each(
+        &mut self,
+        lighting: &Lighting,
+        mut after: impl FnMut(&PrtRuntime) -> Result<(), GpuError>,
+    ) -> Result<u32, GpuError> {
         let mut updates = 0;
         loop {
             let mut encoder = self.device.create_command_encoder(&Default::default());
             let report = self.update(&mut encoder, lighting, None)?;
             self.queue.submit([encoder.finish()]);
             updates += 1;
-            if report.idle || report.pending_windows == 0 {
+            if report.idle {
+                return Ok(updates);
+            }
+            after(self)?;
+            if report.pending_windows == 0 {
                 return Ok(updates);
             }
         }
@@ -587,17 +600,9 @@ pub fn relight_once(
     let (device, queue, info) = headless_device()?;
     let mut runtime = PrtRuntime::new(&device, &queue, asset, settings)?;
     let mut total = Counters::default();
-    loop {
-        let mut encoder = device.create_command_encoder(&Default::default());
-        let report = runtime.update(&mut encoder, lighting, None)?;
-        queue.submit([encoder.finish()]);
-        if report.idle {
-            break;
-        }
-        total = total.plus(&runtime.read_counters()?);
-        if report.pending_windows == 0 {
-            break;
-        }
-    }
+    runtime.settle_each(lighting, |r| {
+        total = total.plus(&r.read_counters()?);
+        Ok(())
+    })?;
     Ok((runtime.read_probe_sh()?, total, info))
 }

@@ -418,67 +418,89 @@ pub fn volume_info(grid: &prt_format::Grid, settings: &RuntimeSettings) -> Volum
 /// Smallest buffer the runtime creates: larger than every element type it binds.
 const MIN_BUFFER: u64 = 256;
 
-/// Splits the probes into runs whose factor tables fit `limit` bytes each (at least one chunk).
-pub fn factor_chunks(asset: &Asset, limit: u64) -> Result<Vec<FactorChunk>, GpuError> {
-    let per_factor = asset.factors.bytes_per_factor() as u64;
-    let mut chunks = Vec::new();
-    let mut current = FactorChunk::default();
-    for (i, p) in asset.probes.iter().enumerate() {
-        let own = u64::from(p.factor_count) * per_factor;
+/// Where runs of whole items start, as `(item, first element)`, for items that each own the
+/// elements `first..first + count` (contiguous, in item order), so that no run's elements take
+/// more than `limit` bytes of `element_bytes` each. The first run starts at (0, 0); an item whose
+/// own elements exceed the limit is an error naming `what`.
+fn run_starts(
+    items: impl Iterator<Item = (u32, u32)>,
+    element_bytes: u64,
+    limit: u64,
+    what: &'static str,
+) -> Result<Vec<(usize, u32)>, GpuError> {
+    let mut starts = vec![(0usize, 0u32)];
+    for (i, (first, count)) in items.enumerate() {
+        let own = u64::from(count) * element_bytes;
         if own > limit {
             return Err(GpuError::Limit {
-                what: "one probe's factor table",
+                what,
                 needed: own,
                 limit,
             });
         }
-        let end = u64::from(p.first_factor) + u64::from(p.factor_count);
-        if (end - u64::from(current.first_factor)) * per_factor > limit {
-            current.probe_end = i as u32;
-            chunks.push(current);
-            current = FactorChunk {
-                first_factor: p.first_factor,
-                probe_begin: i as u32,
-                ..FactorChunk::default()
-            };
+        let run_first = starts.last().map_or(0, |s| s.1);
+        if (u64::from(first) + u64::from(count) - u64::from(run_first)) * element_bytes > limit {
+            starts.push((i, first));
         }
     }
-    current.probe_end = asset.probes.len() as u32;
-    chunks.push(current);
-    Ok(chunks)
+    Ok(starts)
+}
+
+/// Splits the probes into runs whose factor tables fit `limit` bytes each (at least one chunk).
+pub fn factor_chunks(asset: &Asset, limit: u64) -> Result<Vec<FactorChunk>, GpuError> {
+    let starts = run_starts(
+        asset
+            .probes
+            .iter()
+            .map(|p| (p.first_factor, p.factor_count)),
+        asset.factors.bytes_per_factor() as u64,
+        limit,
+        "one probe's factor table",
+    )?;
+    let ends = starts
+        .iter()
+        .skip(1)
+        .map(|s| s.0)
+        .chain([asset.probes.len()]);
+    Ok(starts
+        .iter()
+        .zip(ends)
+        .map(|(&(probe, first), end)| FactorChunk {
+            first_factor: first,
+            probe_begin: probe as u32,
+            probe_end: end as u32,
+            ..FactorChunk::default()
+        })
+        .collect())
 }
 
 /// Splits the bricks into runs whose surfels take at most `limit` bytes each (whole bricks,
 /// since a brick's stage reads all its surfels).
 pub fn surfel_chunks(asset: &Asset, limit: u64) -> Result<Vec<SurfelChunk>, GpuError> {
-    let per_surfel = std::mem::size_of::<prt_format::Surfel>() as u64;
-    let mut chunks = Vec::new();
-    let mut current = SurfelChunk::default();
-    for (i, b) in asset.bricks.iter().enumerate() {
-        let own = u64::from(b.surfel_count) * per_surfel;
-        if own > limit {
-            return Err(GpuError::Limit {
-                what: "one brick's surfels",
-                needed: own,
-                limit,
-            });
-        }
-        let end = u64::from(b.first_surfel) + u64::from(b.surfel_count);
-        if (end - u64::from(current.surfel_begin)) * per_surfel > limit {
-            current.brick_end = i as u32;
-            current.surfel_end = b.first_surfel;
-            chunks.push(current);
-            current = SurfelChunk {
-                brick_begin: i as u32,
-                surfel_begin: b.first_surfel,
-                ..SurfelChunk::default()
-            };
-        }
-    }
-    current.brick_end = asset.bricks.len() as u32;
-    current.surfel_end = asset.surfels.len() as u32;
-    chunks.push(current);
-    Ok(chunks)
+    let starts = run_starts(
+        asset
+            .bricks
+            .iter()
+            .map(|b| (b.first_surfel, b.surfel_count)),
+        std::mem::size_of::<prt_format::Surfel>() as u64,
+        limit,
+        "one brick's surfels",
+    )?;
+    let ends = starts
+        .iter()
+        .skip(1)
+        .copied()
+        .chain([(asset.bricks.len(), asset.surfels.len() as u32)]);
+    Ok(starts
+        .iter()
+        .zip(ends)
+        .map(|(&(brick, first), (end, last))| SurfelChunk {
+            brick_begin: brick as u32,
+            brick_end: end as u32,
+            surfel_begin: first,
+            surfel_end: last,
+        })
+        .collect())
 }
 
 /// A buffer holding `bytes`, refused with [`GpuError::Limit`] beyond `limit` bytes (a device
