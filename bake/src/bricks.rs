@@ -13,8 +13,8 @@
 //! `cell_size == 0` switches merging off: every hit is its own surfel and its own brick, which
 //! makes the relit probe exactly the Monte Carlo estimate of conventions.md section 5.
 //!
-//! Everything is ordered by sorted keys and hit indices, so the result does not depend on the
-//! number of threads.
+//! Hits are folded in as they are traced ([`BrickFolder`]); bricks are numbered by sorted key,
+//! so the result does not depend on the number of threads.
 
 use glam::{DMat3, DVec3, Vec3};
 use prt_format::{Brick, Surfel, BRICK_BACKFACE};
@@ -22,11 +22,10 @@ use rayon::prelude::*;
 
 use crate::trace::Hit;
 
-/// Bricks, their surfels, and the brick every hit ended in.
+/// Bricks and their surfels, in key order.
 pub struct Bricked {
     pub bricks: Vec<Brick>,
     pub surfels: Vec<Surfel>,
-    pub hit_brick: Vec<u32>,
 }
 
 /// Dominant axis of a normal: 0..6 for +X, -X, +Y, -Y, +Z, -Z.
@@ -42,153 +41,204 @@ pub fn dominant_axis(n: Vec3) -> u32 {
     2 * axis + u32::from(v < 0.0)
 }
 
+/// Brick cell (x, y, z) and flags (dominant axis | backface).
 type Key = (i32, i32, i32, u32);
 
-fn key(h: &Hit, anchor: Vec3, brick_size: f32) -> Key {
-    let c = ((h.position - anchor) / brick_size).floor();
-    let flags = dominant_axis(h.normal) | if h.backface { BRICK_BACKFACE } else { 0 };
-    (c.x as i32, c.y as i32, c.z as i32, flags)
+fn flags_of(h: &Hit) -> u32 {
+    dominant_axis(h.normal) | if h.backface { BRICK_BACKFACE } else { 0 }
 }
 
-/// Hit indices in key order (ties by index), as `(sort key, hit index)`. Where the cell
-/// coordinates span less than 2^20 per axis (always, short of a cell size a million times
-/// below the scene) the key packs into one u64 that sorts in the tuple's order: 20 bits per
-/// axis from the smallest cell, 4 for the flags (axis | backface < 16), and equal keys compare
-/// as one integer when grouping. Sponza at 1.0 m (6.2 M hits, 2 threads): the merge stage took
-/// 1.65-1.70 s against 2.0 s sorting the 20-byte tuples, with the same bytes out.
-fn sorted(keys: &[Key]) -> Vec<(u64, u32)> {
-    let (lo, hi) = keys
-        .par_iter()
-        .fold(
-            || ([i32::MAX; 3], [i32::MIN; 3]),
-            |(lo, hi), k| {
-                let c = [k.0, k.1, k.2];
-                (
-                    std::array::from_fn(|a| lo[a].min(c[a])),
-                    std::array::from_fn(|a| hi[a].max(c[a])),
-                )
-            },
-        )
-        .reduce(
-            || ([i32::MAX; 3], [i32::MIN; 3]),
-            |a, b| {
-                (
-                    std::array::from_fn(|i| a.0[i].min(b.0[i])),
-                    std::array::from_fn(|i| a.1[i].max(b.1[i])),
-                )
-            },
-        );
-    let packable = keys.is_empty()
-        || (0..3).all(|a| i64::from(hi[a]) - i64::from(lo[a]) < 1 << 20)
-            && keys.iter().all(|k| k.3 < 16);
-    let mut order: Vec<(u64, u32)> = if packable {
-        keys.par_iter()
-            .enumerate()
-            .map(|(i, k)| {
-                let c = |v: i32, a: usize| (i64::from(v) - i64::from(lo[a])) as u64;
-                let packed = c(k.0, 0) << 44 | c(k.1, 1) << 24 | c(k.2, 2) << 4 | u64::from(k.3);
-                (packed, i as u32)
-            })
-            .collect()
-    } else {
-        // Rank the distinct keys (a sort of the tuples), then sort by rank.
-        let mut distinct: Vec<Key> = keys.to_vec();
-        distinct.par_sort_unstable();
-        distinct.dedup();
-        keys.par_iter()
-            .enumerate()
-            .map(|(i, k)| (distinct.binary_search(k).unwrap_or(0) as u64, i as u32))
-            .collect()
-    };
-    order.par_sort_unstable();
-    order
+/// Merges ray hits into bricks as they arrive, so that the bake never holds every hit at once
+/// (the working set is one block of probes; what grows is the bricks and surfels the asset
+/// carries). Hits must come in the bake's order (probe, then ray): a surfel is the running mean
+/// of the hits that joined it, and a hit joins the first surfel of its cell, in creation order,
+/// whose first normal agrees with its own. [`BrickFolder::finish`] numbers the bricks by key,
+/// so the result depends only on the hits and their order, never on how they were blocked or
+/// on the thread count (`tests::blocking_does_not_change_the_result`).
+///
+/// A brick is found by hashing its key (rustc-hash's FxHash, the compiler's own map hasher:
+/// the keys are small integers, not attacker-chosen), then its cell's surfels through a list
+/// per cell. Sponza at 1.0 m, 6.2 M hits, 2 threads: the sort-based merge this replaces (every
+/// hit's key sorted, then grouped) took 1.65-2.45 s and held every hit, its key and its rank at
+/// once; scanning a brick's surfels for the hit's cell instead of one list per cell took 17% of
+/// the bake's CPU time.
+pub struct BrickFolder {
+    anchor: Vec3,
+    cell_size: f32,
+    merge_normal_cos: f32,
+    /// Brick key to provisional brick (arrival order).
+    index: rustc_hash::FxHashMap<Key, u32>,
+    /// Per provisional brick: its key.
+    keys: Vec<Key>,
+    /// Per provisional brick and cell, its first surfel in `clusters` (merging only).
+    heads: Vec<[u32; 64]>,
+    /// Every surfel being merged; a cell's surfels are a list through `Cluster::next`, in
+    /// creation order (unmerged: cluster i is brick i's only surfel).
+    clusters: Vec<Cluster>,
 }
 
-/// Groups `hits` into bricks (see the module docs). The cell lattice starts at `anchor`: the
-/// bake puts it half a cell off the world origin, so that walls at round coordinates (whole
-/// numbers of cells from the origin) lie in the middle of cells. Anchored at the origin itself,
-/// such walls lay exactly on cell boundaries, and float rounding split their hits between two
-/// cells at random: more bricks and surfels, and different ones at every scene scale (Cornell
-/// scaled by 10: 6,234 bricks against 5,976, SH 1.9% of SH0 apart; now 7e-6). Anchoring at the
-/// bounds' corner instead measured worse on the two-room fixture (14.9% mean surface error
-/// against 8.7%).
-pub fn build(hits: &[Hit], cell_size: f32, merge_normal_cos: f32, anchor: Vec3) -> Bricked {
-    if cell_size <= 0.0 {
-        return unmerged(hits);
-    }
-    let brick_size = 4.0 * cell_size;
-    let keys: Vec<Key> = hits
-        .par_iter()
-        .map(|h| key(h, anchor, brick_size))
-        .collect();
-    let order = sorted(&keys);
-    let mut groups: Vec<std::ops::Range<usize>> = Vec::new();
-    let mut start = 0;
-    for i in 1..=order.len() {
-        if i == order.len() || order[i].0 != order[start].0 {
-            groups.push(start..i);
-            start = i;
+/// No surfel: the end of a cell's list.
+const NONE: u32 = u32::MAX;
+
+impl BrickFolder {
+    /// `cell_size == 0` switches merging off (one brick per hit, in hit order). The cell lattice
+    /// starts at `anchor`: the bake puts it half a cell off the world origin, so that walls at
+    /// round coordinates (whole numbers of cells from the origin) lie in the middle of cells.
+    /// Anchored at the origin itself, such walls lay exactly on cell boundaries, and float
+    /// rounding split their hits between two cells at random: more bricks and surfels, and
+    /// different ones at every scene scale (Cornell scaled by 10: 6,234 bricks against 5,976,
+    /// SH 1.9% of SH0 apart; now 7e-6). Anchoring at the bounds' corner instead measured worse
+    /// on the two-room fixture (14.9% mean surface error against 8.7%).
+    pub fn new(cell_size: f32, merge_normal_cos: f32, anchor: Vec3) -> Self {
+        BrickFolder {
+            anchor,
+            cell_size: cell_size.max(0.0),
+            merge_normal_cos,
+            index: rustc_hash::FxHashMap::default(),
+            keys: Vec::new(),
+            heads: Vec::new(),
+            clusters: Vec::new(),
         }
     }
-    // Merge and finish each brick in parallel (`first_surfel` is set below, in order).
-    let merged: Vec<(Brick, Vec<Surfel>)> = groups
-        .par_iter()
-        .enumerate()
-        .map(|(b, g)| {
-            let k = keys[order[g.start].1 as usize];
-            let origin = anchor + Vec3::new(k.0 as f32, k.1 as f32, k.2 as f32) * brick_size;
-            let members = order[g.clone()].iter().map(|&(_, i)| &hits[i as usize]);
-            let mut surfels = merge_brick(members, origin, cell_size, merge_normal_cos);
-            for s in &mut surfels {
-                s.brick = b as u32;
+
+    /// Bricks so far.
+    pub fn len(&self) -> usize {
+        self.keys.len()
+    }
+
+    /// Whether no hit was folded yet.
+    pub fn is_empty(&self) -> bool {
+        self.keys.is_empty()
+    }
+
+    /// Folds the next `hits` in and appends the provisional brick of each to `brick_of_hit`.
+    ///
+    /// The hits are visited brick by brick (sorted by key, in hit order within a brick), which
+    /// merges exactly as hit order does (a brick's surfels depend only on its own hits' order)
+    /// but finds each brick once and keeps its surfels in cache: visiting them in hit order cost
+    /// a cache miss or three per hit (Sponza at 1.0 m: 16% of the bake's CPU time).
+    pub fn fold(&mut self, hits: &[Hit], brick_of_hit: &mut Vec<u32>) {
+        let first = brick_of_hit.len();
+        if self.cell_size == 0.0 {
+            for h in hits {
+                brick_of_hit.push(self.keys.len() as u32);
+                self.keys.push((0, 0, 0, flags_of(h)));
+                self.clusters.push(Cluster::of(h));
             }
-            (brick_of(&mut surfels, k.3, 0), surfels)
-        })
-        .collect();
-
-    let mut hit_brick = vec![0u32; hits.len()];
-    for (b, g) in groups.iter().enumerate() {
-        for &(_, i) in &order[g.clone()] {
-            hit_brick[i as usize] = b as u32;
+            return;
+        }
+        let brick_size = 4.0 * self.cell_size;
+        let mut order: Vec<(Key, u32)> = hits
+            .par_iter()
+            .enumerate()
+            .map(|(i, h)| {
+                let c = ((h.position - self.anchor) / brick_size).floor();
+                ((c.x as i32, c.y as i32, c.z as i32, flags_of(h)), i as u32)
+            })
+            .collect();
+        order.par_sort_unstable();
+        brick_of_hit.resize(first + hits.len(), 0);
+        let mut start = 0;
+        while start < order.len() {
+            let key = order[start].0;
+            let end = start + order[start..].partition_point(|&(k, _)| k == key);
+            let b = self.brick(key);
+            let origin =
+                self.anchor + Vec3::new(key.0 as f32, key.1 as f32, key.2 as f32) * brick_size;
+            for &(_, i) in &order[start..end] {
+                self.merge(b, origin, &hits[i as usize]);
+                brick_of_hit[first + i as usize] = b;
+            }
+            start = end;
         }
     }
-    let mut bricks = Vec::with_capacity(merged.len());
-    let mut surfels = Vec::with_capacity(merged.iter().map(|m| m.1.len()).sum());
-    for (mut brick, brick_surfels) in merged {
-        brick.first_surfel = surfels.len() as u32;
-        bricks.push(brick);
-        surfels.extend(brick_surfels);
-    }
-    Bricked {
-        bricks,
-        surfels,
-        hit_brick,
-    }
-}
 
-/// One brick and one surfel per hit.
-fn unmerged(hits: &[Hit]) -> Bricked {
-    let mut surfels: Vec<Surfel> = hits
-        .iter()
-        .enumerate()
-        .map(|(i, h)| Surfel {
-            brick: i as u32,
-            ..surfel_of(h.position, h.normal, 1.0, h.albedo, h.emission, h.backface)
-        })
-        .collect();
-    let bricks = surfels
-        .iter_mut()
-        .zip(hits)
-        .enumerate()
-        .map(|(i, (s, h))| {
-            let flags = dominant_axis(h.normal) | if h.backface { BRICK_BACKFACE } else { 0 };
-            brick_of(std::slice::from_mut(s), flags, i as u32)
-        })
-        .collect();
-    Bricked {
-        bricks,
-        surfels,
-        hit_brick: (0..hits.len() as u32).collect(),
+    /// The provisional brick of `key`, new if it has none yet.
+    fn brick(&mut self, key: Key) -> u32 {
+        let next = self.keys.len() as u32;
+        let b = *self.index.entry(key).or_insert(next);
+        if b == next {
+            self.keys.push(key);
+            self.heads.push([NONE; 64]);
+        }
+        b
+    }
+
+    /// Merges `h` into the first surfel of its cell in brick `b` whose normal agrees, or starts
+    /// a new one.
+    fn merge(&mut self, b: u32, origin: Vec3, h: &Hit) {
+        let cell = ((h.position - origin) / self.cell_size)
+            .floor()
+            .clamp(Vec3::ZERO, Vec3::splat(3.0));
+        let cell = (cell.x as u32 + 4 * (cell.y as u32 + 4 * cell.z as u32)) as usize;
+        let new = self.clusters.len() as u32;
+        let head = &mut self.heads[b as usize][cell];
+        if *head == NONE {
+            *head = new;
+        } else {
+            let mut at = *head;
+            loop {
+                let cl = &mut self.clusters[at as usize];
+                if cl.direction.dot(h.normal) >= self.merge_normal_cos {
+                    cl.add(h);
+                    return;
+                }
+                if cl.next == NONE {
+                    cl.next = new;
+                    break;
+                }
+                at = cl.next;
+            }
+        }
+        self.clusters.push(Cluster::of(h));
+    }
+
+    /// The bricks numbered in key order (merged) or hit order (unmerged), their surfels, and the
+    /// final number of every provisional brick.
+    pub fn finish(self) -> (Bricked, Vec<u32>) {
+        let unmerged = self.cell_size == 0.0;
+        let mut order: Vec<u32> = (0..self.keys.len() as u32).collect();
+        if !unmerged {
+            order.par_sort_unstable_by_key(|&b| self.keys[b as usize]);
+        }
+        let mut remap = vec![0u32; order.len()];
+        for (final_index, &b) in order.iter().enumerate() {
+            remap[b as usize] = final_index as u32;
+        }
+        // Finish each brick in parallel (`first_surfel` is set below, in order).
+        let finished: Vec<(Brick, Vec<Surfel>)> = order
+            .par_iter()
+            .enumerate()
+            .map(|(final_index, &b)| {
+                let surfel = |cl: &Cluster| Surfel {
+                    brick: final_index as u32,
+                    ..cl.surfel(!unmerged)
+                };
+                let mut surfels = Vec::new();
+                if unmerged {
+                    surfels.push(surfel(&self.clusters[b as usize]));
+                } else {
+                    // Cell by cell, in creation order within a cell.
+                    for &head in &self.heads[b as usize] {
+                        let mut at = head;
+                        while at != NONE {
+                            let cl = &self.clusters[at as usize];
+                            surfels.push(surfel(cl));
+                            at = cl.next;
+                        }
+                    }
+                }
+                (brick_of(&mut surfels, self.keys[b as usize].3, 0), surfels)
+            })
+            .collect();
+        let mut bricks = Vec::with_capacity(finished.len());
+        let mut surfels = Vec::with_capacity(self.clusters.len());
+        for (mut brick, brick_surfels) in finished {
+            brick.first_surfel = surfels.len() as u32;
+            bricks.push(brick);
+            surfels.extend(brick_surfels);
+        }
+        (Bricked { bricks, surfels }, remap)
     }
 }
 
@@ -266,72 +316,63 @@ struct Cluster {
     albedo: Vec3,
     emission: Vec3,
     backface: bool,
+    /// The next surfel of the same brick and cell ([`BrickFolder`]).
+    next: u32,
 }
 
-fn merge_brick<'a>(
-    hits: impl Iterator<Item = &'a Hit>,
-    origin: Vec3,
-    cell_size: f32,
-    merge_normal_cos: f32,
-) -> Vec<Surfel> {
-    // Visit hits cell by cell (stable: hit order within a cell), so that a hit is only compared
-    // with the clusters of its own cell.
-    let mut members: Vec<(u32, &Hit)> = hits
-        .map(|h| {
-            let c = ((h.position - origin) / cell_size)
-                .floor()
-                .clamp(Vec3::ZERO, Vec3::splat(3.0));
-            (c.x as u32 + 4 * (c.y as u32 + 4 * c.z as u32), h)
-        })
-        .collect();
-    members.sort_by_key(|&(cell, _)| cell);
-    let mut clusters: Vec<Cluster> = Vec::new();
-    let mut cell_start = 0;
-    for (i, &(cell, h)) in members.iter().enumerate() {
-        if i == 0 || members[i - 1].0 != cell {
-            cell_start = clusters.len();
-        }
-        let found = clusters[cell_start..]
-            .iter_mut()
-            .find(|cl| cl.direction.dot(h.normal) >= merge_normal_cos);
-        match found {
-            Some(cl) => {
-                cl.count += 1.0;
-                cl.position += h.position;
-                cl.normal += h.normal;
-                cl.albedo += Vec3::from(h.albedo);
-                cl.emission += Vec3::from(h.emission);
-            }
-            None => clusters.push(Cluster {
-                count: 1.0,
-                position: h.position,
-                normal: h.normal,
-                direction: h.normal,
-                albedo: Vec3::from(h.albedo),
-                emission: Vec3::from(h.emission),
-                backface: h.backface,
-            }),
+impl Cluster {
+    fn of(h: &Hit) -> Cluster {
+        Cluster {
+            next: NONE,
+            count: 1.0,
+            position: h.position,
+            normal: h.normal,
+            direction: h.normal,
+            albedo: Vec3::from(h.albedo),
+            emission: Vec3::from(h.emission),
+            backface: h.backface,
         }
     }
-    clusters
-        .iter()
-        .map(|cl| {
-            let n = cl.normal.normalize_or(cl.normal.signum());
-            surfel_of(
-                cl.position / cl.count,
-                n,
-                cl.count,
-                (cl.albedo / cl.count).to_array(),
-                (cl.emission / cl.count).to_array(),
-                cl.backface,
-            )
-        })
-        .collect()
+
+    fn add(&mut self, h: &Hit) {
+        self.count += 1.0;
+        self.position += h.position;
+        self.normal += h.normal;
+        self.albedo += Vec3::from(h.albedo);
+        self.emission += Vec3::from(h.emission);
+    }
+
+    /// The merged surfel: means of its hits, weight their count. An unmerged hit keeps its unit
+    /// normal bit for bit (renormalising could move the last bit).
+    fn surfel(&self, renormalise: bool) -> Surfel {
+        let n = if renormalise {
+            self.normal.normalize_or(self.normal.signum())
+        } else {
+            self.normal
+        };
+        surfel_of(
+            self.position / self.count,
+            n,
+            self.count,
+            (self.albedo / self.count).to_array(),
+            (self.emission / self.count).to_array(),
+            self.backface,
+        )
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Folds `hits` in one go: bricks and each hit's final brick.
+    fn build(hits: &[Hit], cell_size: f32, cos: f32, anchor: Vec3) -> (Bricked, Vec<u32>) {
+        let mut folder = BrickFolder::new(cell_size, cos, anchor);
+        let mut ids = Vec::new();
+        folder.fold(hits, &mut ids);
+        let (bricked, remap) = folder.finish();
+        (bricked, ids.iter().map(|&b| remap[b as usize]).collect())
+    }
 
     fn hit(p: [f32; 3], n: [f32; 3]) -> Hit {
         Hit {
@@ -353,7 +394,7 @@ mod tests {
             hit([0.02, 0.0, 0.02], [0.0, -1.0, 0.0]),
             hit([0.35, 0.0, 0.02], [0.0, 1.0, 0.0]),
         ];
-        let b = build(&hits, 0.1, 0.9, Vec3::ZERO);
+        let (b, hit_brick) = build(&hits, 0.1, 0.9, Vec3::ZERO);
         assert_eq!(b.bricks.len(), 2, "up and down facing bricks");
         assert_eq!(
             b.surfels.len(),
@@ -362,8 +403,8 @@ mod tests {
         );
         let total: f32 = b.surfels.iter().map(|s| s.weight).sum();
         assert_eq!(total, 4.0);
-        assert_eq!(b.hit_brick[0], b.hit_brick[1]);
-        assert_ne!(b.hit_brick[0], b.hit_brick[2]);
+        assert_eq!(hit_brick[0], hit_brick[1]);
+        assert_ne!(hit_brick[0], hit_brick[2]);
     }
 
     #[test]
@@ -372,40 +413,68 @@ mod tests {
             hit([0.0; 3], [0.0, 1.0, 0.0]),
             hit([0.0; 3], [0.0, 1.0, 0.0]),
         ];
-        let b = build(&hits, 0.0, 0.9, Vec3::ZERO);
+        let (b, hit_brick) = build(&hits, 0.0, 0.9, Vec3::ZERO);
         assert_eq!(b.bricks.len(), 2);
-        assert_eq!(b.hit_brick, vec![0, 1]);
+        assert_eq!(hit_brick, vec![0, 1]);
     }
 
-    /// The packed u64 order and the fallback (cells spanning 2^20 or more) both give the order
-    /// of the key tuples, ties broken by hit index.
+    /// Folding hits in blocks of any size gives the same bricks, surfels and hit bricks as
+    /// folding them at once, and bricks come out in key order whatever order they arrived in.
     #[test]
-    fn sorted_keys_follow_the_tuple_order() {
+    fn blocking_does_not_change_the_result() {
         let mut state = 12345u64;
-        let mut next = |m: i32| {
+        let mut next = |m: u32| {
             state = state.wrapping_mul(6364136223846793005).wrapping_add(1);
-            ((state >> 33) % m as u64) as i32
+            ((state >> 33) % u64::from(m)) as f32
         };
-        for span in [100, 3_000_000] {
-            let keys: Vec<Key> = (0..2000)
-                .map(|_| {
-                    (
-                        next(span) - span / 2,
-                        next(7) - 3,
-                        next(5),
-                        (next(6) as u32) | if next(2) == 1 { BRICK_BACKFACE } else { 0 },
-                    )
-                })
-                .collect();
-            let mut expect: Vec<(Key, u32)> = keys
-                .iter()
-                .enumerate()
-                .map(|(i, k)| (*k, i as u32))
-                .collect();
-            expect.sort_unstable();
-            let got: Vec<u32> = sorted(&keys).iter().map(|&(_, i)| i).collect();
-            let expect: Vec<u32> = expect.iter().map(|&(_, i)| i).collect();
-            assert_eq!(got, expect, "span {span}");
+        let hits: Vec<Hit> = (0..3000)
+            .map(|_| {
+                let p = [next(100) * 0.013, next(50) * 0.021, next(20) * 0.05];
+                let n = Vec3::new(next(9) - 4.0, next(9) - 4.0, next(9) - 4.0 + 0.5).normalize();
+                Hit {
+                    backface: next(7) == 0.0,
+                    ..hit(p, n.to_array())
+                }
+            })
+            .collect();
+        for cell in [0.0, 0.05] {
+            let (whole, whole_ids) = build(&hits, cell, 0.9, Vec3::splat(-0.025));
+            let mut folder = BrickFolder::new(cell, 0.9, Vec3::splat(-0.025));
+            let mut ids = Vec::new();
+            let mut start = 0;
+            while start < hits.len() {
+                let end = (start + 1 + next(400) as usize).min(hits.len());
+                folder.fold(&hits[start..end], &mut ids);
+                start = end;
+            }
+            let (blocked, remap) = folder.finish();
+            let ids: Vec<u32> = ids.iter().map(|&b| remap[b as usize]).collect();
+            assert_eq!(ids, whole_ids, "cell {cell}");
+            assert_eq!(
+                bytemuck::cast_slice::<Brick, u8>(&blocked.bricks),
+                bytemuck::cast_slice::<Brick, u8>(&whole.bricks)
+            );
+            assert_eq!(
+                bytemuck::cast_slice::<Surfel, u8>(&blocked.surfels),
+                bytemuck::cast_slice::<Surfel, u8>(&whole.surfels)
+            );
+            let weight: f32 = whole.surfels.iter().map(|s| s.weight).sum();
+            assert_eq!(weight, hits.len() as f32, "cell {cell}");
+            if cell > 0.0 {
+                // Brick numbers follow the keys of the hits in them.
+                let mut numbered: Vec<(u32, (i32, i32, i32, u32))> = hits
+                    .iter()
+                    .zip(&whole_ids)
+                    .map(|(h, &b)| {
+                        let c = ((h.position + 0.025) / (4.0 * cell)).floor();
+                        (b, (c.x as i32, c.y as i32, c.z as i32, flags_of(h)))
+                    })
+                    .collect();
+                numbered.sort_unstable();
+                assert!(numbered
+                    .windows(2)
+                    .all(|w| (w[0].0 == w[1].0) == (w[0].1 == w[1].1) && w[0].1 <= w[1].1));
+            }
         }
     }
 }

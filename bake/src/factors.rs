@@ -13,12 +13,12 @@ use prt_format::{Brick, FactorRow};
 
 use crate::trace::Hit;
 
-/// Factor rows of one probe, sorted by brick. The offset of a row is the mean of its rays' hit
-/// points minus the brick's centroid (see `prt_format::FactorF32`).
-pub fn probe_factors(
+/// Factor rows of one probe while bricks are provisional ([`crate::bricks::BrickFolder`]):
+/// keyed by provisional brick, sorted by it, the last field holding the sum of the rays' hit
+/// points until [`finish`] turns it into the offset.
+pub fn probe_rows(
     hits: &[Hit],
     hit_brick: &[u32],
-    bricks: &[Brick],
     directions: &[Vec3],
     weight: f32,
 ) -> Vec<FactorRow> {
@@ -30,28 +30,29 @@ pub fn probe_factors(
         .collect();
     order.sort_unstable();
     let mut rows: Vec<FactorRow> = Vec::new();
-    let mut hit_sum = Vec3::ZERO;
     for (brick, ray, i) in order {
         let y = sh::basis(directions[ray as usize].to_array());
         if rows.last().is_none_or(|r| r.0 != brick) {
-            finish_offset(rows.last_mut(), hit_sum, bricks);
-            hit_sum = Vec3::ZERO;
             rows.push((brick, 0, [0.0; SH_COUNT - 1], [0.0; 3]));
         }
         let row = rows.last_mut().expect("a row was just pushed");
         row.1 += 1;
-        hit_sum += hits[i].position;
+        row.3 = (Vec3::from(row.3) + hits[i].position).to_array();
         for k in 1..SH_COUNT {
             row.2[k - 1] += weight * y[k];
         }
     }
-    finish_offset(rows.last_mut(), hit_sum, bricks);
     rows
 }
 
-fn finish_offset(row: Option<&mut FactorRow>, hit_sum: Vec3, bricks: &[Brick]) {
-    if let Some(row) = row {
+/// The final rows of one probe, sorted by brick: provisional bricks renumbered by `remap`, hit
+/// sums turned into offsets, the mean of the rays' hit points minus the brick's centroid (see
+/// `prt_format::FactorF32`).
+pub fn finish(rows: &mut [FactorRow], remap: &[u32], bricks: &[Brick]) {
+    for row in rows.iter_mut() {
+        row.0 = remap[row.0 as usize];
         let centroid = Vec3::from(bricks[row.0 as usize].centroid);
-        row.3 = (hit_sum / row.1 as f32 - centroid).to_array();
+        row.3 = (Vec3::from(row.3) / row.1 as f32 - centroid).to_array();
     }
+    rows.sort_unstable_by_key(|r| r.0);
 }

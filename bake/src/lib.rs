@@ -9,7 +9,8 @@
 //!    become surfel samples (position, normal, albedo, emission, back-face flag), misses set bits
 //!    of the probe's sky mask. Probes whose rays mostly hit back faces are inside geometry and
 //!    marked invalid.
-//! 5. [`bricks`]: hits are grouped into normal-keyed bricks and merged into surfels.
+//! 5. [`bricks`]: hits are folded into normal-keyed bricks and merged into surfels as they
+//!    arrive, block by block of probes ([`stream`]), never all held at once.
 //! 6. [`factors`]: per probe, (brick, ray count, SH9 transfer) rows from its own rays.
 //! 7. The asset is assembled, validated and written atomically (`prt_format::io`).
 //!
@@ -30,6 +31,7 @@ pub mod gltf_check;
 pub mod offset;
 pub mod probes;
 pub mod scene;
+pub mod stream;
 pub mod texture;
 pub mod trace;
 
@@ -388,10 +390,12 @@ fn bake_in_pool(
         .map(Vec3::from)
         .collect();
     let weight = directions::direction_weight(n);
+    let order = trace::coherent_order(&dirs);
     let tracer = trace::Tracer {
         scene: &scene,
         bvh: &bvh,
         directions: &dirs,
+        order: &order,
         weight,
         double_sided: settings.double_sided,
         srgb: texture::srgb_to_linear_table(),
@@ -403,83 +407,71 @@ fn bake_in_pool(
                 && r.facing_away_rays as f32 > settings.inside_facing_away_fraction * n as f32)
     };
     let [nx, ny, nz] = grid.counts;
-    let traced: Vec<(Vec3, trace::ProbeRays, bool)> = positions
-        .par_iter()
-        .enumerate()
-        .map(|(index, &grid_p)| {
-            let (i, j, k) = (
-                index as u32 % nx,
-                (index as u32 / nx) % ny,
-                index as u32 / (nx * ny),
-            );
-            let ijk = [(i, nx), (j, ny), (k, nz)];
-            let outer = ijk.iter().any(|&(c, n)| n > 1 && (c == 0 || c == n - 1));
-            let inwards =
-                Vec3::from_array(ijk.map(|(c, n)| if 2 * c > n - 1 { -1.0 } else { 1.0 }));
-            let p = if settings.surface_offset {
-                let centre = outer.then_some((min + max) * 0.5);
-                offset::surface_offset(&tracer, grid_p, spacing, inwards, centre)
-            } else {
-                grid_p
-            };
-            let r = tracer.trace_probe(p);
-            progress.advance(1);
-            if settings.virtual_offset && is_inside(&r) {
-                if let Some((moved, again)) =
-                    offset::virtual_offset(&tracer, p, &r, spacing, &is_inside)
-                {
-                    return (moved, again, true);
-                }
+    let trace_one = |index: usize| {
+        let grid_p = positions[index];
+        let (i, j, k) = (
+            index as u32 % nx,
+            (index as u32 / nx) % ny,
+            index as u32 / (nx * ny),
+        );
+        let ijk = [(i, nx), (j, ny), (k, nz)];
+        let outer = ijk.iter().any(|&(c, n)| n > 1 && (c == 0 || c == n - 1));
+        let inwards = Vec3::from_array(ijk.map(|(c, n)| if 2 * c > n - 1 { -1.0 } else { 1.0 }));
+        let p = if settings.surface_offset {
+            let centre = outer.then_some((min + max) * 0.5);
+            offset::surface_offset(&tracer, grid_p, spacing, inwards, centre)
+        } else {
+            grid_p
+        };
+        let r = tracer.trace_probe(p);
+        if settings.virtual_offset && is_inside(&r) {
+            if let Some((moved, again)) =
+                offset::virtual_offset(&tracer, p, &r, spacing, &is_inside)
+            {
+                return (moved, again, true);
             }
-            (p, r, p != grid_p)
-        })
-        .collect();
-    let (positions, traced): (Vec<(Vec3, bool)>, Vec<trace::ProbeRays>) = traced
-        .into_iter()
-        .map(|(p, r, moved)| ((p, moved), r))
-        .unzip();
-    lap(&mut report, "trace", Some("merge"));
-
-    let mut hit_offsets = Vec::with_capacity(traced.len() + 1);
-    hit_offsets.push(0usize);
-    for r in &traced {
-        hit_offsets.push(hit_offsets.last().copied().unwrap_or(0) + r.hits.len());
-    }
-    // Sized once: collecting a flat_map grows by doubling, copying the hits several times.
-    let mut hits: Vec<trace::Hit> = Vec::with_capacity(hit_offsets.last().copied().unwrap_or(0));
-    for r in &traced {
-        hits.extend_from_slice(&r.hits);
-    }
-    if hits.len() > u32::MAX as usize {
-        return Err(BakeError::Setting {
-            name: "rays",
-            value: format!("{} ray hits", hits.len()),
-            reason: "more than 2^32 ray hits: use fewer probes or rays",
-        });
-    }
+        }
+        (p, r, p != grid_p)
+    };
     let cell_size = settings
         .cell_size
         .unwrap_or(spacing / settings.cells_per_spacing);
-    let bricked = bricks::build(
-        &hits,
+    // Half a cell off the origin: see `bricks::BrickFolder::new`.
+    let folder = bricks::BrickFolder::new(
         cell_size,
         settings.merge_normal_cos,
-        // Half a cell off the origin: see `bricks::build`.
         Vec3::splat(-0.5 * cell_size),
     );
-    let tables: Vec<Vec<FactorRow>> = (0..traced.len())
-        .into_par_iter()
-        .map(|p| {
-            let range = hit_offsets[p]..hit_offsets[p + 1];
-            factors::probe_factors(
-                &hits[range.clone()],
-                &bricked.hit_brick[range],
-                &bricked.bricks,
-                &dirs,
-                weight,
-            )
-        })
-        .collect();
+    let stream::Traced {
+        positions,
+        rays: traced,
+        rows: mut tables,
+        depth: probe_depth,
+        folder,
+        hits,
+        backface_hits,
+    } = stream::trace_and_fold(
+        positions.len(),
+        &trace_one,
+        &tracer,
+        folder,
+        spacing,
+        progress,
+    );
+    lap(&mut report, "trace", Some("merge"));
+
+    if folder.len() >= u32::MAX as usize {
+        return Err(BakeError::Setting {
+            name: "rays",
+            value: format!("{} bricks", folder.len()),
+            reason: "more than 2^32 bricks: use fewer probes or rays, or merge",
+        });
+    }
+    let (bricked, remap) = folder.finish();
+    tables
+        .par_iter_mut()
+        .for_each(|rows| factors::finish(rows, &remap, &bricked.bricks));
+    drop(remap);
     let tables: Vec<Vec<FactorRow>> = if settings.transfer_precision == TransferPrecision::U8 {
         if bricked.bricks.len() > U8_MAX_BRICK as usize + 1 {
             return Err(BakeError::Setting {
@@ -503,12 +495,6 @@ fn bake_in_pool(
     } else {
         vec![None; valid.len()]
     };
-    let depth_filter = depth::DepthFilter::new(&dirs);
-    let probe_depth: Vec<u32> = traced
-        .par_iter()
-        .zip(&positions)
-        .flat_map_iter(|(r, &(pos, _))| depth_filter.map(pos, r, dirs.len(), spacing))
-        .collect();
     let Assembled {
         probes: probes_out,
         carried,
@@ -527,10 +513,19 @@ fn bake_in_pool(
         triangles: scene.triangles.len() as u64,
         degenerate_triangles_skipped: scene.degenerate_skipped,
         rays: traced.len() as u64 * u64::from(n),
-        ray_hits: hits.len() as u64,
-        backface_hits: hits.iter().filter(|h| h.backface).count() as u64,
-        surfels_unmerged: hits.len() as u64,
+        ray_hits: hits,
+        backface_hits,
+        surfels_unmerged: hits,
     };
+    // Encoded probe by probe in parallel, then joined; the f32 rows, the largest thing the
+    // bake holds, are dropped before the join.
+    let parts: Vec<Factors> = carried
+        .par_iter()
+        .map(|t| Factors::build(t, settings.transfer_precision, n, 4.0 * cell_size))
+        .collect();
+    drop(carried);
+    drop(tables);
+    let factors = Factors::concat(parts);
     let asset = Asset {
         header: Header {
             generator: format!("prt-bake {}", env!("CARGO_PKG_VERSION")),
@@ -554,13 +549,7 @@ fn bake_in_pool(
         sky_mask,
         sky_transfer,
         probe_depth,
-        // Encoded probe by probe in parallel, then joined: no vector of every factor row.
-        factors: Factors::concat(
-            carried
-                .par_iter()
-                .map(|t| Factors::build(t, settings.transfer_precision, n, 4.0 * cell_size))
-                .collect(),
-        ),
+        factors,
         bricks: bricked.bricks,
         surfels: bricked.surfels,
         geometry: bvh.geometry,

@@ -42,6 +42,8 @@ pub struct Tracer<'a> {
     pub scene: &'a Scene,
     pub bvh: &'a SceneBvh,
     pub directions: &'a [Vec3],
+    /// The order the lattice is traced in ([`coherent_order`]).
+    pub order: &'a [u32],
     pub weight: f32,
     pub double_sided: bool,
     pub srgb: [f32; 256],
@@ -56,7 +58,8 @@ impl Tracer<'_> {
             sky_mask: vec![0; n.div_ceil(32)],
             ..ProbeRays::default()
         };
-        for (i, &dir) in self.directions.iter().enumerate() {
+        for &i in self.order {
+            let (i, dir) = (i as usize, self.directions[i as usize]);
             match self.bvh.closest_hit(origin, dir) {
                 Some(h) => {
                     let hit = self.shade(i as u32, origin, dir, h.triangle as usize, h.t);
@@ -139,6 +142,29 @@ impl Tracer<'_> {
         }
         (albedo.map(|a| a.clamp(0.0, 1.0)), emission)
     }
+}
+
+/// The lattice's directions in Morton order of their octahedral map: consecutive rays leave a
+/// probe in nearby directions, so they visit the same BVH nodes and mostly land in the same
+/// bricks, which keeps both the traversal and the brick merging in cache (the lattice's own
+/// order turns by the golden angle, 137.5 degrees, from one ray to the next). Rays are traced
+/// and their hits merged in this order; what a ray contributes does not depend on it.
+pub fn coherent_order(directions: &[Vec3]) -> Vec<u32> {
+    let morton = |d: Vec3| -> u32 {
+        let [u, v] = prt_format::depth::oct_encode(d.to_array());
+        let q = |x: f32| ((x * 0.5 + 0.5).clamp(0.0, 1.0) * 65535.0) as u32;
+        let spread = |mut x: u32| {
+            x &= 0xffff;
+            x = (x | x << 8) & 0x00ff_00ff;
+            x = (x | x << 4) & 0x0f0f_0f0f;
+            x = (x | x << 2) & 0x3333_3333;
+            (x | x << 1) & 0x5555_5555
+        };
+        spread(q(u)) | spread(q(v)) << 1
+    };
+    let mut order: Vec<u32> = (0..directions.len() as u32).collect();
+    order.sort_by_key(|&i| (morton(directions[i as usize]), i));
+    order
 }
 
 /// Barycentric coordinates of `p` (on the triangle's plane).

@@ -67,27 +67,72 @@ impl Sections<'_> {
 
 /// Serializes an asset into the bytes of a `.prt` file.
 pub fn encode(asset: &Asset) -> Result<Vec<u8>, FormatError> {
-    // The payload's size first (a pass that writes nothing), then the payload straight into the
-    // output after its prefix: no second copy of a file of hundreds of megabytes, no growth.
+    let size = payload_size(asset)?;
+    let mut out = Vec::with_capacity(PREFIX + size + SUFFIX);
+    encode_to(asset, size, &mut out).map_err(|e| match e {
+        EncodeTo::Format(e) => e,
+        EncodeTo::Io(e) => FormatError::Encode(e.to_string()),
+    })?;
+    Ok(out)
+}
+
+/// Bytes of the payload of `asset` (a pass that writes nothing).
+fn payload_size(asset: &Asset) -> Result<usize, FormatError> {
     let mut size = bincode::enc::write::SizeWriter::default();
     bincode::serde::encode_into_writer(asset, &mut size, config())
         .map_err(|e| FormatError::Encode(e.to_string()))?;
-    let mut out = Vec::with_capacity(PREFIX + size.bytes_written + SUFFIX);
-    out.extend_from_slice(&MAGIC);
-    out.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
-    out.extend_from_slice(&(size.bytes_written as u64).to_le_bytes());
-    bincode::serde::encode_into_std_write(asset, &mut out, config())
-        .map_err(|e| FormatError::Encode(e.to_string()))?;
-    if out.len() != PREFIX + size.bytes_written {
-        return Err(FormatError::Encode(format!(
-            "payload of {} bytes, {} expected",
-            out.len() - PREFIX,
-            size.bytes_written
-        )));
+    Ok(size.bytes_written)
+}
+
+/// A failure of [`encode_to`]: of the encoding, or of the sink.
+enum EncodeTo {
+    Format(FormatError),
+    Io(std::io::Error),
+}
+
+/// Writes the file's bytes to `sink` as they are encoded, the checksum computed on the way: no
+/// copy of the file in memory (for a bake, the asset alone is most of the peak memory).
+fn encode_to(asset: &Asset, size: usize, sink: &mut impl Write) -> Result<(), EncodeTo> {
+    struct Hashing<'a, W> {
+        sink: &'a mut W,
+        hasher: xxhash_rust::xxh3::Xxh3,
+        written: usize,
     }
-    let checksum = xxhash_rust::xxh3::xxh3_64(&out);
-    out.extend_from_slice(&checksum.to_le_bytes());
-    Ok(out)
+    impl<W: Write> Write for Hashing<'_, W> {
+        fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+            let n = self.sink.write(buf)?;
+            self.hasher.update(&buf[..n]);
+            self.written += n;
+            Ok(n)
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            self.sink.flush()
+        }
+    }
+    let mut out = Hashing {
+        sink,
+        hasher: xxhash_rust::xxh3::Xxh3::new(),
+        written: 0,
+    };
+    out.write_all(&MAGIC).map_err(EncodeTo::Io)?;
+    out.write_all(&FORMAT_VERSION.to_le_bytes())
+        .map_err(EncodeTo::Io)?;
+    out.write_all(&(size as u64).to_le_bytes())
+        .map_err(EncodeTo::Io)?;
+    bincode::serde::encode_into_std_write(asset, &mut out, config()).map_err(|e| match e {
+        bincode::error::EncodeError::Io { inner, .. } => EncodeTo::Io(inner),
+        other => EncodeTo::Format(FormatError::Encode(other.to_string())),
+    })?;
+    if out.written != PREFIX + size {
+        return Err(EncodeTo::Format(FormatError::Encode(format!(
+            "payload of {} bytes, {size} expected",
+            out.written - PREFIX
+        ))));
+    }
+    let checksum = out.hasher.digest();
+    out.sink
+        .write_all(&checksum.to_le_bytes())
+        .map_err(EncodeTo::Io)
 }
 
 /// Parses and validates the bytes of a `.prt` file. Never panics, whatever the bytes.
@@ -179,9 +224,23 @@ pub fn read_asset(path: &Path) -> Result<Asset, FormatError> {
 /// Writes an asset atomically: to a temporary file beside `path`, flushed to disk, then renamed
 /// over `path`. A failure leaves no partial file behind. Returns the number of bytes written.
 pub fn write_asset_atomic(path: &Path, asset: &Asset) -> Result<u64, FormatError> {
-    let bytes = encode(asset)?;
-    write_bytes_atomic(path, &bytes)?;
-    Ok(bytes.len() as u64)
+    let size = payload_size(asset)?;
+    let mut failure = None;
+    write_atomic_with(path, |file| {
+        let mut buffered = std::io::BufWriter::with_capacity(1 << 20, file);
+        let result = encode_to(asset, size, &mut buffered)
+            .and_then(|()| buffered.flush().map_err(EncodeTo::Io));
+        match result {
+            Ok(()) => Ok(()),
+            Err(EncodeTo::Io(e)) => Err(e),
+            Err(EncodeTo::Format(e)) => {
+                failure = Some(e);
+                Err(std::io::Error::other("encoding failed"))
+            }
+        }
+    })
+    .map_err(|e| failure.take().unwrap_or(e))?;
+    Ok((PREFIX + size + SUFFIX) as u64)
 }
 
 /// Fails when `path` exists and is not a regular file (the atomic rename would replace a device,
@@ -220,6 +279,15 @@ pub fn same_file(a: &Path, b: &Path) -> bool {
 
 /// Writes `bytes` to `path` through a temporary file and a rename.
 pub fn write_bytes_atomic(path: &Path, bytes: &[u8]) -> Result<(), FormatError> {
+    write_atomic_with(path, |f| f.write_all(bytes))
+}
+
+/// Writes a file to `path` with `write` through a temporary file, synced, then a rename; the
+/// temporary file is removed on failure.
+fn write_atomic_with(
+    path: &Path,
+    write: impl FnOnce(&mut std::fs::File) -> std::io::Result<()>,
+) -> Result<(), FormatError> {
     check_replaceable(path)?;
     let io_err = |p: &Path| {
         let p = p.to_owned();
@@ -229,7 +297,7 @@ pub fn write_bytes_atomic(path: &Path, bytes: &[u8]) -> Result<(), FormatError> 
     let _pending = PendingTemp::new(&tmp);
     let result = (|| {
         let mut f = std::fs::File::create(&tmp).map_err(io_err(&tmp))?;
-        f.write_all(bytes).map_err(io_err(&tmp))?;
+        write(&mut f).map_err(io_err(&tmp))?;
         f.sync_all().map_err(io_err(&tmp))?;
         drop(f);
         std::fs::rename(&tmp, path).map_err(io_err(path))

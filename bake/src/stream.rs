@@ -1,0 +1,128 @@
+//! Tracing and merging streamed in probe blocks: each block of probes is traced in parallel
+//! while the block before it is folded into bricks ([`BrickFolder`]), so that the bake holds at
+//! most two blocks of ray hits, never all of them (Sponza at 0.55 m, 94,202 probes: 7.4 GiB
+//! peak before, when every hit was kept for one global sort).
+//!
+//! What a probe keeps once its block is folded is what the asset needs from it: its sky mask,
+//! sky transfer and ray counts, its visibility map, and its factor rows (keyed by provisional
+//! brick until [`BrickFolder::finish`] numbers the bricks). Blocks are folded in probe order and
+//! a block's hits in ray order, so the result is the same for any block size or thread count.
+
+use glam::Vec3;
+use prt_format::{FactorRow, DEPTH_WORDS};
+use rayon::prelude::*;
+
+use crate::bricks::BrickFolder;
+use crate::depth::DepthFilter;
+use crate::trace::{ProbeRays, Tracer};
+use crate::{factors, Progress};
+
+/// Probes traced per block: enough parallel work per block for many cores, few enough hits
+/// (about 18 MB at 512 rays) to keep two blocks in cache-friendly reach.
+pub const BLOCK_PROBES: usize = 1024;
+
+/// Everything the bake keeps of its probes after tracing.
+pub struct Traced {
+    /// Per probe: where it was traced from, and whether that is off its grid point.
+    pub positions: Vec<(Vec3, bool)>,
+    /// Per probe: sky mask, sky transfer and ray counts (the hits are folded and dropped).
+    pub rays: Vec<ProbeRays>,
+    /// Per probe: factor rows keyed by provisional brick ([`factors::probe_rows`]).
+    pub rows: Vec<Vec<FactorRow>>,
+    /// Per probe, its packed visibility map ([`DepthFilter::map`]), probe after probe.
+    pub depth: Vec<u32>,
+    pub folder: BrickFolder,
+    pub hits: u64,
+    pub backface_hits: u64,
+}
+
+/// How one probe is traced: from its grid point (its index) to its position and rays.
+pub type TraceProbe<'a> = dyn Fn(usize) -> (Vec3, ProbeRays, bool) + Sync + 'a;
+
+/// One block of traced probes, hits still attached.
+type Block = Vec<(Vec3, ProbeRays, bool)>;
+
+/// Traces `probe_count` probes with `trace` and folds their hits into `folder`.
+pub fn trace_and_fold(
+    probe_count: usize,
+    trace: &TraceProbe,
+    tracer: &Tracer,
+    folder: BrickFolder,
+    spacing: f32,
+    progress: &dyn Progress,
+) -> Traced {
+    let depth_filter = DepthFilter::new(tracer.directions);
+    let mut out = Traced {
+        positions: Vec::with_capacity(probe_count),
+        rays: Vec::with_capacity(probe_count),
+        rows: Vec::with_capacity(probe_count),
+        depth: Vec::with_capacity(probe_count * DEPTH_WORDS),
+        folder,
+        hits: 0,
+        backface_hits: 0,
+    };
+    let trace_block = |start: usize| -> Block {
+        let end = (start + BLOCK_PROBES).min(probe_count);
+        (start..end)
+            .into_par_iter()
+            .map(|p| {
+                let traced = trace(p);
+                progress.advance(1);
+                traced
+            })
+            .collect()
+    };
+    let mut pending: Option<Block> = None;
+    let mut next = 0;
+    while next < probe_count || pending.is_some() {
+        let start = next;
+        let (traced, ()) = rayon::join(
+            || (start < probe_count).then(|| trace_block(start)),
+            || {
+                if let Some(block) = pending.take() {
+                    fold_block(block, &mut out, tracer, &depth_filter, spacing);
+                }
+            },
+        );
+        next = (start + BLOCK_PROBES).min(probe_count);
+        pending = traced;
+    }
+    out
+}
+
+/// Folds one block's hits into the bricks (in probe and ray order), then per probe, in
+/// parallel: factor rows, visibility map, and the hits dropped.
+fn fold_block(
+    block: Block,
+    out: &mut Traced,
+    tracer: &Tracer,
+    depth_filter: &DepthFilter,
+    spacing: f32,
+) {
+    let mut brick_of_hit = Vec::new();
+    let mut hit_start = Vec::with_capacity(block.len() + 1);
+    for (_, r, _) in &block {
+        hit_start.push(brick_of_hit.len());
+        out.folder.fold(&r.hits, &mut brick_of_hit);
+        out.hits += r.hits.len() as u64;
+        out.backface_hits += r.hits.iter().filter(|h| h.backface).count() as u64;
+    }
+    hit_start.push(brick_of_hit.len());
+    let finished: Vec<_> = block
+        .into_par_iter()
+        .enumerate()
+        .map(|(i, (p, mut r, moved))| {
+            let ids = &brick_of_hit[hit_start[i]..hit_start[i + 1]];
+            let rows = factors::probe_rows(&r.hits, ids, tracer.directions, tracer.weight);
+            let depth = depth_filter.map(p, &r, tracer.directions.len(), spacing);
+            r.hits = Vec::new();
+            ((p, moved), r, rows, depth)
+        })
+        .collect();
+    for (position, r, rows, depth) in finished {
+        out.positions.push(position);
+        out.rays.push(r);
+        out.rows.push(rows);
+        out.depth.extend_from_slice(&depth);
+    }
+}
