@@ -2,8 +2,6 @@
 //! triangle winding (the usual reason a scene bakes with most probes invalid) and grids whose
 //! probes are mostly inside geometry.
 
-use std::collections::HashMap;
-
 use glam::Vec3;
 
 /// Shared edges of a mesh, and how many of them both of their triangles walk the same way.
@@ -78,7 +76,10 @@ pub fn inside_warning(
 /// positions are bit-identical (as when triangles share an index).
 pub fn winding(triangles: &[[Vec3; 3]]) -> Winding {
     let key = |v: Vec3| v.to_array().map(f32::to_bits);
-    let mut directed: HashMap<([u32; 3], [u32; 3]), u32> = HashMap::new();
+    // FxHash (keys are float bits of the scene's own vertices): Sponza's 187k triangles took
+    // 0.17 s with the standard library's SipHash.
+    let mut directed: rustc_hash::FxHashMap<([u32; 3], [u32; 3]), u32> =
+        rustc_hash::FxHashMap::with_capacity_and_hasher(3 * triangles.len(), Default::default());
     for t in triangles {
         for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
             *directed.entry((key(a), key(b))).or_default() += 1;

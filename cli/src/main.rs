@@ -295,7 +295,7 @@ fn parse_bounds(s: &str) -> Result<[f32; 6], String> {
 }
 
 /// The process's peak resident set size in KiB (`VmHWM` of `/proc/self/status`; Linux only).
-fn peak_rss_kib() -> Option<u64> {
+pub(crate) fn peak_rss_kib() -> Option<u64> {
     let status = std::fs::read_to_string("/proc/self/status").ok()?;
     let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
     line.split_whitespace().nth(1)?.parse().ok()
