@@ -458,7 +458,7 @@ fn bake_in_pool(
         spacing,
         progress,
     );
-    lap(&mut report, "trace", Some("merge"));
+    lap(&mut report, "trace", Some("bricks"));
 
     if folder.len() >= u32::MAX as usize {
         return Err(BakeError::Setting {
@@ -484,7 +484,7 @@ fn bake_in_pool(
     } else {
         tables
     };
-    lap(&mut report, "merge", Some("assemble"));
+    lap(&mut report, "bricks", Some("assemble"));
 
     let valid: Vec<bool> = traced.iter().map(|r| !is_inside(r)).collect();
     if let Some(w) = diagnostics::inside_warning(&valid, settings, &winding, winding_hint) {

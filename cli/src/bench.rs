@@ -90,7 +90,7 @@ pub fn bake(scene: &Path, settings: &BakeSettings) -> Result<String> {
     )?;
     writeln!(
         md,
-        "| bake trace stage alone | {:.2} M rays/s |",
+        "| bake trace stage alone (tracing and merging, overlapped) | {:.2} M rays/s |",
         rays / trace_s / 1e6
     )?;
     writeln!(
