@@ -21,6 +21,7 @@ use prt_format::{Brick, Surfel, BRICK_BACKFACE};
 use rayon::prelude::*;
 
 use crate::trace::Hit;
+use crate::BakeError;
 
 /// Bricks and their surfels, in key order.
 pub struct Bricked {
@@ -50,15 +51,17 @@ fn flags_of(h: &Hit) -> u32 {
 
 /// Merges ray hits into bricks as they arrive, so that the bake never holds every hit at once
 /// (the working set is one block of probes; what grows is the bricks and surfels the asset
-/// carries). Hits must come in the bake's order (probe, then ray): a surfel is the running mean
+/// carries). Hits must come in the bake's order (probe by probe, each probe's in the order its
+/// rays were traced): a surfel is the running mean
 /// of the hits that joined it, and a hit joins the first surfel of its cell, in creation order,
 /// whose first normal agrees with its own. [`BrickFolder::finish`] numbers the bricks by key,
 /// so the result depends only on the hits and their order, never on how they were blocked or
 /// on the thread count (`tests::blocking_does_not_change_the_result`).
 ///
-/// A brick is found by hashing its key (rustc-hash's FxHash, the compiler's own map hasher:
-/// the keys are small integers, not attacker-chosen), then its cell's surfels through a list
-/// per cell. Sponza at 1.0 m, 6.2 M hits, 2 threads: the sort-based merge this replaces (every
+/// A brick is found by hashing its key (foldhash, seeded per process: the keys come from where
+/// the file's geometry is, so a fixed fast hash could be made to collide; the map is only
+/// looked up, never iterated, so the seed never changes the result), then its cell's surfels
+/// through a list per cell. Sponza at 1.0 m, 6.2 M hits, 2 threads: the sort-based merge this replaces (every
 /// hit's key sorted, then grouped) took 1.65-2.45 s and held every hit, its key and its rank at
 /// once; scanning a brick's surfels for the hit's cell instead of one list per cell took 17% of
 /// the bake's CPU time.
@@ -67,7 +70,7 @@ pub struct BrickFolder {
     cell_size: f32,
     merge_normal_cos: f32,
     /// Brick key to provisional brick (arrival order).
-    index: rustc_hash::FxHashMap<Key, u32>,
+    index: foldhash::HashMap<Key, u32>,
     /// Per provisional brick: its key.
     keys: Vec<Key>,
     /// Per provisional brick and cell, its first surfel in `clusters` (merging only).
@@ -94,30 +97,35 @@ impl BrickFolder {
             anchor,
             cell_size: cell_size.max(0.0),
             merge_normal_cos,
-            index: rustc_hash::FxHashMap::default(),
+            index: foldhash::HashMap::default(),
             keys: Vec::new(),
             heads: Vec::new(),
             clusters: Vec::new(),
         }
     }
 
-    /// Bricks so far.
-    pub fn len(&self) -> usize {
-        self.keys.len()
-    }
-
-    /// Whether no hit was folded yet.
-    pub fn is_empty(&self) -> bool {
-        self.keys.is_empty()
-    }
-
-    /// Folds the next `hits` in and appends the provisional brick of each to `brick_of_hit`.
+    /// Folds the next `hits` (one probe's) in and appends the provisional brick of each to
+    /// `brick_of_hit`. Fails, before any change, when the bricks or surfels would pass 2^32 - 1
+    /// (every hit adds at most one of each).
     ///
     /// The hits are visited brick by brick (sorted by key, in hit order within a brick), which
     /// merges exactly as hit order does (a brick's surfels depend only on its own hits' order)
     /// but finds each brick once and keeps its surfels in cache: visiting them in hit order cost
-    /// a cache miss or three per hit (Sponza at 1.0 m: 16% of the bake's CPU time).
-    pub fn fold(&mut self, hits: &[Hit], brick_of_hit: &mut Vec<u32>) {
+    /// a cache miss or three per hit (Sponza at 1.0 m: 16% of the bake's CPU time, 13% now).
+    pub fn fold(&mut self, hits: &[Hit], brick_of_hit: &mut Vec<u32>) -> Result<(), BakeError> {
+        let room = NONE as usize - hits.len().min(NONE as usize);
+        if self.clusters.len() > room || self.keys.len() > room {
+            return Err(BakeError::Setting {
+                name: "spacing",
+                value: format!(
+                    "{} surfels and {} bricks so far, {} more ray hits",
+                    self.clusters.len(),
+                    self.keys.len(),
+                    hits.len()
+                ),
+                reason: "more than 2^32 - 1 surfels or bricks: use fewer probes or rays, or merge",
+            });
+        }
         let first = brick_of_hit.len();
         if self.cell_size == 0.0 {
             for h in hits {
@@ -125,18 +133,18 @@ impl BrickFolder {
                 self.keys.push((0, 0, 0, flags_of(h)));
                 self.clusters.push(Cluster::of(h));
             }
-            return;
+            return Ok(());
         }
         let brick_size = 4.0 * self.cell_size;
         let mut order: Vec<(Key, u32)> = hits
-            .par_iter()
+            .iter()
             .enumerate()
             .map(|(i, h)| {
                 let c = ((h.position - self.anchor) / brick_size).floor();
                 ((c.x as i32, c.y as i32, c.z as i32, flags_of(h)), i as u32)
             })
             .collect();
-        order.par_sort_unstable();
+        order.sort_unstable();
         brick_of_hit.resize(first + hits.len(), 0);
         let mut start = 0;
         while start < order.len() {
@@ -151,6 +159,7 @@ impl BrickFolder {
             }
             start = end;
         }
+        Ok(())
     }
 
     /// The provisional brick of `key`, new if it has none yet.
@@ -369,7 +378,7 @@ mod tests {
     fn build(hits: &[Hit], cell_size: f32, cos: f32, anchor: Vec3) -> (Bricked, Vec<u32>) {
         let mut folder = BrickFolder::new(cell_size, cos, anchor);
         let mut ids = Vec::new();
-        folder.fold(hits, &mut ids);
+        folder.fold(hits, &mut ids).unwrap();
         let (bricked, remap) = folder.finish();
         (bricked, ids.iter().map(|&b| remap[b as usize]).collect())
     }
@@ -444,7 +453,7 @@ mod tests {
             let mut start = 0;
             while start < hits.len() {
                 let end = (start + 1 + next(400) as usize).min(hits.len());
-                folder.fold(&hits[start..end], &mut ids);
+                folder.fold(&hits[start..end], &mut ids).unwrap();
                 start = end;
             }
             let (blocked, remap) = folder.finish();

@@ -76,10 +76,11 @@ pub fn inside_warning(
 /// positions are bit-identical (as when triangles share an index).
 pub fn winding(triangles: &[[Vec3; 3]]) -> Winding {
     let key = |v: Vec3| v.to_array().map(f32::to_bits);
-    // FxHash (keys are float bits of the scene's own vertices): Sponza's 187k triangles took
-    // 0.17 s with the standard library's SipHash.
-    let mut directed: rustc_hash::FxHashMap<([u32; 3], [u32; 3]), u32> =
-        rustc_hash::FxHashMap::with_capacity_and_hasher(3 * triangles.len(), Default::default());
+    // foldhash, seeded per process: keys are float bits the file's author chose, so a fixed
+    // fast hash (FxHash) could be made to collide; Sponza's 187k triangles took 0.17 s with the
+    // standard library's SipHash. Only counts are read, so the seed never changes the result.
+    let mut directed: foldhash::HashMap<([u32; 3], [u32; 3]), u32> =
+        foldhash::HashMap::with_capacity_and_hasher(3 * triangles.len(), Default::default());
     for t in triangles {
         for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
             *directed.entry((key(a), key(b))).or_default() += 1;

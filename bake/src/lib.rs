@@ -457,16 +457,9 @@ fn bake_in_pool(
         folder,
         spacing,
         progress,
-    );
+    )?;
     lap(&mut report, "trace", Some("bricks"));
 
-    if folder.len() >= u32::MAX as usize {
-        return Err(BakeError::Setting {
-            name: "rays",
-            value: format!("{} bricks", folder.len()),
-            reason: "more than 2^32 bricks: use fewer probes or rays, or merge",
-        });
-    }
     let (bricked, remap) = folder.finish();
     tables
         .par_iter_mut()

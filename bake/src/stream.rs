@@ -6,7 +6,8 @@
 //! What a probe keeps once its block is folded is what the asset needs from it: its sky mask,
 //! sky transfer and ray counts, its visibility map, and its factor rows (keyed by provisional
 //! brick until [`BrickFolder::finish`] numbers the bricks). Blocks are folded in probe order and
-//! a block's hits in ray order, so the result is the same for any block size or thread count.
+//! a probe's hits in the order its rays were traced ([`crate::trace::coherent_order`]), so the
+//! result is the same for any block size or thread count.
 
 use glam::Vec3;
 use prt_format::{FactorRow, DEPTH_WORDS};
@@ -15,7 +16,7 @@ use rayon::prelude::*;
 use crate::bricks::BrickFolder;
 use crate::depth::DepthFilter;
 use crate::trace::{ProbeRays, Tracer};
-use crate::{factors, Progress};
+use crate::{factors, BakeError, Progress};
 
 /// Probes traced per block: enough parallel work per block for many cores, few enough hits
 /// (about 5 MB at 512 rays) that a block's merge stays in cache, and enough blocks that the
@@ -45,7 +46,8 @@ pub type TraceProbe<'a> = dyn Fn(usize) -> (Vec3, ProbeRays, bool) + Sync + 'a;
 /// One block of traced probes, hits still attached.
 type Block = Vec<(Vec3, ProbeRays, bool)>;
 
-/// Traces `probe_count` probes with `trace` and folds their hits into `folder`.
+/// Traces `probe_count` probes with `trace` and folds their hits into `folder`; fails when the
+/// surfels or bricks outgrow 32-bit indices.
 pub fn trace_and_fold(
     probe_count: usize,
     trace: &TraceProbe,
@@ -53,7 +55,7 @@ pub fn trace_and_fold(
     folder: BrickFolder,
     spacing: f32,
     progress: &dyn Progress,
-) -> Traced {
+) -> Result<Traced, BakeError> {
     let depth_filter = DepthFilter::new(tracer.directions);
     let mut out = Traced {
         positions: Vec::with_capacity(probe_count),
@@ -79,18 +81,18 @@ pub fn trace_and_fold(
     let mut next = 0;
     while next < probe_count || pending.is_some() {
         let start = next;
-        let (traced, ()) = rayon::join(
+        let (traced, folded) = rayon::join(
             || (start < probe_count).then(|| trace_block(start)),
-            || {
-                if let Some(block) = pending.take() {
-                    fold_block(block, &mut out, tracer, &depth_filter, spacing);
-                }
+            || match pending.take() {
+                Some(block) => fold_block(block, &mut out, tracer, &depth_filter, spacing),
+                None => Ok(()),
             },
         );
+        folded?;
         next = (start + BLOCK_PROBES).min(probe_count);
         pending = traced;
     }
-    out
+    Ok(out)
 }
 
 /// Folds one block's hits into the bricks (in probe and ray order), then per probe, in
@@ -101,12 +103,12 @@ fn fold_block(
     tracer: &Tracer,
     depth_filter: &DepthFilter,
     spacing: f32,
-) {
+) -> Result<(), BakeError> {
     let mut brick_of_hit = Vec::new();
     let mut hit_start = Vec::with_capacity(block.len() + 1);
     for (_, r, _) in &block {
         hit_start.push(brick_of_hit.len());
-        out.folder.fold(&r.hits, &mut brick_of_hit);
+        out.folder.fold(&r.hits, &mut brick_of_hit)?;
         out.hits += r.hits.len() as u64;
         out.backface_hits += r.hits.iter().filter(|h| h.backface).count() as u64;
     }
@@ -128,4 +130,5 @@ fn fold_block(
         out.rows.push(rows);
         out.depth.extend_from_slice(&depth);
     }
+    Ok(())
 }

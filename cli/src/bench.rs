@@ -80,7 +80,7 @@ pub fn bake(scene: &Path, settings: &BakeSettings) -> Result<String> {
     writeln!(md, "| peak memory of the bake (resident) | {peak} |")?;
     writeln!(
         md,
-        "| end-to-end bake (load, BVH, trace, merge, write to a file and sync it) | {bake_s:.3} s |"
+        "| end-to-end bake (load, BVH, trace, bricks, assemble, write to a file and sync it) | {bake_s:.3} s |"
     )?;
     writeln!(
         md,
@@ -105,12 +105,12 @@ pub fn bake(scene: &Path, settings: &BakeSettings) -> Result<String> {
     )?;
     writeln!(
         md,
-        "| end-to-end / bare tracing in lattice order | {:.0}% |",
+        "| end-to-end throughput / bare tracing throughput, lattice order | {:.0}% |",
         100.0 * lattice_s / bake_s
     )?;
     writeln!(
         md,
-        "| end-to-end / bare tracing in the bake's order | {:.0}% |",
+        "| end-to-end throughput / bare tracing throughput, the bake's order | {:.0}% |",
         100.0 * bare_s / bake_s
     )?;
     writeln!(

@@ -91,14 +91,15 @@ enum EncodeTo {
 }
 
 /// Writes the file's bytes to `sink` as they are encoded, the checksum computed on the way: no
-/// copy of the file in memory (for a bake, the asset alone is most of the peak memory).
-fn encode_to(asset: &Asset, size: usize, sink: &mut impl Write) -> Result<(), EncodeTo> {
-    struct Hashing<'a, W> {
-        sink: &'a mut W,
+/// copy of the file in memory (for a bake, the asset alone is most of the peak memory). The
+/// hash sits below a 1 MiB buffer: bincode writes field by field, a few bytes at a time.
+fn encode_to<W: Write>(asset: &Asset, size: usize, sink: W) -> Result<(), EncodeTo> {
+    struct Hashing<W> {
+        sink: W,
         hasher: xxhash_rust::xxh3::Xxh3,
         written: usize,
     }
-    impl<W: Write> Write for Hashing<'_, W> {
+    impl<W: Write> Write for Hashing<W> {
         fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
             let n = self.sink.write(buf)?;
             self.hasher.update(&buf[..n]);
@@ -109,11 +110,12 @@ fn encode_to(asset: &Asset, size: usize, sink: &mut impl Write) -> Result<(), En
             self.sink.flush()
         }
     }
-    let mut out = Hashing {
+    let hashing = Hashing {
         sink,
         hasher: xxhash_rust::xxh3::Xxh3::new(),
         written: 0,
     };
+    let mut out = std::io::BufWriter::with_capacity(1 << 20, hashing);
     out.write_all(&MAGIC).map_err(EncodeTo::Io)?;
     out.write_all(&FORMAT_VERSION.to_le_bytes())
         .map_err(EncodeTo::Io)?;
@@ -123,15 +125,18 @@ fn encode_to(asset: &Asset, size: usize, sink: &mut impl Write) -> Result<(), En
         bincode::error::EncodeError::Io { inner, .. } => EncodeTo::Io(inner),
         other => EncodeTo::Format(FormatError::Encode(other.to_string())),
     })?;
-    if out.written != PREFIX + size {
+    let mut hashing = out.into_inner().map_err(|e| EncodeTo::Io(e.into_error()))?;
+    if hashing.written != PREFIX + size {
         return Err(EncodeTo::Format(FormatError::Encode(format!(
             "payload of {} bytes, {size} expected",
-            out.written - PREFIX
+            hashing.written - PREFIX
         ))));
     }
-    let checksum = out.hasher.digest();
-    out.sink
+    let checksum = hashing.hasher.digest();
+    hashing
+        .sink
         .write_all(&checksum.to_le_bytes())
+        .and_then(|()| hashing.sink.flush())
         .map_err(EncodeTo::Io)
 }
 
@@ -226,17 +231,12 @@ pub fn read_asset(path: &Path) -> Result<Asset, FormatError> {
 pub fn write_asset_atomic(path: &Path, asset: &Asset) -> Result<u64, FormatError> {
     let size = payload_size(asset)?;
     let mut failure = None;
-    write_atomic_with(path, |file| {
-        let mut buffered = std::io::BufWriter::with_capacity(1 << 20, file);
-        let result = encode_to(asset, size, &mut buffered)
-            .and_then(|()| buffered.flush().map_err(EncodeTo::Io));
-        match result {
-            Ok(()) => Ok(()),
-            Err(EncodeTo::Io(e)) => Err(e),
-            Err(EncodeTo::Format(e)) => {
-                failure = Some(e);
-                Err(std::io::Error::other("encoding failed"))
-            }
+    write_atomic_with(path, |file| match encode_to(asset, size, file) {
+        Ok(()) => Ok(()),
+        Err(EncodeTo::Io(e)) => Err(e),
+        Err(EncodeTo::Format(e)) => {
+            failure = Some(e);
+            Err(std::io::Error::other("encoding failed"))
         }
     })
     .map_err(|e| failure.take().unwrap_or(e))?;

@@ -111,6 +111,27 @@ fn round_trip_through_a_file() {
     assert_eq!(dir.entries(), ["a.prt"], "no temporary file left");
 }
 
+/// A file written by streaming (the checksum hashed below a 1 MiB buffer) holds exactly the
+/// bytes of the in-memory encoding, for an asset of several buffers' worth.
+#[test]
+fn streamed_file_equals_the_encoding() {
+    let dir = prt_tests::ScratchDir::new("streamed_file_equals_the_encoding");
+    let path = dir.path().join("big.prt");
+    let asset = bake_ok(&cornell(), &rays(512));
+    let bytes = encode(&asset).expect("encode");
+    assert!(
+        bytes.len() > 3 << 20,
+        "{} bytes: want several MiB",
+        bytes.len()
+    );
+    let n = prt_format::write_asset_atomic(&path, &asset).expect("write");
+    assert_eq!(n, bytes.len() as u64);
+    assert!(
+        std::fs::read(&path).unwrap() == bytes,
+        "file differs from encode()"
+    );
+}
+
 // ---------------------------------------------------------------------------------------------
 // Damaged files
 
