@@ -251,26 +251,6 @@ impl BrickFolder {
     }
 }
 
-fn surfel_of(
-    position: Vec3,
-    normal: Vec3,
-    weight: f32,
-    albedo: [f32; 3],
-    emission: [f32; 3],
-    backface: bool,
-) -> Surfel {
-    Surfel {
-        position: position.to_array(),
-        brick: 0,
-        normal: normal.to_array(),
-        weight,
-        albedo,
-        flags: if backface { BRICK_BACKFACE } else { 0 },
-        emission,
-        ..Surfel::default()
-    }
-}
-
 /// Finishes one brick: bounds, centroid, and the surfels' gradient weights.
 ///
 /// The brick's radiance is modelled as linear, `L(p) = L_mean + G . (p - centroid)`, fitted by
@@ -359,14 +339,16 @@ impl Cluster {
         } else {
             self.normal
         };
-        surfel_of(
-            self.position / self.count,
-            n,
-            self.count,
-            (self.albedo / self.count).to_array(),
-            (self.emission / self.count).to_array(),
-            self.backface,
-        )
+        Surfel {
+            position: (self.position / self.count).to_array(),
+            brick: 0,
+            normal: n.to_array(),
+            weight: self.count,
+            albedo: (self.albedo / self.count).to_array(),
+            flags: if self.backface { BRICK_BACKFACE } else { 0 },
+            emission: (self.emission / self.count).to_array(),
+            ..Surfel::default()
+        }
     }
 }
 

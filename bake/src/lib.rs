@@ -445,11 +445,9 @@ fn bake_in_pool(
     let stream::Traced {
         positions,
         rays: traced,
-        rows: mut tables,
+        rows: tables,
         depth: probe_depth,
         folder,
-        hits,
-        backface_hits,
     } = stream::trace_and_fold(
         positions.len(),
         &trace_one,
@@ -461,22 +459,26 @@ fn bake_in_pool(
     lap(&mut report, "trace", Some("bricks"));
 
     let (bricked, remap) = folder.finish();
-    tables
-        .par_iter_mut()
-        .for_each(|rows| factors::finish(rows, &remap, &bricked.bricks));
+    let u8_rows = settings.transfer_precision == TransferPrecision::U8;
+    if u8_rows && bricked.bricks.len() > U8_MAX_BRICK as usize + 1 {
+        return Err(BakeError::Setting {
+            name: "precision",
+            value: format!("u8 with {} bricks", bricked.bricks.len()),
+            reason: "the 8-bit factor encoding addresses at most 16,777,216 bricks; use f16",
+        });
+    }
+    let tables: Vec<Vec<FactorRow>> = tables
+        .into_par_iter()
+        .map(|mut rows| {
+            factors::finish(&mut rows, &remap, &bricked.bricks);
+            if u8_rows {
+                split_rows_for_u8(rows)
+            } else {
+                rows
+            }
+        })
+        .collect();
     drop(remap);
-    let tables: Vec<Vec<FactorRow>> = if settings.transfer_precision == TransferPrecision::U8 {
-        if bricked.bricks.len() > U8_MAX_BRICK as usize + 1 {
-            return Err(BakeError::Setting {
-                name: "precision",
-                value: format!("u8 with {} bricks", bricked.bricks.len()),
-                reason: "the 8-bit factor encoding addresses at most 16,777,216 bricks; use f16",
-            });
-        }
-        tables.into_par_iter().map(split_rows_for_u8).collect()
-    } else {
-        tables
-    };
     lap(&mut report, "bricks", Some("assemble"));
 
     let valid: Vec<bool> = traced.iter().map(|r| !is_inside(r)).collect();
@@ -502,12 +504,14 @@ fn bake_in_pool(
             reason: "more than 2^32 factors (dilation copies tables into probes inside geometry): use fewer probes or rays, or --no-dilation",
         });
     }
+    // Every ray hits a surface or the sky.
+    let hits: u64 = traced.iter().map(|r| u64::from(n - r.sky_rays)).sum();
     let stats = BakeStats {
         triangles: scene.triangles.len() as u64,
         degenerate_triangles_skipped: scene.degenerate_skipped,
         rays: traced.len() as u64 * u64::from(n),
         ray_hits: hits,
-        backface_hits,
+        backface_hits: traced.iter().map(|r| u64::from(r.backface_rays)).sum(),
         surfels_unmerged: hits,
     };
     // Encoded probe by probe in parallel, then joined; the f32 rows, the largest thing the

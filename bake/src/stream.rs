@@ -36,8 +36,6 @@ pub struct Traced {
     /// Per probe, its packed visibility map ([`DepthFilter::map`]), probe after probe.
     pub depth: Vec<u32>,
     pub folder: BrickFolder,
-    pub hits: u64,
-    pub backface_hits: u64,
 }
 
 /// How one probe is traced: from its grid point (its index) to its position and rays.
@@ -63,8 +61,6 @@ pub fn trace_and_fold(
         rows: Vec::with_capacity(probe_count),
         depth: Vec::with_capacity(probe_count * DEPTH_WORDS),
         folder,
-        hits: 0,
-        backface_hits: 0,
     };
     let trace_block = |start: usize| -> Block {
         let end = (start + BLOCK_PROBES).min(probe_count);
@@ -109,8 +105,6 @@ fn fold_block(
     for (_, r, _) in &block {
         hit_start.push(brick_of_hit.len());
         out.folder.fold(&r.hits, &mut brick_of_hit)?;
-        out.hits += r.hits.len() as u64;
-        out.backface_hits += r.hits.iter().filter(|h| h.backface).count() as u64;
     }
     hit_start.push(brick_of_hit.len());
     let finished: Vec<_> = block

@@ -230,16 +230,7 @@ pub fn read_asset(path: &Path) -> Result<Asset, FormatError> {
 /// over `path`. A failure leaves no partial file behind. Returns the number of bytes written.
 pub fn write_asset_atomic(path: &Path, asset: &Asset) -> Result<u64, FormatError> {
     let size = payload_size(asset)?;
-    let mut failure = None;
-    write_atomic_with(path, |file| match encode_to(asset, size, file) {
-        Ok(()) => Ok(()),
-        Err(EncodeTo::Io(e)) => Err(e),
-        Err(EncodeTo::Format(e)) => {
-            failure = Some(e);
-            Err(std::io::Error::other("encoding failed"))
-        }
-    })
-    .map_err(|e| failure.take().unwrap_or(e))?;
+    write_atomic_with(path, |file| encode_to(asset, size, file))?;
     Ok((PREFIX + size + SUFFIX) as u64)
 }
 
@@ -279,14 +270,15 @@ pub fn same_file(a: &Path, b: &Path) -> bool {
 
 /// Writes `bytes` to `path` through a temporary file and a rename.
 pub fn write_bytes_atomic(path: &Path, bytes: &[u8]) -> Result<(), FormatError> {
-    write_atomic_with(path, |f| f.write_all(bytes))
+    write_atomic_with(path, |f| f.write_all(bytes).map_err(EncodeTo::Io))
 }
 
 /// Writes a file to `path` with `write` through a temporary file, synced, then a rename; the
-/// temporary file is removed on failure.
+/// temporary file is removed on failure. A failure of the sink is an IO error naming the
+/// temporary file; a failure of the encoding is reported as it is.
 fn write_atomic_with(
     path: &Path,
-    write: impl FnOnce(&mut std::fs::File) -> std::io::Result<()>,
+    write: impl FnOnce(&mut std::fs::File) -> Result<(), EncodeTo>,
 ) -> Result<(), FormatError> {
     check_replaceable(path)?;
     let io_err = |p: &Path| {
@@ -297,7 +289,10 @@ fn write_atomic_with(
     let _pending = PendingTemp::new(&tmp);
     let result = (|| {
         let mut f = std::fs::File::create(&tmp).map_err(io_err(&tmp))?;
-        write(&mut f).map_err(io_err(&tmp))?;
+        write(&mut f).map_err(|e| match e {
+            EncodeTo::Io(error) => io_err(&tmp)(error),
+            EncodeTo::Format(e) => e,
+        })?;
         f.sync_all().map_err(io_err(&tmp))?;
         drop(f);
         std::fs::rename(&tmp, path).map_err(io_err(path))

@@ -178,11 +178,7 @@ impl Resources {
         });
 
         let (textures, views, sampler) = volume(device, &g, settings);
-        let volume_info = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("prt volume info"),
-            contents: bytemuck::bytes_of(&volume_info(&g, settings)),
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
+        let volume_info = alloc.uniform("prt volume info", &volume_info(&g, settings));
         Ok(Resources {
             probes,
             chunks,
@@ -264,20 +260,13 @@ fn factor_buffers(
     asset: &Asset,
     settings: &RuntimeSettings,
 ) -> Result<FactorBuffers, GpuError> {
-    let (device, max_binding) = (alloc.device, alloc.max_binding);
     let none = wgpu::BufferUsages::empty();
     let factor_bytes: &[u8] = match &asset.factors {
         Factors::F16(f) => bytemuck::cast_slice(f),
         Factors::F32(f) => bytemuck::cast_slice(f),
         Factors::U8 { factors, .. } => bytemuck::cast_slice(factors),
     };
-    let chunks = factor_chunks(
-        asset,
-        settings
-            .max_factor_chunk_bytes
-            .unwrap_or(max_binding)
-            .min(max_binding),
-    )?;
+    let chunks = factor_chunks(asset, alloc.chunk_bytes(settings.max_factor_chunk_bytes))?;
     let per_factor = asset.factors.bytes_per_factor();
     let chunk_factors: Vec<wgpu::Buffer> = chunks
         .iter()
@@ -295,13 +284,7 @@ fn factor_buffers(
         .collect::<Result<_, _>>()?;
     let chunk_uniforms: Vec<wgpu::Buffer> = chunks
         .iter()
-        .map(|c| {
-            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("prt factor chunk"),
-                contents: bytemuck::bytes_of(c),
-                usage: wgpu::BufferUsages::UNIFORM,
-            })
-        })
+        .map(|c| alloc.uniform("prt factor chunk", c))
         .collect();
     Ok((chunks, chunk_factors, chunk_uniforms))
 }
@@ -313,15 +296,8 @@ fn surfel_buffers(
     asset: &Asset,
     settings: &RuntimeSettings,
 ) -> Result<SurfelBuffers, GpuError> {
-    let (device, max_binding) = (alloc.device, alloc.max_binding);
     let none = wgpu::BufferUsages::empty();
-    let surfel_chunks = surfel_chunks(
-        asset,
-        settings
-            .max_surfel_chunk_bytes
-            .unwrap_or(max_binding)
-            .min(max_binding),
-    )?;
+    let surfel_chunks = surfel_chunks(asset, alloc.chunk_bytes(settings.max_surfel_chunk_bytes))?;
     let feeds_back = settings.bounces.feeds_back();
     // Per chunk: its surfels, their direct radiance and their bounce radiance.
     let chunk_surfels: Vec<[wgpu::Buffer; 4]> = surfel_chunks
@@ -341,11 +317,7 @@ fn surfel_buffers(
                     if feeds_back { 16 * n } else { 0 },
                     none,
                 )?,
-                device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                    label: Some("prt surfel chunk"),
-                    contents: bytemuck::bytes_of(c),
-                    usage: wgpu::BufferUsages::UNIFORM,
-                }),
+                alloc.uniform("prt surfel chunk", c),
             ])
         })
         .collect::<Result<_, GpuError>>()?;
@@ -552,6 +524,21 @@ impl Alloc<'_> {
             });
         }
         Ok(())
+    }
+
+    /// A uniform buffer holding `value`.
+    fn uniform<T: bytemuck::Pod>(&self, label: &'static str, value: &T) -> wgpu::Buffer {
+        self.device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents: bytemuck::bytes_of(value),
+                usage: wgpu::BufferUsages::UNIFORM,
+            })
+    }
+
+    /// Bytes per chunk of a chunked array: the setting's limit, if any, within one binding.
+    fn chunk_bytes(&self, setting: Option<u64>) -> u64 {
+        setting.unwrap_or(self.max_binding).min(self.max_binding)
     }
 
     /// A storage buffer holding `bytes`.
