@@ -78,6 +78,8 @@ pub struct BrickFolder {
     /// Every surfel being merged; a cell's surfels are a list through `Cluster::next`, in
     /// creation order (unmerged: cluster i is brick i's only surfel).
     clusters: Vec<Cluster>,
+    /// Scratch: one probe's hits as (brick, cell, hit), reused.
+    slots: Vec<(u32, u8, u32)>,
 }
 
 /// No surfel: the end of a cell's list.
@@ -101,6 +103,7 @@ impl BrickFolder {
             keys: Vec::new(),
             heads: Vec::new(),
             clusters: Vec::new(),
+            slots: Vec::new(),
         }
     }
 
@@ -146,40 +149,66 @@ impl BrickFolder {
             .collect();
         order.sort_unstable();
         brick_of_hit.resize(first + hits.len(), 0);
-        let mut start = 0;
-        while start < order.len() {
-            let key = order[start].0;
-            let end = start + order[start..].partition_point(|&(k, _)| k == key);
-            let b = self.brick(key);
+        // The bricks already known, looked up together so that their cache misses overlap.
+        let known: Vec<Option<u32>> = order
+            .chunk_by(|a, b| a.0 == b.0)
+            .map(|run| self.index.get(&run[0].0).copied())
+            .collect();
+        // Each hit's brick and cell, brick by brick.
+        let mut slots = std::mem::take(&mut self.slots);
+        slots.clear();
+        for (run, known) in order.chunk_by(|a, b| a.0 == b.0).zip(known) {
+            let key = run[0].0;
+            let b = known.unwrap_or_else(|| self.new_brick(key));
             let origin =
                 self.anchor + Vec3::new(key.0 as f32, key.1 as f32, key.2 as f32) * brick_size;
-            for &(_, i) in &order[start..end] {
-                self.merge(b, origin, &hits[i as usize]);
+            for &(_, i) in run {
+                let cell = ((hits[i as usize].position - origin) / self.cell_size)
+                    .floor()
+                    .clamp(Vec3::ZERO, Vec3::splat(3.0));
+                let cell = cell.x as u32 + 4 * (cell.y as u32 + 4 * cell.z as u32);
+                slots.push((b, cell as u8, i));
                 brick_of_hit[first + i as usize] = b;
             }
-            start = end;
         }
+        self.touch(&slots);
+        for &(b, cell, i) in &slots {
+            self.merge(b, usize::from(cell), &hits[i as usize]);
+        }
+        self.slots = slots;
         Ok(())
     }
 
-    /// The provisional brick of `key`, new if it has none yet.
-    fn brick(&mut self, key: Key) -> u32 {
-        let next = self.keys.len() as u32;
-        let b = *self.index.entry(key).or_insert(next);
-        if b == next {
-            self.keys.push(key);
-            self.heads.push([NONE; 64]);
+    /// Loads the cells' heads, then their first surfels, for every hit before any is merged.
+    /// The loads do not depend on each other, so the CPU overlaps their cache misses; merging
+    /// hit by hit, each hit waited for two misses in turn (its cell's head, then the surfel it
+    /// points to: 83% of the fold's time on Sponza at 1.0 m). Merging then finds them in cache.
+    fn touch(&self, slots: &[(u32, u8, u32)]) {
+        let mut any = 0u32;
+        for &(b, cell, _) in slots {
+            any ^= self.heads[b as usize][usize::from(cell)];
         }
+        for &(b, cell, _) in slots {
+            let head = self.heads[b as usize][usize::from(cell)];
+            if let Some(cl) = self.clusters.get(head as usize) {
+                any ^= cl.next;
+            }
+        }
+        std::hint::black_box(any);
+    }
+
+    /// A new provisional brick for `key`.
+    fn new_brick(&mut self, key: Key) -> u32 {
+        let b = self.keys.len() as u32;
+        self.index.insert(key, b);
+        self.keys.push(key);
+        self.heads.push([NONE; 64]);
         b
     }
 
     /// Merges `h` into the first surfel of its cell in brick `b` whose normal agrees, or starts
     /// a new one.
-    fn merge(&mut self, b: u32, origin: Vec3, h: &Hit) {
-        let cell = ((h.position - origin) / self.cell_size)
-            .floor()
-            .clamp(Vec3::ZERO, Vec3::splat(3.0));
-        let cell = (cell.x as u32 + 4 * (cell.y as u32 + 4 * cell.z as u32)) as usize;
+    fn merge(&mut self, b: u32, cell: usize, h: &Hit) {
         let new = self.clusters.len() as u32;
         let head = &mut self.heads[b as usize][cell];
         if *head == NONE {

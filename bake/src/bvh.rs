@@ -2,7 +2,8 @@
 //! (Meister & Bittner, "Parallel Locally-Ordered Clustering for Bounding Volume Hierarchy
 //! Construction", 2018, with parallel reinsertion):
 //!
-//! - a compressed wide BVH8 (Ylitie et al., HPG 2017) that the bake traces its probe rays with;
+//! - an uncompressed 8-wide BVH that the bake traces its probe rays with, eight rays from one
+//!   probe at a time ([`crate::bvh8`]);
 //! - the binary BVH it was made from, flattened with children after parents and triangles in
 //!   leaf order, which the asset carries so that the runtime (CPU reference and WGSL alike) can
 //!   trace shadow rays with a plain stack traversal.
@@ -13,21 +14,20 @@ use std::collections::VecDeque;
 use glam::Vec3;
 use obvhs::{
     bvh2::{reinsertion::ReinsertionOptimizer, Bvh2},
-    cwbvh::{bvh2_to_cwbvh::bvh2_to_cwbvh, CwBvh},
     ploc::PlocBuilder,
-    ray::{Ray, RayHit},
-    rt_triangle::RtTriangle,
     triangle::Triangle,
     BvhBuildParams,
 };
 use prt_format::{BvhNode, Geometry};
 
+use crate::bvh8::{Bvh8, LANES};
+
 /// The power of two nearest `1 / spacing`: the bake traces in a frame where the probe spacing is
-/// about one unit. obvhs 0.4's wide-BVH traversal clamps a child box's entry distance to an
-/// absolute 1e-4 (`cwbvh::node::EPSILON`), which made a millimetre-sized scene miss every
-/// surface within 0.1 mm of a probe; scaled by a power of two, every float operation of the
-/// build and traversal is the same up to that constant, so results do not depend on the scene's
-/// scale (tests/tests/scale.rs).
+/// about one unit. obvhs 0.4's wide-BVH traversal, which the bake used before [`crate::bvh8`],
+/// clamps a child box's entry distance to an absolute 1e-4 (`cwbvh::node::EPSILON`), which made
+/// a millimetre-sized scene miss every surface within 0.1 mm of a probe; scaled by a power of
+/// two, every float operation of the build and traversal is exact up to constants like that one,
+/// so results do not depend on the scene's scale (tests/tests/scale.rs).
 pub fn trace_scale(spacing: f32) -> f32 {
     if !(spacing.is_finite() && spacing > 0.0) {
         return 1.0;
@@ -39,9 +39,7 @@ pub fn trace_scale(spacing: f32) -> f32 {
 pub struct SceneBvh {
     /// The tracing frame's scale ([`trace_scale`]); the asset's geometry stays in world units.
     scale: f32,
-    cwbvh: CwBvh,
-    /// Triangles in CWBVH primitive order, for intersection.
-    rt_triangles: Vec<RtTriangle>,
+    bvh8: Bvh8,
     /// Asset geometry: flattened BVH2 and its triangles.
     pub geometry: Geometry,
 }
@@ -53,29 +51,6 @@ pub struct TriangleHit {
     pub t: f32,
 }
 
-/// Möller-Trumbore as obvhs' `RtTriangle::intersect` (same layout: `e1 = v0 - v1`,
-/// `e2 = v2 - v0`, `ng = e1 x e2`), with the barycentric tests widened by
-/// [`prt_format::EDGE_TOLERANCE`]: exact tests let a ray aimed at an edge that two triangles
-/// share slip between them when both round it outside (672 of 14,256 rays aimed at the edges
-/// and vertices of a closed box escaped it, `tests/tests/geometry.rs`).
-#[inline(always)]
-fn intersect(tri: &RtTriangle, ray: &Ray) -> f32 {
-    let c = tri.v0 - ray.origin;
-    let r = ray.direction.cross(c);
-    let inv_det = 1.0 / tri.ng.dot(ray.direction);
-    let u = r.dot(tri.e2) * inv_det;
-    let v = r.dot(tri.e1) * inv_det;
-    let w = 1.0 - u - v;
-    let eps = -prt_format::EDGE_TOLERANCE;
-    if inv_det.is_finite() && u >= eps && v >= eps && w >= eps {
-        let t = tri.ng.dot(c) * inv_det;
-        if t >= ray.tmin && t <= ray.tmax {
-            return t;
-        }
-    }
-    f32::INFINITY
-}
-
 impl SceneBvh {
     /// Builds both BVHs (in parallel on the current rayon pool), the traced one in the frame
     /// scaled by `scale` (a power of two, [`trace_scale`]).
@@ -83,8 +58,7 @@ impl SceneBvh {
         if triangles.is_empty() {
             return SceneBvh {
                 scale,
-                cwbvh: CwBvh::default(),
-                rt_triangles: Vec::new(),
+                bvh8: Bvh8::default(),
                 geometry: Geometry::default(),
             };
         }
@@ -105,17 +79,13 @@ impl SceneBvh {
             params.search_depth_threshold,
         );
         ReinsertionOptimizer::default().run(&mut bvh2, params.reinsertion_batch_ratio, None);
-        let cwbvh = bvh2_to_cwbvh(&bvh2, params.max_prims_per_leaf.clamp(1, 3), true, false);
-        let rt_triangles = cwbvh
-            .primitive_indices
-            .iter()
-            .map(|&i| RtTriangle::from(&tris[i as usize]))
-            .collect();
-        let geometry = flatten(&bvh2, triangles, 1.0 / scale);
+        let (bvh8, geometry) = rayon::join(
+            || Bvh8::from_bvh2(&bvh2, &tris),
+            || flatten(&bvh2, triangles, 1.0 / scale),
+        );
         SceneBvh {
             scale,
-            cwbvh,
-            rt_triangles,
+            bvh8,
             geometry,
         }
     }
@@ -137,25 +107,29 @@ impl SceneBvh {
         })
     }
 
-    /// Closest hit along `origin + t dir`, `t` in `(0, inf)`.
+    /// Closest hit along `origin + t dir`, `t` in `[0, tmax]` (ties to the lowest triangle).
     #[inline]
-    pub fn closest_hit(&self, origin: Vec3, dir: Vec3) -> Option<TriangleHit> {
-        if self.rt_triangles.is_empty() {
-            return None;
-        }
-        let ray = Ray::new_inf((origin * self.scale).into(), dir.into());
-        let mut hit = RayHit::none();
-        if self
-            .cwbvh
-            .ray_traverse(ray, &mut hit, |r, id| intersect(&self.rt_triangles[id], r))
-        {
-            Some(TriangleHit {
-                triangle: self.cwbvh.primitive_indices[hit.primitive_id as usize],
-                t: hit.t / self.scale,
+    pub fn closest_hit(&self, origin: Vec3, dir: Vec3, tmax: f32) -> Option<TriangleHit> {
+        self.closest_hits(origin, &[dir], tmax)[0]
+    }
+
+    /// [`SceneBvh::closest_hit`] of up to [`LANES`] rays from one origin, traced as a packet
+    /// (each ray gets the hit it gets alone).
+    #[inline]
+    pub fn closest_hits(
+        &self,
+        origin: Vec3,
+        dirs: &[Vec3],
+        tmax: f32,
+    ) -> [Option<TriangleHit>; LANES] {
+        self.bvh8
+            .closest_hits(origin * self.scale, dirs, tmax * self.scale)
+            .map(|hit| {
+                hit.map(|(triangle, t)| TriangleHit {
+                    triangle,
+                    t: t / self.scale,
+                })
             })
-        } else {
-            None
-        }
     }
 }
 
@@ -168,7 +142,7 @@ pub const LEAF_TRIANGLES: u32 = 4;
 
 /// Triangles under every node of `bvh2` reachable from the root, summed in post order (the
 /// reinsertion optimiser leaves no order between parents and children in the node array).
-fn subtree_triangles(bvh2: &Bvh2) -> Vec<u32> {
+pub(crate) fn subtree_triangles(bvh2: &Bvh2) -> Vec<u32> {
     let mut count = vec![0u32; bvh2.nodes.len()];
     let mut stack = vec![(0usize, false)];
     while let Some((i, children_done)) = stack.pop() {
@@ -187,25 +161,14 @@ fn subtree_triangles(bvh2: &Bvh2) -> Vec<u32> {
     count
 }
 
-/// Appends the triangles of `node`'s subtree to `out`, in leaf order.
-fn gather_leaves(
-    bvh2: &Bvh2,
-    node: usize,
-    triangles: &[[Vec3; 3]],
-    out: &mut Vec<prt_format::Triangle>,
-) {
+/// Calls `f` with the primitive (triangle) index of every leaf under `node`, in leaf order.
+pub(crate) fn leaf_primitives(bvh2: &Bvh2, node: usize, mut f: impl FnMut(u32)) {
     let mut stack = vec![node];
     while let Some(i) = stack.pop() {
         let n = &bvh2.nodes[i];
         if n.is_leaf() {
             for p in n.first_index..n.first_index + n.prim_count {
-                let t = triangles[bvh2.primitive_indices[p as usize] as usize];
-                out.push(prt_format::Triangle {
-                    v0: t[0].to_array(),
-                    v1: t[1].to_array(),
-                    v2: t[2].to_array(),
-                    ..Default::default()
-                });
+                f(bvh2.primitive_indices[p as usize]);
             }
         } else {
             stack.push(n.first_index as usize + 1);
@@ -234,7 +197,15 @@ fn flatten(bvh2: &Bvh2, triangles: &[[Vec3; 3]], unscale: f32) -> Geometry {
         };
         if n.is_leaf() || below[src] <= LEAF_TRIANGLES {
             out.first = tris.len() as u32;
-            gather_leaves(bvh2, src, triangles, &mut tris);
+            leaf_primitives(bvh2, src, |p| {
+                let t = triangles[p as usize];
+                tris.push(prt_format::Triangle {
+                    v0: t[0].to_array(),
+                    v1: t[1].to_array(),
+                    v2: t[2].to_array(),
+                    ..Default::default()
+                });
+            });
             out.count = tris.len() as u32 - out.first;
         } else {
             // Children land at the next two free slots, in queue order.

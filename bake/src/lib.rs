@@ -22,6 +22,7 @@
 
 pub mod bricks;
 pub mod bvh;
+pub mod bvh8;
 pub mod depth;
 pub mod diagnostics;
 pub mod dilate;

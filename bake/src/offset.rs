@@ -70,12 +70,11 @@ pub fn surface_offset(
         let search = at + nudge;
         for d in near_directions() {
             let o = search - d * eps;
-            let Some(h) = tracer.bvh.closest_hit(o, d) else {
+            // Only hits within 2 eps count: limiting the ray to them makes it visit only the
+            // nodes around the probe.
+            let Some(h) = tracer.bvh.closest_hit(o, d, 2.0 * eps) else {
                 continue;
             };
-            if h.t > 2.0 * eps {
-                continue;
-            }
             let tri = h.triangle as usize;
             let v = tracer.scene.triangles[tri];
             let n = (v[1] - v[0]).cross(v[2] - v[0]).normalize_or_zero();

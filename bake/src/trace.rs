@@ -4,7 +4,8 @@
 use glam::Vec3;
 use prt_format::sh::{self, SH_COUNT};
 
-use crate::bvh::SceneBvh;
+use crate::bvh::{SceneBvh, TriangleHit};
+use crate::bvh8::LANES;
 use crate::scene::{Material, Scene};
 use crate::texture;
 
@@ -58,26 +59,47 @@ impl Tracer<'_> {
             sky_mask: vec![0; n.div_ceil(32)],
             ..ProbeRays::default()
         };
-        for &i in self.order {
-            let (i, dir) = (i as usize, self.directions[i as usize]);
-            match self.bvh.closest_hit(origin, dir) {
-                Some(h) => {
-                    let hit = self.shade(i as u32, origin, dir, h.triangle as usize, h.t);
-                    out.backface_rays += u32::from(hit.backface);
-                    out.facing_away_rays += u32::from(hit.facing_away);
-                    out.hits.push(hit);
-                }
-                None => {
-                    out.sky_mask[i / 32] |= 1 << (i % 32);
-                    out.sky_rays += 1;
-                    let y = sh::basis(dir.to_array());
-                    for k in 0..SH_COUNT {
-                        out.sky_transfer[k] += self.weight * y[k];
-                    }
-                }
+        for packet in self.order.chunks(LANES) {
+            let mut dirs = [Vec3::ZERO; LANES];
+            for (d, &i) in dirs.iter_mut().zip(packet) {
+                *d = self.directions[i as usize];
+            }
+            let hits = self
+                .bvh
+                .closest_hits(origin, &dirs[..packet.len()], f32::INFINITY);
+            for ((&i, &dir), hit) in packet.iter().zip(&dirs).zip(hits) {
+                self.record(&mut out, origin, i as usize, dir, hit);
             }
         }
         out
+    }
+
+    /// Adds one ray's hit or miss to `out`.
+    #[inline]
+    fn record(
+        &self,
+        out: &mut ProbeRays,
+        origin: Vec3,
+        i: usize,
+        dir: Vec3,
+        hit: Option<TriangleHit>,
+    ) {
+        match hit {
+            Some(h) => {
+                let hit = self.shade(i as u32, origin, dir, h.triangle as usize, h.t);
+                out.backface_rays += u32::from(hit.backface);
+                out.facing_away_rays += u32::from(hit.facing_away);
+                out.hits.push(hit);
+            }
+            None => {
+                out.sky_mask[i / 32] |= 1 << (i % 32);
+                out.sky_rays += 1;
+                let y = sh::basis(dir.to_array());
+                for k in 0..SH_COUNT {
+                    out.sky_transfer[k] += self.weight * y[k];
+                }
+            }
+        }
     }
 
     fn shade(&self, ray: u32, origin: Vec3, dir: Vec3, tri: usize, t: f32) -> Hit {

@@ -2,6 +2,7 @@
 //! options into a settings struct and calls one library function.
 
 mod bench;
+mod bench_bake;
 mod bench_fuzz;
 mod bench_lights;
 mod bench_render;
@@ -479,7 +480,7 @@ fn run(cli: Cli) -> Result<()> {
                     double_sided,
                     ..BakeSettings::default()
                 };
-                println!("{}", bench::bake(&scene, &settings)?);
+                println!("{}", bench_bake::bake(&scene, &settings)?);
                 Ok(())
             }
             BenchKind::Accuracy {

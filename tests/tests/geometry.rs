@@ -40,7 +40,7 @@ fn rays_through_edges_and_vertices_of_a_closed_box_never_escape() {
             for &t in &targets {
                 let d = (t - o).normalize();
                 tried += 1;
-                if bvh.closest_hit(o, d).is_none() {
+                if bvh.closest_hit(o, d, f32::INFINITY).is_none() {
                     escaped += 1;
                 }
             }

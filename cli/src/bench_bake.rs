@@ -1,0 +1,219 @@
+//! `prt bench bake`: bake throughput against bare obvhs tracing of the same rays.
+
+use std::fmt::Write as _;
+use std::path::Path;
+use std::time::Instant;
+
+use anyhow::Result;
+use glam::Vec3;
+use obvhs::{
+    cwbvh::{builder::build_cwbvh_from_tris, CwBvh},
+    ray::{Ray, RayHit},
+    rt_triangle::RtTriangle,
+    triangle::Triangle,
+    BvhBuildParams,
+};
+use prt_bake::{BakeSettings, NoProgress};
+use rayon::prelude::*;
+
+/// obvhs as its documentation shows it: a CWBVH from `build_cwbvh_from_tris` (PLOC, medium
+/// preset) and its closest-hit traversal over `RtTriangle`s in BVH order.
+struct ObvhsTracer {
+    cwbvh: CwBvh,
+    triangles: Vec<RtTriangle>,
+}
+
+impl ObvhsTracer {
+    /// In the bake's tracing frame (`scale`, [`prt_bake::bvh::trace_scale`]).
+    fn build(triangles: &[[Vec3; 3]], scale: f32) -> ObvhsTracer {
+        let tris: Vec<Triangle> = triangles
+            .iter()
+            .map(|t| Triangle {
+                v0: (t[0] * scale).into(),
+                v1: (t[1] * scale).into(),
+                v2: (t[2] * scale).into(),
+            })
+            .collect();
+        let cwbvh = build_cwbvh_from_tris(
+            &tris,
+            BvhBuildParams::medium_build(),
+            &mut std::time::Duration::default(),
+        );
+        let triangles = cwbvh
+            .primitive_indices
+            .iter()
+            .map(|&i| RtTriangle::from(&tris[i as usize]))
+            .collect();
+        ObvhsTracer { cwbvh, triangles }
+    }
+
+    /// Whether the ray hits anything (closest-hit traversal).
+    fn hits(&self, origin: Vec3, dir: Vec3) -> bool {
+        if self.triangles.is_empty() {
+            return false;
+        }
+        let mut hit = RayHit::none();
+        self.cwbvh.ray_traverse(
+            Ray::new_inf(origin.into(), dir.into()),
+            &mut hit,
+            |r, id| self.triangles[id].intersect(r),
+        )
+    }
+}
+
+/// Bake throughput against bare obvhs tracing of the same rays, and asset size per probe.
+pub fn bake(scene: &Path, settings: &BakeSettings) -> Result<String> {
+    // To a file, synced, as `prt bake` does: the "process start to file written".
+    let out = std::env::temp_dir().join(format!("prt-bench-bake-{}.prt", std::process::id()));
+    let start = Instant::now();
+    let baked = prt_bake::bake_to_file(scene, &out, settings, &NoProgress);
+    let bake_s = start.elapsed().as_secs_f64();
+    std::fs::remove_file(&out).ok();
+    let (asset, report) = baked?;
+    let peak = crate::peak_rss_kib().map_or("unknown".into(), |kb| {
+        format!("{:.0} MiB", kb as f64 / 1024.0)
+    });
+
+    // Bare tracing: the same probes and lattice, closest hit only, through obvhs' CWBVH and
+    // through the bake's packet tracer.
+    let loaded = prt_bake::scene::load(scene)?;
+    let scale = prt_bake::bvh::trace_scale(asset.header.grid.spacing);
+    let obvhs = ObvhsTracer::build(&loaded.triangles, scale);
+    let dirs: Vec<Vec3> = prt_format::directions::fibonacci_directions(settings.rays)
+        .into_iter()
+        .map(Vec3::from)
+        .collect();
+    let positions = prt_bake::probes::positions(&asset.header.grid);
+    let bare = |order: &[u32]| {
+        let t = Instant::now();
+        let hits: usize = positions
+            .par_iter()
+            .map(|&p| {
+                order
+                    .iter()
+                    .filter(|&&i| obvhs.hits(p * scale, dirs[i as usize]))
+                    .count()
+            })
+            .sum();
+        (hits, t.elapsed().as_secs_f64())
+    };
+    let coherent = prt_bake::trace::coherent_order(&dirs);
+    let (hits, lattice_s) = bare(&(0..settings.rays).collect::<Vec<u32>>());
+    let (_, bare_s) = bare(&coherent);
+    let (packet_hits, packet_s) = {
+        let bvh = prt_bake::bvh::SceneBvh::build(&loaded.triangles, scale);
+        let t = Instant::now();
+        let hits: usize = positions
+            .par_iter()
+            .map(|&p| {
+                coherent
+                    .chunks(prt_bake::bvh8::LANES)
+                    .map(|packet| {
+                        let d: Vec<Vec3> = packet.iter().map(|&i| dirs[i as usize]).collect();
+                        bvh.closest_hits(p, &d, f32::INFINITY)
+                            .iter()
+                            .flatten()
+                            .count()
+                    })
+                    .sum::<usize>()
+            })
+            .sum();
+        (hits, t.elapsed().as_secs_f64())
+    };
+
+    let probes = asset.probes.len() as f64;
+    let rays = probes * f64::from(settings.rays);
+    let summary = prt_format::Summary::of(&asset, report.file_bytes);
+    let trace_s = report
+        .timings
+        .iter()
+        .find(|(s, _)| *s == "trace")
+        .map_or(0.0, |(_, d)| d.as_secs_f64());
+    let mut md = String::new();
+    writeln!(md, "| figure | value |\n|---|---|")?;
+    writeln!(
+        md,
+        "| scene | {} ({} triangles) |",
+        scene.display(),
+        summary.triangle_count
+    )?;
+    writeln!(
+        md,
+        "| probes (valid) | {} ({}) |",
+        summary.probe_count, summary.valid_probe_count
+    )?;
+    writeln!(md, "| rays per probe | {} |", settings.rays)?;
+    writeln!(md, "| threads | {} |", rayon::current_num_threads())?;
+    writeln!(md, "| peak memory of the bake (resident) | {peak} |")?;
+    writeln!(
+        md,
+        "| end-to-end bake (load, BVH, trace, bricks, assemble, write to a file and sync it) | {bake_s:.3} s |"
+    )?;
+    writeln!(
+        md,
+        "| end-to-end throughput | {:.0} probes/s, {:.2} M rays/s |",
+        probes / bake_s,
+        rays / bake_s / 1e6
+    )?;
+    writeln!(
+        md,
+        "| bake trace stage alone (tracing and merging, overlapped) | {:.2} M rays/s |",
+        rays / trace_s / 1e6
+    )?;
+    writeln!(
+        md,
+        "| bare obvhs tracing, same rays in lattice order ({hits} hits) | {lattice_s:.3} s, {:.2} M rays/s |",
+        rays / lattice_s / 1e6
+    )?;
+    writeln!(
+        md,
+        "| bare obvhs tracing, same rays in the bake's order | {bare_s:.3} s, {:.2} M rays/s |",
+        rays / bare_s / 1e6
+    )?;
+    writeln!(
+        md,
+        "| bare packet tracing (the bake's BVH8, 8 rays a packet, {packet_hits} hits) | {packet_s:.3} s, {:.2} M rays/s |",
+        rays / packet_s / 1e6
+    )?;
+    writeln!(
+        md,
+        "| end-to-end throughput / bare tracing throughput, lattice order | {:.0}% |",
+        100.0 * lattice_s / bake_s
+    )?;
+    writeln!(
+        md,
+        "| end-to-end throughput / bare tracing throughput, the bake's order | {:.0}% |",
+        100.0 * bare_s / bake_s
+    )?;
+    writeln!(
+        md,
+        "| stage times | {} |",
+        report
+            .timings
+            .iter()
+            .map(|(s, d)| format!("{s} {:.3} s", d.as_secs_f64()))
+            .collect::<Vec<_>>()
+            .join(", ")
+    )?;
+    writeln!(
+        md,
+        "| asset bytes per probe (file) | {:.0} |",
+        summary.bytes_per_probe
+    )?;
+    writeln!(
+        md,
+        "| per-probe runtime data (probe, sky mask and transfer, visibility map, factors) | {:.0} bytes |",
+        summary.transport_bytes_per_probe
+    )?;
+    writeln!(
+        md,
+        "| factors per probe | {:.1} |",
+        summary.factors_per_probe
+    )?;
+    writeln!(
+        md,
+        "| surfels (ray hits before merging) / bricks | {} ({}) / {} |",
+        summary.surfel_count, summary.surfels_unmerged, summary.brick_count
+    )?;
+    Ok(md)
+}
