@@ -3,11 +3,14 @@
 //! Every probe shoots its lattice directions from one origin, in Morton order of the octahedral
 //! map ([`crate::trace::coherent_order`]), so consecutive rays span a narrow cone. Tracing eight
 //! of them together (ray packets: Wald, Slusallek, Benthin, Wagner, "Interactive Rendering with
-//! Coherent Ray Tracing", 2001) fetches each node once for the packet and tests a child box or a
-//! triangle against all eight rays as two SSE vectors of four (glam's `Vec4`). The shared origin makes `box - origin`, `v0 - origin` and `ng . (v0 - origin)`
-//! one value per packet instead of one per ray. Nodes hold eight children with their boxes in
-//! plain f32, structure of arrays, as Embree's BVH8 does: a packet amortises the node fetch, so
-//! obvhs' compressed nodes (decoded per ray) would save memory at the price of decode work.
+//! Coherent Ray Tracing", 2001) fetches each node once for the packet. Inside a node the work is
+//! per ray, SIMD across the node (as Embree's single-ray BVH8 traversal): each ray still in the
+//! packet tests the eight child boxes as two SSE vectors of four (glam's `Vec4`), and each leaf's
+//! four triangles, stored structure of arrays, in one vector. Rays that left the packet cost
+//! nothing: at Sponza's probes a packet arrives at an inner node with 3.8 of its 8 rays on
+//! average, and at a leaf with 2.1. The shared origin makes `box - origin`, `v0 - origin` and
+//! `ng . (v0 - origin)` one value per node or leaf, not one per ray. Boxes are plain f32, not
+//! obvhs' compressed nodes, which trade decode work per ray for memory.
 //!
 //! The tree is obvhs' PLOC binary BVH collapsed greedily (open the child with the largest
 //! surface area until eight), with subtrees of at most [`LEAF_TRIANGLES`] triangles as leaves.
@@ -24,7 +27,7 @@ use obvhs::{bvh2::Bvh2, triangle::Triangle};
 /// Rays in a packet and children in a node.
 pub const LANES: usize = 8;
 
-/// Most triangles in a leaf.
+/// Most triangles in a leaf: one SIMD vector of them.
 pub const LEAF_TRIANGLES: u32 = 4;
 
 type Lanes = [f32; LANES];
@@ -38,15 +41,15 @@ const FAR_SLACK: f32 = 1.0 + 4.0 * f32::EPSILON;
 /// tests only, so that `0 * (1 / 0)` never makes a NaN.
 const TINY: f32 = 1e-30;
 
-/// Eight children: boxes, and for each either a node index or a run of triangles.
+/// Eight children: boxes, and for each either a node index or a leaf.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(32))]
 struct Node {
     min: [Lanes; 3],
     max: [Lanes; 3],
-    /// Inner child: its node index; leaf child: its first triangle.
+    /// Inner child: its node index; leaf child: its first [`Tri4`].
     index: [u32; LANES],
-    /// Leaf child: its triangle count; 0 for an inner child.
+    /// Leaf child: its [`Tri4`] count; 0 for an inner child.
     count: [u8; LANES],
     /// Children in use (the first `len`).
     len: u8,
@@ -62,22 +65,47 @@ impl Node {
     };
 }
 
-/// A triangle in the layout of obvhs' `RtTriangle` (`e1 = v0 - v1`, `e2 = v2 - v0`,
-/// `ng = e1 x e2`), with its index in the scene.
+/// Four triangles, structure of arrays, in the layout of obvhs' `RtTriangle` (`e1 = v0 - v1`,
+/// `e2 = v2 - v0`, `ng = e1 x e2`), with their indices in the scene. Unused lanes have `ng = 0`,
+/// which no ray hits.
 #[derive(Clone, Copy, Debug)]
-struct Tri {
-    v0: Vec3,
-    e1: Vec3,
-    e2: Vec3,
-    ng: Vec3,
-    index: u32,
+#[repr(C, align(16))]
+struct Tri4 {
+    v0: [Vec4; 3],
+    e1: [Vec4; 3],
+    e2: [Vec4; 3],
+    ng: [Vec4; 3],
+    index: [u32; 4],
+}
+
+impl Tri4 {
+    const EMPTY: Tri4 = Tri4 {
+        v0: [Vec4::ZERO; 3],
+        e1: [Vec4::ZERO; 3],
+        e2: [Vec4::ZERO; 3],
+        ng: [Vec4::ZERO; 3],
+        index: [u32::MAX; 4],
+    };
+
+    /// Puts triangle `v` (scene index `index`) in lane `j`.
+    fn set(&mut self, j: usize, v: [Vec3; 3], index: u32) {
+        let (e1, e2) = (v[0] - v[1], v[2] - v[0]);
+        let ng = e1.cross(e2);
+        for a in 0..3 {
+            self.v0[a][j] = v[0][a];
+            self.e1[a][j] = e1[a];
+            self.e2[a][j] = e2[a];
+            self.ng[a][j] = ng[a];
+        }
+        self.index[j] = index;
+    }
 }
 
 /// The wide BVH and its triangles in leaf order.
 #[derive(Default)]
 pub struct Bvh8 {
     nodes: Vec<Node>,
-    triangles: Vec<Tri>,
+    triangles: Vec<Tri4>,
 }
 
 /// A stack entry: an inner node or a leaf's triangles, the rays that entered its box and the
@@ -90,32 +118,34 @@ struct Entry {
     near: f32,
 }
 
-/// Eight lanes as two SSE vectors.
-type Wide = [Vec4; 2];
-
-/// Eight rays from one origin.
+/// Up to eight rays from one origin.
 struct Packet {
     origin: Vec3,
-    /// Per axis, the rays' direction components.
-    dir: [Wide; 3],
-    /// Per axis, their inverses ([`TINY`] for zero).
-    inv: [Wide; 3],
-    /// Best distance so far (infinite: none).
-    t: Wide,
-    /// Triangle (scene index) at `t`.
+    dir: [Lanes; 3],
+    /// Inverse directions ([`TINY`] for zero components).
+    inv: [Lanes; 3],
+    /// Best distance so far (`tmax`: none).
+    t: Lanes,
+    /// Triangle (scene index) at `t`, `u32::MAX` for none.
     hit: [u32; LANES],
 }
 
-/// The lanes of a mask as bits (lane `k` is bit `k`).
+/// The set lanes of a mask as bits.
 #[inline(always)]
-fn bits(m: [BVec4A; 2]) -> u8 {
-    (m[0].bitmask() | m[1].bitmask() << 4) as u8
+fn bits(m: BVec4A) -> u8 {
+    m.bitmask() as u8
 }
 
-/// Lane `k` of `w`.
+/// The set bits of `mask`, lowest first.
 #[inline(always)]
-fn lane(w: &Wide, k: usize) -> f32 {
-    w[k / 4][k % 4]
+fn each_bit(mut mask: u8) -> impl Iterator<Item = usize> {
+    std::iter::from_fn(move || {
+        (mask != 0).then(|| {
+            let k = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            k
+        })
+    })
 }
 
 impl Bvh8 {
@@ -128,7 +158,7 @@ impl Bvh8 {
         let is_leaf = |i: usize| bvh2.nodes[i].is_leaf() || below[i] <= LEAF_TRIANGLES;
         let mut out = Bvh8 {
             nodes: vec![Node::EMPTY],
-            triangles: Vec::with_capacity(triangles.len()),
+            triangles: Vec::with_capacity(triangles.len() / 2),
         };
         let mut work = vec![(0usize, 0usize)];
         while let Some((src, dst)) = work.pop() {
@@ -140,20 +170,21 @@ impl Bvh8 {
                     node.max[a][k] = hi[a];
                 }
                 if is_leaf(c) {
-                    node.index[k] = out.triangles.len() as u32;
+                    let first = out.triangles.len();
+                    let mut n = 0;
                     crate::bvh::leaf_primitives(bvh2, c, |p| {
+                        if n % 4 == 0 {
+                            out.triangles.push(Tri4::EMPTY);
+                        }
                         let t = &triangles[p as usize];
-                        let (v0, v1, v2) = (Vec3::from(t.v0), Vec3::from(t.v1), Vec3::from(t.v2));
-                        let (e1, e2) = (v0 - v1, v2 - v0);
-                        out.triangles.push(Tri {
-                            v0,
-                            e1,
-                            e2,
-                            ng: e1.cross(e2),
-                            index: p,
-                        });
+                        let v = [t.v0, t.v1, t.v2].map(Vec3::from);
+                        if let Some(q) = out.triangles.last_mut() {
+                            q.set(n % 4, v, p);
+                        }
+                        n += 1;
                     });
-                    node.count[k] = (out.triangles.len() as u32 - node.index[k]) as u8;
+                    node.index[k] = first as u32;
+                    node.count[k] = (out.triangles.len() - first) as u8;
                 } else {
                     node.index[k] = out.nodes.len() as u32;
                     out.nodes.push(Node::EMPTY);
@@ -179,27 +210,24 @@ impl Bvh8 {
         if self.nodes.is_empty() || dirs.is_empty() {
             return hits;
         }
-        let mut dir = [[0.0f32; LANES]; 3];
-        let mut inv = [[1.0 / TINY; LANES]; 3];
+        let mut p = Packet {
+            origin,
+            dir: [[0.0; LANES]; 3],
+            inv: [[0.0; LANES]; 3],
+            t: [tmax; LANES],
+            hit: [u32::MAX; LANES],
+        };
         for (k, d) in dirs.iter().enumerate() {
             for a in 0..3 {
-                dir[a][k] = d[a];
+                p.dir[a][k] = d[a];
                 let safe = if d[a].abs() < TINY {
                     TINY.copysign(d[a])
                 } else {
                     d[a]
                 };
-                inv[a][k] = 1.0 / safe;
+                p.inv[a][k] = 1.0 / safe;
             }
         }
-        let wide = |l: &Lanes| [Vec4::from_slice(&l[..4]), Vec4::from_slice(&l[4..])];
-        let mut p = Packet {
-            origin,
-            dir: dir.each_ref().map(wide),
-            inv: inv.each_ref().map(wide),
-            t: [Vec4::splat(tmax); 2],
-            hit: [u32::MAX; LANES],
-        };
         let all = (1u16 << dirs.len()) as u8 - 1;
         let mut stack = Vec::with_capacity(64);
         stack.push(Entry {
@@ -209,11 +237,8 @@ impl Bvh8 {
             near: 0.0,
         });
         while let Some(e) = stack.pop() {
-            // Rays whose best hit is nearer than the box for all of them: skip.
-            let far = (0..LANES)
-                .filter(|&k| e.mask >> k & 1 != 0)
-                .fold(0.0f32, |m, k| m.max(lane(&p.t, k)));
-            if e.near > far {
+            // Every ray in the entry has a hit nearer than its box: skip.
+            if each_bit(e.mask).all(|k| e.near > p.t[k]) {
                 continue;
             }
             if e.count == 0 {
@@ -227,53 +252,57 @@ impl Bvh8 {
         }
         for (k, hit) in hits.iter_mut().enumerate().take(dirs.len()) {
             if p.hit[k] != u32::MAX {
-                *hit = Some((p.hit[k], lane(&p.t, k)));
+                *hit = Some((p.hit[k], p.t[k]));
             }
         }
         hits
     }
 
-    /// Tests the packet against a node's children and pushes those it enters, nearest last (so
-    /// popped first).
+    /// Tests the packet's rays in `mask` against a node's children and pushes those entered,
+    /// nearest last (so popped first).
     #[inline(always)]
     fn visit(&self, node: &Node, p: &Packet, mask: u8, stack: &mut Vec<Entry>) {
+        // Per axis and half, the children's planes relative to the origin.
+        let rel = |planes: &[Lanes; 3], a: usize, h: usize| {
+            Vec4::from_slice(&planes[a][4 * h..]) - Vec4::splat(p.origin[a])
+        };
+        let lo: [[Vec4; 2]; 3] =
+            std::array::from_fn(|a| [rel(&node.min, a, 0), rel(&node.min, a, 1)]);
+        let hi: [[Vec4; 2]; 3] =
+            std::array::from_fn(|a| [rel(&node.max, a, 0), rel(&node.max, a, 1)]);
+        let mut rays = [0u8; LANES];
+        let mut near = [Vec4::INFINITY; 2];
+        for k in each_bit(mask) {
+            let inv = [0, 1, 2].map(|a| Vec4::splat(p.inv[a][k]));
+            for h in 0..2 {
+                let (mut tn, mut tf) = (Vec4::ZERO, Vec4::INFINITY);
+                for a in 0..3 {
+                    let (t0, t1) = (lo[a][h] * inv[a], hi[a][h] * inv[a]);
+                    tn = tn.max(t0.min(t1));
+                    tf = tf.min(t0.max(t1));
+                }
+                let enter = tn.cmple((tf * FAR_SLACK).min(Vec4::splat(p.t[k])));
+                near[h] = Vec4::select(enter, near[h].min(tn), near[h]);
+                for c in each_bit(bits(enter)) {
+                    rays[4 * h + c] |= 1 << k;
+                }
+            }
+        }
         let base = stack.len();
         for c in 0..usize::from(node.len) {
-            let mut enter = [BVec4A::FALSE; 2];
-            let mut near = [Vec4::ZERO; 2];
-            for h in 0..2 {
-                let (mut tn, mut tf) = (Vec4::ZERO, p.t[h]);
-                for a in 0..3 {
-                    let lo = Vec4::splat(node.min[a][c] - p.origin[a]);
-                    let hi = Vec4::splat(node.max[a][c] - p.origin[a]);
-                    let (t0, t1) = (lo * p.inv[a][h], hi * p.inv[a][h]);
-                    tn = tn.max(t0.min(t1));
-                    tf = tf.min(t0.max(t1) * FAR_SLACK);
-                }
-                enter[h] = tn.cmple(tf);
-                near[h] = Vec4::select(enter[h], tn, Vec4::INFINITY);
-            }
-            let hit = bits(enter) & mask;
-            if hit == 0 {
+            if rays[c] == 0 {
                 continue;
             }
-            let near = if hit == bits(enter) {
-                near[0].min(near[1]).min_element()
-            } else {
-                (0..LANES)
-                    .filter(|&k| hit >> k & 1 != 0)
-                    .fold(f32::INFINITY, |m, k| m.min(lane(&near, k)))
-            };
             let entry = Entry {
                 index: node.index[c],
                 count: node.count[c],
-                mask: hit,
-                near,
+                mask: rays[c],
+                near: near[c / 4][c % 4],
             };
             // Insertion by descending distance among this node's entries.
             let mut i = stack.len();
             stack.push(entry);
-            while i > base && stack[i - 1].near < near {
+            while i > base && stack[i - 1].near < entry.near {
                 stack[i] = stack[i - 1];
                 i -= 1;
             }
@@ -283,43 +312,41 @@ impl Bvh8 {
 }
 
 impl Packet {
-    /// Möller-Trumbore as `crate::bvh`'s single-ray test, lane by lane, keeping the nearer hit
-    /// (ties to the lower triangle index).
+    /// Möller-Trumbore in the form of obvhs' `RtTriangle::intersect` with the barycentric
+    /// tests widened by [`prt_format::EDGE_TOLERANCE`] (exact tests let a ray aimed at an edge
+    /// two triangles share slip between them when both round it outside:
+    /// `tests/tests/geometry.rs`), for each ray in `mask` against four triangles at once,
+    /// keeping the nearer hit (ties to the lower triangle index).
     #[inline(always)]
-    fn intersect(&mut self, tri: &Tri, mask: u8) {
-        let c = tri.v0 - self.origin;
-        let ngc = Vec4::splat(tri.ng.dot(c));
+    fn intersect(&mut self, tri: &Tri4, mask: u8) {
+        let o = self.origin;
+        let c = [0, 1, 2].map(|a| tri.v0[a] - Vec4::splat(o[a]));
+        let [ngx, ngy, ngz] = tri.ng;
+        let ngc = ngx * c[0] + ngy * c[1] + ngz * c[2];
         let eps = Vec4::splat(-prt_format::EDGE_TOLERANCE);
-        let s = |v: f32| Vec4::splat(v);
-        let mut candidate = [BVec4A::FALSE; 2];
-        let mut ts = [Vec4::ZERO; 2];
-        for h in 0..2 {
-            let (dx, dy, dz) = (self.dir[0][h], self.dir[1][h], self.dir[2][h]);
+        for k in each_bit(mask) {
+            let [dx, dy, dz] = [0, 1, 2].map(|a| Vec4::splat(self.dir[a][k]));
             // r = d x c, in glam's operand order.
-            let rx = dy * s(c.z) - s(c.y) * dz;
-            let ry = dz * s(c.x) - s(c.z) * dx;
-            let rz = dx * s(c.y) - s(c.x) * dy;
-            let inv_det = Vec4::ONE / (s(tri.ng.x) * dx + s(tri.ng.y) * dy + s(tri.ng.z) * dz);
-            let u = (rx * s(tri.e2.x) + ry * s(tri.e2.y) + rz * s(tri.e2.z)) * inv_det;
-            let v = (rx * s(tri.e1.x) + ry * s(tri.e1.y) + rz * s(tri.e1.z)) * inv_det;
+            let rx = dy * c[2] - c[1] * dz;
+            let ry = dz * c[0] - c[2] * dx;
+            let rz = dx * c[1] - c[0] * dy;
+            let inv_det = Vec4::ONE / (ngx * dx + ngy * dy + ngz * dz);
+            let u = (rx * tri.e2[0] + ry * tri.e2[1] + rz * tri.e2[2]) * inv_det;
+            let v = (rx * tri.e1[0] + ry * tri.e1[1] + rz * tri.e1[2]) * inv_det;
             let w = Vec4::ONE - u - v;
             let t = ngc * inv_det;
-            ts[h] = t;
-            candidate[h] = inv_det.abs().cmplt(Vec4::INFINITY)
+            let candidate = inv_det.abs().cmplt(Vec4::INFINITY)
                 & u.cmpge(eps)
                 & v.cmpge(eps)
                 & w.cmpge(eps)
                 & t.cmpge(Vec4::ZERO)
-                & t.cmple(self.t[h]);
-        }
-        let mut m = bits(candidate) & mask;
-        while m != 0 {
-            let k = m.trailing_zeros() as usize;
-            m &= m - 1;
-            let (t, best) = (lane(&ts, k), lane(&self.t, k));
-            if t < best || tri.index < self.hit[k] {
-                self.t[k / 4][k % 4] = t;
-                self.hit[k] = tri.index;
+                & t.cmple(Vec4::splat(self.t[k]));
+            for j in each_bit(bits(candidate)) {
+                let (t, index) = (t[j], tri.index[j]);
+                if t < self.t[k] || (t == self.t[k] && index < self.hit[k]) {
+                    self.t[k] = t;
+                    self.hit[k] = index;
+                }
             }
         }
     }
@@ -393,29 +420,27 @@ mod tests {
         Bvh8::from_bvh2(&bvh2, tris)
     }
 
-    /// The hit a loop over every triangle finds, with the same test and tie rule.
+    /// The hit a loop over every triangle finds: the same test, one ray and one triangle at a
+    /// time in scalar code, and the same tie rule.
     fn brute(tris: &[Triangle], o: Vec3, d: Vec3) -> Option<(u32, f32)> {
-        let w = |x: f32| [Vec4::splat(x); 2];
-        let mut p = Packet {
-            origin: o,
-            dir: [w(d.x), w(d.y), w(d.z)],
-            inv: [w(0.0); 3],
-            t: w(f32::INFINITY),
-            hit: [u32::MAX; LANES],
-        };
+        let mut best: Option<(u32, f32)> = None;
         for (i, t) in tris.iter().enumerate() {
-            let (v0, v1, v2) = (Vec3::from(t.v0), Vec3::from(t.v1), Vec3::from(t.v2));
-            let (e1, e2) = (v0 - v1, v2 - v0);
-            let tri = Tri {
-                v0,
-                e1,
-                e2,
-                ng: e1.cross(e2),
-                index: i as u32,
-            };
-            p.intersect(&tri, 1);
+            let v = [t.v0, t.v1, t.v2].map(Vec3::from);
+            let (e1, e2) = (v[0] - v[1], v[2] - v[0]);
+            let ng = e1.cross(e2);
+            let c = v[0] - o;
+            let r = d.cross(c);
+            let inv_det = 1.0 / ng.dot(d);
+            let (u, v) = (r.dot(e2) * inv_det, r.dot(e1) * inv_det);
+            let w = 1.0 - u - v;
+            let t = ng.dot(c) * inv_det;
+            let eps = -prt_format::EDGE_TOLERANCE;
+            let inside = inv_det.is_finite() && u >= eps && v >= eps && w >= eps && t >= 0.0;
+            if inside && best.is_none_or(|(_, b)| t < b) {
+                best = Some((i as u32, t));
+            }
         }
-        (p.hit[0] != u32::MAX).then_some((p.hit[0], p.t[0].x))
+        best
     }
 
     fn check(tris: &[Triangle], origins: &[Vec3], dirs: &[Vec3]) -> usize {
