@@ -113,6 +113,17 @@ impl SceneBvh {
         self.closest_hits(origin, &[dir], tmax)[0]
     }
 
+    /// The triangles within `radius` (along each axis) of `centre`, for short rays there
+    /// ([`Near::closest_hit`]): one traversal for many rays, and none for most probes, which
+    /// have nothing that near.
+    pub fn near(&self, centre: Vec3, radius: f32) -> Near<'_> {
+        let (c, r) = (centre * self.scale, Vec3::splat(radius * self.scale));
+        Near {
+            bvh: self,
+            leaves: self.bvh8.leaves_in(c - r, c + r),
+        }
+    }
+
     /// [`SceneBvh::closest_hit`] of up to [`LANES`] rays from one origin, traced as a packet
     /// (each ray gets the hit it gets alone).
     #[inline]
@@ -129,6 +140,30 @@ impl SceneBvh {
                     triangle,
                     t: t / self.scale,
                 })
+            })
+    }
+}
+
+/// The triangles near a point ([`SceneBvh::near`]).
+pub struct Near<'a> {
+    bvh: &'a SceneBvh,
+    leaves: Vec<(u32, u8)>,
+}
+
+impl Near<'_> {
+    /// [`SceneBvh::closest_hit`], exact for rays whose first `tmax` stays in the box the
+    /// triangles were gathered from.
+    pub fn closest_hit(&self, origin: Vec3, dir: Vec3, tmax: f32) -> Option<TriangleHit> {
+        if self.leaves.is_empty() {
+            return None;
+        }
+        let scale = self.bvh.scale;
+        self.bvh
+            .bvh8
+            .closest_hit_among(&self.leaves, origin * scale, dir, tmax * scale)
+            .map(|(triangle, t)| TriangleHit {
+                triangle,
+                t: t / scale,
             })
     }
 }

@@ -258,6 +258,55 @@ impl Bvh8 {
         hits
     }
 
+    /// The leaves (first [`Tri4`], count) whose boxes overlap the box `lo..=hi`: every
+    /// triangle a ray inside that box can hit there.
+    pub fn leaves_in(&self, lo: Vec3, hi: Vec3) -> Vec<(u32, u8)> {
+        let mut leaves = Vec::new();
+        let mut stack = vec![0u32];
+        while let Some(i) = stack.pop() {
+            let Some(node) = self.nodes.get(i as usize) else {
+                break;
+            };
+            for c in 0..usize::from(node.len) {
+                let overlaps = (0..3).all(|a| node.min[a][c] <= hi[a] && node.max[a][c] >= lo[a]);
+                if !overlaps {
+                    continue;
+                }
+                if node.count[c] == 0 {
+                    stack.push(node.index[c]);
+                } else {
+                    leaves.push((node.index[c], node.count[c]));
+                }
+            }
+        }
+        leaves
+    }
+
+    /// [`Bvh8::closest_hits`] of one ray, among the triangles of `leaves` only (exact when they
+    /// are [`Bvh8::leaves_in`] a box that holds the ray's first `tmax` of length).
+    pub fn closest_hit_among(
+        &self,
+        leaves: &[(u32, u8)],
+        origin: Vec3,
+        dir: Vec3,
+        tmax: f32,
+    ) -> Option<(u32, f32)> {
+        let mut p = Packet {
+            origin,
+            dir: [[dir.x; LANES], [dir.y; LANES], [dir.z; LANES]],
+            inv: [[0.0; LANES]; 3],
+            t: [tmax; LANES],
+            hit: [u32::MAX; LANES],
+        };
+        for &(first, count) in leaves {
+            let first = first as usize;
+            for tri in &self.triangles[first..first + usize::from(count)] {
+                p.intersect(tri, 1);
+            }
+        }
+        (p.hit[0] != u32::MAX).then_some((p.hit[0], p.t[0]))
+    }
+
     /// Tests the packet's rays in `mask` against a node's children and pushes those entered,
     /// nearest last (so popped first).
     #[inline(always)]
@@ -452,6 +501,12 @@ mod tests {
                 for (k, &d) in packet.iter().enumerate() {
                     let want = brute(tris, o, d);
                     assert_eq!(got[k], want, "origin {o}, direction {d}");
+                    // Among the triangles near its first stretch, the same hit within it.
+                    let reach = want.map_or(2.0, |(_, t)| t.min(2.0));
+                    let r = Vec3::splat(reach);
+                    let near = bvh.leaves_in(o - r, o + r);
+                    let short = bvh.closest_hits(o, &[d], reach)[0];
+                    assert_eq!(bvh.closest_hit_among(&near, o, d, reach), short);
                     // Alone, the ray gets the same hit as in its packet.
                     assert_eq!(bvh.closest_hits(o, &[d], f32::INFINITY)[0], want);
                     // Within the hit's distance, the same hit; within less, none.

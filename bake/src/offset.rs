@@ -68,11 +68,12 @@ pub fn surface_offset(
     let mut at = p;
     'moves: for _ in 0..3 {
         let search = at + nudge;
+        // The rays span `search +- eps`; their triangles are gathered once (with room for
+        // rounding: more candidates never change a closest hit).
+        let near = tracer.bvh.near(search, 2.0 * eps);
         for d in near_directions() {
             let o = search - d * eps;
-            // Only hits within 2 eps count: limiting the ray to them makes it visit only the
-            // nodes around the probe.
-            let Some(h) = tracer.bvh.closest_hit(o, d, 2.0 * eps) else {
+            let Some(h) = near.closest_hit(o, d, 2.0 * eps) else {
                 continue;
             };
             let tri = h.triangle as usize;
