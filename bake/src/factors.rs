@@ -8,7 +8,7 @@
 //! conventions.md section 2 with each hit's radiance replaced by its brick's.
 
 use glam::Vec3;
-use prt_format::sh::{self, SH_COUNT};
+use prt_format::sh::SH_COUNT;
 use prt_format::{Brick, FactorRow};
 
 use crate::trace::Hit;
@@ -19,7 +19,7 @@ use crate::trace::Hit;
 pub fn probe_rows(
     hits: &[Hit],
     hit_brick: &[u32],
-    directions: &[Vec3],
+    basis: &[[f32; SH_COUNT]],
     weight: f32,
 ) -> Vec<FactorRow> {
     let mut order: Vec<(u32, u32, usize)> = hits
@@ -31,7 +31,7 @@ pub fn probe_rows(
     order.sort_unstable();
     let mut rows: Vec<FactorRow> = Vec::new();
     for (brick, ray, i) in order {
-        let y = sh::basis(directions[ray as usize].to_array());
+        let y = &basis[ray as usize];
         if rows.last().is_none_or(|r| r.0 != brick) {
             rows.push((brick, 0, [0.0; SH_COUNT - 1], [0.0; 3]));
         }

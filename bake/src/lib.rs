@@ -396,6 +396,10 @@ fn bake_in_pool(
         scene: &scene,
         bvh: &bvh,
         directions: &dirs,
+        basis: dirs
+            .iter()
+            .map(|d| prt_format::sh::basis(d.to_array()))
+            .collect(),
         order: &order,
         weight,
         double_sided: settings.double_sided,

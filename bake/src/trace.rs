@@ -2,7 +2,7 @@
 //! sample, a miss sets the ray's bit in the probe's sky mask.
 
 use glam::Vec3;
-use prt_format::sh::{self, SH_COUNT};
+use prt_format::sh::SH_COUNT;
 
 use crate::bvh::{SceneBvh, TriangleHit};
 use crate::bvh8::LANES;
@@ -43,6 +43,8 @@ pub struct Tracer<'a> {
     pub scene: &'a Scene,
     pub bvh: &'a SceneBvh,
     pub directions: &'a [Vec3],
+    /// The SH basis of each direction ([`prt_format::sh::basis`]), evaluated once for every probe.
+    pub basis: Vec<[f32; SH_COUNT]>,
     /// The order the lattice is traced in ([`coherent_order`]).
     pub order: &'a [u32],
     pub weight: f32,
@@ -94,7 +96,7 @@ impl Tracer<'_> {
             None => {
                 out.sky_mask[i / 32] |= 1 << (i % 32);
                 out.sky_rays += 1;
-                let y = sh::basis(dir.to_array());
+                let y = &self.basis[i];
                 for k in 0..SH_COUNT {
                     out.sky_transfer[k] += self.weight * y[k];
                 }
