@@ -348,11 +348,8 @@ fn bake_in_pool(
     let scene = scene::load_bytes(scene_path, &source_bytes)?;
     drop(source_bytes);
     report.warnings.extend(scene.warnings.iter().cloned());
-    let winding = diagnostics::winding(&scene.triangles);
-    let winding_hint = winding.inconsistent_fraction() > WINDING_WARNING && !settings.double_sided;
-    if winding_hint {
-        report.warnings.push(diagnostics::winding_warning(&winding));
-    }
+    // The winding check runs beside the BVH build; its warning goes here, after the scene's.
+    let winding_warning_at = report.warnings.len();
     if scene.degenerate_skipped > 0 {
         report.warnings.push(format!(
             "{} degenerate (zero-area) triangles skipped",
@@ -381,7 +378,16 @@ fn bake_in_pool(
         .unwrap_or_else(|| probes::default_spacing(min, max));
     // The grid first: a spacing far too small for the scene is refused before any other work.
     let grid = probes::grid(min, max, spacing, settings.max_probes)?;
-    let bvh = bvh::SceneBvh::build_checked(&scene.triangles, bvh::trace_scale(spacing))?;
+    let (winding, bvh) = rayon::join(
+        || diagnostics::winding(&scene.triangles),
+        || bvh::SceneBvh::build_checked(&scene.triangles, bvh::trace_scale(spacing)),
+    );
+    let bvh = bvh?;
+    let winding_hint = winding.inconsistent_fraction() > WINDING_WARNING && !settings.double_sided;
+    if winding_hint {
+        let warning = diagnostics::winding_warning(&winding);
+        report.warnings.insert(winding_warning_at, warning);
+    }
     lap(&mut report, "bvh", None);
 
     let positions = probes::positions(&grid);
