@@ -41,8 +41,8 @@ use std::time::{Duration, Instant};
 
 use glam::Vec3;
 use prt_format::{
-    directions, split_rows_for_u8, Asset, BakeSettingsRecord, BakeStats, FactorRow, Factors,
-    Header, Probe, TransferPrecision, PROBE_DILATED, PROBE_OFFSET, PROBE_VALID, U8_MAX_BRICK,
+    directions, split_rows_for_u8, Asset, BakeSettingsRecord, BakeStats, Factors, Header, Probe,
+    TransferPrecision, PROBE_DILATED, PROBE_OFFSET, PROBE_VALID, U8_MAX_BRICK,
 };
 use rayon::prelude::*;
 
@@ -478,15 +478,18 @@ fn bake_in_pool(
             reason: "the 8-bit factor encoding addresses at most 16,777,216 bricks; use f16",
         });
     }
-    let tables: Vec<Vec<FactorRow>> = tables
+    // Each probe's f32 rows (52 bytes a row, the largest thing the bake holds) are finished
+    // and encoded (16 bytes a row in u8), and freed, one table at a time.
+    let tables: Vec<Factors> = tables
         .into_par_iter()
         .map(|mut rows| {
             factors::finish(&mut rows, &remap, &bricked.bricks);
-            if u8_rows {
+            let rows = if u8_rows {
                 split_rows_for_u8(rows)
             } else {
                 rows
-            }
+            };
+            Factors::build(&rows, settings.transfer_precision, n, 4.0 * cell_size)
         })
         .collect();
     drop(remap);
@@ -525,15 +528,13 @@ fn bake_in_pool(
         backface_hits: traced.iter().map(|r| u64::from(r.backface_rays)).sum(),
         surfels_unmerged: hits,
     };
-    // Encoded probe by probe in parallel, then joined; the f32 rows, the largest thing the
-    // bake holds, are dropped before the join.
-    let parts: Vec<Factors> = carried
-        .par_iter()
-        .map(|t| Factors::build(t, settings.transfer_precision, n, 4.0 * cell_size))
-        .collect();
+    // No probe carrying a table (all invalid): an empty table of the asked precision.
+    let factors = match carried.is_empty() {
+        true => Factors::build(&[], settings.transfer_precision, n, 4.0 * cell_size),
+        false => Factors::concat(&carried),
+    };
     drop(carried);
     drop(tables);
-    let factors = Factors::concat(parts);
     let asset = Asset {
         header: Header {
             generator: format!("prt-bake {}", env!("CARGO_PKG_VERSION")),
@@ -578,12 +579,12 @@ fn bake_in_pool(
 fn assemble_probes<'a>(
     traced: &[trace::ProbeRays],
     positions: &[(Vec3, bool)],
-    tables: &'a [Vec<FactorRow>],
+    tables: &'a [Factors],
     valid: &[bool],
     sources: &[Option<usize>],
 ) -> Assembled<'a> {
     let mut probes = Vec::with_capacity(traced.len());
-    let mut carried: Vec<&[FactorRow]> = Vec::with_capacity(traced.len());
+    let mut carried: Vec<&Factors> = Vec::with_capacity(traced.len());
     let mask_words = traced.first().map_or(0, |r| r.sky_mask.len());
     let mut sky_mask = Vec::with_capacity(mask_words * positions.len());
     let mut sky_transfer = Vec::with_capacity(positions.len());
@@ -594,17 +595,18 @@ fn assemble_probes<'a>(
             (false, Some(q)) => (PROBE_VALID | PROBE_DILATED, q),
             (false, None) => (0, p),
         };
-        let table: &[FactorRow] = if flags == 0 { &[] } else { &tables[from] };
+        let table = (flags != 0).then(|| &tables[from]);
+        let len = table.map_or(0, Factors::len);
         probes.push(Probe {
             position: pos.to_array(),
             flags: flags | if moved { PROBE_OFFSET } else { 0 },
             first_factor: factor_count as u32,
-            factor_count: table.len() as u32,
+            factor_count: len as u32,
             sky_rays: traced[from].sky_rays,
             backface_rays: traced[from].backface_rays,
         });
-        factor_count += table.len() as u64;
-        carried.push(table);
+        factor_count += len as u64;
+        carried.extend(table);
         sky_mask.extend_from_slice(&traced[from].sky_mask);
         sky_transfer.push(traced[from].sky_transfer);
     }
@@ -620,8 +622,9 @@ fn assemble_probes<'a>(
 /// The per-probe sections of the asset, before encoding.
 struct Assembled<'a> {
     probes: Vec<Probe>,
-    /// Per probe, the factor table it carries (its own, its dilation source's, or none).
-    carried: Vec<&'a [FactorRow]>,
+    /// The factor tables the probes carry, in probe order (a probe's own, its dilation
+    /// source's; none for an invalid probe).
+    carried: Vec<&'a Factors>,
     factor_count: u64,
     sky_mask: Vec<u32>,
     sky_transfer: Vec<[f32; prt_format::sh::SH_COUNT]>,

@@ -328,27 +328,29 @@ pub enum Factors {
 
 impl Factors {
     /// Joins tables encoded separately, in order (all of one precision and, for u8, built with
-    /// one brick size). No parts give the default (empty u8).
+    /// one brick size); a table may appear more than once (a dilated probe carries its source's).
+    /// No parts give the default (empty u8).
     ///
     /// # Panics
     /// When the parts mix precisions or u8 offset scales: they come from one
     /// [`Factors::build`] call site with fixed arguments, never from input.
-    pub fn concat(parts: Vec<Factors>) -> Factors {
-        let total: usize = parts.iter().map(Factors::len).sum();
-        let mut parts = parts.into_iter();
-        let Some(mut all) = parts.next() else {
+    pub fn concat(parts: &[&Factors]) -> Factors {
+        let total: usize = parts.iter().map(|p| p.len()).sum();
+        let Some(first) = parts.first() else {
             return Factors::default();
         };
-        let more = total - all.len();
-        match &mut all {
-            Factors::F32(a) => a.reserve_exact(more),
-            Factors::F16(a) => a.reserve_exact(more),
-            Factors::U8 { factors, .. } => factors.reserve_exact(more),
-        }
+        let mut all = match first {
+            Factors::F32(_) => Factors::F32(Vec::with_capacity(total)),
+            Factors::F16(_) => Factors::F16(Vec::with_capacity(total)),
+            Factors::U8 { offset_scale, .. } => Factors::U8 {
+                factors: Vec::with_capacity(total),
+                offset_scale: *offset_scale,
+            },
+        };
         for part in parts {
             match (&mut all, part) {
-                (Factors::F32(a), Factors::F32(b)) => a.extend(b),
-                (Factors::F16(a), Factors::F16(b)) => a.extend(b),
+                (Factors::F32(a), Factors::F32(b)) => a.extend_from_slice(b),
+                (Factors::F16(a), Factors::F16(b)) => a.extend_from_slice(b),
                 (
                     Factors::U8 {
                         factors: a,
@@ -359,8 +361,8 @@ impl Factors {
                         offset_scale: scale,
                     },
                 ) => {
-                    assert_eq!(*offset_scale, scale, "Factors::concat of u8 offset scales");
-                    a.extend(b)
+                    assert_eq!(offset_scale, scale, "Factors::concat of u8 offset scales");
+                    a.extend_from_slice(b)
                 }
                 (a, b) => panic!(
                     "Factors::concat of {:?} and {:?} tables",
