@@ -9,7 +9,9 @@
 
 use glam::Vec3;
 use prt_format::sh::SH_COUNT;
-use prt_format::{Brick, FactorRow};
+use prt_format::{
+    split_rows_for_u8, u8_offset_scale, Brick, FactorRow, FactorU8, Factors, TransferPrecision,
+};
 
 use crate::trace::Hit;
 
@@ -45,14 +47,130 @@ pub fn probe_rows(
     rows
 }
 
+/// One probe's factor rows while bricks are provisional, as close to their final form as that
+/// allows: f32 sums for f32 and f16 tables; for u8 tables, the transfer already encoded (rows of
+/// more than 255 rays split) beside the rays' mean hit point, 32 bytes a row against 52 (the
+/// rows are the largest thing the bake holds: 1.9 GB as sums at 105k Sponza probes).
+pub enum ProbeRows {
+    Sums(Vec<FactorRow>),
+    U8(Vec<RowU8>),
+}
+
+/// A u8 factor waiting for its brick's final number and centroid.
+pub struct RowU8 {
+    /// Provisional brick.
+    brick: u32,
+    /// Transfer and rays ([`FactorU8::transfer`]).
+    factor: FactorU8,
+    /// Mean hit point of the row's rays (all of them, before a split).
+    mean: Vec3,
+}
+
+impl ProbeRows {
+    /// `rows` from [`probe_rows`] in the form `precision` keeps them, for a lattice of
+    /// `ray_count` rays.
+    pub fn new(rows: Vec<FactorRow>, precision: TransferPrecision, ray_count: u32) -> Self {
+        if precision != TransferPrecision::U8 {
+            return ProbeRows::Sums(rows);
+        }
+        let means: Vec<FactorRow> = rows
+            .into_iter()
+            .map(|(b, rays, sh, sum)| (b, rays, sh, (Vec3::from(sum) / rays as f32).to_array()))
+            .collect();
+        ProbeRows::U8(
+            split_rows_for_u8(means)
+                .into_iter()
+                .map(|(brick, rays, sh, mean)| RowU8 {
+                    brick,
+                    factor: FactorU8::transfer(rays, sh, ray_count),
+                    mean: Vec3::from(mean),
+                })
+                .collect(),
+        )
+    }
+
+    /// The probe's factor table: bricks renumbered by `remap`, offsets from the bricks'
+    /// centroids, sorted by brick (a split row's parts in order), encoded in `precision`.
+    pub fn encode(
+        self,
+        remap: &[u32],
+        bricks: &[Brick],
+        precision: TransferPrecision,
+        ray_count: u32,
+        brick_size: f32,
+    ) -> Factors {
+        match self {
+            ProbeRows::Sums(mut rows) => {
+                finish(&mut rows, remap, bricks);
+                Factors::build(&rows, precision, ray_count, brick_size)
+            }
+            ProbeRows::U8(rows) => {
+                let offset_scale = u8_offset_scale(brick_size);
+                let mut factors: Vec<FactorU8> = rows
+                    .iter()
+                    .map(|r| {
+                        let b = remap[r.brick as usize];
+                        let offset = r.mean - Vec3::from(bricks[b as usize].centroid);
+                        r.factor.place(b, offset.to_array(), offset_scale)
+                    })
+                    .collect();
+                factors.sort_by_key(|f| f.brick_rays >> 8);
+                Factors::U8 {
+                    factors,
+                    offset_scale,
+                }
+            }
+        }
+    }
+}
+
 /// The final rows of one probe, sorted by brick: provisional bricks renumbered by `remap`, hit
 /// sums turned into offsets, the mean of the rays' hit points minus the brick's centroid (see
 /// `prt_format::FactorF32`).
-pub fn finish(rows: &mut [FactorRow], remap: &[u32], bricks: &[Brick]) {
+fn finish(rows: &mut [FactorRow], remap: &[u32], bricks: &[Brick]) {
     for row in rows.iter_mut() {
         row.0 = remap[row.0 as usize];
         let centroid = Vec3::from(bricks[row.0 as usize].centroid);
         row.3 = (Vec3::from(row.3) / row.1 as f32 - centroid).to_array();
     }
     rows.sort_unstable_by_key(|r| r.0);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Rows encoded as u8 while bricks are provisional give the table that finishing the f32
+    /// sums, splitting them and encoding them at the end gives, byte for byte.
+    #[test]
+    fn early_u8_rows_encode_as_late_ones() {
+        let rows: Vec<FactorRow> = [(2u32, 600u32), (0, 3), (1, 255), (3, 256)]
+            .iter()
+            .map(|&(brick, rays)| {
+                let sh = std::array::from_fn(|k| (k as f32 - 3.5) * 0.01 * rays as f32);
+                let sum = [0.3 * rays as f32, -1.7 * rays as f32, 0.05 * rays as f32];
+                (brick, rays, sh, sum)
+            })
+            .collect();
+        let remap = [3, 0, 2, 1];
+        let bricks: Vec<Brick> = (0..4)
+            .map(|i| Brick {
+                centroid: [0.25 * i as f32, -1.6, 0.1],
+                ..Brick::default()
+            })
+            .collect();
+        let (n, size) = (4096, 0.5);
+        let mut late = rows.clone();
+        finish(&mut late, &remap, &bricks);
+        let late = Factors::build(&split_rows_for_u8(late), TransferPrecision::U8, n, size);
+        let early = ProbeRows::new(rows, TransferPrecision::U8, n).encode(
+            &remap,
+            &bricks,
+            TransferPrecision::U8,
+            n,
+            size,
+        );
+        assert_eq!(early.len(), 7, "600 and 256 rays split in three and two");
+        assert_eq!(early, late);
+    }
 }

@@ -41,8 +41,8 @@ use std::time::{Duration, Instant};
 
 use glam::Vec3;
 use prt_format::{
-    directions, split_rows_for_u8, Asset, BakeSettingsRecord, BakeStats, Factors, Header, Probe,
-    TransferPrecision, PROBE_DILATED, PROBE_OFFSET, PROBE_VALID, U8_MAX_BRICK,
+    directions, Asset, BakeSettingsRecord, BakeStats, Factors, Header, Probe, TransferPrecision,
+    PROBE_DILATED, PROBE_OFFSET, PROBE_VALID, U8_MAX_BRICK,
 };
 use rayon::prelude::*;
 
@@ -465,6 +465,7 @@ fn bake_in_pool(
         &tracer,
         folder,
         spacing,
+        settings.transfer_precision,
         progress,
     )?;
     lap(&mut report, "trace", Some("bricks"));
@@ -478,18 +479,12 @@ fn bake_in_pool(
             reason: "the 8-bit factor encoding addresses at most 16,777,216 bricks; use f16",
         });
     }
-    // Each probe's f32 rows (52 bytes a row, the largest thing the bake holds) are finished
-    // and encoded (16 bytes a row in u8), and freed, one table at a time.
+    // Each probe's rows are finished and encoded, and freed, one table at a time.
     let tables: Vec<Factors> = tables
         .into_par_iter()
-        .map(|mut rows| {
-            factors::finish(&mut rows, &remap, &bricked.bricks);
-            let rows = if u8_rows {
-                split_rows_for_u8(rows)
-            } else {
-                rows
-            };
-            Factors::build(&rows, settings.transfer_precision, n, 4.0 * cell_size)
+        .map(|rows| {
+            let precision = settings.transfer_precision;
+            rows.encode(&remap, &bricked.bricks, precision, n, 4.0 * cell_size)
         })
         .collect();
     drop(remap);

@@ -10,13 +10,14 @@
 //! result is the same for any block size or thread count.
 
 use glam::Vec3;
-use prt_format::{FactorRow, DEPTH_WORDS};
+use prt_format::{TransferPrecision, DEPTH_WORDS};
 use rayon::prelude::*;
 
 use crate::bricks::BrickFolder;
 use crate::depth::DepthFilter;
+use crate::factors::{self, ProbeRows};
 use crate::trace::{ProbeRays, Tracer};
-use crate::{factors, BakeError, Progress};
+use crate::{BakeError, Progress};
 
 /// Probes traced per block: enough parallel work per block for many cores, few enough hits
 /// (about 5 MB at 512 rays) that a block's merge stays in cache, and enough blocks that the
@@ -31,8 +32,8 @@ pub struct Traced {
     pub positions: Vec<(Vec3, bool)>,
     /// Per probe: sky mask, sky transfer and ray counts (the hits are folded and dropped).
     pub rays: Vec<ProbeRays>,
-    /// Per probe: factor rows keyed by provisional brick ([`factors::probe_rows`]).
-    pub rows: Vec<Vec<FactorRow>>,
+    /// Per probe: factor rows keyed by provisional brick ([`factors::ProbeRows`]).
+    pub rows: Vec<ProbeRows>,
     /// Per probe, its packed visibility map ([`DepthFilter::map`]), probe after probe.
     pub depth: Vec<u32>,
     pub folder: BrickFolder,
@@ -52,6 +53,7 @@ pub fn trace_and_fold(
     tracer: &Tracer,
     folder: BrickFolder,
     spacing: f32,
+    precision: TransferPrecision,
     progress: &dyn Progress,
 ) -> Result<Traced, BakeError> {
     let depth_filter = DepthFilter::new(tracer.directions);
@@ -80,7 +82,10 @@ pub fn trace_and_fold(
         let (traced, folded) = rayon::join(
             || (start < probe_count).then(|| trace_block(start)),
             || match pending.take() {
-                Some(block) => fold_block(block, &mut out, tracer, &depth_filter, spacing),
+                Some(block) => {
+                    let at = (&depth_filter, spacing, precision);
+                    fold_block(block, &mut out, tracer, at)
+                }
                 None => Ok(()),
             },
         );
@@ -97,8 +102,7 @@ fn fold_block(
     block: Block,
     out: &mut Traced,
     tracer: &Tracer,
-    depth_filter: &DepthFilter,
-    spacing: f32,
+    (depth_filter, spacing, precision): (&DepthFilter, f32, TransferPrecision),
 ) -> Result<(), BakeError> {
     let mut brick_of_hit = Vec::new();
     let mut hit_start = Vec::with_capacity(block.len() + 1);
@@ -113,6 +117,7 @@ fn fold_block(
         .map(|(i, (p, mut r, moved))| {
             let ids = &brick_of_hit[hit_start[i]..hit_start[i + 1]];
             let rows = factors::probe_rows(&r.hits, ids, &tracer.basis, tracer.weight);
+            let rows = ProbeRows::new(rows, precision, tracer.directions.len() as u32);
             let depth = depth_filter.map(p, &r, tracer.directions.len(), spacing);
             r.hits = Vec::new();
             ((p, moved), r, rows, depth)

@@ -270,6 +270,47 @@ pub struct FactorU8 {
 }
 const _: () = assert!(std::mem::size_of::<FactorU8>() == 16);
 
+impl FactorU8 {
+    /// The 8-bit transfer of `rays` (at most [`U8_MAX_RAYS`]) of a probe's `ray_count` rays with
+    /// transfer `sh` (k = 1..9), brick and offset left zero for [`FactorU8::place`]. The baker
+    /// encodes a probe's transfers as it is traced, before its bricks are numbered.
+    pub fn transfer(rays: u32, sh: [f32; 8], ray_count: u32) -> FactorU8 {
+        let dc_per_ray = crate::directions::direction_weight(ray_count) * crate::sh::Y00;
+        let dc = rays as f32 * dc_per_ray;
+        let mut packed = [0u32; 3];
+        for k in 0..8 {
+            let b = 3 + k;
+            packed[b / 4] |= snorm8(sh[k] / (U8_SH_RANGE * dc)) << (8 * (b % 4));
+        }
+        FactorU8 {
+            brick_rays: rays,
+            packed,
+        }
+    }
+
+    /// This transfer from brick `brick` (at most [`U8_MAX_BRICK`]) whose rays' mean hit point
+    /// is `offset` from its centroid (metres; `offset_scale` as in [`Factors::U8`]).
+    pub fn place(self, brick: u32, offset: [f32; 3], offset_scale: f32) -> FactorU8 {
+        let mut packed = self.packed;
+        for (a, &o) in offset.iter().enumerate() {
+            packed[0] |= snorm8(o / offset_scale) << (8 * a);
+        }
+        FactorU8 {
+            brick_rays: (brick << 8) | (self.brick_rays & 0xff),
+            packed,
+        }
+    }
+}
+
+/// Metres per unit of the 8-bit offsets of factors of bricks `brick_size` metres wide.
+pub fn u8_offset_scale(brick_size: f32) -> f32 {
+    if brick_size > 0.0 {
+        brick_size
+    } else {
+        1.0
+    }
+}
+
 /// Largest |Y_k / Y_0| of L2 SH (band 2, m = 0: 0.315392 * 2 / 0.282095 = 2.236): the range of
 /// 8-bit SH terms relative to the DC term.
 pub const U8_SH_RANGE: f32 = 2.24;
@@ -469,25 +510,11 @@ impl Factors {
     ) -> Self {
         match precision {
             TransferPrecision::U8 => {
-                let offset_scale = if brick_size > 0.0 { brick_size } else { 1.0 };
-                let dc_per_ray = crate::directions::direction_weight(ray_count) * crate::sh::Y00;
+                let offset_scale = u8_offset_scale(brick_size);
                 let factors = rows
                     .iter()
                     .map(|&(brick, rays, sh, offset)| {
-                        let dc = rays as f32 * dc_per_ray;
-                        let mut bytes = [0u32; 12];
-                        for a in 0..3 {
-                            bytes[a] = snorm8(offset[a] / offset_scale);
-                        }
-                        for k in 0..8 {
-                            bytes[3 + k] = snorm8(sh[k] / (U8_SH_RANGE * dc));
-                        }
-                        FactorU8 {
-                            brick_rays: (brick << 8) | rays,
-                            packed: std::array::from_fn(|w| {
-                                (0..4).map(|b| bytes[4 * w + b] << (8 * b)).sum()
-                            }),
-                        }
+                        FactorU8::transfer(rays, sh, ray_count).place(brick, offset, offset_scale)
                     })
                     .collect();
                 Factors::U8 {
