@@ -114,7 +114,9 @@ impl BrickFolder {
     /// The hits are visited brick by brick (sorted by key, in hit order within a brick), which
     /// merges exactly as hit order does (a brick's surfels depend only on its own hits' order)
     /// but finds each brick once and keeps its surfels in cache: visiting them in hit order cost
-    /// a cache miss or three per hit (Sponza at 1.0 m: 16% of the bake's CPU time, 13% now).
+    /// a cache miss or three per hit (Sponza at 1.0 m: 16% of the bake's CPU time). Then the
+    /// misses that remain are taken together ([`BrickFolder::touch`]): the fold went from 3.0
+    /// to 1.5 s there.
     pub fn fold(&mut self, hits: &[Hit], brick_of_hit: &mut Vec<u32>) -> Result<(), BakeError> {
         let room = NONE as usize - hits.len().min(NONE as usize);
         if self.clusters.len() > room || self.keys.len() > room {

@@ -23,11 +23,12 @@ use prt_format::{BvhNode, Geometry};
 use crate::bvh8::{Bvh8, LANES};
 
 /// The power of two nearest `1 / spacing`: the bake traces in a frame where the probe spacing is
-/// about one unit. obvhs 0.4's wide-BVH traversal, which the bake used before [`crate::bvh8`],
-/// clamps a child box's entry distance to an absolute 1e-4 (`cwbvh::node::EPSILON`), which made
-/// a millimetre-sized scene miss every surface within 0.1 mm of a probe; scaled by a power of
-/// two, every float operation of the build and traversal is exact up to constants like that one,
-/// so results do not depend on the scene's scale (tests/tests/scale.rs).
+/// about one unit. The triangle test's normal and `ng . (v0 - origin)` grow with the square and
+/// the cube of the coordinates (a quad scaled by 1e19 overflows f32 in metres), and obvhs 0.4's
+/// traversal, which the bake used before [`crate::bvh8`], clamped box entry distances to an
+/// absolute 1e-4. Scaled by a power of two, every float operation of the build and traversal is
+/// the same at any scene scale short of overflow, so results do not depend on the scale
+/// (tests/tests/scale.rs).
 pub fn trace_scale(spacing: f32) -> f32 {
     if !(spacing.is_finite() && spacing > 0.0) {
         return 1.0;
@@ -90,10 +91,18 @@ impl SceneBvh {
         }
     }
 
-    /// [`SceneBvh::build`], with a panic inside obvhs (its CWBVH conversion indexes out of bounds
-    /// on boxes near f32's range, e.g. a quad scaled by 1e19 in the traced frame) ended as an
-    /// error naming the scene's extent in metres.
+    /// [`SceneBvh::build`], with a panic inside obvhs ended as an error naming the scene's extent
+    /// in metres (0.4's CWBVH conversion, which the bake used before [`crate::bvh8`], indexed out
+    /// of bounds on boxes near f32's range, e.g. a quad scaled by 1e19; `tests/tests/hostile.rs`).
     pub fn build_checked(triangles: &[[Vec3; 3]], scale: f32) -> Result<SceneBvh, BakeError> {
+        // Triangle indices are u32, u32::MAX meaning no hit.
+        if triangles.len() >= u32::MAX as usize {
+            return Err(BakeError::Setting {
+                name: "scene",
+                value: format!("{} triangles", triangles.len()),
+                reason: "more than 2^32 - 2 triangles",
+            });
+        }
         crate::catch_quietly(|| SceneBvh::build(triangles, scale)).map_err(|message| {
             let extent = triangles
                 .iter()

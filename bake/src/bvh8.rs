@@ -13,13 +13,17 @@
 //! obvhs' compressed nodes, which trade decode work per ray for memory.
 //!
 //! The tree is obvhs' PLOC binary BVH collapsed greedily (open the child with the largest
-//! surface area until eight), with subtrees of at most [`LEAF_TRIANGLES`] triangles as leaves.
+//! surface area until eight), with subtrees of at most [`TRI_LANES`] triangles as leaves.
 //!
 //! The closest hit is defined without reference to traversal: the least `t`, ties going to the
-//! lowest triangle index. Box tests are conservative (the far distance is widened by
-//! `4 eps`, after Ize, "Robust BVH Ray Traversal", JCGT 2013) and a child is entered when its
-//! near distance equals a ray's best `t`, so a ray gets the same hit whichever packet carries
-//! it, alone or with seven others (unit tests against a brute-force loop over every triangle).
+//! lowest triangle index. Box tests are conservative (boxes grown past what the triangle test's
+//! edge tolerance can reach, the far distance widened by `4 eps` after Ize, "Robust BVH Ray
+//! Traversal", JCGT 2013) and a child is entered when its near distance equals a ray's best `t`,
+//! so a ray gets the same hit whichever packet carries it, alone or with seven others (unit tests
+//! against a brute-force loop over every triangle). One caveat: rounding in the triangle test of
+//! a near-degenerate sliver hit at a grazing angle could put its hit outside its grown box, and
+//! then whether it is found depends on the packet; the bake stays deterministic, since packets are
+//! fixed runs of the ray order.
 
 use glam::{BVec4A, Vec3, Vec4};
 use obvhs::{bvh2::Bvh2, triangle::Triangle};
@@ -27,8 +31,11 @@ use obvhs::{bvh2::Bvh2, triangle::Triangle};
 /// Rays in a packet and children in a node.
 pub const LANES: usize = 8;
 
-/// Most triangles in a leaf: one SIMD vector of them.
-pub const LEAF_TRIANGLES: u32 = 4;
+// Ray sets are `u8` masks, and a node's children two SSE vectors.
+const _: () = assert!(LANES == 8);
+
+/// Triangles in a leaf: one SSE vector of them ([`Tri4`]).
+pub const TRI_LANES: usize = 4;
 
 type Lanes = [f32; LANES];
 
@@ -75,7 +82,7 @@ struct Tri4 {
     e1: [Vec4; 3],
     e2: [Vec4; 3],
     ng: [Vec4; 3],
-    index: [u32; 4],
+    index: [u32; TRI_LANES],
 }
 
 impl Tri4 {
@@ -84,7 +91,7 @@ impl Tri4 {
         e1: [Vec4::ZERO; 3],
         e2: [Vec4::ZERO; 3],
         ng: [Vec4::ZERO; 3],
-        index: [u32::MAX; 4],
+        index: [u32::MAX; TRI_LANES],
     };
 
     /// Puts triangle `v` (scene index `index`) in lane `j`.
@@ -155,7 +162,6 @@ impl Bvh8 {
             return Bvh8::default();
         }
         let below = crate::bvh::subtree_triangles(bvh2);
-        let is_leaf = |i: usize| bvh2.nodes[i].is_leaf() || below[i] <= LEAF_TRIANGLES;
         let mut out = Bvh8 {
             nodes: vec![Node::EMPTY],
             triangles: Vec::with_capacity(triangles.len() / 2),
@@ -169,20 +175,23 @@ impl Bvh8 {
                     node.min[a][k] = lo[a];
                     node.max[a][k] = hi[a];
                 }
-                if is_leaf(c) {
+                if !inner(bvh2, &below, c) {
                     let first = out.triangles.len();
                     let mut n = 0;
                     crate::bvh::leaf_primitives(bvh2, c, |p| {
-                        if n % 4 == 0 {
+                        if n % TRI_LANES == 0 {
                             out.triangles.push(Tri4::EMPTY);
                         }
                         let t = &triangles[p as usize];
                         let v = [t.v0, t.v1, t.v2].map(Vec3::from);
                         if let Some(q) = out.triangles.last_mut() {
-                            q.set(n % 4, v, p);
+                            q.set(n % TRI_LANES, v, p);
                         }
                         n += 1;
                     });
+                    // One Tri4: PLOC's leaves hold one triangle each, and a subtree becomes a
+                    // leaf only when it has at most TRI_LANES of them.
+                    debug_assert!((1..=TRI_LANES).contains(&n), "{n} triangles in a leaf");
                     node.index[k] = first as u32;
                     node.count[k] = (out.triangles.len() - first) as u8;
                 } else {
@@ -228,7 +237,7 @@ impl Bvh8 {
                 p.inv[a][k] = 1.0 / safe;
             }
         }
-        let all = (1u16 << dirs.len()) as u8 - 1;
+        let all = u8::MAX >> (LANES - dirs.len());
         let mut stack = Vec::with_capacity(64);
         stack.push(Entry {
             index: 0,
@@ -414,11 +423,17 @@ fn padded(aabb: &obvhs::aabb::Aabb) -> (Vec3, Vec3) {
     (lo - ulps(lo) - grow, hi + ulps(hi) + grow)
 }
 
+/// Whether node `i` of `bvh2` (with `below` triangles under each node) becomes an inner node of
+/// the wide BVH, not a leaf.
+fn inner(bvh2: &Bvh2, below: &[u32], i: usize) -> bool {
+    !bvh2.nodes[i].is_leaf() && below[i] as usize > TRI_LANES
+}
+
 /// Up to eight nodes of `bvh2` covering `node`'s subtree: the node itself when it is a leaf or
 /// small enough to be one, else its children, opening the inner child with the largest surface
 /// area until there are eight (ties to the first).
 fn open(bvh2: &Bvh2, below: &[u32], node: usize) -> Vec<usize> {
-    let inner = |i: usize| !bvh2.nodes[i].is_leaf() && below[i] > LEAF_TRIANGLES;
+    let inner = |i: usize| inner(bvh2, below, i);
     let mut kids = vec![node];
     while kids.len() < LANES {
         let widest = kids
@@ -439,158 +454,4 @@ fn open(bvh2: &Bvh2, below: &[u32], node: usize) -> Vec<usize> {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use obvhs::{ploc::PlocBuilder, BvhBuildParams};
-
-    /// A deterministic generator (xorshift) of floats in [0, 1).
-    struct Rng(u32);
-    impl Rng {
-        fn next(&mut self) -> f32 {
-            self.0 ^= self.0 << 13;
-            self.0 ^= self.0 >> 17;
-            self.0 ^= self.0 << 5;
-            (self.0 >> 8) as f32 / (1 << 24) as f32
-        }
-        fn vec(&mut self, scale: f32) -> Vec3 {
-            Vec3::new(self.next(), self.next(), self.next()) * scale
-        }
-    }
-
-    fn build(tris: &[Triangle]) -> Bvh8 {
-        let params = BvhBuildParams::medium_build();
-        let bvh2 = PlocBuilder::with_capacity(tris.len()).build(
-            params.ploc_search_distance,
-            tris,
-            (0..tris.len() as u32).collect(),
-            params.sort_precision,
-            params.search_depth_threshold,
-        );
-        Bvh8::from_bvh2(&bvh2, tris)
-    }
-
-    /// The hit a loop over every triangle finds: the same test, one ray and one triangle at a
-    /// time in scalar code, and the same tie rule.
-    fn brute(tris: &[Triangle], o: Vec3, d: Vec3) -> Option<(u32, f32)> {
-        let mut best: Option<(u32, f32)> = None;
-        for (i, t) in tris.iter().enumerate() {
-            let v = [t.v0, t.v1, t.v2].map(Vec3::from);
-            let (e1, e2) = (v[0] - v[1], v[2] - v[0]);
-            let ng = e1.cross(e2);
-            let c = v[0] - o;
-            let r = d.cross(c);
-            let inv_det = 1.0 / ng.dot(d);
-            let (u, v) = (r.dot(e2) * inv_det, r.dot(e1) * inv_det);
-            let w = 1.0 - u - v;
-            let t = ng.dot(c) * inv_det;
-            let eps = -prt_format::EDGE_TOLERANCE;
-            let inside = inv_det.is_finite() && u >= eps && v >= eps && w >= eps && t >= 0.0;
-            if inside && best.is_none_or(|(_, b)| t < b) {
-                best = Some((i as u32, t));
-            }
-        }
-        best
-    }
-
-    fn check(tris: &[Triangle], origins: &[Vec3], dirs: &[Vec3]) -> usize {
-        let bvh = build(tris);
-        let mut hits = 0;
-        for &o in origins {
-            for packet in dirs.chunks(LANES) {
-                let got = bvh.closest_hits(o, packet, f32::INFINITY);
-                for (k, &d) in packet.iter().enumerate() {
-                    let want = brute(tris, o, d);
-                    assert_eq!(got[k], want, "origin {o}, direction {d}");
-                    // Among the triangles near its first stretch, the same hit within it.
-                    let reach = want.map_or(2.0, |(_, t)| t.min(2.0));
-                    let r = Vec3::splat(reach);
-                    let near = bvh.leaves_in(o - r, o + r);
-                    let short = bvh.closest_hits(o, &[d], reach)[0];
-                    assert_eq!(bvh.closest_hit_among(&near, o, d, reach), short);
-                    // Alone, the ray gets the same hit as in its packet.
-                    assert_eq!(bvh.closest_hits(o, &[d], f32::INFINITY)[0], want);
-                    // Within the hit's distance, the same hit; within less, none.
-                    if let Some((_, t)) = want.filter(|&(_, t)| t > 0.0) {
-                        assert_eq!(bvh.closest_hits(o, &[d], t)[0], want);
-                        assert_eq!(bvh.closest_hits(o, &[d], t * 0.999)[0], None);
-                    }
-                    hits += usize::from(want.is_some());
-                }
-            }
-        }
-        hits
-    }
-
-    #[test]
-    fn packets_find_the_brute_force_hit_in_a_triangle_soup() {
-        let mut rng = Rng(0x9e37_79b9);
-        let tris: Vec<Triangle> = (0..600)
-            .map(|_| {
-                let c = rng.vec(10.0);
-                Triangle {
-                    v0: (c + rng.vec(3.0)).into(),
-                    v1: (c + rng.vec(3.0)).into(),
-                    v2: (c + rng.vec(3.0)).into(),
-                }
-            })
-            .collect();
-        let origins: Vec<Vec3> = (0..20).map(|_| rng.vec(10.0)).collect();
-        let dirs: Vec<Vec3> = prt_format::directions::fibonacci_directions(203)
-            .into_iter()
-            .map(Vec3::from)
-            .collect();
-        let hits = check(&tris, &origins, &dirs);
-        assert!(
-            hits > 1000,
-            "{hits} hits: the test needs hits to mean anything"
-        );
-    }
-
-    /// Axis-aligned rays along the faces of an axis-aligned box (zero direction components,
-    /// rays in the planes of flat bounding boxes, edges shared by two triangles, ties).
-    #[test]
-    fn packets_find_the_brute_force_hit_on_axis_aligned_faces() {
-        let v = |x: f32, y: f32, z: f32| glam::Vec3A::new(x, y, z);
-        let mut tris = Vec::new();
-        for a in 0..3 {
-            for side in [0.0, 1.0] {
-                let p = |u: f32, w: f32| {
-                    let mut c = [0.0; 3];
-                    c[a] = side;
-                    c[(a + 1) % 3] = u;
-                    c[(a + 2) % 3] = w;
-                    v(c[0], c[1], c[2])
-                };
-                tris.push(Triangle {
-                    v0: p(0.0, 0.0),
-                    v1: p(1.0, 0.0),
-                    v2: p(1.0, 1.0),
-                });
-                tris.push(Triangle {
-                    v0: p(0.0, 0.0),
-                    v1: p(1.0, 1.0),
-                    v2: p(0.0, 1.0),
-                });
-            }
-        }
-        let mut dirs = Vec::new();
-        for a in 0..3 {
-            for s in [-1.0, 1.0] {
-                let mut d = Vec3::ZERO;
-                d[a] = s;
-                dirs.push(d);
-            }
-        }
-        dirs.extend([Vec3::ONE.normalize(), Vec3::new(1.0, 1.0, 0.0).normalize()]);
-        let grid = [0.0, 0.25, 0.5, 1.0];
-        let origins: Vec<Vec3> = grid
-            .iter()
-            .flat_map(|&x| {
-                grid.iter()
-                    .flat_map(move |&y| grid.map(|z| Vec3::new(x, y, z)))
-            })
-            .collect();
-        let hits = check(&tris, &origins, &dirs);
-        assert!(hits > 300, "{hits} hits");
-    }
-}
+mod tests;

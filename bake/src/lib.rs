@@ -3,7 +3,8 @@
 //! The pipeline, one module per stage:
 //!
 //! 1. [`scene`]: load the glTF (transforms, primitives, materials, textures, lights).
-//! 2. [`bvh`]: one PLOC build gives the CWBVH we trace with and the BVH2 the asset carries.
+//! 2. [`bvh`]: one PLOC build gives the 8-wide BVH the probes' ray packets are traced through
+//!    ([`bvh8`]) and the BVH2 the asset carries.
 //! 3. [`probes`]: a regular grid over the scene bounds or `bounds`.
 //! 4. [`trace`]: each probe shoots the N directions of the spherical Fibonacci lattice; hits
 //!    become surfel samples (position, normal, albedo, emission, back-face flag), misses set bits

@@ -83,8 +83,7 @@ pub fn trace_and_fold(
             || (start < probe_count).then(|| trace_block(start)),
             || match pending.take() {
                 Some(block) => {
-                    let at = (&depth_filter, spacing, precision);
-                    fold_block(block, &mut out, tracer, at)
+                    fold_block(block, &mut out, tracer, &depth_filter, spacing, precision)
                 }
                 None => Ok(()),
             },
@@ -102,7 +101,9 @@ fn fold_block(
     block: Block,
     out: &mut Traced,
     tracer: &Tracer,
-    (depth_filter, spacing, precision): (&DepthFilter, f32, TransferPrecision),
+    depth_filter: &DepthFilter,
+    spacing: f32,
+    precision: TransferPrecision,
 ) -> Result<(), BakeError> {
     let mut brick_of_hit = Vec::new();
     let mut hit_start = Vec::with_capacity(block.len() + 1);

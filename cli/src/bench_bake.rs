@@ -61,6 +61,59 @@ impl ObvhsTracer {
     }
 }
 
+/// Bare closest-hit tracing of a bake's rays: seconds and hit count of each way of tracing them.
+struct Bare {
+    /// obvhs, single rays, lattice order and the bake's order; `None` when obvhs panicked
+    /// building its BVH (it does on boxes near f32's range).
+    obvhs: Option<[(f64, usize); 2]>,
+    /// The bake's packet tracer, the bake's order and lattice order.
+    packets: [(f64, usize); 2],
+}
+
+/// Times bare tracing of `asset`'s probes and lattice (`rays` per probe) through obvhs and
+/// through the bake's packet tracer.
+fn bare(scene: &Path, asset: &prt_format::Asset, rays: u32) -> Result<Bare> {
+    let loaded = prt_bake::scene::load(scene)?;
+    let scale = prt_bake::bvh::trace_scale(asset.header.grid.spacing);
+    let dirs: Vec<Vec3> = prt_format::directions::fibonacci_directions(rays)
+        .into_iter()
+        .map(Vec3::from)
+        .collect();
+    let positions = prt_bake::probes::positions(&asset.header.grid);
+    let lattice: Vec<u32> = (0..rays).collect();
+    let coherent = prt_bake::trace::coherent_order(&dirs);
+    let timed = |per_probe: &(dyn Fn(Vec3) -> usize + Sync)| {
+        let t = Instant::now();
+        let hits: usize = positions.par_iter().map(|&p| per_probe(p)).sum();
+        (t.elapsed().as_secs_f64(), hits)
+    };
+    let obvhs = std::panic::catch_unwind(|| ObvhsTracer::build(&loaded.triangles, scale)).ok();
+    let obvhs = obvhs.map(|o| {
+        [&lattice, &coherent].map(|order| {
+            timed(&|p| {
+                order
+                    .iter()
+                    .filter(|&&i| o.hits(p * scale, dirs[i as usize]))
+                    .count()
+            })
+        })
+    });
+    let bvh = prt_bake::bvh::SceneBvh::build_checked(&loaded.triangles, scale)?;
+    let packets = [&coherent, &lattice].map(|order| {
+        timed(&|p| {
+            order
+                .chunks(prt_bake::bvh8::LANES)
+                .map(|packet| {
+                    let d: Vec<Vec3> = packet.iter().map(|&i| dirs[i as usize]).collect();
+                    let hits = bvh.closest_hits(p, &d, f32::INFINITY);
+                    hits.iter().flatten().count()
+                })
+                .sum()
+        })
+    });
+    Ok(Bare { obvhs, packets })
+}
+
 /// Bake throughput against bare obvhs tracing of the same rays, and asset size per probe.
 pub fn bake(scene: &Path, settings: &BakeSettings) -> Result<String> {
     // To a file, synced, as `prt bake` does: the "process start to file written".
@@ -73,57 +126,9 @@ pub fn bake(scene: &Path, settings: &BakeSettings) -> Result<String> {
     let peak = crate::peak_rss_kib().map_or("unknown".into(), |kb| {
         format!("{:.0} MiB", kb as f64 / 1024.0)
     });
-
-    // Bare tracing: the same probes and lattice, closest hit only, through obvhs' CWBVH and
-    // through the bake's packet tracer.
-    let loaded = prt_bake::scene::load(scene)?;
-    let scale = prt_bake::bvh::trace_scale(asset.header.grid.spacing);
-    let obvhs = ObvhsTracer::build(&loaded.triangles, scale);
-    let dirs: Vec<Vec3> = prt_format::directions::fibonacci_directions(settings.rays)
-        .into_iter()
-        .map(Vec3::from)
-        .collect();
-    let positions = prt_bake::probes::positions(&asset.header.grid);
-    let bare = |order: &[u32]| {
-        let t = Instant::now();
-        let hits: usize = positions
-            .par_iter()
-            .map(|&p| {
-                order
-                    .iter()
-                    .filter(|&&i| obvhs.hits(p * scale, dirs[i as usize]))
-                    .count()
-            })
-            .sum();
-        (hits, t.elapsed().as_secs_f64())
-    };
-    let coherent = prt_bake::trace::coherent_order(&dirs);
-    let (hits, lattice_s) = bare(&(0..settings.rays).collect::<Vec<u32>>());
-    let (_, bare_s) = bare(&coherent);
-    let (packet_hits, packet_s) = {
-        let bvh = prt_bake::bvh::SceneBvh::build(&loaded.triangles, scale);
-        let t = Instant::now();
-        let hits: usize = positions
-            .par_iter()
-            .map(|&p| {
-                coherent
-                    .chunks(prt_bake::bvh8::LANES)
-                    .map(|packet| {
-                        let d: Vec<Vec3> = packet.iter().map(|&i| dirs[i as usize]).collect();
-                        bvh.closest_hits(p, &d, f32::INFINITY)
-                            .iter()
-                            .flatten()
-                            .count()
-                    })
-                    .sum::<usize>()
-            })
-            .sum();
-        (hits, t.elapsed().as_secs_f64())
-    };
-
-    let probes = asset.probes.len() as f64;
-    let rays = probes * f64::from(settings.rays);
+    let bare = bare(scene, &asset, settings.rays)?;
     let summary = prt_format::Summary::of(&asset, report.file_bytes);
+    let rays = asset.probes.len() as f64 * f64::from(settings.rays);
     let trace_s = report
         .timings
         .iter()
@@ -152,7 +157,7 @@ pub fn bake(scene: &Path, settings: &BakeSettings) -> Result<String> {
     writeln!(
         md,
         "| end-to-end throughput | {:.0} probes/s, {:.2} M rays/s |",
-        probes / bake_s,
+        summary.probe_count as f64 / bake_s,
         rays / bake_s / 1e6
     )?;
     writeln!(
@@ -160,31 +165,47 @@ pub fn bake(scene: &Path, settings: &BakeSettings) -> Result<String> {
         "| bake trace stage alone (tracing and merging, overlapped) | {:.2} M rays/s |",
         rays / trace_s / 1e6
     )?;
+    let timed = |(s, _): (f64, usize)| format!("{s:.3} s, {:.2} M rays/s", rays / s / 1e6);
+    match bare.obvhs {
+        Some([lattice, coherent]) => {
+            writeln!(
+                md,
+                "| bare obvhs tracing, same rays in lattice order ({} hits) | {} |",
+                lattice.1,
+                timed(lattice)
+            )?;
+            writeln!(
+                md,
+                "| bare obvhs tracing, same rays in the bake's order | {} |",
+                timed(coherent)
+            )?;
+        }
+        None => writeln!(
+            md,
+            "| bare obvhs tracing | n/a: obvhs panicked building its BVH |"
+        )?,
+    }
+    let [packets, lattice_packets] = bare.packets;
     writeln!(
         md,
-        "| bare obvhs tracing, same rays in lattice order ({hits} hits) | {lattice_s:.3} s, {:.2} M rays/s |",
-        rays / lattice_s / 1e6
+        "| bare packet tracing, the bake's BVH8 and order (8 rays a packet, {} hits) | {} |",
+        packets.1,
+        timed(packets)
     )?;
     writeln!(
         md,
-        "| bare obvhs tracing, same rays in the bake's order | {bare_s:.3} s, {:.2} M rays/s |",
-        rays / bare_s / 1e6
+        "| bare packet tracing, packets of consecutive rays in lattice order | {} |",
+        timed(lattice_packets)
     )?;
-    writeln!(
-        md,
-        "| bare packet tracing (the bake's BVH8, 8 rays a packet, {packet_hits} hits) | {packet_s:.3} s, {:.2} M rays/s |",
-        rays / packet_s / 1e6
-    )?;
-    writeln!(
-        md,
-        "| end-to-end throughput / bare tracing throughput, lattice order | {:.0}% |",
-        100.0 * lattice_s / bake_s
-    )?;
-    writeln!(
-        md,
-        "| end-to-end throughput / bare tracing throughput, the bake's order | {:.0}% |",
-        100.0 * bare_s / bake_s
-    )?;
+    if let Some([lattice, coherent]) = bare.obvhs {
+        for (name, (s, _)) in [("lattice order", lattice), ("the bake's order", coherent)] {
+            writeln!(
+                md,
+                "| end-to-end throughput / bare tracing throughput, {name} | {:.0}% |",
+                100.0 * s / bake_s
+            )?;
+        }
+    }
     writeln!(
         md,
         "| stage times | {} |",
@@ -195,6 +216,12 @@ pub fn bake(scene: &Path, settings: &BakeSettings) -> Result<String> {
             .collect::<Vec<_>>()
             .join(", ")
     )?;
+    sizes(&mut md, &summary)?;
+    Ok(md)
+}
+
+/// The asset's size rows of the report.
+fn sizes(md: &mut String, summary: &prt_format::Summary) -> Result<()> {
     writeln!(
         md,
         "| asset bytes per probe (file) | {:.0} |",
@@ -215,5 +242,5 @@ pub fn bake(scene: &Path, settings: &BakeSettings) -> Result<String> {
         "| surfels (ray hits before merging) / bricks | {} ({}) / {} |",
         summary.surfel_count, summary.surfels_unmerged, summary.brick_count
     )?;
-    Ok(md)
+    Ok(())
 }

@@ -1,0 +1,192 @@
+//! Tests of the packet tracer against a brute-force loop over every triangle.
+use super::*;
+use obvhs::{ploc::PlocBuilder, BvhBuildParams};
+
+/// A deterministic generator (xorshift) of floats in [0, 1).
+struct Rng(u32);
+impl Rng {
+    fn next(&mut self) -> f32 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 17;
+        self.0 ^= self.0 << 5;
+        (self.0 >> 8) as f32 / (1 << 24) as f32
+    }
+    fn vec(&mut self, scale: f32) -> Vec3 {
+        Vec3::new(self.next(), self.next(), self.next()) * scale
+    }
+}
+
+fn build(tris: &[Triangle]) -> Bvh8 {
+    let params = BvhBuildParams::medium_build();
+    let bvh2 = PlocBuilder::with_capacity(tris.len()).build(
+        params.ploc_search_distance,
+        tris,
+        (0..tris.len() as u32).collect(),
+        params.sort_precision,
+        params.search_depth_threshold,
+    );
+    Bvh8::from_bvh2(&bvh2, tris)
+}
+
+/// The hit a loop over every triangle finds: the same test, one ray and one triangle at a
+/// time in scalar code, and the same tie rule.
+fn brute(tris: &[Triangle], o: Vec3, d: Vec3) -> Option<(u32, f32)> {
+    let mut best: Option<(u32, f32)> = None;
+    for (i, t) in tris.iter().enumerate() {
+        let v = [t.v0, t.v1, t.v2].map(Vec3::from);
+        let (e1, e2) = (v[0] - v[1], v[2] - v[0]);
+        let ng = e1.cross(e2);
+        let c = v[0] - o;
+        let r = d.cross(c);
+        let inv_det = 1.0 / ng.dot(d);
+        let (u, v) = (r.dot(e2) * inv_det, r.dot(e1) * inv_det);
+        let w = 1.0 - u - v;
+        let t = ng.dot(c) * inv_det;
+        let eps = -prt_format::EDGE_TOLERANCE;
+        let inside = inv_det.is_finite() && u >= eps && v >= eps && w >= eps && t >= 0.0;
+        if inside && best.is_none_or(|(_, b)| t < b) {
+            best = Some((i as u32, t));
+        }
+    }
+    best
+}
+
+fn check(tris: &[Triangle], origins: &[Vec3], dirs: &[Vec3]) -> usize {
+    let bvh = build(tris);
+    let mut hits = 0;
+    for &o in origins {
+        for packet in dirs.chunks(LANES) {
+            let got = bvh.closest_hits(o, packet, f32::INFINITY);
+            for (k, &d) in packet.iter().enumerate() {
+                let want = brute(tris, o, d);
+                assert_eq!(got[k], want, "origin {o}, direction {d}");
+                // Among the triangles near its first stretch, the same hit within it.
+                let reach = want.map_or(2.0, |(_, t)| t.min(2.0));
+                let r = Vec3::splat(reach);
+                let near = bvh.leaves_in(o - r, o + r);
+                let short = bvh.closest_hits(o, &[d], reach)[0];
+                assert_eq!(bvh.closest_hit_among(&near, o, d, reach), short);
+                // Alone, the ray gets the same hit as in its packet.
+                assert_eq!(bvh.closest_hits(o, &[d], f32::INFINITY)[0], want);
+                // Within the hit's distance, the same hit; within less, none.
+                if let Some((_, t)) = want.filter(|&(_, t)| t > 0.0) {
+                    assert_eq!(bvh.closest_hits(o, &[d], t)[0], want);
+                    assert_eq!(bvh.closest_hits(o, &[d], t * 0.999)[0], None);
+                }
+                hits += usize::from(want.is_some());
+            }
+        }
+    }
+    hits
+}
+
+#[test]
+fn packets_find_the_brute_force_hit_in_a_triangle_soup() {
+    // At the origin, and 10 km off it (where a float step is 1 mm: the boxes' growth by float
+    // steps of their coordinates matters there).
+    for offset in [Vec3::ZERO, Vec3::new(1e4, -1e4, 3e3)] {
+        let mut rng = Rng(0x9e37_79b9);
+        let tris: Vec<Triangle> = (0..600)
+            .map(|_| {
+                let c = offset + rng.vec(10.0);
+                Triangle {
+                    v0: (c + rng.vec(3.0)).into(),
+                    v1: (c + rng.vec(3.0)).into(),
+                    v2: (c + rng.vec(3.0)).into(),
+                }
+            })
+            .collect();
+        let origins: Vec<Vec3> = (0..20).map(|_| offset + rng.vec(10.0)).collect();
+        let dirs: Vec<Vec3> = prt_format::directions::fibonacci_directions(203)
+            .into_iter()
+            .map(Vec3::from)
+            .collect();
+        let hits = check(&tris, &origins, &dirs);
+        assert!(
+            hits > 1000,
+            "{hits} hits: the test needs hits to mean anything"
+        );
+    }
+}
+
+/// Slivers (one vertex almost on the opposite edge) and rays grazing them.
+#[test]
+fn packets_find_the_brute_force_hit_on_slivers() {
+    let mut rng = Rng(0x1234_5678);
+    let tris: Vec<Triangle> = (0..300)
+        .map(|_| {
+            let (a, b) = (rng.vec(8.0), rng.vec(8.0));
+            let on_edge = a.lerp(b, rng.next()) + rng.vec(1e-4);
+            Triangle {
+                v0: a.into(),
+                v1: b.into(),
+                v2: on_edge.into(),
+            }
+        })
+        .collect();
+    // Origins on the slivers' lines, rays along and across them.
+    let origins: Vec<Vec3> = tris
+        .iter()
+        .take(10)
+        .map(|t| Vec3::from(t.v0).lerp(Vec3::from(t.v1), 0.5))
+        .collect();
+    let dirs: Vec<Vec3> = prt_format::directions::fibonacci_directions(301)
+        .into_iter()
+        .map(Vec3::from)
+        .chain(
+            tris.iter()
+                .take(10)
+                .map(|t| (Vec3::from(t.v1) - Vec3::from(t.v0)).normalize()),
+        )
+        .collect();
+    let hits = check(&tris, &origins, &dirs);
+    assert!(hits > 100, "{hits} hits");
+}
+
+/// Axis-aligned rays along the faces of an axis-aligned box (zero direction components,
+/// rays in the planes of flat bounding boxes, edges shared by two triangles, ties).
+#[test]
+fn packets_find_the_brute_force_hit_on_axis_aligned_faces() {
+    let v = |x: f32, y: f32, z: f32| glam::Vec3A::new(x, y, z);
+    let mut tris = Vec::new();
+    for a in 0..3 {
+        for side in [0.0, 1.0] {
+            let p = |u: f32, w: f32| {
+                let mut c = [0.0; 3];
+                c[a] = side;
+                c[(a + 1) % 3] = u;
+                c[(a + 2) % 3] = w;
+                v(c[0], c[1], c[2])
+            };
+            tris.push(Triangle {
+                v0: p(0.0, 0.0),
+                v1: p(1.0, 0.0),
+                v2: p(1.0, 1.0),
+            });
+            tris.push(Triangle {
+                v0: p(0.0, 0.0),
+                v1: p(1.0, 1.0),
+                v2: p(0.0, 1.0),
+            });
+        }
+    }
+    let mut dirs = Vec::new();
+    for a in 0..3 {
+        for s in [-1.0, 1.0] {
+            let mut d = Vec3::ZERO;
+            d[a] = s;
+            dirs.push(d);
+        }
+    }
+    dirs.extend([Vec3::ONE.normalize(), Vec3::new(1.0, 1.0, 0.0).normalize()]);
+    let grid = [0.0, 0.25, 0.5, 1.0];
+    let origins: Vec<Vec3> = grid
+        .iter()
+        .flat_map(|&x| {
+            grid.iter()
+                .flat_map(move |&y| grid.map(|z| Vec3::new(x, y, z)))
+        })
+        .collect();
+    let hits = check(&tris, &origins, &dirs);
+    assert!(hits > 300, "{hits} hits");
+}
