@@ -36,6 +36,18 @@ pub fn trace_scale(spacing: f32) -> f32 {
     (-spacing.log2()).round().clamp(-100.0, 100.0).exp2()
 }
 
+/// `triangles` as obvhs triangles in the tracing frame scaled by `scale` ([`trace_scale`]).
+pub fn traced_triangles(triangles: &[[Vec3; 3]], scale: f32) -> Vec<Triangle> {
+    triangles
+        .iter()
+        .map(|t| Triangle {
+            v0: (t[0] * scale).into(),
+            v1: (t[1] * scale).into(),
+            v2: (t[2] * scale).into(),
+        })
+        .collect()
+}
+
 /// The scene's BVHs.
 pub struct SceneBvh {
     /// The tracing frame's scale ([`trace_scale`]); the asset's geometry stays in world units.
@@ -63,14 +75,7 @@ impl SceneBvh {
                 geometry: Geometry::default(),
             };
         }
-        let tris: Vec<Triangle> = triangles
-            .iter()
-            .map(|t| Triangle {
-                v0: (t[0] * scale).into(),
-                v1: (t[1] * scale).into(),
-                v2: (t[2] * scale).into(),
-            })
-            .collect();
+        let tris = traced_triangles(triangles, scale);
         let params = BvhBuildParams::medium_build();
         let mut bvh2 = PlocBuilder::with_capacity(tris.len()).build(
             params.ploc_search_distance,
@@ -144,12 +149,15 @@ impl SceneBvh {
     ) -> [Option<TriangleHit>; LANES] {
         self.bvh8
             .closest_hits(origin * self.scale, dirs, tmax * self.scale)
-            .map(|hit| {
-                hit.map(|(triangle, t)| TriangleHit {
-                    triangle,
-                    t: t / self.scale,
-                })
-            })
+            .map(|hit| self.unscaled(hit))
+    }
+
+    /// A hit of the traced frame, its distance back in world units.
+    fn unscaled(&self, hit: Option<(u32, f32)>) -> Option<TriangleHit> {
+        hit.map(|(triangle, t)| TriangleHit {
+            triangle,
+            t: t / self.scale,
+        })
     }
 }
 
@@ -166,14 +174,11 @@ impl Near<'_> {
         if self.leaves.is_empty() {
             return None;
         }
-        let scale = self.bvh.scale;
-        self.bvh
+        let (bvh, scale) = (self.bvh, self.bvh.scale);
+        let hit = bvh
             .bvh8
-            .closest_hit_among(&self.leaves, origin * scale, dir, tmax * scale)
-            .map(|(triangle, t)| TriangleHit {
-                triangle,
-                t: t / scale,
-            })
+            .closest_hit_among(&self.leaves, origin * scale, dir, tmax * scale);
+        bvh.unscaled(hit)
     }
 }
 

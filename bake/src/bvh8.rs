@@ -219,24 +219,7 @@ impl Bvh8 {
         if self.nodes.is_empty() || dirs.is_empty() {
             return hits;
         }
-        let mut p = Packet {
-            origin,
-            dir: [[0.0; LANES]; 3],
-            inv: [[0.0; LANES]; 3],
-            t: [tmax; LANES],
-            hit: [u32::MAX; LANES],
-        };
-        for (k, d) in dirs.iter().enumerate() {
-            for a in 0..3 {
-                p.dir[a][k] = d[a];
-                let safe = if d[a].abs() < TINY {
-                    TINY.copysign(d[a])
-                } else {
-                    d[a]
-                };
-                p.inv[a][k] = 1.0 / safe;
-            }
-        }
+        let mut p = Packet::new(origin, dirs, tmax);
         let all = u8::MAX >> (LANES - dirs.len());
         let mut stack = Vec::with_capacity(64);
         stack.push(Entry {
@@ -253,18 +236,21 @@ impl Bvh8 {
             if e.count == 0 {
                 self.visit(&self.nodes[e.index as usize], &p, e.mask, &mut stack);
             } else {
-                let first = e.index as usize;
-                for tri in &self.triangles[first..first + usize::from(e.count)] {
+                for tri in self.leaf(e.index, e.count) {
                     p.intersect(tri, e.mask);
                 }
             }
         }
         for (k, hit) in hits.iter_mut().enumerate().take(dirs.len()) {
-            if p.hit[k] != u32::MAX {
-                *hit = Some((p.hit[k], p.t[k]));
-            }
+            *hit = p.hit(k);
         }
         hits
+    }
+
+    /// The triangles of the leaf whose first [`Tri4`] is `first`.
+    fn leaf(&self, first: u32, count: u8) -> &[Tri4] {
+        let first = first as usize;
+        &self.triangles[first..first + usize::from(count)]
     }
 
     /// The leaves (first [`Tri4`], count) whose boxes overlap the box `lo..=hi`: every
@@ -300,20 +286,13 @@ impl Bvh8 {
         dir: Vec3,
         tmax: f32,
     ) -> Option<(u32, f32)> {
-        let mut p = Packet {
-            origin,
-            dir: [[dir.x; LANES], [dir.y; LANES], [dir.z; LANES]],
-            inv: [[0.0; LANES]; 3],
-            t: [tmax; LANES],
-            hit: [u32::MAX; LANES],
-        };
+        let mut p = Packet::new(origin, &[dir], tmax);
         for &(first, count) in leaves {
-            let first = first as usize;
-            for tri in &self.triangles[first..first + usize::from(count)] {
+            for tri in self.leaf(first, count) {
                 p.intersect(tri, 1);
             }
         }
-        (p.hit[0] != u32::MAX).then_some((p.hit[0], p.t[0]))
+        p.hit(0)
     }
 
     /// Tests the packet's rays in `mask` against a node's children and pushes those entered,
@@ -370,6 +349,34 @@ impl Bvh8 {
 }
 
 impl Packet {
+    /// The rays from `origin` along `dirs` (at most [`LANES`]), none hit within `tmax` yet.
+    fn new(origin: Vec3, dirs: &[Vec3], tmax: f32) -> Packet {
+        let mut p = Packet {
+            origin,
+            dir: [[0.0; LANES]; 3],
+            inv: [[0.0; LANES]; 3],
+            t: [tmax; LANES],
+            hit: [u32::MAX; LANES],
+        };
+        for (k, d) in dirs.iter().enumerate() {
+            for a in 0..3 {
+                p.dir[a][k] = d[a];
+                let safe = if d[a].abs() < TINY {
+                    TINY.copysign(d[a])
+                } else {
+                    d[a]
+                };
+                p.inv[a][k] = 1.0 / safe;
+            }
+        }
+        p
+    }
+
+    /// Ray `k`'s closest hit so far: triangle and distance.
+    fn hit(&self, k: usize) -> Option<(u32, f32)> {
+        (self.hit[k] != u32::MAX).then_some((self.hit[k], self.t[k]))
+    }
+
     /// Möller-Trumbore in the form of obvhs' `RtTriangle::intersect` with the barycentric
     /// tests widened by [`prt_format::EDGE_TOLERANCE`] (exact tests let a ray aimed at an edge
     /// two triangles share slip between them when both round it outside:

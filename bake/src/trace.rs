@@ -173,8 +173,9 @@ impl Tracer<'_> {
 /// by the golden angle, 137.5 degrees, from one ray to the next). Rays are traced, eight
 /// consecutive ones to a packet ([`crate::bvh8`]), and their hits merged in this order. Packets
 /// of rays consecutive in the lattice's own order traced 11-22% slower (`prt bench bake`, Sponza
-/// at 1.9 and 1.0 m); single-ray obvhs traversal ran at about the same speed in either order. The order changes
-/// float sums (sky transfer, surfel means) in their last bits, never which ray hits what.
+/// at 1.9 and 1.0 m); single-ray obvhs traversal ran at about the same speed in either order.
+/// The order changes float sums (sky transfer, surfel means) in their last bits, never which ray
+/// hits what.
 pub fn coherent_order(directions: &[Vec3]) -> Vec<u32> {
     let morton = |d: Vec3| -> u32 {
         let [u, v] = prt_format::depth::oct_encode(d.to_array());

@@ -10,7 +10,6 @@ use obvhs::{
     cwbvh::{builder::build_cwbvh_from_tris, CwBvh},
     ray::{Ray, RayHit},
     rt_triangle::RtTriangle,
-    triangle::Triangle,
     BvhBuildParams,
 };
 use prt_bake::{BakeSettings, NoProgress};
@@ -26,14 +25,7 @@ struct ObvhsTracer {
 impl ObvhsTracer {
     /// In the bake's tracing frame (`scale`, [`prt_bake::bvh::trace_scale`]).
     fn build(triangles: &[[Vec3; 3]], scale: f32) -> ObvhsTracer {
-        let tris: Vec<Triangle> = triangles
-            .iter()
-            .map(|t| Triangle {
-                v0: (t[0] * scale).into(),
-                v1: (t[1] * scale).into(),
-                v2: (t[2] * scale).into(),
-            })
-            .collect();
+        let tris = prt_bake::bvh::traced_triangles(triangles, scale);
         let cwbvh = build_cwbvh_from_tris(
             &tris,
             BvhBuildParams::medium_build(),
