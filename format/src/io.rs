@@ -19,6 +19,7 @@ use std::path::{Path, PathBuf};
 
 use crate::asset::Asset;
 use crate::error::FormatError;
+use crate::sections::{payload_size, write_payload, EncodeTo, Sections};
 
 /// The first eight bytes of every prt asset.
 pub const MAGIC: [u8; 8] = *b"PRTGI\0\r\n";
@@ -27,43 +28,6 @@ pub const FORMAT_VERSION: u32 = 3;
 
 const PREFIX: usize = 20;
 const SUFFIX: usize = 8;
-
-fn config() -> bincode::config::Configuration<bincode::config::LittleEndian, bincode::config::Fixint>
-{
-    bincode::config::standard()
-        .with_little_endian()
-        .with_fixed_int_encoding()
-}
-
-/// The payload read one section (top-level field of [`Asset`]) at a time.
-struct Sections<'a> {
-    payload: &'a [u8],
-    at: usize,
-}
-
-impl Sections<'_> {
-    fn next<T: serde::de::DeserializeOwned>(
-        &mut self,
-        section: &'static str,
-    ) -> Result<T, FormatError> {
-        let rest = &self.payload[self.at..];
-        let (value, used) = bincode::serde::decode_from_slice(rest, config()).map_err(|e| {
-            let message = match e {
-                bincode::error::DecodeError::UnexpectedEnd { additional } => {
-                    format!("the payload ends {additional} bytes too early")
-                }
-                other => other.to_string(),
-            };
-            FormatError::Decode {
-                section,
-                offset: self.at,
-                message,
-            }
-        })?;
-        self.at += used;
-        Ok(value)
-    }
-}
 
 /// Serializes an asset into the bytes of a `.prt` file.
 pub fn encode(asset: &Asset) -> Result<Vec<u8>, FormatError> {
@@ -76,23 +40,9 @@ pub fn encode(asset: &Asset) -> Result<Vec<u8>, FormatError> {
     Ok(out)
 }
 
-/// Bytes of the payload of `asset` (a pass that writes nothing).
-fn payload_size(asset: &Asset) -> Result<usize, FormatError> {
-    let mut size = bincode::enc::write::SizeWriter::default();
-    bincode::serde::encode_into_writer(asset, &mut size, config())
-        .map_err(|e| FormatError::Encode(e.to_string()))?;
-    Ok(size.bytes_written)
-}
-
-/// A failure of [`encode_to`]: of the encoding, or of the sink.
-enum EncodeTo {
-    Format(FormatError),
-    Io(std::io::Error),
-}
-
 /// Writes the file's bytes to `sink` as they are encoded, the checksum computed on the way: no
 /// copy of the file in memory (for a bake, the asset alone is most of the peak memory). The
-/// hash sits below a 1 MiB buffer: bincode writes field by field, a few bytes at a time.
+/// hash sits below a 1 MiB buffer: serde writes the small sections a few bytes at a time.
 fn encode_to<W: Write>(asset: &Asset, size: usize, sink: W) -> Result<(), EncodeTo> {
     struct Hashing<W> {
         sink: W,
@@ -121,10 +71,7 @@ fn encode_to<W: Write>(asset: &Asset, size: usize, sink: W) -> Result<(), Encode
         .map_err(EncodeTo::Io)?;
     out.write_all(&(size as u64).to_le_bytes())
         .map_err(EncodeTo::Io)?;
-    bincode::serde::encode_into_std_write(asset, &mut out, config()).map_err(|e| match e {
-        bincode::error::EncodeError::Io { inner, .. } => EncodeTo::Io(inner),
-        other => EncodeTo::Format(FormatError::Encode(other.to_string())),
-    })?;
+    write_payload(asset, &mut out)?;
     let mut hashing = out.into_inner().map_err(|e| EncodeTo::Io(e.into_error()))?;
     if hashing.written != PREFIX + size {
         return Err(EncodeTo::Format(FormatError::Encode(format!(
@@ -180,20 +127,7 @@ pub fn decode(bytes: &[u8]) -> Result<Asset, FormatError> {
     }
     let payload = &bytes[PREFIX..body_end];
     let mut r = Sections { payload, at: 0 };
-    // Field by field, in the struct's order (bincode writes a struct as its fields back to
-    // back), so that an error names the section it is in.
-    let asset = Asset {
-        header: r.next("header")?,
-        probes: r.next("probes")?,
-        sky_mask: r.next("sky_mask")?,
-        sky_transfer: r.next("sky_transfer")?,
-        probe_depth: r.next("probe_depth")?,
-        factors: r.next("factors")?,
-        bricks: r.next("bricks")?,
-        surfels: r.next("surfels")?,
-        geometry: r.next("geometry")?,
-        lights: r.next("lights")?,
-    };
+    let asset = r.asset()?;
     if r.at != payload.len() {
         return Err(FormatError::TrailingBytes {
             payload_bytes: payload.len() - r.at,

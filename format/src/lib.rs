@@ -34,6 +34,7 @@ pub mod directions;
 pub mod error;
 pub mod io;
 pub mod rig;
+mod sections;
 pub mod sh;
 pub mod summary;
 pub mod validate;
