@@ -20,15 +20,26 @@ const SHARPNESS_SQUARINGS: u32 = 6;
 /// Rays farther than this from a texel's centre (weight below 1e-4) are skipped.
 const MIN_COS: f32 = 0.866;
 
-/// Per texel, the lattice rays that feed it and their filter weights.
+/// Texels filtered together: their sums are independent, so interleaving them keeps the
+/// floating-point adders busy instead of waiting on one texel's chain of additions.
+const GROUP: usize = 4;
+const _: () = assert!(DEPTH_TEXELS.is_multiple_of(GROUP));
+
+/// Per texel, the lattice rays that feed it and their filter weights, padded with weight-0
+/// feeds to the same count for every texel (adding `0 * d` to a sum leaves it as it is, bit for
+/// bit: every distance is finite), laid out group by group, feed by feed, texel by texel.
+/// Sponza at 1.0 m: 0.31 s of CPU time for one vector of feeds per texel, one texel at a time.
 pub struct DepthFilter {
-    texels: Vec<Vec<(u32, f32)>>,
+    /// Feeds per texel, padding included.
+    feeds: usize,
+    rays: Vec<u32>,
+    weights: Vec<f64>,
 }
 
 impl DepthFilter {
     /// The filter of the lattice `directions`.
     pub fn new(directions: &[Vec3]) -> DepthFilter {
-        let texels = (0..DEPTH_TEXELS)
+        let texels: Vec<Vec<(u32, f64)>> = (0..DEPTH_TEXELS)
             .map(|t| {
                 let centre = Vec3::from(texel_direction(t));
                 directions
@@ -42,12 +53,27 @@ impl DepthFilter {
                         for _ in 0..SHARPNESS_SQUARINGS {
                             w *= w;
                         }
-                        Some((i as u32, w))
+                        Some((i as u32, f64::from(w)))
                     })
                     .collect()
             })
             .collect();
-        DepthFilter { texels }
+        let feeds = texels.iter().map(Vec::len).max().unwrap_or(0);
+        let mut filter = DepthFilter {
+            feeds,
+            rays: Vec::with_capacity(DEPTH_TEXELS * feeds),
+            weights: Vec::with_capacity(DEPTH_TEXELS * feeds),
+        };
+        for group in texels.chunks(GROUP) {
+            for f in 0..feeds {
+                for texel in group {
+                    let (ray, w) = texel.get(f).copied().unwrap_or((0, 0.0));
+                    filter.rays.push(ray);
+                    filter.weights.push(w);
+                }
+            }
+        }
+        filter
     }
 
     /// The packed visibility map of one probe at `origin` (`ray_count` lattice rays).
@@ -58,33 +84,40 @@ impl DepthFilter {
         ray_count: usize,
         spacing: f32,
     ) -> [u32; DEPTH_WORDS] {
-        let mut distance = vec![MAX_DEPTH; ray_count];
+        let mut distance = vec![MAX_DEPTH; ray_count.max(1)];
         for h in &rays.hits {
             if let Some(d) = distance.get_mut(h.ray as usize) {
                 *d = ((h.position - origin).length() / spacing).min(MAX_DEPTH);
             }
         }
-        let texels: Vec<[u8; 2]> = self
-            .texels
-            .iter()
-            .map(|feeds| {
-                let (mut w_sum, mut m1, mut m2) = (0.0f64, 0.0f64, 0.0f64);
-                for &(i, w) in feeds {
-                    let (w, d) = (f64::from(w), f64::from(distance[i as usize]));
-                    w_sum += w;
-                    m1 += w * d;
-                    m2 += w * d * d;
+        let mut texels = [[0u8; 2]; DEPTH_TEXELS];
+        let step = GROUP * self.feeds;
+        for (g, out) in texels.chunks_mut(GROUP).enumerate() {
+            let (rays, weights) = (
+                &self.rays[g * step..(g + 1) * step],
+                &self.weights[g * step..(g + 1) * step],
+            );
+            let (mut w_sum, mut m1, mut m2) = ([0.0f64; GROUP], [0.0f64; GROUP], [0.0f64; GROUP]);
+            for (rays, weights) in rays.chunks_exact(GROUP).zip(weights.chunks_exact(GROUP)) {
+                for l in 0..GROUP {
+                    let (w, d) = (weights[l], f64::from(distance[rays[l] as usize]));
+                    w_sum[l] += w;
+                    m1[l] += w * d;
+                    m2[l] += w * d * d;
                 }
-                if w_sum <= 0.0 {
+            }
+            for (l, texel) in out.iter_mut().enumerate() {
+                *texel = if w_sum[l] <= 0.0 {
                     // No ray near this texel (very low ray counts): unbounded, so the sampler
                     // skips the test here.
-                    return quantise(MAX_DEPTH, 0.0);
-                }
-                let mean = m1 / w_sum;
-                let deviation = (m2 / w_sum - mean * mean).max(0.0).sqrt();
-                quantise(mean as f32, deviation as f32)
-            })
-            .collect();
+                    quantise(MAX_DEPTH, 0.0)
+                } else {
+                    let mean = m1[l] / w_sum[l];
+                    let deviation = (m2[l] / w_sum[l] - mean * mean).max(0.0).sqrt();
+                    quantise(mean as f32, deviation as f32)
+                };
+            }
+        }
         std::array::from_fn(|w| {
             let (a, b) = (texels[2 * w], texels[2 * w + 1]);
             u32::from_le_bytes([a[0], a[1], b[0], b[1]])

@@ -24,16 +24,18 @@ pub fn probe_rows(
     basis: &[[f32; SH_COUNT]],
     weight: f32,
 ) -> Vec<FactorRow> {
-    let mut order: Vec<(u32, u32, usize)> = hits
+    // By brick, then ray (one key: a probe's rays are distinct).
+    let mut order: Vec<(u64, u32)> = hits
         .iter()
         .zip(hit_brick)
         .enumerate()
-        .map(|(i, (h, &b))| (b, h.ray, i))
+        .map(|(i, (h, &b))| (u64::from(b) << 32 | u64::from(h.ray), i as u32))
         .collect();
-    order.sort_unstable();
+    order.sort_unstable_by_key(|&(key, _)| key);
     let mut rows: Vec<FactorRow> = Vec::new();
-    for (brick, ray, i) in order {
-        let y = &basis[ray as usize];
+    for (key, i) in order {
+        let (brick, i) = ((key >> 32) as u32, i as usize);
+        let y = &basis[hits[i].ray as usize];
         if rows.last().is_none_or(|r| r.0 != brick) {
             rows.push((brick, 0, [0.0; SH_COUNT - 1], [0.0; 3]));
         }

@@ -122,7 +122,7 @@ impl Tracer<'_> {
                 facing_away: true,
             };
         }
-        let (albedo, emission) = self.material_at(material, tri, barycentric(&v, position));
+        let (albedo, emission) = self.material_at(material, tri, || barycentric(&v, position));
         Hit {
             ray,
             position,
@@ -134,12 +134,19 @@ impl Tracer<'_> {
         }
     }
 
-    /// Albedo (base colour x texture x COLOR_0) and emission (factor x texture) at a point.
-    fn material_at(&self, m: &Material, tri: usize, b: [f32; 3]) -> ([f32; 3], [f32; 3]) {
+    /// Albedo (base colour x texture x COLOR_0) and emission (factor x texture) at the point
+    /// of barycentric coordinates `b()`, computed only when something varies over the triangle.
+    fn material_at(
+        &self,
+        m: &Material,
+        tri: usize,
+        b: impl FnOnce() -> [f32; 3],
+    ) -> ([f32; 3], [f32; 3]) {
         if !self.scene.has_vertex_colors && m.base_texture.is_none() && m.emissive_texture.is_none()
         {
             return (m.base_color.map(|a| a.clamp(0.0, 1.0)), m.emissive);
         }
+        let b = b();
         let attr = &self.scene.attributes[tri];
         let uv = |set: u32| -> [f32; 2] {
             let uv = attr.uv[(set as usize).min(1)];
