@@ -141,30 +141,29 @@ impl BrickFolder {
             return Ok(());
         }
         let brick_size = 4.0 * self.cell_size;
-        let mut order: Vec<(Key, u32)> = hits
+        let keys: Vec<Key> = hits
             .iter()
-            .enumerate()
-            .map(|(i, h)| {
+            .map(|h| {
                 let c = ((h.position - self.anchor) / brick_size).floor();
-                ((c.x as i32, c.y as i32, c.z as i32, flags_of(h)), i as u32)
+                (c.x as i32, c.y as i32, c.z as i32, flags_of(h))
             })
             .collect();
-        order.sort_unstable();
+        let order = by_key(&keys);
         brick_of_hit.resize(first + hits.len(), 0);
+        let runs = || order.chunk_by(|&a, &b| keys[a as usize] == keys[b as usize]);
         // The bricks already known, looked up together so that their cache misses overlap.
-        let known: Vec<Option<u32>> = order
-            .chunk_by(|a, b| a.0 == b.0)
-            .map(|run| self.index.get(&run[0].0).copied())
+        let known: Vec<Option<u32>> = runs()
+            .map(|run| self.index.get(&keys[run[0] as usize]).copied())
             .collect();
         // Each hit's brick and cell, brick by brick.
         let mut slots = std::mem::take(&mut self.slots);
         slots.clear();
-        for (run, known) in order.chunk_by(|a, b| a.0 == b.0).zip(known) {
-            let key = run[0].0;
+        for (run, known) in runs().zip(known) {
+            let key = keys[run[0] as usize];
             let b = known.unwrap_or_else(|| self.new_brick(key));
             let origin =
                 self.anchor + Vec3::new(key.0 as f32, key.1 as f32, key.2 as f32) * brick_size;
-            for &(_, i) in run {
+            for &i in run {
                 let cell = ((hits[i as usize].position - origin) / self.cell_size)
                     .floor()
                     .clamp(Vec3::ZERO, Vec3::splat(3.0));
@@ -295,6 +294,43 @@ impl BrickFolder {
     }
 }
 
+/// Indices of `keys` sorted by key, then index. Keys are packed into one `u64` when the span
+/// of their brick coordinates allows (20 bits an axis: a million bricks, 4 flag bits), which
+/// sorts in the same order as the tuples and at a fraction of the cost (the tuples' sort was
+/// 5.7% of the bake's CPU time on Sponza at 1.0 m).
+fn by_key(keys: &[Key]) -> Vec<u32> {
+    const AXIS_BITS: u32 = 20;
+    // Flags (an axis 0..6 and the back-face bit) fit in 4 bits.
+    const _: () = assert!(BRICK_BACKFACE < 16 && BRICK_BACKFACE > 5);
+    let span = |axis: fn(&Key) -> i32| {
+        let (lo, hi) = keys
+            .iter()
+            .map(axis)
+            .fold((i32::MAX, i32::MIN), |(lo, hi), v| (lo.min(v), hi.max(v)));
+        (lo, i64::from(hi) - i64::from(lo) < 1 << AXIS_BITS)
+    };
+    let [(x0, fx), (y0, fy), (z0, fz)] = [|k: &Key| k.0, |k: &Key| k.1, |k: &Key| k.2].map(span);
+    if !(fx && fy && fz) {
+        let mut order: Vec<u32> = (0..keys.len() as u32).collect();
+        order.sort_unstable_by_key(|&i| (keys[i as usize], i));
+        return order;
+    }
+    let offset = |v: i32, lo: i32| (i64::from(v) - i64::from(lo)) as u64;
+    let mut packed: Vec<(u64, u32)> = keys
+        .iter()
+        .zip(0u32..)
+        .map(|(k, i)| {
+            let key = offset(k.0, x0) << (2 * AXIS_BITS + 4)
+                | offset(k.1, y0) << (AXIS_BITS + 4)
+                | offset(k.2, z0) << 4
+                | u64::from(k.3);
+            (key, i)
+        })
+        .collect();
+    packed.sort_unstable();
+    packed.into_iter().map(|(_, i)| i).collect()
+}
+
 /// Finishes one brick: bounds, centroid, and the surfels' gradient weights.
 ///
 /// The brick's radiance is modelled as linear, `L(p) = L_mean + G . (p - centroid)`, fitted by
@@ -399,6 +435,34 @@ impl Cluster {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Packed keys sort as the tuples do, ties by index; spans too wide to pack fall back.
+    #[test]
+    fn by_key_sorts_as_tuples() {
+        let mut state = 0x2545_f491_u32;
+        let mut next = |m: i32| {
+            state ^= state << 13;
+            state ^= state >> 17;
+            state ^= state << 5;
+            (state % m as u32) as i32 - m / 2
+        };
+        for wide in [false, true] {
+            let keys: Vec<Key> = (0..700)
+                .map(|_| {
+                    let x = if wide { next(4) * (1 << 21) } else { next(9) };
+                    (
+                        x,
+                        next(5) - 100,
+                        next(3) + i32::MAX / 2,
+                        (next(16) + 8) as u32,
+                    )
+                })
+                .collect();
+            let mut want: Vec<u32> = (0..keys.len() as u32).collect();
+            want.sort_by_key(|&i| (keys[i as usize], i));
+            assert_eq!(by_key(&keys), want, "wide {wide}");
+        }
+    }
 
     /// Folds `hits` in one go: bricks and each hit's final brick.
     fn build(hits: &[Hit], cell_size: f32, cos: f32, anchor: Vec3) -> (Bricked, Vec<u32>) {
