@@ -85,9 +85,10 @@ impl SceneBvh {
             params.search_depth_threshold,
         );
         ReinsertionOptimizer::default().run(&mut bvh2, params.reinsertion_batch_ratio, None);
+        let below = subtree_triangles(&bvh2);
         let (bvh8, geometry) = rayon::join(
-            || Bvh8::from_bvh2(&bvh2, &tris),
-            || flatten(&bvh2, triangles, 1.0 / scale),
+            || Bvh8::from_bvh2(&bvh2, &below, &tris),
+            || flatten(&bvh2, &below, triangles, 1.0 / scale),
         );
         SceneBvh {
             scale,
@@ -211,18 +212,17 @@ pub(crate) fn subtree_triangles(bvh2: &Bvh2) -> Vec<u32> {
 }
 
 /// Calls `f` with the primitive (triangle) index of every leaf under `node`, in leaf order.
-pub(crate) fn leaf_primitives(bvh2: &Bvh2, node: usize, mut f: impl FnMut(u32)) {
-    let mut stack = vec![node];
-    while let Some(i) = stack.pop() {
-        let n = &bvh2.nodes[i];
-        if n.is_leaf() {
-            for p in n.first_index..n.first_index + n.prim_count {
-                f(bvh2.primitive_indices[p as usize]);
-            }
-        } else {
-            stack.push(n.first_index as usize + 1);
-            stack.push(n.first_index as usize);
+/// Recursive rather than with a stack vector: it runs once per leaf of both collapsed trees,
+/// on subtrees of a few triangles.
+pub(crate) fn leaf_primitives(bvh2: &Bvh2, node: usize, f: &mut impl FnMut(u32)) {
+    let n = &bvh2.nodes[node];
+    if n.is_leaf() {
+        for p in n.first_index..n.first_index + n.prim_count {
+            f(bvh2.primitive_indices[p as usize]);
         }
+    } else {
+        leaf_primitives(bvh2, n.first_index as usize, f);
+        leaf_primitives(bvh2, n.first_index as usize + 1, f);
     }
 }
 
@@ -230,8 +230,7 @@ pub(crate) fn leaf_primitives(bvh2: &Bvh2, node: usize, mut f: impl FnMut(u32)) 
 /// collapses subtrees of at most [`LEAF_TRIANGLES`] triangles into one leaf, and lays the
 /// triangles out in leaf order, back in world units (boxes times `unscale`, exact for a power of
 /// two).
-fn flatten(bvh2: &Bvh2, triangles: &[[Vec3; 3]], unscale: f32) -> Geometry {
-    let below = subtree_triangles(bvh2);
+fn flatten(bvh2: &Bvh2, below: &[u32], triangles: &[[Vec3; 3]], unscale: f32) -> Geometry {
     let mut nodes: Vec<BvhNode> = Vec::with_capacity(bvh2.nodes.len());
     let mut tris = Vec::with_capacity(triangles.len());
     let mut queue = VecDeque::from([0usize]);
@@ -246,7 +245,7 @@ fn flatten(bvh2: &Bvh2, triangles: &[[Vec3; 3]], unscale: f32) -> Geometry {
         };
         if n.is_leaf() || below[src] <= LEAF_TRIANGLES {
             out.first = tris.len() as u32;
-            leaf_primitives(bvh2, src, |p| {
+            leaf_primitives(bvh2, src, &mut |p| {
                 let t = triangles[p as usize];
                 tris.push(prt_format::Triangle {
                     v0: t[0].to_array(),

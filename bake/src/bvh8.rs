@@ -176,12 +176,12 @@ fn each_bit(mut mask: u8) -> impl Iterator<Item = usize> {
 }
 
 impl Bvh8 {
-    /// Collapses `bvh2`, built over `triangles` (whose indices are the scene's).
-    pub fn from_bvh2(bvh2: &Bvh2, triangles: &[Triangle]) -> Bvh8 {
+    /// Collapses `bvh2`, built over `triangles` (whose indices are the scene's), with `below`
+    /// triangles under each node ([`crate::bvh::subtree_triangles`]).
+    pub fn from_bvh2(bvh2: &Bvh2, below: &[u32], triangles: &[Triangle]) -> Bvh8 {
         if bvh2.nodes.is_empty() || triangles.is_empty() {
             return Bvh8::default();
         }
-        let below = crate::bvh::subtree_triangles(bvh2);
         let mut out = Bvh8 {
             nodes: vec![Node::EMPTY],
             triangles: Vec::with_capacity(triangles.len() / 2),
@@ -189,16 +189,16 @@ impl Bvh8 {
         let mut work = vec![(0usize, 0usize)];
         while let Some((src, dst)) = work.pop() {
             let mut node = Node::EMPTY;
-            for (k, &c) in open(bvh2, &below, src).iter().enumerate() {
+            for (k, &c) in open(bvh2, below, src).iter().enumerate() {
                 let (lo, hi) = padded(bvh2.nodes[c].aabb());
                 for a in 0..3 {
                     node.min[a][k] = lo[a];
                     node.max[a][k] = hi[a];
                 }
-                if !inner(bvh2, &below, c) {
+                if !inner(bvh2, below, c) {
                     let first = out.triangles.len();
                     let mut n = 0;
-                    crate::bvh::leaf_primitives(bvh2, c, |p| {
+                    crate::bvh::leaf_primitives(bvh2, c, &mut |p| {
                         if n % TRI_LANES == 0 {
                             out.triangles.push(Tri4::EMPTY);
                         }

@@ -25,7 +25,7 @@ fn build(tris: &[Triangle]) -> Bvh8 {
         params.sort_precision,
         params.search_depth_threshold,
     );
-    Bvh8::from_bvh2(&bvh2, tris)
+    Bvh8::from_bvh2(&bvh2, &crate::bvh::subtree_triangles(&bvh2), tris)
 }
 
 /// The hit a loop over every triangle finds: the same test, one ray and one triangle at a
