@@ -320,6 +320,7 @@ fn by_key(keys: &[Key]) -> Vec<u32> {
         .iter()
         .zip(0u32..)
         .map(|(k, i)| {
+            debug_assert!(k.3 < 16, "flags {} need more than 4 bits", k.3);
             let key = offset(k.0, x0) << (2 * AXIS_BITS + 4)
                 | offset(k.1, y0) << (AXIS_BITS + 4)
                 | offset(k.2, z0) << 4

@@ -5,10 +5,11 @@
 //! of them together (ray packets: Wald, Slusallek, Benthin, Wagner, "Interactive Rendering with
 //! Coherent Ray Tracing", 2001) fetches each node once for the packet. Inside a node the work is
 //! per ray, SIMD across the node (as Embree's single-ray BVH8 traversal): each ray still in the
-//! packet tests the eight child boxes (one AVX vector, or two SSE vectors of four where the CPU
-//! lacks AVX), and each leaf's four triangles, stored structure of arrays, in one vector. Rays that left the packet cost
-//! nothing: at Sponza's probes a packet arrives at an inner node with 3.8 of its 8 rays on
-//! average, and at a leaf with 2.1. The shared origin makes `box - origin`, `v0 - origin` and
+//! packet tests the eight child boxes in one AVX vector (two SSE vectors where the CPU lacks
+//! AVX, [`Bvh8::closest_hits`] choosing at run time), and each leaf's four triangles, stored
+//! structure of arrays, in one SSE vector. Rays that left the packet cost nothing: at Sponza's
+//! probes a packet arrives at an inner node with 3.8 of its 8 rays on average, and at a leaf
+//! with 2.1. The shared origin makes `box - origin`, `v0 - origin` and
 //! `ng . (v0 - origin)` one value per node or leaf, not one per ray. Boxes are plain f32, not
 //! obvhs' compressed nodes, which trade decode work per ray for memory.
 //!
@@ -31,7 +32,7 @@ use obvhs::{bvh2::Bvh2, triangle::Triangle};
 /// Rays in a packet and children in a node.
 pub const LANES: usize = 8;
 
-// Ray sets are `u8` masks, and a node's children eight lanes of one AVX vector.
+// Ray sets are `u8` masks.
 const _: () = assert!(LANES == 8);
 
 /// Triangles in a leaf: one SSE vector of them ([`Tri4`]).
@@ -349,8 +350,8 @@ impl Bvh8 {
     ///
     /// Written over plain arrays of eight lanes, one per child, with `min` and `max` as `minps`
     /// and `maxps` compute them (the second operand when either is NaN), so that the compiler
-    /// vectorizes it for the instruction set it compiles for: one AVX vector in
-    /// [`Bvh8::closest_hits_avx`], two SSE vectors elsewhere. Sponza at 1.9 m, bare tracing:
+    /// can vectorize it for the instruction set it compiles for: AVX in
+    /// [`Bvh8::closest_hits_avx`], SSE elsewhere (`tests` hold the two to the same bits). Sponza at 1.9 m, bare tracing:
     /// 0.27-0.28 s with the same test written as two glam `Vec4`s, 0.21-0.28 s as arrays for
     /// SSE, 0.17-0.19 s for AVX.
     #[inline(always)]

@@ -250,18 +250,29 @@ pub struct BakeReport {
 pub const MAX_THREADS: usize = 1024;
 
 /// Runs `f`, turning a panic inside a dependency (the gltf crate's readers, obvhs) into its
-/// message, for an error that names the input instead of a crash. The default report of the
-/// panic is suppressed meanwhile; the hook is process-wide, so callers swap it one at a time
-/// and one never restores another's silent hook for good.
+/// message, for an error that names the input instead of a crash. The default report of a panic
+/// is suppressed while any such call runs: the panic hook is process-wide (a panic elsewhere in
+/// the process meanwhile still unwinds, unreported), so it is wrapped once and told by a count
+/// of the calls under way. No lock is held while `f` runs: `f` runs rayon jobs, and a worker
+/// waiting for them can steal another bake's call to this function; a lock held across `f`
+/// (the hook swapped under a mutex) deadlocked two bakes running at once in the test suite.
 pub(crate) fn catch_quietly<T>(
     f: impl FnOnce() -> T + std::panic::UnwindSafe,
 ) -> Result<T, String> {
-    static HOOK: std::sync::Mutex<()> = std::sync::Mutex::new(());
-    let _guard = HOOK.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
-    let previous = std::panic::take_hook();
-    std::panic::set_hook(Box::new(|_| {}));
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    static QUIET: AtomicUsize = AtomicUsize::new(0);
+    static WRAP: std::sync::Once = std::sync::Once::new();
+    WRAP.call_once(|| {
+        let previous = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            if QUIET.load(Ordering::SeqCst) == 0 {
+                previous(info);
+            }
+        }));
+    });
+    QUIET.fetch_add(1, Ordering::SeqCst);
     let result = std::panic::catch_unwind(f);
-    std::panic::set_hook(previous);
+    QUIET.fetch_sub(1, Ordering::SeqCst);
     result.map_err(|payload| {
         payload
             .downcast_ref::<&str>()
@@ -316,4 +327,25 @@ pub fn bake_to_file(
         })?;
     report.timings.push(("write", t.elapsed()));
     Ok((asset, report))
+}
+
+#[cfg(test)]
+mod tests {
+    /// A call inside a call, on the same thread, as when a rayon worker waiting inside one
+    /// bake's BVH build steals another bake's: it finishes (a lock held across `f` hung here),
+    /// and a panic inside comes back as its message.
+    #[test]
+    fn catch_quietly_nests() {
+        let (send, receive) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let inner = super::catch_quietly(|| {
+                super::catch_quietly(|| -> u32 { panic!("inner failure") })
+            });
+            send.send(inner).ok();
+        });
+        let got = receive
+            .recv_timeout(std::time::Duration::from_secs(30))
+            .expect("catch_quietly inside catch_quietly did not finish: deadlock");
+        assert_eq!(got, Ok(Err("inner failure".to_string())));
+    }
 }

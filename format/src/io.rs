@@ -11,8 +11,9 @@
 //! | 20+L..28+L | xxh3-64 of bytes 0..20+L |
 //!
 //! The checksum is verified before anything is decoded, so a flipped byte or a truncated file is
-//! reported as such instead of as a confusing decode error; decoding then runs under a size limit
-//! and the result is validated ([`crate::validate`]).
+//! reported as such instead of as a confusing decode error; decoding then checks every declared
+//! length against the bytes left before allocating ([`crate::sections`]), and the result is
+//! validated ([`crate::validate`]).
 
 use std::io::Write;
 use std::path::{Path, PathBuf};

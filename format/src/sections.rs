@@ -41,34 +41,34 @@ pub(crate) fn config(
 
 /// Writes the payload of `asset` to `out`.
 pub(crate) fn write_payload<W: Write>(asset: &Asset, out: &mut W) -> Result<(), EncodeTo> {
-    serde(out, &asset.header)?;
+    via_serde(out, &asset.header)?;
     pod(out, &asset.probes)?;
     pod(out, &asset.sky_mask)?;
     pod(out, &asset.sky_transfer)?;
     pod(out, &asset.probe_depth)?;
     match &asset.factors {
         Factors::F32(v) => {
-            serde(out, &F32)?;
+            via_serde(out, &F32)?;
             pod(out, v)?;
         }
         Factors::F16(v) => {
-            serde(out, &F16)?;
+            via_serde(out, &F16)?;
             pod(out, v)?;
         }
         Factors::U8 {
             factors,
             offset_scale,
         } => {
-            serde(out, &U8)?;
+            via_serde(out, &U8)?;
             pod(out, factors)?;
-            serde(out, offset_scale)?;
+            via_serde(out, offset_scale)?;
         }
     }
     pod(out, &asset.bricks)?;
     pod(out, &asset.surfels)?;
     pod(out, &asset.geometry.nodes)?;
     pod(out, &asset.geometry.triangles)?;
-    serde(out, &asset.lights)
+    via_serde(out, &asset.lights)
 }
 
 /// Bytes of the payload of `asset` (a pass that copies nothing).
@@ -92,7 +92,7 @@ pub(crate) fn payload_size(asset: &Asset) -> Result<usize, FormatError> {
     Ok(count.0)
 }
 
-fn serde<W: Write, T: Serialize>(out: &mut W, value: &T) -> Result<(), EncodeTo> {
+fn via_serde<W: Write, T: Serialize>(out: &mut W, value: &T) -> Result<(), EncodeTo> {
     bincode::serde::encode_into_std_write(value, out, config())
         .map(|_| ())
         .map_err(|e| match e {
@@ -103,7 +103,7 @@ fn serde<W: Write, T: Serialize>(out: &mut W, value: &T) -> Result<(), EncodeTo>
 
 fn pod<W: Write, T: Pod + Serialize>(out: &mut W, v: &[T]) -> Result<(), EncodeTo> {
     if !RAW {
-        return serde(out, &v);
+        return via_serde(out, &v);
     }
     out.write_all(&(v.len() as u64).to_le_bytes())
         .map_err(EncodeTo::Io)?;
@@ -125,7 +125,7 @@ impl Sections<'_> {
     /// The whole asset, section after section.
     pub fn asset(&mut self) -> Result<Asset, FormatError> {
         Ok(Asset {
-            header: self.serde("header")?,
+            header: self.via_serde("header")?,
             probes: self.pod("probes")?,
             sky_mask: self.pod("sky_mask")?,
             sky_transfer: self.pod("sky_transfer")?,
@@ -137,24 +137,24 @@ impl Sections<'_> {
                 nodes: self.pod("geometry")?,
                 triangles: self.pod("geometry")?,
             },
-            lights: self.serde("lights")?,
+            lights: self.via_serde("lights")?,
         })
     }
 
     fn factors(&mut self) -> Result<Factors, FormatError> {
         let at = self.at;
-        Ok(match self.serde::<u32>("factors")? {
+        Ok(match self.via_serde::<u32>("factors")? {
             F32 => Factors::F32(self.pod("factors")?),
             F16 => Factors::F16(self.pod("factors")?),
             U8 => Factors::U8 {
                 factors: self.pod("factors")?,
-                offset_scale: self.serde("factors")?,
+                offset_scale: self.via_serde("factors")?,
             },
             other => return Err(self.error("factors", at, format!("unknown encoding {other}"))),
         })
     }
 
-    fn serde<T: serde::de::DeserializeOwned>(
+    fn via_serde<T: serde::de::DeserializeOwned>(
         &mut self,
         section: &'static str,
     ) -> Result<T, FormatError> {
@@ -175,18 +175,20 @@ impl Sections<'_> {
         section: &'static str,
     ) -> Result<Vec<T>, FormatError> {
         if !RAW {
-            return self.serde(section);
+            return self.via_serde(section);
         }
-        let len: u64 = self.serde(section)?;
+        let start = self.at;
+        let len: u64 = self.via_serde(section)?;
         let rest = self.payload.len() - self.at;
+        let size = std::mem::size_of::<T>();
         let bytes = usize::try_from(len)
             .ok()
-            .and_then(|n| n.checked_mul(std::mem::size_of::<T>()))
+            .and_then(|n| n.checked_mul(size))
             .filter(|&b| b <= rest);
         let Some(bytes) = bytes else {
-            let needed = u128::from(len) * std::mem::size_of::<T>() as u128;
-            let message = too_early(usize::try_from(needed - rest as u128).unwrap_or(usize::MAX));
-            return Err(self.error(section, self.at, message));
+            let message =
+                format!("{len} elements of {size} bytes declared, {rest} bytes of payload left");
+            return Err(self.error(section, start, message));
         };
         let mut v = vec![T::zeroed(); bytes / std::mem::size_of::<T>().max(1)];
         bytemuck::cast_slice_mut(&mut v).copy_from_slice(&self.payload[self.at..self.at + bytes]);
@@ -327,8 +329,8 @@ mod tests {
             let mut bad = bytes.clone();
             bad[probes_at..probes_at + 8].copy_from_slice(&len.to_le_bytes());
             let e = read(&bad).unwrap_err();
-            let ok = matches!(&e, FormatError::Decode { section: "probes", message, .. }
-                if message.contains("too early"));
+            let ok = matches!(&e, FormatError::Decode { section: "probes", offset, message }
+                if *offset == probes_at && message.contains("bytes of payload left"));
             assert!(ok, "length {len}: {e}");
         }
         let e = read(&bytes[..bytes.len() - 3]).unwrap_err();

@@ -193,3 +193,74 @@ fn packets_find_the_brute_force_hit_on_axis_aligned_faces() {
     let hits = check(&tris, &origins, &dirs);
     assert!(hits > 300, "{hits} hits");
 }
+
+/// [`Bvh8::visit`] compiled for AVX.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+fn visit_avx(bvh: &Bvh8, node: &Node, p: &Packet, mask: u8, stack: &mut Vec<Entry>) {
+    bvh.visit(node, p, mask, stack);
+}
+
+/// The box test compiled for AVX pushes the same entries, nearest distances bit for bit, as
+/// the baseline copy, at every node, for packets with zero direction components (infinite
+/// inverse directions replaced by `TINY`), origins on box planes, and finite `tmax`.
+#[cfg(target_arch = "x86_64")]
+#[test]
+fn box_test_compiled_for_avx_gives_the_same_bits() {
+    if !std::arch::is_x86_feature_detected!("avx") {
+        eprintln!("this CPU has no AVX: only the baseline copy runs here");
+        return;
+    }
+    let mut rng = Rng(0x0bad_cafe);
+    let tris: Vec<Triangle> = (0..500)
+        .map(|_| {
+            let c = rng.vec(10.0);
+            Triangle {
+                v0: (c + rng.vec(2.0)).into(),
+                v1: (c + rng.vec(2.0)).into(),
+                v2: (c + rng.vec(2.0)).into(),
+            }
+        })
+        .collect();
+    let bvh = build(&tris);
+    let mut dirs: Vec<Vec3> = prt_format::directions::fibonacci_directions(64)
+        .into_iter()
+        .map(Vec3::from)
+        .collect();
+    for a in 0..3 {
+        for s in [-1.0, 1.0, -0.0] {
+            let mut d = Vec3::splat(0.0);
+            d[a] = s;
+            dirs.push(d);
+        }
+    }
+    let entries = |stack: &[Entry]| -> Vec<(u32, u8, u8, u32)> {
+        stack
+            .iter()
+            .map(|e| (e.index, e.count, e.mask, e.near.to_bits()))
+            .collect()
+    };
+    let mut compared = 0;
+    for (n, node) in bvh.nodes.iter().enumerate() {
+        let corner = Vec3::new(node.min[0][0], node.min[1][0], node.min[2][0]);
+        for origin in [rng.vec(10.0), corner] {
+            for (packet, tmax) in dirs
+                .chunks(LANES)
+                .zip([f32::INFINITY, 3.0, 0.5].iter().cycle())
+            {
+                let p = Packet::new(origin, packet, *tmax);
+                let mask = u8::MAX >> (LANES - packet.len());
+                let (mut base, mut avx) = (Vec::new(), Vec::new());
+                bvh.visit(node, &p, mask, &mut base);
+                // SAFETY: the CPU has AVX (checked above).
+                unsafe { visit_avx(&bvh, node, &p, mask, &mut avx) };
+                assert_eq!(entries(&base), entries(&avx), "node {n}, origin {origin}");
+                compared += base.len();
+            }
+        }
+    }
+    assert!(
+        compared > 1000,
+        "{compared} entries: the test needs entries"
+    );
+}
