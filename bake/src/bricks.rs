@@ -75,6 +75,9 @@ pub struct BrickFolder {
     keys: Vec<Key>,
     /// Per provisional brick and cell, its first surfel in `clusters` (merging only).
     heads: Vec<[u32; 64]>,
+    /// Per provisional brick, its surfels (merging only): counted as they are made, so that
+    /// numbering the bricks does not walk every cell list once more just to count them.
+    surfel_counts: Vec<u32>,
     /// Every surfel being merged; a cell's surfels are a list through `Cluster::next`, in
     /// creation order (unmerged: cluster i is brick i's only surfel).
     clusters: Vec<Cluster>,
@@ -102,6 +105,7 @@ impl BrickFolder {
             index: foldhash::HashMap::default(),
             keys: Vec::new(),
             heads: Vec::new(),
+            surfel_counts: Vec::new(),
             clusters: Vec::new(),
             slots: Vec::new(),
         }
@@ -204,6 +208,7 @@ impl BrickFolder {
         self.index.insert(key, b);
         self.keys.push(key);
         self.heads.push([NONE; 64]);
+        self.surfel_counts.push(0);
         b
     }
 
@@ -230,6 +235,7 @@ impl BrickFolder {
             }
         }
         self.clusters.push(Cluster::of(h));
+        self.surfel_counts[b as usize] += 1;
     }
 
     /// Brick `b`'s surfels: cell by cell, in creation order within a cell.
@@ -263,8 +269,11 @@ impl BrickFolder {
         // array (at 105k Sponza probes, building a vector per brick and joining them held 434 MB
         // twice at the bake's peak).
         let counts: Vec<usize> = order
-            .par_iter()
-            .map(|&b| self.clusters_of(b).count())
+            .iter()
+            .map(|&b| match unmerged {
+                true => 1,
+                false => self.surfel_counts[b as usize] as usize,
+            })
             .collect();
         let mut surfels = vec![Surfel::default(); counts.iter().sum()];
         let mut runs = Vec::with_capacity(order.len());
