@@ -78,9 +78,12 @@ pub struct BrickFolder {
     /// Per provisional brick, its surfels (merging only): counted as they are made, so that
     /// numbering the bricks does not walk every cell list once more just to count them.
     surfel_counts: Vec<u32>,
-    /// Every surfel being merged; a cell's surfels are a list through `Cluster::next`, in
-    /// creation order (unmerged: cluster i is brick i's only surfel).
+    /// Every surfel being merged; a cell's surfels are a list through `next`, in creation
+    /// order (unmerged: cluster i is brick i's only surfel).
     clusters: Vec<Cluster>,
+    /// Per surfel (merging only), the next surfel of the same brick and cell: beside the
+    /// clusters, not in them, so that a cluster fills one cache line ([`Cluster`]).
+    next: Vec<u32>,
     /// Scratch: one probe's hits as (brick, cell, hit), reused.
     slots: Vec<(u32, u8, u32)>,
 }
@@ -107,6 +110,7 @@ impl BrickFolder {
             heads: Vec::new(),
             surfel_counts: Vec::new(),
             clusters: Vec::new(),
+            next: Vec::new(),
             slots: Vec::new(),
         }
     }
@@ -196,7 +200,7 @@ impl BrickFolder {
         for &(b, cell, _) in slots {
             let head = self.heads[b as usize][usize::from(cell)];
             if let Some(cl) = self.clusters.get(head as usize) {
-                any ^= cl.next;
+                any ^= cl.count.to_bits();
             }
         }
         std::hint::black_box(any);
@@ -227,14 +231,16 @@ impl BrickFolder {
                     cl.add(h);
                     return;
                 }
-                if cl.next == NONE {
-                    cl.next = new;
+                let next = &mut self.next[at as usize];
+                if *next == NONE {
+                    *next = new;
                     break;
                 }
-                at = cl.next;
+                at = *next;
             }
         }
         self.clusters.push(Cluster::of(h));
+        self.next.push(NONE);
         self.surfel_counts[b as usize] += 1;
     }
 
@@ -245,10 +251,9 @@ impl BrickFolder {
             false => (&self.heads[b as usize][..], None),
         };
         let listed = heads.iter().flat_map(move |&head| {
-            let first = (head != NONE).then(|| &self.clusters[head as usize]);
-            std::iter::successors(first, |cl| {
-                (cl.next != NONE).then(|| &self.clusters[cl.next as usize])
-            })
+            let next = |&at: &u32| Some(self.next[at as usize]).filter(|&n| n != NONE);
+            std::iter::successors(Some(head).filter(|&h| h != NONE), next)
+                .map(|at| &self.clusters[at as usize])
         });
         single.into_iter().chain(listed)
     }
@@ -290,13 +295,15 @@ impl BrickFolder {
             .zip(runs)
             .enumerate()
             .map(|(final_index, (&b, (first, run)))| {
+                let flags = self.keys[b as usize].3;
+                let backface = flags & BRICK_BACKFACE != 0;
                 for (out, cl) in run.iter_mut().zip(self.clusters_of(b)) {
                     *out = Surfel {
                         brick: final_index as u32,
-                        ..cl.surfel(!unmerged)
+                        ..cl.surfel(!unmerged, backface)
                     };
                 }
-                brick_of(run, self.keys[b as usize].3, first)
+                brick_of(run, flags, first)
             })
             .collect();
         (Bricked { bricks, surfels }, remap)
@@ -385,7 +392,12 @@ fn brick_of(surfels: &mut [Surfel], flags: u32, first_surfel: u32) -> Brick {
     }
 }
 
-/// Running sums of one surfel being merged.
+/// Running sums of one surfel being merged, in one cache line: merging a hit reads the
+/// cluster's direction and adds to its sums. The cell's list link is kept beside it
+/// ([`BrickFolder`]'s `next`) and the back-face flag is its brick's; with both inside, a
+/// cluster took 72 bytes and most straddled two lines (Sponza at 1.0 m: 5.30 s of CPU time
+/// against 5.19 s, the least of four alternating bakes each).
+#[repr(C, align(64))]
 struct Cluster {
     count: f32,
     position: Vec3,
@@ -394,22 +406,18 @@ struct Cluster {
     direction: Vec3,
     albedo: Vec3,
     emission: Vec3,
-    backface: bool,
-    /// The next surfel of the same brick and cell ([`BrickFolder`]).
-    next: u32,
 }
+const _: () = assert!(std::mem::size_of::<Cluster>() == 64);
 
 impl Cluster {
     fn of(h: &Hit) -> Cluster {
         Cluster {
-            next: NONE,
             count: 1.0,
             position: h.position,
             normal: h.normal,
             direction: h.normal,
             albedo: Vec3::from(h.albedo),
             emission: Vec3::from(h.emission),
-            backface: h.backface,
         }
     }
 
@@ -421,9 +429,10 @@ impl Cluster {
         self.emission += Vec3::from(h.emission);
     }
 
-    /// The merged surfel: means of its hits, weight their count. An unmerged hit keeps its unit
-    /// normal bit for bit (renormalising could move the last bit).
-    fn surfel(&self, renormalise: bool) -> Surfel {
+    /// The merged surfel: means of its hits, weight their count, back face as its brick (a
+    /// brick's hits all have the same flags). An unmerged hit keeps its unit normal bit for bit
+    /// (renormalising could move the last bit).
+    fn surfel(&self, renormalise: bool, backface: bool) -> Surfel {
         let n = if renormalise {
             self.normal.normalize_or(self.normal.signum())
         } else {
@@ -435,7 +444,7 @@ impl Cluster {
             normal: n.to_array(),
             weight: self.count,
             albedo: (self.albedo / self.count).to_array(),
-            flags: if self.backface { BRICK_BACKFACE } else { 0 },
+            flags: if backface { BRICK_BACKFACE } else { 0 },
             emission: (self.emission / self.count).to_array(),
             ..Surfel::default()
         }

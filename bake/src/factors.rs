@@ -10,20 +10,22 @@
 use glam::Vec3;
 use prt_format::sh::SH_COUNT;
 use prt_format::{
-    split_rows_for_u8, u8_offset_scale, Brick, FactorRow, FactorU8, Factors, TransferPrecision,
+    split_row_for_u8, u8_offset_scale, Brick, FactorRow, FactorU8, Factors, TransferPrecision,
 };
 
 use crate::trace::Hit;
 
 /// Factor rows of one probe while bricks are provisional ([`crate::bricks::BrickFolder`]):
-/// keyed by provisional brick, sorted by it, the last field holding the sum of the rays' hit
-/// points until [`finish`] turns it into the offset.
+/// keyed by provisional brick, sorted by it, each row's sums taken ray by ray in lattice order,
+/// and kept in the form `precision` keeps them ([`ProbeRows`]) as each row is finished: no
+/// intermediate table per probe.
 pub fn probe_rows(
     hits: &[Hit],
     hit_brick: &[u32],
     basis: &[[f32; SH_COUNT]],
     weight: f32,
-) -> Vec<FactorRow> {
+    precision: TransferPrecision,
+) -> ProbeRows {
     // By brick, then ray (one key: a probe's rays are distinct).
     let mut order: Vec<(u64, u32)> = hits
         .iter()
@@ -32,25 +34,31 @@ pub fn probe_rows(
         .map(|(i, (h, &b))| (u64::from(b) << 32 | u64::from(h.ray), i as u32))
         .collect();
     order.sort_unstable_by_key(|&(key, _)| key);
-    let mut rows: Vec<FactorRow> = Vec::new();
+    let ray_count = basis.len() as u32;
+    let mut rows = ProbeRows::new(precision);
+    let mut row: Option<FactorRow> = None;
     for (key, i) in order {
         let (brick, i) = ((key >> 32) as u32, i as usize);
-        let y = &basis[hits[i].ray as usize];
-        if rows.last().is_none_or(|r| r.0 != brick) {
-            rows.push((brick, 0, [0.0; SH_COUNT - 1], [0.0; 3]));
+        if let Some(done) = row.take_if(|r| r.0 != brick) {
+            rows.push(done, ray_count);
         }
-        let row = rows.last_mut().expect("a row was just pushed");
+        let row = row.get_or_insert((brick, 0, [0.0; SH_COUNT - 1], [0.0; 3]));
+        let y = &basis[hits[i].ray as usize];
         row.1 += 1;
         row.3 = (Vec3::from(row.3) + hits[i].position).to_array();
         for k in 1..SH_COUNT {
             row.2[k - 1] += weight * y[k];
         }
     }
+    if let Some(done) = row {
+        rows.push(done, ray_count);
+    }
     rows
 }
 
 /// One probe's factor rows while bricks are provisional, as close to their final form as that
-/// allows: f32 sums for f32 and f16 tables; for u8 tables, the transfer already encoded (rows of
+/// allows: f32 sums for f32 and f16 tables (the last field the sum of the rays' hit points until
+/// [`finish`] turns it into the offset); for u8 tables, the transfer already encoded (rows of
 /// more than 255 rays split) beside the rays' mean hit point, 32 bytes a row against 52 (the
 /// rows are the largest thing the bake holds: 1.9 GB as sums at 105k Sponza probes).
 pub enum ProbeRows {
@@ -69,26 +77,31 @@ pub struct RowU8 {
 }
 
 impl ProbeRows {
-    /// `rows` from [`probe_rows`] in the form `precision` keeps them, for a lattice of
-    /// `ray_count` rays.
-    pub fn new(rows: Vec<FactorRow>, precision: TransferPrecision, ray_count: u32) -> Self {
-        if precision != TransferPrecision::U8 {
-            return ProbeRows::Sums(rows);
+    /// No rows yet, kept as `precision` keeps them.
+    pub fn new(precision: TransferPrecision) -> Self {
+        match precision {
+            TransferPrecision::U8 => ProbeRows::U8(Vec::new()),
+            _ => ProbeRows::Sums(Vec::new()),
         }
-        let means: Vec<FactorRow> = rows
-            .into_iter()
-            .map(|(b, rays, sh, sum)| (b, rays, sh, (Vec3::from(sum) / rays as f32).to_array()))
-            .collect();
-        ProbeRows::U8(
-            split_rows_for_u8(means)
-                .into_iter()
-                .map(|(brick, rays, sh, mean)| RowU8 {
-                    brick,
-                    factor: FactorU8::transfer(rays, sh, ray_count),
-                    mean: Vec3::from(mean),
-                })
-                .collect(),
-        )
+    }
+
+    /// Adds a finished row (a row of [`probe_rows`]: brick, rays, transfer sums, hit point
+    /// sum) of a lattice of `ray_count` rays.
+    pub fn push(&mut self, row: FactorRow, ray_count: u32) {
+        match self {
+            ProbeRows::Sums(rows) => rows.push(row),
+            ProbeRows::U8(rows) => {
+                let (brick, rays, sh, sum) = row;
+                let mean = Vec3::from(sum) / rays as f32;
+                for (_, part, sh, _) in split_row_for_u8((brick, rays, sh, mean.to_array())) {
+                    rows.push(RowU8 {
+                        brick,
+                        factor: FactorU8::transfer(part, sh, ray_count),
+                        mean,
+                    });
+                }
+            }
+        }
     }
 
     /// The probe's factor table: bricks renumbered by `remap`, offsets from the bricks'
@@ -164,14 +177,17 @@ mod tests {
         let (n, size) = (4096, 0.5);
         let mut late = rows.clone();
         finish(&mut late, &remap, &bricks);
-        let late = Factors::build(&split_rows_for_u8(late), TransferPrecision::U8, n, size);
-        let early = ProbeRows::new(rows, TransferPrecision::U8, n).encode(
-            &remap,
-            &bricks,
+        let late = Factors::build(
+            &prt_format::split_rows_for_u8(late),
             TransferPrecision::U8,
             n,
             size,
         );
+        let mut early = ProbeRows::new(TransferPrecision::U8);
+        for row in rows {
+            early.push(row, n);
+        }
+        let early = early.encode(&remap, &bricks, TransferPrecision::U8, n, size);
         assert_eq!(early.len(), 7, "600 and 256 rays split in three and two");
         assert_eq!(early, late);
     }

@@ -282,24 +282,46 @@ pub(crate) fn catch_quietly<T>(
     })
 }
 
-/// Bakes `scene_path` into an asset (not written).
+/// Bakes `scene_path` into a validated asset (not written).
 pub fn bake(
     scene_path: &Path,
     settings: &BakeSettings,
     progress: &dyn Progress,
 ) -> Result<(Asset, BakeReport), BakeError> {
+    in_pool(settings, || {
+        let (asset, mut report) = pipeline::bake_in_pool(scene_path, settings, progress)?;
+        let t = Instant::now();
+        pipeline::validate(&asset, scene_path)?;
+        // Validation is the end of assembling.
+        if let Some((_, assemble)) = report.timings.last_mut() {
+            *assemble += t.elapsed();
+        }
+        Ok((asset, report))
+    })
+}
+
+/// Runs `f` in a pool of `settings.threads` workers, or in the global pool (all cores).
+fn in_pool<T: Send>(
+    settings: &BakeSettings,
+    f: impl FnOnce() -> Result<T, BakeError> + Send,
+) -> Result<T, BakeError> {
     settings.check()?;
     match settings.threads {
         Some(n) => rayon::ThreadPoolBuilder::new()
             .num_threads(n)
             .build()
             .map_err(|e| BakeError::ThreadPool(e.to_string()))?
-            .install(|| pipeline::bake_in_pool(scene_path, settings, progress)),
-        None => pipeline::bake_in_pool(scene_path, settings, progress),
+            .install(f),
+        None => f(),
     }
 }
 
 /// Bakes and writes the asset atomically to `out`; no partial file is left on failure.
+///
+/// The asset is validated while it is written (to a temporary file, renamed over `out` only if
+/// the asset is valid; an invalid asset, a bug of the bake, is written in full before it is
+/// removed). Sponza at 1.0 m: validation takes 0.08 s, the write 0.13-0.15 s. The report's
+/// "write" stage is both; [`bake`] counts validation in "assemble".
 pub fn bake_to_file(
     scene_path: &Path,
     out: &Path,
@@ -314,19 +336,26 @@ pub fn bake_to_file(
             reason: "is the input scene; refusing to overwrite it",
         });
     }
-    prt_format::io::check_replaceable(out).map_err(|error| BakeError::Format {
+    let format_error = |error| BakeError::Format {
         path: out.to_owned(),
         error,
-    })?;
-    let (asset, mut report) = bake(scene_path, settings, progress)?;
-    let t = Instant::now();
-    report.file_bytes =
-        prt_format::write_asset_atomic(out, &asset).map_err(|error| BakeError::Format {
-            path: out.to_owned(),
-            error,
-        })?;
-    report.timings.push(("write", t.elapsed()));
-    Ok((asset, report))
+    };
+    prt_format::io::check_replaceable(out).map_err(format_error)?;
+    in_pool(settings, || {
+        let (asset, mut report) = pipeline::bake_in_pool(scene_path, settings, progress)?;
+        let t = Instant::now();
+        let (valid, staged) = rayon::join(
+            || pipeline::validate(&asset, scene_path),
+            || prt_format::stage_asset(out, &asset).map_err(format_error),
+        );
+        // Invalid: the staged file is dropped, so removed.
+        valid?;
+        let (staged, bytes) = staged?;
+        staged.commit().map_err(format_error)?;
+        report.file_bytes = bytes;
+        report.timings.push(("write", t.elapsed()));
+        Ok((asset, report))
+    })
 }
 
 #[cfg(test)]

@@ -1,7 +1,7 @@
 //! The bake's stages in order, from the scene file to the validated asset: load, BVH, trace
 //! (merging as it goes, [`crate::stream`]), bricks (numbering them and encoding the factor
-//! tables), assemble. [`crate::bake`] runs them in its thread pool; each stage's time goes into
-//! the report.
+//! tables), assemble. [`crate::bake`] runs them in its thread pool, then [`validate`]s the
+//! asset; each stage's time goes into the report.
 
 use std::path::Path;
 use std::time::Instant;
@@ -18,6 +18,7 @@ use crate::{
     BakeError, BakeReport, BakeSettings, Progress, WINDING_WARNING,
 };
 
+/// The bake's stages, in the current thread pool: the asset, not yet validated, and the report.
 pub(crate) fn bake_in_pool(
     scene_path: &Path,
     settings: &BakeSettings,
@@ -212,12 +213,17 @@ pub(crate) fn bake_in_pool(
         geometry: bvh.geometry,
         lights: scene.lights,
     };
-    prt_format::validate::validate(&asset).map_err(|error| BakeError::Format {
-        path: scene_path.to_owned(),
-        error,
-    })?;
     lap(&mut report, "assemble", None);
     Ok((asset, report))
+}
+
+/// Validates a baked asset (`scene_path` names the scene in the error): a failure here is a bug
+/// of the bake, reported rather than written.
+pub(crate) fn validate(asset: &Asset, scene_path: &Path) -> Result<(), BakeError> {
+    prt_format::validate::validate(asset).map_err(|error| BakeError::Format {
+        path: scene_path.to_owned(),
+        error,
+    })
 }
 
 /// What the load stage gives the bake.

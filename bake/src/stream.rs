@@ -118,8 +118,7 @@ fn fold_block(
         .enumerate()
         .map(|(i, (p, mut r, moved))| {
             let ids = &brick_of_hit[hit_start[i]..hit_start[i + 1]];
-            let rows = factors::probe_rows(&r.hits, ids, &tracer.basis, tracer.weight);
-            let rows = ProbeRows::new(rows, precision, tracer.directions.len() as u32);
+            let rows = factors::probe_rows(&r.hits, ids, &tracer.basis, tracer.weight, precision);
             let depth = depth_filter.map(p, &r, tracer.directions.len(), spacing);
             r.hits = Vec::new();
             ((p, moved), r, rows, depth)

@@ -334,17 +334,21 @@ pub type FactorRow = (u32, u32, [f32; 8], [f32; 3]);
 /// offset whose rays and transfers add up to the original (the gather is linear, so the probe's
 /// SH is unchanged).
 pub fn split_rows_for_u8(rows: Vec<FactorRow>) -> Vec<FactorRow> {
-    let mut out = Vec::with_capacity(rows.len());
-    for (brick, rays, sh, offset) in rows {
-        let mut left = rays;
-        while left > 0 {
+    rows.into_iter().flat_map(split_row_for_u8).collect()
+}
+
+/// [`split_rows_for_u8`] of one row.
+pub fn split_row_for_u8(row: FactorRow) -> impl Iterator<Item = FactorRow> {
+    let (brick, rays, sh, offset) = row;
+    let mut left = rays;
+    std::iter::from_fn(move || {
+        (left > 0).then(|| {
             let part = left.min(U8_MAX_RAYS);
-            let share = part as f32 / rays as f32;
-            out.push((brick, part, sh.map(|v| v * share), offset));
             left -= part;
-        }
-    }
-    out
+            let share = part as f32 / rays as f32;
+            (brick, part, sh.map(|v| v * share), offset)
+        })
+    })
 }
 
 fn pack2(a: f32, b: f32) -> u32 {

@@ -161,12 +161,108 @@ pub fn read_asset(path: &Path) -> Result<Asset, FormatError> {
     decode(&bytes)
 }
 
-/// Writes an asset atomically: to a temporary file beside `path`, flushed to disk, then renamed
-/// over `path`. A failure leaves no partial file behind. Returns the number of bytes written.
+/// Writes an asset atomically: to a temporary file beside `path`, synced to disk, then renamed
+/// over `path` ([`stage_asset`], then [`Staged::commit`]). A failure leaves no partial file
+/// behind. Returns the number of bytes written.
 pub fn write_asset_atomic(path: &Path, asset: &Asset) -> Result<u64, FormatError> {
+    let (staged, size) = stage_asset(path, asset)?;
+    staged.commit()?;
+    Ok(size)
+}
+
+/// Writes an asset to a temporary file beside `path`, synced, and returns it with the file's
+/// size, to be renamed over `path` by [`Staged::commit`] (or removed when dropped): a caller can
+/// check the asset while it is written, and commit only if the check passes (the bake validates
+/// the asset on another thread meanwhile).
+pub fn stage_asset(path: &Path, asset: &Asset) -> Result<(Staged, u64), FormatError> {
     let size = payload_size(asset)?;
-    write_atomic_with(path, |file| encode_to(asset, size, file))?;
-    Ok((PREFIX + size + SUFFIX) as u64)
+    let staged = stage_with(path, |file| encode_to(asset, size, WriteBack::new(file)))?;
+    Ok((staged, (PREFIX + size + SUFFIX) as u64))
+}
+
+/// A file written and synced under a temporary name, waiting to replace its destination.
+/// Dropped without [`Staged::commit`], it is removed.
+#[must_use = "a staged file is removed when dropped: commit it"]
+pub struct Staged {
+    tmp: PathBuf,
+    path: PathBuf,
+    committed: bool,
+    _pending: PendingTemp,
+}
+
+impl Staged {
+    /// Renames the file over its destination (on failure, the temporary file is removed).
+    pub fn commit(mut self) -> Result<(), FormatError> {
+        std::fs::rename(&self.tmp, &self.path).map_err(|error| FormatError::Io {
+            path: self.path.clone(),
+            error,
+        })?;
+        self.committed = true;
+        Ok(())
+    }
+}
+
+impl Drop for Staged {
+    fn drop(&mut self) {
+        if !self.committed {
+            let _ = std::fs::remove_file(&self.tmp);
+        }
+    }
+}
+
+/// A file sink that asks the kernel to start writing each 8 MiB to disk as soon as it is
+/// written (Linux `sync_file_range` with `SYNC_FILE_RANGE_WRITE`: it starts the writeback and
+/// waits for none of it, unless the device's queue is full), so that the final sync waits for
+/// the last pieces instead of the whole file. Sponza at 1.0 m (229 MB asset, three alternating
+/// bakes each): the write stage took 0.18-0.20 s with one sync at the end, 0.125-0.15 s so.
+struct WriteBack<'a> {
+    file: &'a mut std::fs::File,
+    written: u64,
+    started: u64,
+}
+
+impl<'a> WriteBack<'a> {
+    /// Writeback is started in pieces of this many bytes.
+    const PIECE: u64 = 8 << 20;
+
+    fn new(file: &'a mut std::fs::File) -> Self {
+        WriteBack {
+            file,
+            written: 0,
+            started: 0,
+        }
+    }
+}
+
+impl Write for WriteBack<'_> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let n = self.file.write(buf)?;
+        self.written += n as u64;
+        if self.written - self.started >= Self::PIECE {
+            #[cfg(target_os = "linux")]
+            {
+                use std::os::fd::AsRawFd;
+                let (offset, len) = (self.started as i64, (self.written - self.started) as i64);
+                // SAFETY: a plain system call on a file descriptor this sink borrows; it reads
+                // no memory of this process. Its result is only a hint taken or not: the sync
+                // at the end is what makes the file durable.
+                unsafe {
+                    libc::sync_file_range(
+                        self.file.as_raw_fd(),
+                        offset,
+                        len,
+                        libc::SYNC_FILE_RANGE_WRITE,
+                    );
+                }
+            }
+            self.started = self.written;
+        }
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.file.flush()
+    }
 }
 
 /// Fails when `path` exists and is not a regular file (the atomic rename would replace a device,
@@ -209,40 +305,48 @@ pub fn write_bytes_atomic(path: &Path, bytes: &[u8]) -> Result<(), FormatError> 
 }
 
 /// Writes a file to `path` with `write` through a temporary file, synced, then a rename; the
-/// temporary file is removed on failure. A failure of the sink is an IO error naming the
-/// temporary file; a failure of the encoding is reported as it is.
+/// temporary file is removed on failure.
 fn write_atomic_with(
     path: &Path,
     write: impl FnOnce(&mut std::fs::File) -> Result<(), EncodeTo>,
 ) -> Result<(), FormatError> {
-    check_replaceable(path)?;
-    let io_err = |p: &Path| {
-        let p = p.to_owned();
-        move |error| FormatError::Io { path: p, error }
-    };
-    let tmp = temp_path(path);
-    let _pending = PendingTemp::new(&tmp);
-    let result = (|| {
-        let mut f = std::fs::File::create(&tmp).map_err(io_err(&tmp))?;
-        write(&mut f).map_err(|e| match e {
-            EncodeTo::Io(error) => io_err(&tmp)(error),
-            EncodeTo::Format(e) => e,
-        })?;
-        f.sync_all().map_err(io_err(&tmp))?;
-        drop(f);
-        std::fs::rename(&tmp, path).map_err(io_err(path))
-    })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
+    stage_with(path, write)?.commit()
 }
 
-/// Temporary files being written, removed by [`remove_pending_temp_files`] (the CLI calls it on
-/// SIGINT and SIGTERM, so that an interrupted write leaves no `NAME.tmpPID` behind).
+/// Writes a file for `path` with `write` to a temporary file beside it, synced; the temporary
+/// file is removed on failure. A failure of the sink is an IO error naming the temporary file;
+/// a failure of the encoding is reported as it is.
+fn stage_with(
+    path: &Path,
+    write: impl FnOnce(&mut std::fs::File) -> Result<(), EncodeTo>,
+) -> Result<Staged, FormatError> {
+    check_replaceable(path)?;
+    let tmp = temp_path(path);
+    let staged = Staged {
+        _pending: PendingTemp::new(&tmp),
+        tmp,
+        path: path.to_owned(),
+        committed: false,
+    };
+    let io_err = |error| FormatError::Io {
+        path: staged.tmp.clone(),
+        error,
+    };
+    let mut f = std::fs::File::create(&staged.tmp).map_err(io_err)?;
+    write(&mut f).map_err(|e| match e {
+        EncodeTo::Io(error) => io_err(error),
+        EncodeTo::Format(e) => e,
+    })?;
+    f.sync_all().map_err(io_err)?;
+    Ok(staged)
+}
+
+/// Temporary files being written or staged ([`Staged`]), removed by
+/// [`remove_pending_temp_files`] (the CLI calls it on SIGINT and SIGTERM, so that an
+/// interrupted write leaves no `NAME.tmpPID` behind).
 static PENDING: std::sync::Mutex<Vec<PathBuf>> = std::sync::Mutex::new(Vec::new());
 
-/// Registers a temporary file for the length of one write.
+/// Registers a temporary file from its creation until it is renamed or removed.
 struct PendingTemp(PathBuf);
 
 impl PendingTemp {

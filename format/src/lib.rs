@@ -42,7 +42,8 @@ pub mod validate;
 pub use asset::*;
 pub use error::FormatError;
 pub use io::{
-    decode, encode, read_asset, read_regular_file, write_asset_atomic, FORMAT_VERSION, MAGIC,
+    decode, encode, read_asset, read_regular_file, stage_asset, write_asset_atomic, Staged,
+    FORMAT_VERSION, MAGIC,
 };
 pub use rig::{Light, LightKind, LightRig, Sky};
 pub use summary::Summary;

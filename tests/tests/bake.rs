@@ -777,8 +777,8 @@ fn bake_to_file_is_atomic() {
         );
     }
 
-    // The output path is a directory: the write fails after the temporary file was written,
-    // and the temporary file is removed.
+    // The output path is a directory: refused before the bake (the rename over it failing
+    // after the write is `tests/tests/format.rs`), and nothing is left.
     std::fs::create_dir(&out).unwrap();
     let e = prt_bake::bake_to_file(&cornell(), &out, &rays(64), &NoProgress).unwrap_err();
     assert!(matches!(e, BakeError::Format { .. }), "{e:?}");

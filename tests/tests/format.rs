@@ -111,6 +111,27 @@ fn round_trip_through_a_file() {
     assert_eq!(dir.entries(), ["a.prt"], "no temporary file left");
 }
 
+/// A staged asset is removed when its commit fails (its destination became a directory) or
+/// when it is dropped uncommitted, and the error names the destination.
+#[test]
+fn a_staged_asset_is_removed_unless_committed() {
+    let dir = prt_tests::ScratchDir::new("a_staged_asset_is_removed_unless_committed");
+    let path = dir.path().join("a.prt");
+    let asset = small_asset(TransferPrecision::U8);
+    let (staged, n) = prt_format::stage_asset(&path, asset).expect("stage");
+    assert_eq!(dir.entries().len(), 1, "the temporary file");
+    assert!(n > 0);
+    drop(staged);
+    assert!(dir.entries().is_empty(), "left {:?}", dir.entries());
+
+    let (staged, _) = prt_format::stage_asset(&path, asset).expect("stage");
+    std::fs::create_dir(&path).unwrap();
+    std::fs::write(path.join("x"), b"x").unwrap();
+    let e = staged.commit().unwrap_err();
+    assert!(e.to_string().contains("a.prt"), "{e}");
+    assert_eq!(dir.entries(), ["a.prt"], "temporary file left behind");
+}
+
 /// A file written by streaming (the checksum hashed below a 1 MiB buffer) holds exactly the
 /// bytes of the in-memory encoding, for an asset of several buffers' worth.
 #[test]
@@ -119,9 +140,10 @@ fn streamed_file_equals_the_encoding() {
     let path = dir.path().join("big.prt");
     let asset = bake_ok(&cornell(), &rays(512));
     let bytes = encode(&asset).expect("encode");
+    // Past the 8 MiB after which the writer starts the disk writes.
     assert!(
-        bytes.len() > 3 << 20,
-        "{} bytes: want several MiB",
+        bytes.len() > 8 << 20,
+        "{} bytes: want more than 8 MiB",
         bytes.len()
     );
     let n = prt_format::write_asset_atomic(&path, &asset).expect("write");
