@@ -119,12 +119,15 @@ impl BrickFolder {
     /// `brick_of_hit`. Fails, before any change, when the bricks or surfels would pass 2^32 - 1
     /// (every hit adds at most one of each).
     ///
-    /// The hits are visited brick by brick (sorted by key, in hit order within a brick), which
-    /// merges exactly as hit order does (a brick's surfels depend only on its own hits' order)
-    /// but finds each brick once and keeps its surfels in cache: visiting them in hit order cost
-    /// a cache miss or three per hit (Sponza at 1.0 m: 16% of the bake's CPU time). Then the
-    /// misses that remain are taken together ([`BrickFolder::touch`]): the fold went from 3.0
-    /// to 1.5 s there.
+    /// The hits are taken in their order, a brick looked up once for each run of consecutive
+    /// hits in it (the coherent ray order makes runs common), all the runs' lookups together so
+    /// that their cache misses overlap; then the cells' heads and first surfels are loaded for
+    /// every hit before any is merged ([`BrickFolder::touch`]). Merged hit by hit, each waiting
+    /// for its misses, the fold took 3.0 s on Sponza at 1.0 m; with the hits sorted by brick,
+    /// so that each brick was found once per probe, 1.5 s. With the loads taken together, the
+    /// sort cost more than it saved: the bake took 4.44-4.62 s of CPU time without it against
+    /// 4.59-4.80 s (one thread, five alternating bakes each). A brick's surfels depend only on
+    /// the order of its own hits, which every one of these orders keeps.
     pub fn fold(&mut self, hits: &[Hit], brick_of_hit: &mut Vec<u32>) -> Result<(), BakeError> {
         let room = NONE as usize - hits.len().min(NONE as usize);
         if self.clusters.len() > room || self.keys.len() > room {
@@ -156,28 +159,30 @@ impl BrickFolder {
                 (c.x as i32, c.y as i32, c.z as i32, flags_of(h))
             })
             .collect();
-        let order = by_key(&keys);
         brick_of_hit.resize(first + hits.len(), 0);
-        let runs = || order.chunk_by(|&a, &b| keys[a as usize] == keys[b as usize]);
+        let runs = || keys.chunk_by(|a, b| a == b);
         // The bricks already known, looked up together so that their cache misses overlap.
-        let known: Vec<Option<u32>> = runs()
-            .map(|run| self.index.get(&keys[run[0] as usize]).copied())
-            .collect();
-        // Each hit's brick and cell, brick by brick.
+        let known: Vec<Option<u32>> = runs().map(|run| self.index.get(&run[0]).copied()).collect();
+        // Each hit's brick and cell.
         let mut slots = std::mem::take(&mut self.slots);
         slots.clear();
+        let mut i = 0u32;
         for (run, known) in runs().zip(known) {
-            let key = keys[run[0] as usize];
-            let b = known.unwrap_or_else(|| self.new_brick(key));
+            let key = run[0];
+            // Not known before this probe: made by an earlier run of it, or new.
+            let b = known
+                .or_else(|| self.index.get(&key).copied())
+                .unwrap_or_else(|| self.new_brick(key));
             let origin =
                 self.anchor + Vec3::new(key.0 as f32, key.1 as f32, key.2 as f32) * brick_size;
-            for &i in run {
+            for _ in run {
                 let cell = ((hits[i as usize].position - origin) / self.cell_size)
                     .floor()
                     .clamp(Vec3::ZERO, Vec3::splat(3.0));
                 let cell = cell.x as u32 + 4 * (cell.y as u32 + 4 * cell.z as u32);
                 slots.push((b, cell as u8, i));
                 brick_of_hit[first + i as usize] = b;
+                i += 1;
             }
         }
         self.touch(&slots);
@@ -310,44 +315,6 @@ impl BrickFolder {
     }
 }
 
-/// Indices of `keys` sorted by key, then index. Keys are packed into one `u64` when the span
-/// of their brick coordinates allows (20 bits an axis: a million bricks, 4 flag bits), which
-/// sorts in the same order as the tuples and at a fraction of the cost (the tuples' sort was
-/// 5.7% of the bake's CPU time on Sponza at 1.0 m).
-fn by_key(keys: &[Key]) -> Vec<u32> {
-    const AXIS_BITS: u32 = 20;
-    // Flags (an axis 0..6 and the back-face bit) fit in 4 bits.
-    const _: () = assert!(BRICK_BACKFACE < 16 && BRICK_BACKFACE > 5);
-    let span = |axis: fn(&Key) -> i32| {
-        let (lo, hi) = keys
-            .iter()
-            .map(axis)
-            .fold((i32::MAX, i32::MIN), |(lo, hi), v| (lo.min(v), hi.max(v)));
-        (lo, i64::from(hi) - i64::from(lo) < 1 << AXIS_BITS)
-    };
-    let [(x0, fx), (y0, fy), (z0, fz)] = [|k: &Key| k.0, |k: &Key| k.1, |k: &Key| k.2].map(span);
-    if !(fx && fy && fz) {
-        let mut order: Vec<u32> = (0..keys.len() as u32).collect();
-        order.sort_unstable_by_key(|&i| (keys[i as usize], i));
-        return order;
-    }
-    let offset = |v: i32, lo: i32| (i64::from(v) - i64::from(lo)) as u64;
-    let mut packed: Vec<(u64, u32)> = keys
-        .iter()
-        .zip(0u32..)
-        .map(|(k, i)| {
-            debug_assert!(k.3 < 16, "flags {} need more than 4 bits", k.3);
-            let key = offset(k.0, x0) << (2 * AXIS_BITS + 4)
-                | offset(k.1, y0) << (AXIS_BITS + 4)
-                | offset(k.2, z0) << 4
-                | u64::from(k.3);
-            (key, i)
-        })
-        .collect();
-    packed.sort_unstable();
-    packed.into_iter().map(|(_, i)| i).collect()
-}
-
 /// Finishes one brick: bounds, centroid, and the surfels' gradient weights.
 ///
 /// The brick's radiance is modelled as linear, `L(p) = L_mean + G . (p - centroid)`, fitted by
@@ -454,34 +421,6 @@ impl Cluster {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// Packed keys sort as the tuples do, ties by index; spans too wide to pack fall back.
-    #[test]
-    fn by_key_sorts_as_tuples() {
-        let mut state = 0x2545_f491_u32;
-        let mut next = |m: i32| {
-            state ^= state << 13;
-            state ^= state >> 17;
-            state ^= state << 5;
-            (state % m as u32) as i32 - m / 2
-        };
-        for wide in [false, true] {
-            let keys: Vec<Key> = (0..700)
-                .map(|_| {
-                    let x = if wide { next(4) * (1 << 21) } else { next(9) };
-                    (
-                        x,
-                        next(5) - 100,
-                        next(3) + i32::MAX / 2,
-                        (next(16) + 8) as u32,
-                    )
-                })
-                .collect();
-            let mut want: Vec<u32> = (0..keys.len() as u32).collect();
-            want.sort_by_key(|&i| (keys[i as usize], i));
-            assert_eq!(by_key(&keys), want, "wide {wide}");
-        }
-    }
 
     /// Folds `hits` in one go: bricks and each hit's final brick.
     fn build(hits: &[Hit], cell_size: f32, cos: f32, anchor: Vec3) -> (Bricked, Vec<u32>) {

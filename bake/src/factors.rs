@@ -11,14 +11,20 @@ use glam::Vec3;
 use prt_format::sh::SH_COUNT;
 use prt_format::{
     split_row_for_u8, u8_offset_scale, Brick, FactorRow, FactorU8, Factors, TransferPrecision,
+    U8_MAX_RAYS,
 };
 
 use crate::trace::Hit;
 
 /// Factor rows of one probe while bricks are provisional ([`crate::bricks::BrickFolder`]):
-/// keyed by provisional brick, sorted by it, each row's sums taken ray by ray in lattice order,
-/// and kept in the form `precision` keeps them ([`ProbeRows`]) as each row is finished: no
-/// intermediate table per probe.
+/// one per provisional brick its rays hit, each row's sums taken ray by ray in lattice order,
+/// kept in the form `precision` keeps them ([`ProbeRows`]); rows in the order of their first
+/// rays (encoding sorts them by final brick).
+///
+/// Without a sort: the hits are put in ray order through a table of the lattice (a probe's
+/// rays are distinct), and grouped by a map from brick to row. Sorting (brick, ray) keys
+/// instead, Sponza at 1.0 m took 4.53-4.71 s of CPU time against 4.39-4.60 s (one thread, five
+/// alternating bakes each).
 pub fn probe_rows(
     hits: &[Hit],
     hit_brick: &[u32],
@@ -26,34 +32,34 @@ pub fn probe_rows(
     weight: f32,
     precision: TransferPrecision,
 ) -> ProbeRows {
-    // By brick, then ray (one key: a probe's rays are distinct).
-    let mut order: Vec<(u64, u32)> = hits
-        .iter()
-        .zip(hit_brick)
-        .enumerate()
-        .map(|(i, (h, &b))| (u64::from(b) << 32 | u64::from(h.ray), i as u32))
-        .collect();
-    order.sort_unstable_by_key(|&(key, _)| key);
-    let ray_count = basis.len() as u32;
-    let mut rows = ProbeRows::new(precision);
-    let mut row: Option<FactorRow> = None;
-    for (key, i) in order {
-        let (brick, i) = ((key >> 32) as u32, i as usize);
-        if let Some(done) = row.take_if(|r| r.0 != brick) {
-            rows.push(done, ray_count);
-        }
-        let row = row.get_or_insert((brick, 0, [0.0; SH_COUNT - 1], [0.0; 3]));
-        let y = &basis[hits[i].ray as usize];
+    const NO_HIT: u32 = u32::MAX;
+    let mut by_ray = vec![NO_HIT; basis.len()];
+    for (i, h) in hits.iter().enumerate() {
+        by_ray[h.ray as usize] = i as u32;
+    }
+    let mut row_of: foldhash::HashMap<u32, u32> =
+        foldhash::HashMap::with_capacity_and_hasher(hits.len(), Default::default());
+    let mut rows: Vec<FactorRow> = Vec::new();
+    for (ray, &i) in by_ray.iter().enumerate().filter(|&(_, &i)| i != NO_HIT) {
+        let (brick, i) = (hit_brick[i as usize], i as usize);
+        let r = *row_of.entry(brick).or_insert_with(|| {
+            rows.push((brick, 0, [0.0; SH_COUNT - 1], [0.0; 3]));
+            rows.len() as u32 - 1
+        });
+        let row = &mut rows[r as usize];
+        let y = &basis[ray];
         row.1 += 1;
         row.3 = (Vec3::from(row.3) + hits[i].position).to_array();
         for k in 1..SH_COUNT {
             row.2[k - 1] += weight * y[k];
         }
     }
-    if let Some(done) = row {
-        rows.push(done, ray_count);
+    let ray_count = basis.len() as u32;
+    let mut kept = ProbeRows::new(precision);
+    for row in rows {
+        kept.push(row, ray_count);
     }
-    rows
+    kept
 }
 
 /// One probe's factor rows while bricks are provisional, as close to their final form as that
@@ -129,7 +135,12 @@ impl ProbeRows {
                         r.factor.place(b, offset.to_array(), offset_scale)
                     })
                     .collect();
-                factors.sort_by_key(|f| f.brick_rays >> 8);
+                // By brick; a split row's parts (the only factors of one brick) full ones first,
+                // as they were split. Full parts are equal byte for byte, so this unstable sort
+                // gives the order the stable sort by brick gave, at less cost (the stable sort
+                // was 2% of the bake's CPU time, Sponza at 1.0 m).
+                const _: () = assert!(U8_MAX_RAYS == 0xff);
+                factors.sort_unstable_by_key(|f| f.brick_rays ^ U8_MAX_RAYS);
                 Factors::U8 {
                     factors,
                     offset_scale,
