@@ -166,7 +166,7 @@ impl BrickFolder {
         // Each hit's brick and cell.
         let mut slots = std::mem::take(&mut self.slots);
         slots.clear();
-        let mut i = 0u32;
+        let mut start = 0u32;
         for (run, known) in runs().zip(known) {
             let key = run[0];
             // Not known before this probe: made by an earlier run of it, or new.
@@ -175,15 +175,15 @@ impl BrickFolder {
                 .unwrap_or_else(|| self.new_brick(key));
             let origin =
                 self.anchor + Vec3::new(key.0 as f32, key.1 as f32, key.2 as f32) * brick_size;
-            for _ in run {
+            for i in start..start + run.len() as u32 {
                 let cell = ((hits[i as usize].position - origin) / self.cell_size)
                     .floor()
                     .clamp(Vec3::ZERO, Vec3::splat(3.0));
                 let cell = cell.x as u32 + 4 * (cell.y as u32 + 4 * cell.z as u32);
                 slots.push((b, cell as u8, i));
                 brick_of_hit[first + i as usize] = b;
-                i += 1;
             }
+            start += run.len() as u32;
         }
         self.touch(&slots);
         for &(b, cell, i) in &slots {

@@ -35,6 +35,7 @@ pub fn probe_rows(
     const NO_HIT: u32 = u32::MAX;
     let mut by_ray = vec![NO_HIT; basis.len()];
     for (i, h) in hits.iter().enumerate() {
+        debug_assert_eq!(by_ray[h.ray as usize], NO_HIT, "ray {} hit twice", h.ray);
         by_ray[h.ray as usize] = i as u32;
     }
     let mut row_of: foldhash::HashMap<u32, u32> =
@@ -165,6 +166,73 @@ fn finish(rows: &mut [FactorRow], remap: &[u32], bricks: &[Brick]) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Rows equal those of the sort by (brick, ray) that grouping by a map replaced, sums bit
+    /// for bit: hits in a shuffled ray order, on bricks that recur far apart.
+    #[test]
+    fn rows_sum_rays_in_lattice_order_per_brick() {
+        let n = 512usize;
+        let basis: Vec<[f32; SH_COUNT]> = (0..n)
+            .map(|r| std::array::from_fn(|k| ((r * 7 + k * 13) % 17) as f32 * 0.1 - 0.8))
+            .collect();
+        let mut state = 0x9e37_79b9u32;
+        let mut next = |m: u32| {
+            state ^= state << 13;
+            state ^= state >> 17;
+            state ^= state << 5;
+            state % m
+        };
+        let mut rays: Vec<u32> = (0..n as u32).filter(|r| r % 5 != 0).collect();
+        for i in (1..rays.len()).rev() {
+            rays.swap(i, next(i as u32 + 1) as usize);
+        }
+        let hits: Vec<Hit> = rays
+            .iter()
+            .map(|&ray| Hit {
+                ray,
+                position: Vec3::new(next(1000) as f32 * 0.01, 0.3, -(ray as f32) * 0.001),
+                normal: Vec3::Y,
+                albedo: [0.5; 3],
+                emission: [0.0; 3],
+                backface: false,
+                facing_away: false,
+            })
+            .collect();
+        let bricks: Vec<u32> = hits.iter().map(|_| next(40) * 3).collect();
+        let weight = 4.0 * std::f32::consts::PI / n as f32;
+        let ProbeRows::Sums(mut got) =
+            probe_rows(&hits, &bricks, &basis, weight, TransferPrecision::F32)
+        else {
+            panic!("f32 rows are sums");
+        };
+        got.sort_by_key(|r| r.0);
+        let mut order: Vec<usize> = (0..hits.len()).collect();
+        order.sort_by_key(|&i| (bricks[i], hits[i].ray));
+        let mut want: Vec<FactorRow> = Vec::new();
+        for i in order {
+            if want.last().is_none_or(|r| r.0 != bricks[i]) {
+                want.push((bricks[i], 0, [0.0; SH_COUNT - 1], [0.0; 3]));
+            }
+            let row = want.last_mut().unwrap();
+            row.1 += 1;
+            row.3 = (Vec3::from(row.3) + hits[i].position).to_array();
+            for k in 1..SH_COUNT {
+                row.2[k - 1] += weight * basis[hits[i].ray as usize][k];
+            }
+        }
+        let bits = |rows: &[FactorRow]| -> Vec<u32> {
+            rows.iter()
+                .flat_map(|r| {
+                    [r.0, r.1]
+                        .into_iter()
+                        .chain(r.2.map(f32::to_bits))
+                        .chain(r.3.map(f32::to_bits))
+                })
+                .collect()
+        };
+        assert_eq!(want.len(), got.len());
+        assert_eq!(bits(&got), bits(&want));
+    }
 
     /// Rows encoded as u8 while bricks are provisional give the table that finishing the f32
     /// sums, splitting them and encoding them at the end gives, byte for byte.
