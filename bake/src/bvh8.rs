@@ -351,9 +351,9 @@ impl Bvh8 {
     /// Written over plain arrays of eight lanes, one per child, with `min` and `max` as `minps`
     /// and `maxps` compute them (the second operand when either is NaN), so that the compiler
     /// can vectorize it for the instruction set it compiles for: AVX in
-    /// [`Bvh8::closest_hits_avx`], SSE elsewhere (`tests` hold the two to the same bits). Sponza at 1.9 m, bare tracing:
-    /// 0.27-0.28 s with the same test written as two glam `Vec4`s, 0.21-0.28 s as arrays for
-    /// SSE, 0.17-0.19 s for AVX.
+    /// [`Bvh8::closest_hits_avx`], SSE elsewhere (`tests` hold the two to the same bits).
+    /// Sponza at 1.9 m, bare tracing: 0.27-0.28 s with the same test written as two glam
+    /// `Vec4`s, 0.21-0.28 s as arrays for SSE, 0.17-0.19 s for AVX.
     #[inline(always)]
     fn visit(&self, node: &Node, p: &Packet, mask: u8, stack: &mut Vec<Entry>) {
         let rel = |planes: &[Lanes; 3]| -> [Lanes; 3] {

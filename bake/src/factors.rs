@@ -256,12 +256,8 @@ mod tests {
         let (n, size) = (4096, 0.5);
         let mut late = rows.clone();
         finish(&mut late, &remap, &bricks);
-        let late = Factors::build(
-            &prt_format::split_rows_for_u8(late),
-            TransferPrecision::U8,
-            n,
-            size,
-        );
+        let late: Vec<FactorRow> = late.into_iter().flat_map(split_row_for_u8).collect();
+        let late = Factors::build(&late, TransferPrecision::U8, n, size);
         let mut early = ProbeRows::new(TransferPrecision::U8);
         for row in rows {
             early.push(row, n);

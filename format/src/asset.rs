@@ -330,14 +330,9 @@ fn unsnorm8(b: u32) -> f32 {
 /// A factor row as the baker produces it: brick, rays, transfer k = 1..9, offset.
 pub type FactorRow = (u32, u32, [f32; 8], [f32; 3]);
 
-/// Splits rows with more than [`U8_MAX_RAYS`] rays into several rows of the same brick and
+/// Splits a row with more than [`U8_MAX_RAYS`] rays into several rows of the same brick and
 /// offset whose rays and transfers add up to the original (the gather is linear, so the probe's
-/// SH is unchanged).
-pub fn split_rows_for_u8(rows: Vec<FactorRow>) -> Vec<FactorRow> {
-    rows.into_iter().flat_map(split_row_for_u8).collect()
-}
-
-/// [`split_rows_for_u8`] of one row.
+/// SH is unchanged); a row of fewer rays comes back as it is.
 pub fn split_row_for_u8(row: FactorRow) -> impl Iterator<Item = FactorRow> {
     let (brick, rays, sh, offset) = row;
     let mut left = rays;
@@ -505,7 +500,7 @@ impl Factors {
 
     /// Builds the table in the requested precision for a bake of `ray_count` rays.
     /// `brick_size` (metres) scales 8-bit offsets; for `U8`, rows must have at most
-    /// [`U8_MAX_RAYS`] rays and bricks up to [`U8_MAX_BRICK`] (see [`split_rows_for_u8`]).
+    /// [`U8_MAX_RAYS`] rays and bricks up to [`U8_MAX_BRICK`] (see [`split_row_for_u8`]).
     pub fn build(
         rows: &[FactorRow],
         precision: TransferPrecision,

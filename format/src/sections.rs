@@ -181,16 +181,16 @@ impl Sections<'_> {
         let len: u64 = self.via_serde(section)?;
         let rest = self.payload.len() - self.at;
         let size = std::mem::size_of::<T>();
-        let bytes = usize::try_from(len)
+        let fits = usize::try_from(len)
             .ok()
-            .and_then(|n| n.checked_mul(size))
-            .filter(|&b| b <= rest);
-        let Some(bytes) = bytes else {
+            .and_then(|n| Some((n, n.checked_mul(size)?)))
+            .filter(|&(_, b)| b <= rest);
+        let Some((n, bytes)) = fits else {
             let message =
                 format!("{len} elements of {size} bytes declared, {rest} bytes of payload left");
             return Err(self.error(section, start, message));
         };
-        let mut v = vec![T::zeroed(); bytes / std::mem::size_of::<T>().max(1)];
+        let mut v = vec![T::zeroed(); n];
         bytemuck::cast_slice_mut(&mut v).copy_from_slice(&self.payload[self.at..self.at + bytes]);
         self.at += bytes;
         Ok(v)
