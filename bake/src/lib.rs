@@ -24,6 +24,7 @@
 pub mod bricks;
 pub mod bvh;
 pub mod bvh8;
+mod chunked;
 pub mod depth;
 pub mod diagnostics;
 pub mod dilate;

@@ -49,11 +49,11 @@ pub(crate) fn bake_in_pool(
         .unwrap_or_else(|| probes::default_spacing(min, max));
     // The grid first: a spacing far too small for the scene is refused before any other work.
     let grid = probes::grid(min, max, spacing, settings.max_probes)?;
-    let (winding, bvh) = rayon::join(
-        || diagnostics::winding(&scene.triangles),
-        || bvh::SceneBvh::build_checked(&scene.triangles, bvh::trace_scale(spacing)),
-    );
-    let bvh = bvh?;
+    let rays = grid.probe_count().saturating_mul(u64::from(settings.rays));
+    let (bvh, winding) =
+        bvh::SceneBvh::build_checked(&scene.triangles, bvh::trace_scale(spacing), rays, || {
+            diagnostics::winding(&scene.triangles)
+        })?;
     let winding_hint = winding.inconsistent_fraction() > WINDING_WARNING && !settings.double_sided;
     if winding_hint {
         let warning = diagnostics::winding_warning(&winding);

@@ -90,7 +90,10 @@ fn bare(scene: &Path, asset: &prt_format::Asset, rays: u32) -> Result<Bare> {
             })
         })
     });
-    let bvh = prt_bake::bvh::SceneBvh::build_checked(&loaded.triangles, scale)?;
+    // The bake's BVH: built with the preset the bake chose for these rays.
+    let traced = positions.len() as u64 * u64::from(rays);
+    let (bvh, ()) =
+        prt_bake::bvh::SceneBvh::build_checked(&loaded.triangles, scale, traced, || ())?;
     let packets = [&coherent, &lattice].map(|order| {
         timed(&|p| {
             order

@@ -869,6 +869,16 @@ fn scene_diagnostics_warn_about_winding_and_invalid_probes() {
         "{:?}",
         report.warnings
     );
+    // The exact count, as sorting the corners by position and then the edges found it (the
+    // hashed count must not lose or merge edges).
+    assert!(
+        report
+            .warnings
+            .iter()
+            .any(|w| w.contains("(1 of 249798 shared edges inconsistent)")),
+        "{:?}",
+        report.warnings
+    );
 
     let (_, report) = prt_bake::bake(&cornell(), &rays(64), &NoProgress).unwrap();
     assert!(report.warnings.is_empty(), "{:?}", report.warnings);

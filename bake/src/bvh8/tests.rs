@@ -1,6 +1,5 @@
 //! Tests of the packet tracer against a brute-force loop over every triangle.
 use super::*;
-use obvhs::{ploc::PlocBuilder, BvhBuildParams};
 
 /// A deterministic generator (xorshift) of floats in [0, 1).
 struct Rng(u32);
@@ -16,15 +15,11 @@ impl Rng {
     }
 }
 
-fn build(tris: &[Triangle]) -> Bvh8 {
-    let params = BvhBuildParams::medium_build();
-    let bvh2 = PlocBuilder::with_capacity(tris.len()).build(
-        params.ploc_search_distance,
-        tris,
-        (0..tris.len() as u32).collect(),
-        params.sort_precision,
-        params.search_depth_threshold,
-    );
+/// The bake's wide BVH over `tris`, built with obvhs' `medium_build` preset or (`fast`) its
+/// `fast_build` ([`crate::bvh::build_params`]): hits must not depend on which.
+fn build(tris: &[Triangle], fast: bool) -> Bvh8 {
+    let rays = if fast { 0 } else { u64::MAX };
+    let bvh2 = crate::bvh::ploc(tris, &crate::bvh::build_params(tris.len(), rays));
     Bvh8::from_bvh2(&bvh2, &crate::bvh::subtree_triangles(&bvh2), tris)
 }
 
@@ -52,7 +47,12 @@ fn brute(tris: &[Triangle], o: Vec3, d: Vec3) -> Option<(u32, f32)> {
 }
 
 fn check(tris: &[Triangle], origins: &[Vec3], dirs: &[Vec3]) -> usize {
-    let bvh = build(tris);
+    let hits = check_with(&build(tris, false), tris, origins, dirs);
+    assert_eq!(check_with(&build(tris, true), tris, origins, dirs), hits);
+    hits
+}
+
+fn check_with(bvh: &Bvh8, tris: &[Triangle], origins: &[Vec3], dirs: &[Vec3]) -> usize {
     let mut hits = 0;
     for &o in origins {
         for packet in dirs.chunks(LANES) {
@@ -222,7 +222,7 @@ fn box_test_compiled_for_avx_gives_the_same_bits() {
             }
         })
         .collect();
-    let bvh = build(&tris);
+    let bvh = build(&tris, false);
     let mut dirs: Vec<Vec3> = prt_format::directions::fibonacci_directions(64)
         .into_iter()
         .map(Vec3::from)
