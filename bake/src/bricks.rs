@@ -157,8 +157,10 @@ impl BrickFolder {
         let keys: Vec<Key> = hits
             .iter()
             .map(|h| {
-                let c = ((h.position - self.anchor) / brick_size).floor();
-                (c.x as i32, c.y as i32, c.z as i32, flags_of(h))
+                let c = ((h.position - self.anchor) / brick_size)
+                    .to_array()
+                    .map(floor_i32);
+                (c[0], c[1], c[2], flags_of(h))
             })
             .collect();
         brick_of_hit.resize(first + hits.len(), 0);
@@ -179,9 +181,9 @@ impl BrickFolder {
                 self.anchor + Vec3::new(key.0 as f32, key.1 as f32, key.2 as f32) * brick_size;
             for i in start..start + run.len() as u32 {
                 let cell = ((hits[i as usize].position - origin) / self.cell_size)
-                    .floor()
-                    .clamp(Vec3::ZERO, Vec3::splat(3.0));
-                let cell = cell.x as u32 + 4 * (cell.y as u32 + 4 * cell.z as u32);
+                    .to_array()
+                    .map(|c| floor_i32(c).clamp(0, 3) as u32);
+                let cell = cell[0] + 4 * (cell[1] + 4 * cell[2]);
                 slots.push((b, cell as u8, i));
                 brick_of_hit[first + i as usize] = b;
             }
@@ -319,6 +321,19 @@ impl BrickFolder {
     }
 }
 
+/// `v.floor() as i32` (saturating, NaN to 0) by truncation: the baseline x86-64 target has no
+/// SSE4.1 `roundps`, so `floor` is a call to a software routine, and the fold takes six per
+/// hit (8% of its time on Sponza at 1.0 m, one thread).
+#[inline]
+fn floor_i32(v: f32) -> i32 {
+    let t = v as i32;
+    if t as f32 > v {
+        t.saturating_sub(1)
+    } else {
+        t
+    }
+}
+
 /// Finishes one brick: bounds, centroid, and the surfels' gradient weights.
 ///
 /// The brick's radiance is modelled as linear, `L(p) = L_mean + G . (p - centroid)`, fitted by
@@ -425,6 +440,30 @@ impl Cluster {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// [`floor_i32`] is `floor` then a saturating cast, for every 61st float of all 2^32 bit
+    /// patterns (infinities and NaNs among them) and around every integer near zero.
+    #[test]
+    fn floor_by_truncation_is_floor() {
+        let check = |v: f32| assert_eq!(floor_i32(v), v.floor() as i32, "{v:e}");
+        for bits in (0..=u32::MAX).step_by(61) {
+            check(f32::from_bits(bits));
+        }
+        for n in -300..300 {
+            let v = n as f32;
+            for w in [
+                v,
+                v.next_down(),
+                v.next_up(),
+                v + 0.5,
+                -0.0,
+                2147483520.0,
+                -2147483648.0,
+            ] {
+                check(w);
+            }
+        }
+    }
 
     /// Folds `hits` in one go: bricks and each hit's final brick.
     fn build(hits: &[Hit], cell_size: f32, cos: f32, anchor: Vec3) -> (Bricked, Vec<u32>) {

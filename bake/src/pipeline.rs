@@ -11,7 +11,6 @@ use prt_format::{
     directions, Asset, BakeSettingsRecord, BakeStats, Factors, Header, Probe, TransferPrecision,
     PROBE_DILATED, PROBE_OFFSET, PROBE_VALID, U8_MAX_BRICK,
 };
-use rayon::prelude::*;
 
 use crate::{
     bricks, bvh, diagnostics, dilate, factors, offset, probes, scene, stream, texture, trace,
@@ -141,9 +140,6 @@ pub(crate) fn bake_in_pool(
     )?;
     lap(&mut report, "trace", Some("bricks"));
 
-    let (bricked, tables) = bricks_and_tables(folder, tables, settings, n, cell_size)?;
-    lap(&mut report, "bricks", Some("assemble"));
-
     let valid: Vec<bool> = traced.iter().map(|r| !is_inside(r)).collect();
     if let Some(w) = diagnostics::inside_warning(&valid, settings, &winding, winding_hint) {
         report.warnings.push(w);
@@ -153,13 +149,18 @@ pub(crate) fn bake_in_pool(
     } else {
         vec![None; valid.len()]
     };
-    let Assembled {
-        probes: probes_out,
-        carried,
-        factor_count,
-        sky_mask,
-        sky_transfer,
-    } = assemble_probes(&traced, &positions, &tables, &valid, &sources);
+    // Per probe, whose table it carries: its own, its dilation source's, or none.
+    let from: Vec<Option<usize>> = valid
+        .iter()
+        .zip(&sources)
+        .enumerate()
+        .map(|(p, (&valid, &source))| if valid { Some(p) } else { source })
+        .collect();
+    let lens: Vec<usize> = from
+        .iter()
+        .map(|f| f.map_or(0, |q| tables[q].len()))
+        .collect();
+    let factor_count: u64 = lens.iter().map(|&len| len as u64).sum();
     if factor_count > u64::from(u32::MAX) {
         return Err(BakeError::Setting {
             name: "spacing",
@@ -167,6 +168,18 @@ pub(crate) fn bake_in_pool(
             reason: "more than 2^32 factors (dilation copies tables into probes inside geometry): use fewer probes or rays, or --no-dilation",
         });
     }
+    let carried = factors::Carried {
+        from: &from,
+        lens: &lens,
+    };
+    let (bricked, factors) = bricks_and_tables(folder, tables, carried, settings, n, cell_size)?;
+    lap(&mut report, "bricks", Some("assemble"));
+
+    let Assembled {
+        probes: probes_out,
+        sky_mask,
+        sky_transfer,
+    } = assemble_probes(&traced, &positions, carried);
     // Every ray hits a surface or the sky.
     let hits: u64 = traced.iter().map(|r| u64::from(n - r.sky_rays)).sum();
     let stats = BakeStats {
@@ -177,13 +190,6 @@ pub(crate) fn bake_in_pool(
         backface_hits: traced.iter().map(|r| u64::from(r.backface_rays)).sum(),
         surfels_unmerged: hits,
     };
-    // No probe carrying a table (all invalid): an empty table of the asked precision.
-    let factors = match carried.is_empty() {
-        true => Factors::build(&[], settings.transfer_precision, n, 4.0 * cell_size),
-        false => Factors::concat(&carried),
-    };
-    drop(carried);
-    drop(tables);
     let asset = Asset {
         header: Header {
             generator: format!("prt-bake {}", env!("CARGO_PKG_VERSION")),
@@ -284,16 +290,17 @@ fn load(
     })
 }
 
-/// The bricks stage: numbers the bricks and finishes their surfels, then finishes and encodes
-/// each probe's factor table, freeing its rows as it goes; fails when u8 factors cannot address
-/// the bricks.
+/// The bricks stage: numbers the bricks and finishes their surfels, then encodes the factor
+/// tables the probes carry into the asset's table ([`factors::encode_tables`]), freeing the
+/// rows as it goes; fails when u8 factors cannot address the bricks.
 fn bricks_and_tables(
     folder: bricks::BrickFolder,
     tables: Vec<factors::ProbeRows>,
+    carried: factors::Carried,
     settings: &BakeSettings,
     ray_count: u32,
     cell_size: f32,
-) -> Result<(bricks::Bricked, Vec<Factors>), BakeError> {
+) -> Result<(bricks::Bricked, Factors), BakeError> {
     let (bricked, remap) = folder.finish();
     let u8_rows = settings.transfer_precision == TransferPrecision::U8;
     if u8_rows && bricked.bricks.len() > U8_MAX_BRICK as usize + 1 {
@@ -303,76 +310,55 @@ fn bricks_and_tables(
             reason: "the 8-bit factor encoding addresses at most 16,777,216 bricks; use f16",
         });
     }
-    let precision = settings.transfer_precision;
-    let tables = tables
-        .into_par_iter()
-        .map(|rows| {
-            rows.encode(
-                &remap,
-                &bricked.bricks,
-                precision,
-                ray_count,
-                4.0 * cell_size,
-            )
-        })
-        .collect();
-    Ok((bricked, tables))
+    let encoding = (settings.transfer_precision, ray_count, 4.0 * cell_size);
+    let factors = factors::encode_tables(tables, carried, &remap, &bricked.bricks, encoding);
+    Ok((bricked, factors))
 }
 
-/// Per probe: its record, and the factor table, sky mask and sky transfer it carries, in probe
-/// order. A dilated probe carries its source's table, sky and ray counts (the record describes
-/// the data it carries); only its position is its own. An invalid probe is never gathered and
-/// carries no table.
-fn assemble_probes<'a>(
+/// Per probe, in probe order: its record, and the sky mask and sky transfer it carries with
+/// its factor table (`carried`). A dilated probe carries its source's table, sky and ray counts
+/// (the record describes the data it carries); only its position is its own. An invalid probe
+/// is never gathered and carries no table.
+fn assemble_probes(
     traced: &[trace::ProbeRays],
     positions: &[(Vec3, bool)],
-    tables: &'a [Factors],
-    valid: &[bool],
-    sources: &[Option<usize>],
-) -> Assembled<'a> {
+    carried: factors::Carried,
+) -> Assembled {
     let mut probes = Vec::with_capacity(traced.len());
-    let mut carried: Vec<&Factors> = Vec::with_capacity(traced.len());
     let mask_words = traced.first().map_or(0, |r| r.sky_mask.len());
     let mut sky_mask = Vec::with_capacity(mask_words * positions.len());
     let mut sky_transfer = Vec::with_capacity(positions.len());
-    let mut factor_count = 0u64;
+    let mut first_factor = 0u32;
     for (p, &(pos, moved)) in positions.iter().enumerate() {
-        let (flags, from) = match (valid[p], sources[p]) {
-            (true, _) => (PROBE_VALID, p),
-            (false, Some(q)) => (PROBE_VALID | PROBE_DILATED, q),
-            (false, None) => (0, p),
+        let (flags, from) = match carried.from[p] {
+            Some(q) if q == p => (PROBE_VALID, p),
+            Some(q) => (PROBE_VALID | PROBE_DILATED, q),
+            None => (0, p),
         };
-        let table = (flags != 0).then(|| &tables[from]);
-        let len = table.map_or(0, Factors::len);
+        let len = carried.lens[p] as u32;
         probes.push(Probe {
             position: pos.to_array(),
             flags: flags | if moved { PROBE_OFFSET } else { 0 },
-            first_factor: factor_count as u32,
-            factor_count: len as u32,
+            first_factor,
+            factor_count: len,
             sky_rays: traced[from].sky_rays,
             backface_rays: traced[from].backface_rays,
         });
-        factor_count += len as u64;
-        carried.extend(table);
+        // At most 2^32 - 1 factors in all (checked before the tables were encoded).
+        first_factor += len;
         sky_mask.extend_from_slice(&traced[from].sky_mask);
         sky_transfer.push(traced[from].sky_transfer);
     }
     Assembled {
         probes,
-        carried,
-        factor_count,
         sky_mask,
         sky_transfer,
     }
 }
 
 /// The per-probe sections of the asset, before encoding.
-struct Assembled<'a> {
+struct Assembled {
     probes: Vec<Probe>,
-    /// The factor tables the probes carry, in probe order (a probe's own, its dilation
-    /// source's; none for an invalid probe).
-    carried: Vec<&'a Factors>,
-    factor_count: u64,
     sky_mask: Vec<u32>,
     sky_transfer: Vec<[f32; prt_format::sh::SH_COUNT]>,
 }

@@ -320,7 +320,17 @@ pub const U8_MAX_BRICK: u32 = (1 << 24) - 1;
 pub const U8_MAX_RAYS: u32 = 255;
 
 fn snorm8(v: f32) -> u32 {
-    ((v.clamp(-1.0, 1.0) * 127.0).round() as i32 as u32) & 0xff
+    (round_small(v.clamp(-1.0, 1.0) * 127.0) as u32) & 0xff
+}
+
+/// `v.round() as i32` (half away from zero; NaN to 0) for `|v| < 2^23`, by truncation: the
+/// baseline x86-64 target has no SSE4.1 `roundps`, so `round` is a call to a software routine,
+/// and the baker encodes eleven a factor. `v - trunc(v)` is exact in that range.
+#[inline]
+fn round_small(v: f32) -> i32 {
+    let t = v as i32;
+    let f = v - t as f32;
+    t + i32::from(f >= 0.5) - i32::from(f <= -0.5)
 }
 
 fn unsnorm8(b: u32) -> f32 {
@@ -364,55 +374,6 @@ pub enum Factors {
         /// Metres of offset per unit of the snorm8 offset (the brick size).
         offset_scale: f32,
     },
-}
-
-impl Factors {
-    /// Joins tables encoded separately, in order (all of one precision and, for u8, built with
-    /// one brick size); a table may appear more than once (a dilated probe carries its source's).
-    /// No parts give the default (empty u8).
-    ///
-    /// # Panics
-    /// When the parts mix precisions or u8 offset scales: they come from one
-    /// [`Factors::build`] call site with fixed arguments, never from input.
-    pub fn concat(parts: &[&Factors]) -> Factors {
-        let total: usize = parts.iter().map(|p| p.len()).sum();
-        let Some(first) = parts.first() else {
-            return Factors::default();
-        };
-        let mut all = match first {
-            Factors::F32(_) => Factors::F32(Vec::with_capacity(total)),
-            Factors::F16(_) => Factors::F16(Vec::with_capacity(total)),
-            Factors::U8 { offset_scale, .. } => Factors::U8 {
-                factors: Vec::with_capacity(total),
-                offset_scale: *offset_scale,
-            },
-        };
-        for part in parts {
-            match (&mut all, part) {
-                (Factors::F32(a), Factors::F32(b)) => a.extend_from_slice(b),
-                (Factors::F16(a), Factors::F16(b)) => a.extend_from_slice(b),
-                (
-                    Factors::U8 {
-                        factors: a,
-                        offset_scale,
-                    },
-                    Factors::U8 {
-                        factors: b,
-                        offset_scale: scale,
-                    },
-                ) => {
-                    assert_eq!(offset_scale, scale, "Factors::concat of u8 offset scales");
-                    a.extend_from_slice(b)
-                }
-                (a, b) => panic!(
-                    "Factors::concat of {:?} and {:?} tables",
-                    a.precision(),
-                    b.precision()
-                ),
-            }
-        }
-        all
-    }
 }
 
 impl Default for Factors {
@@ -680,6 +641,30 @@ pub fn f16_to_f32(h: u16) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// [`round_small`] is `round` then a cast for every 37th float of magnitude below 2^23 (and
+    /// NaN) and around every half-integer near zero, and through [`snorm8`] for every 61st
+    /// float of all bit patterns.
+    #[test]
+    fn round_by_truncation_is_round() {
+        let check = |v: f32| assert_eq!(round_small(v), v.round() as i32, "{v:e}");
+        for bits in (0..0x4b00_0000u32).step_by(37) {
+            check(f32::from_bits(bits));
+            check(-f32::from_bits(bits));
+        }
+        check(f32::NAN);
+        for n in -300..300 {
+            let v = n as f32 + 0.5;
+            for w in [v, v.next_down(), v.next_up()] {
+                check(w);
+            }
+        }
+        for bits in (0..=u32::MAX).step_by(61) {
+            let v = f32::from_bits(bits);
+            let want = ((v.clamp(-1.0, 1.0) * 127.0).round() as i32 as u32) & 0xff;
+            assert_eq!(snorm8(v), want, "{v:e}");
+        }
+    }
 
     #[test]
     fn half_round_trip() {
