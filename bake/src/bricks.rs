@@ -201,18 +201,36 @@ impl BrickFolder {
     /// The loads do not depend on each other, so the CPU overlaps their cache misses; merging
     /// hit by hit, each hit waited for two misses in turn (its cell's head, then the surfel it
     /// points to: 83% of the fold's time on Sponza at 1.0 m). Merging then finds them in cache.
+    /// On x86-64 as prefetches, which the CPU does not wait for, where a load it must finish
+    /// before the next instructions retire (Sponza at 1.0 m, one thread, least of four
+    /// alternating bakes: the trace stage took 3.895 s against 3.975 s with loads).
     fn touch(&self, slots: &[(u32, u8, u32)]) {
-        let mut any = 0u32;
-        for &(b, cell, _) in slots {
-            any ^= self.heads[b as usize][usize::from(cell)];
-        }
-        for &(b, cell, _) in slots {
-            let head = self.heads[b as usize][usize::from(cell)];
-            if let Some(cl) = self.clusters.get(head as usize) {
-                any ^= cl.count.to_bits();
+        #[cfg(target_arch = "x86_64")]
+        {
+            for &(b, cell, _) in slots {
+                prefetch(&self.heads[b as usize][usize::from(cell)]);
+            }
+            for &(b, cell, _) in slots {
+                let head = self.heads[b as usize][usize::from(cell)];
+                if let Some(cl) = self.clusters.get(head as usize) {
+                    prefetch(cl);
+                }
             }
         }
-        std::hint::black_box(any);
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            let mut any = 0u32;
+            for &(b, cell, _) in slots {
+                any ^= self.heads[b as usize][usize::from(cell)];
+            }
+            for &(b, cell, _) in slots {
+                let head = self.heads[b as usize][usize::from(cell)];
+                if let Some(cl) = self.clusters.get(head as usize) {
+                    any ^= cl.count.to_bits();
+                }
+            }
+            std::hint::black_box(any);
+        }
     }
 
     /// A new provisional brick for `key`.
@@ -319,6 +337,16 @@ impl BrickFolder {
             .collect();
         (Bricked { bricks, surfels }, remap)
     }
+}
+
+/// Asks for the cache line holding `item` without waiting for it (`prefetcht0`).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn prefetch<T>(item: &T) {
+    use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+    let p: *const T = item;
+    // SAFETY: SSE is part of the x86-64 baseline, and a prefetch reads nothing and never faults.
+    unsafe { _mm_prefetch::<_MM_HINT_T0>(p.cast()) };
 }
 
 /// `v.floor() as i32` (saturating, NaN to 0) by truncation: the baseline x86-64 target has no
