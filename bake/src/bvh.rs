@@ -52,8 +52,8 @@ pub fn traced_triangles(triangles: &[[Vec3; 3]], scale: f32) -> Vec<Triangle> {
 /// Rays per triangle below which [`build_params`] takes obvhs' `fast_build` preset. Against
 /// `medium_build` (a wider PLOC search, more reinsertion), Sponza's 187k triangles, 2 threads,
 /// least of 5-10 alternating bakes: at 1.9 m spacing (8 rays a triangle) the BVH stage took
-/// 0.092 s against 0.108 s and the trace stage 0.354 s against 0.357 s; at 1.4 m (16) 0.088
-/// against 0.122 s and 0.872 against 0.855 s; at 1.0 m (40) 0.085 against 0.106 s and 2.104
+/// 0.092 s against 0.108 s and the trace stage 0.354 s against 0.357 s; at 1.4 m (19) 0.088
+/// against 0.122 s and 0.872 against 0.855 s; at 1.0 m (46) 0.085 against 0.106 s and 2.104
 /// against 2.052 s. The build saves about 20-30 ms; the trace loses about 2%, which passes that
 /// at about 25 rays a triangle.
 pub const FAST_BUILD_RAYS_PER_TRIANGLE: u64 = 24;
@@ -107,8 +107,9 @@ impl SceneBvh {
 
     /// [`SceneBvh::build`] for tracing about `rays` rays ([`build_params`]), running `beside`
     /// on the pool while the binary BVH is collapsed into the two the bake uses. PLOC and
-    /// reinsertion take every thread; the collapse is two serial walks of the tree, which
-    /// leave a thread free for other work. The bake runs its winding check there: beside the
+    /// reinsertion take every thread; the collapse (each subtree's triangles counted, then the
+    /// two trees walked out of it side by side) is serial work that leaves room on the pool.
+    /// The bake runs its winding check there: beside the
     /// PLOC build instead, the BVH stage took 0.113 s against 0.106 s (Sponza at 1.9 m with
     /// `medium_build`, 2 threads, least of 8 alternating bakes).
     pub fn build_beside<R: Send>(

@@ -136,9 +136,8 @@ fn mix(mut h: u64) -> u64 {
 /// whose hash is this, one in 2^63, is left out with them).
 const SELF_EDGE: u64 = u64::MAX;
 
-/// `keys` (uniform hashes) with equal keys side by side, sorted within runs of equal top bits:
-/// one pass to count buckets of their top bits (about four keys a bucket), one to scatter them,
-/// then a sort of each small bucket. Sponza's 562k edges, one thread: 23 ms in one
+/// `keys` (uniform hashes) sorted: one pass to count buckets of their top bits (four to eight
+/// keys a bucket), one to scatter them, then a sort of each small bucket. Sponza's 562k edges, one thread: 23 ms in one
 /// `sort_unstable`, 11 ms so.
 fn group_equal(keys: &[u64]) -> Vec<u64> {
     let bits = (keys.len() / 4).max(2).ilog2().min(24);

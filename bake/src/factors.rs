@@ -121,15 +121,13 @@ impl ProbeRows {
         }
     }
 
-    /// Sums rows finished ([`finish`]); none for u8 rows.
+    /// Sums rows finished ([`finish`]).
     fn finished(self, placed: &[Placed]) -> Vec<FactorRow> {
-        match self {
-            ProbeRows::Sums(mut rows) => {
-                finish(&mut rows, placed);
-                rows
-            }
-            ProbeRows::U8(_) => Vec::new(),
-        }
+        let ProbeRows::Sums(mut rows) = self else {
+            unreachable!("f16 and f32 rows are kept as sums");
+        };
+        finish(&mut rows, placed);
+        rows
     }
 }
 
@@ -163,9 +161,9 @@ pub struct Carried<'a> {
     pub lens: &'a [usize],
 }
 
-/// The asset's factor table, every carried table encoded straight into its place, in probe
-/// order: tables in parallel, a dilated probe's copied from its source's, an invalid probe's
-/// rows dropped unencoded. Encoding a table per probe and joining them copied every factor
+/// The asset's factor table, every carried table put in its place in probe order: tables in
+/// parallel (u8 ones encoded straight into their place, f16 and f32 ones built, then copied),
+/// a dilated probe's copied from its source's, an invalid probe's rows dropped unencoded. Encoding a table per probe and joining them copied every factor
 /// once more: at Sponza's 1.0 m spacing (74 MB of factors, 2 threads) the assemble stage took
 /// 0.050 s, 0.001 s now.
 pub fn encode_tables(
@@ -196,14 +194,16 @@ pub fn encode_tables(
             }
         }
         TransferPrecision::F16 => Factors::F16(place_tables(tables, carried, |rows, out| {
-            if let Factors::F16(table) = sums(rows, precision) {
-                out.copy_from_slice(&table);
-            }
+            let Factors::F16(table) = sums(rows, precision) else {
+                unreachable!("built as f16");
+            };
+            out.copy_from_slice(&table);
         })),
         TransferPrecision::F32 => Factors::F32(place_tables(tables, carried, |rows, out| {
-            if let Factors::F32(table) = sums(rows, precision) {
-                out.copy_from_slice(&table);
-            }
+            let Factors::F32(table) = sums(rows, precision) else {
+                unreachable!("built as f32");
+            };
+            out.copy_from_slice(&table);
         })),
     }
 }
@@ -239,6 +239,11 @@ fn place_tables<T: bytemuck::Zeroable + Copy + Send + Sync>(
     }
     for (p, from) in carried.from.iter().enumerate() {
         if let Some(q) = from.filter(|&q| q != p) {
+            debug_assert_eq!(
+                carried.from[q],
+                Some(q),
+                "a dilation source carries its own table"
+            );
             out.copy_within(starts[q]..starts[q] + carried.lens[q], starts[p]);
         }
     }

@@ -149,25 +149,7 @@ pub(crate) fn bake_in_pool(
     } else {
         vec![None; valid.len()]
     };
-    // Per probe, whose table it carries: its own, its dilation source's, or none.
-    let from: Vec<Option<usize>> = valid
-        .iter()
-        .zip(&sources)
-        .enumerate()
-        .map(|(p, (&valid, &source))| if valid { Some(p) } else { source })
-        .collect();
-    let lens: Vec<usize> = from
-        .iter()
-        .map(|f| f.map_or(0, |q| tables[q].len()))
-        .collect();
-    let factor_count: u64 = lens.iter().map(|&len| len as u64).sum();
-    if factor_count > u64::from(u32::MAX) {
-        return Err(BakeError::Setting {
-            name: "spacing",
-            value: format!("{factor_count} factors"),
-            reason: "more than 2^32 factors (dilation copies tables into probes inside geometry): use fewer probes or rays, or --no-dilation",
-        });
-    }
+    let (from, lens) = carried_layout(&valid, &sources, &tables)?;
     let carried = factors::Carried {
         from: &from,
         lens: &lens,
@@ -313,6 +295,34 @@ fn bricks_and_tables(
     let encoding = (settings.transfer_precision, ray_count, 4.0 * cell_size);
     let factors = factors::encode_tables(tables, carried, &remap, &bricked.bricks, encoding);
     Ok((bricked, factors))
+}
+
+/// Per probe: whose factor table it carries (its own when valid, else its dilation source's,
+/// else none) and how many factors that is; fails when they pass 2^32 in all.
+fn carried_layout(
+    valid: &[bool],
+    sources: &[Option<usize>],
+    tables: &[factors::ProbeRows],
+) -> Result<(Vec<Option<usize>>, Vec<usize>), BakeError> {
+    let from: Vec<Option<usize>> = valid
+        .iter()
+        .zip(sources)
+        .enumerate()
+        .map(|(p, (&valid, &source))| if valid { Some(p) } else { source })
+        .collect();
+    let lens: Vec<usize> = from
+        .iter()
+        .map(|f| f.map_or(0, |q| tables[q].len()))
+        .collect();
+    let factor_count: u64 = lens.iter().map(|&len| len as u64).sum();
+    if factor_count > u64::from(u32::MAX) {
+        return Err(BakeError::Setting {
+            name: "spacing",
+            value: format!("{factor_count} factors"),
+            reason: "more than 2^32 factors (dilation copies tables into probes inside geometry): use fewer probes or rays, or --no-dilation",
+        });
+    }
+    Ok((from, lens))
 }
 
 /// Per probe, in probe order: its record, and the sky mask and sky transfer it carries with

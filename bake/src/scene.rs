@@ -449,27 +449,13 @@ impl Loader<'_> {
                 .materials
                 .get(material as usize)
                 .is_some_and(|m| m.base_texture.is_some() || m.emissive_texture.is_some());
-            let uvs: [Option<Vec<Vec2>>; 2] = [0, 1].map(|set| {
-                reader
-                    .read_tex_coords(set)
-                    .filter(|_| textured)
-                    .map(|t| t.into_f32().map(Vec2::from).collect())
-            });
-            let colors: Option<Vec<Vec4>> = reader
-                .read_colors(0)
-                .map(|c| c.into_rgba_f32().map(Vec4::from).collect());
-            for (set, uv) in uvs.iter().enumerate() {
-                if uv.as_ref().is_some_and(|u| u.len() != vertex_count) {
-                    return Err(err(format!("TEXCOORD_{set} count differs from POSITION")));
-                }
-            }
-            if colors.as_ref().is_some_and(|c| c.len() != vertex_count) {
-                return Err(err("COLOR_0 count differs from POSITION".into()));
-            }
+            let (uvs, colors) = vertex_attributes(&reader, vertex_count, textured).map_err(err)?;
             self.scene.has_vertex_colors |= colors.is_some();
-            // Attributes from the first primitive that needs them on, the triangles before it
-            // given the defaults (white, no texture coordinates).
-            let keep_attributes = textured || colors.is_some() || !self.scene.attributes.is_empty();
+            // Attributes from the first primitive that needs them on (shading reads them for
+            // every triangle once any primitive has COLOR_0), the triangles before it given the
+            // defaults (white, no texture coordinates).
+            let keep_attributes =
+                textured || self.scene.has_vertex_colors || !self.scene.attributes.is_empty();
             if keep_attributes {
                 let before = self.scene.triangles.len();
                 self.scene
@@ -503,6 +489,40 @@ impl Loader<'_> {
         }
         Ok(())
     }
+}
+
+/// Per vertex of a primitive: TEXCOORD_0 and TEXCOORD_1, and COLOR_0, where it has them.
+type VertexAttributes = ([Option<Vec<Vec2>>; 2], Option<Vec<Vec4>>);
+
+/// A primitive's texture coordinates (read only when its material is `textured`; their counts
+/// checked either way) and COLOR_0.
+fn vertex_attributes<'a, 's, F>(
+    reader: &gltf::mesh::Reader<'a, 's, F>,
+    vertex_count: usize,
+    textured: bool,
+) -> Result<VertexAttributes, String>
+where
+    F: Clone + Fn(gltf::Buffer<'a>) -> Option<&'s [u8]>,
+{
+    let mut uvs = [None, None];
+    for (set, uv) in uvs.iter_mut().enumerate() {
+        if let Some(t) = reader.read_tex_coords(set as u32) {
+            let t = t.into_f32();
+            if t.len() != vertex_count {
+                return Err(format!("TEXCOORD_{set} count differs from POSITION"));
+            }
+            if textured {
+                *uv = Some(t.map(Vec2::from).collect());
+            }
+        }
+    }
+    let colors: Option<Vec<Vec4>> = reader
+        .read_colors(0)
+        .map(|c| c.into_rgba_f32().map(Vec4::from).collect());
+    if colors.as_ref().is_some_and(|c| c.len() != vertex_count) {
+        return Err("COLOR_0 count differs from POSITION".into());
+    }
+    Ok((uvs, colors))
 }
 
 /// Triangle list of a primitive in glTF vertex order (spec 3.7.2.1): strips alternate winding so
@@ -549,15 +569,22 @@ mod tests {
         );
     }
 
-    /// A glTF of two one-triangle primitives, the second with COLOR_0 when `colored`.
-    fn two_primitives(colored: bool) -> Vec<u8> {
+    /// A glTF of two one-triangle primitives, primitive `colored` (if any) with COLOR_0, the
+    /// first one's triangle degenerate (collinear corners) when `degenerate`.
+    fn two_primitives(colored: Option<usize>, degenerate: bool) -> Vec<u8> {
         let mut buffer: Vec<u8> = Vec::new();
-        let corners = [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
-        for z in [0.0f32, 1.0] {
-            for c in corners {
-                for x in [c[0], c[1], c[2] + z] {
-                    buffer.extend(x.to_le_bytes());
-                }
+        let first = if degenerate {
+            [2.0f32, 0.0, 0.0]
+        } else {
+            [0.0, 1.0, 0.0]
+        };
+        let corners = [
+            [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], first],
+            [[0.0, 0.0, 1.0], [1.0, 0.0, 1.0], [0.0, 1.0, 1.0]],
+        ];
+        for c in corners.as_flattened() {
+            for x in c {
+                buffer.extend(x.to_le_bytes());
             }
         }
         for _ in 0..3 {
@@ -565,17 +592,25 @@ mod tests {
                 buffer.extend(x.to_le_bytes());
             }
         }
-        let color = if colored { r#","COLOR_0":2"# } else { "" };
+        let color = |p| {
+            if colored == Some(p) {
+                r#","COLOR_0":2"#
+            } else {
+                ""
+            }
+        };
+        let (c0, c1) = (color(0), color(1));
+        let max0 = if degenerate { "[2,0,0]" } else { "[1,1,0]" };
         format!(
             r#"{{"asset":{{"version":"2.0"}},"scenes":[{{"nodes":[0]}}],"nodes":[{{"mesh":0}}],
-            "meshes":[{{"primitives":[{{"attributes":{{"POSITION":0}}}},
-                {{"attributes":{{"POSITION":1{color}}}}}]}}],
+            "meshes":[{{"primitives":[{{"attributes":{{"POSITION":0{c0}}}}},
+                {{"attributes":{{"POSITION":1{c1}}}}}]}}],
             "buffers":[{{"byteLength":{},"uri":"data:application/octet-stream;base64,{}"}}],
             "bufferViews":[{{"buffer":0,"byteLength":72}},
                 {{"buffer":0,"byteOffset":72,"byteLength":48}}],
             "accessors":[
                 {{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3",
-                  "min":[0,0,0],"max":[1,1,0]}},
+                  "min":[0,0,0],"max":{max0}}},
                 {{"bufferView":0,"byteOffset":36,"componentType":5126,"count":3,"type":"VEC3",
                   "min":[0,0,1],"max":[1,1,1]}},
                 {{"bufferView":1,"componentType":5126,"count":3,"type":"VEC4"}}]}}"#,
@@ -586,19 +621,26 @@ mod tests {
     }
 
     /// Triangle attributes are kept only when shading reads them, and then for every triangle:
-    /// the primitive before the first that needs them gets the defaults (white).
+    /// the primitive before the first that needs them gets the defaults (white), and a scene
+    /// with COLOR_0 keeps them even when the primitive that has it leaves no triangle.
     #[test]
     fn attributes_are_kept_for_every_triangle_or_none() {
         let path = Path::new("two_primitives.gltf");
-        let plain = load_bytes(path, &two_primitives(false)).unwrap();
+        let load = |colored, degenerate| load_bytes(path, &two_primitives(colored, degenerate));
+        let plain = load(None, false).unwrap();
         assert_eq!(plain.triangles.len(), 2);
         assert!(plain.attributes.is_empty() && !plain.has_vertex_colors);
-        let colored = load_bytes(path, &two_primitives(true)).unwrap();
+        let colored = load(Some(1), false).unwrap();
         assert!(colored.has_vertex_colors);
         let colors: Vec<[Vec4; 3]> = colored.attributes.iter().map(|a| a.color).collect();
         assert_eq!(
             colors,
             [[Vec4::ONE; 3], [Vec4::new(0.25, 0.5, 0.75, 1.0); 3]]
         );
+        let lost = load(Some(0), true).unwrap();
+        assert_eq!((lost.triangles.len(), lost.degenerate_skipped), (1, 1));
+        assert!(lost.has_vertex_colors);
+        let colors: Vec<[Vec4; 3]> = lost.attributes.iter().map(|a| a.color).collect();
+        assert_eq!(colors, [[Vec4::ONE; 3]]);
     }
 }
