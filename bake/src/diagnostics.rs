@@ -80,7 +80,7 @@ pub fn inside_warning(
 ///
 /// Each directed edge becomes one `u64`: a 63-bit hash of its two vertices' position bits
 /// (smaller vertex hash first, so both directions agree) above one bit for the direction.
-/// Grouping equal integers ([`group_equal`]) puts an edge's uses side by side. Sponza's 187k
+/// Grouping equal integers (`group_equal`) puts an edge's uses side by side. Sponza's 187k
 /// triangles, one thread: 0.16-0.21 s counting directed edges in a hash map, about 0.09 s
 /// sorting corners (to number vertices) and then edge pairs, 0.023 s now (`prt bake --spacing
 /// 1.9 --threads 1`). Two distinct vertices or edges share a hash with probability about
