@@ -3,6 +3,7 @@
 
 use glam::Vec3;
 use prt_format::sh::SH_COUNT;
+use rayon::prelude::*;
 
 use crate::bvh::{SceneBvh, TriangleHit};
 use crate::bvh8::LANES;
@@ -50,6 +51,19 @@ pub struct Tracer<'a> {
     pub weight: f32,
     pub double_sided: bool,
     pub srgb: [f32; 256],
+    /// Per triangle, its unit geometric normal ([`triangle_normals`]).
+    pub normals: Vec<Vec3>,
+}
+
+/// The unit geometric normal of every triangle (zero for a degenerate one), computed once for
+/// all hits, the same bits as at each hit: shading read the triangle's corners (36 bytes, most
+/// of them a cache miss) and took a cross product and a square root at every hit. Sponza at
+/// 1.0 m, one thread, least of five alternating bakes: trace stage 4.117 s then, 3.833 s now.
+pub fn triangle_normals(triangles: &[[Vec3; 3]]) -> Vec<Vec3> {
+    triangles
+        .par_iter()
+        .map(|v| (v[1] - v[0]).cross(v[2] - v[0]).normalize_or_zero())
+        .collect()
 }
 
 impl Tracer<'_> {
@@ -105,9 +119,8 @@ impl Tracer<'_> {
     }
 
     fn shade(&self, ray: u32, origin: Vec3, dir: Vec3, tri: usize, t: f32) -> Hit {
-        let v = self.scene.triangles[tri];
         let material = &self.scene.materials[self.scene.materials_of_triangles[tri] as usize];
-        let ng = (v[1] - v[0]).cross(v[2] - v[0]).normalize_or_zero();
+        let ng = self.normals[tri];
         let front = ng.dot(dir) < 0.0;
         let position = origin + dir * t;
         let facing = if front { ng } else { -ng };
@@ -122,7 +135,9 @@ impl Tracer<'_> {
                 facing_away: true,
             };
         }
-        let (albedo, emission) = self.material_at(material, tri, || barycentric(&v, position));
+        let (albedo, emission) = self.material_at(material, tri, || {
+            barycentric(&self.scene.triangles[tri], position)
+        });
         Hit {
             ray,
             position,
