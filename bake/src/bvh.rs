@@ -109,9 +109,9 @@ impl SceneBvh {
     /// on the pool while the binary BVH is collapsed into the two the bake uses. PLOC and
     /// reinsertion take every thread; the collapse (each subtree's triangles counted, then the
     /// two trees walked out of it side by side) is serial work that leaves room on the pool.
-    /// The bake runs its winding check there: beside the
-    /// PLOC build instead, the BVH stage took 0.113 s against 0.106 s (Sponza at 1.9 m with
-    /// `medium_build`, 2 threads, least of 8 alternating bakes).
+    /// The bake runs its winding check there: beside the PLOC build instead, the BVH stage took
+    /// 0.113 s against 0.106 s (Sponza at 1.9 m with `medium_build`, 2 threads, least of 8
+    /// alternating bakes).
     pub fn build_beside<R: Send>(
         triangles: &[[Vec3; 3]],
         scale: f32,

@@ -137,8 +137,8 @@ fn mix(mut h: u64) -> u64 {
 const SELF_EDGE: u64 = u64::MAX;
 
 /// `keys` (uniform hashes) sorted: one pass to count buckets of their top bits (four to eight
-/// keys a bucket), one to scatter them, then a sort of each small bucket. Sponza's 562k edges, one thread: 23 ms in one
-/// `sort_unstable`, 11 ms so.
+/// keys a bucket), one to scatter them, then a sort of each small bucket. Sponza's 562k edges,
+/// one thread: 23 ms in one `sort_unstable`, 11 ms so.
 fn group_equal(keys: &[u64]) -> Vec<u64> {
     let bits = (keys.len() / 4).max(2).ilog2().min(24);
     let bucket = |k: u64| (k >> (64 - bits)) as usize;
@@ -190,19 +190,23 @@ mod tests {
         );
     }
 
+    /// A deterministic 64-bit generator (Marsaglia's xorshift) seeded with `state`.
+    fn xorshift(mut state: u64) -> impl FnMut() -> u64 {
+        move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state
+        }
+    }
+
     /// No two of 300,000 distinct positions (every bit random, or on a grid of floats as meshes
     /// have them) share a vertex hash, and no two of their edges share an edge key: a collision
     /// is likely only past billions of items, so any here is a weak hash (as when one component
     /// was ORed in rather than mixed: it miscounted 39 of Sponza's 249,798 shared edges).
     #[test]
     fn hashes_of_distinct_vertices_and_edges_differ() {
-        let mut state = 0x9e37_79b9_7f4a_7c15u64;
-        let mut next = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            state
-        };
+        let mut next = xorshift(0x9e37_79b9_7f4a_7c15);
         let mut positions: Vec<[u32; 3]> = (0..100_000)
             .map(|_| [next() as u32, next() as u32, next() as u32])
             .collect();
@@ -261,13 +265,7 @@ mod tests {
             }
             w
         }
-        let mut state = 0x2545_f491_4f6c_dd1du64;
-        let mut next = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            state
-        };
+        let mut next = xorshift(0x2545_f491_4f6c_dd1d);
         for n in [1usize, 2, 5, 12, 40] {
             // Coordinates that use every bit of a float, as real meshes do.
             let v = |i: usize, j: usize| {

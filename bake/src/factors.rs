@@ -163,9 +163,9 @@ pub struct Carried<'a> {
 
 /// The asset's factor table, every carried table put in its place in probe order: tables in
 /// parallel (u8 ones encoded straight into their place, f16 and f32 ones built, then copied),
-/// a dilated probe's copied from its source's, an invalid probe's rows dropped unencoded. Encoding a table per probe and joining them copied every factor
-/// once more: at Sponza's 1.0 m spacing (74 MB of factors, 2 threads) the assemble stage took
-/// 0.050 s, 0.001 s now.
+/// a dilated probe's copied from its source's, an invalid probe's rows dropped unencoded.
+/// Encoding a table per probe and joining them copied every factor once more: at Sponza's
+/// 1.0 m spacing (74 MB of factors, 2 threads) the assemble stage took 0.050 s, 0.001 s now.
 pub fn encode_tables(
     tables: Vec<ProbeRows>,
     carried: Carried,
@@ -215,28 +215,17 @@ fn place_tables<T: bytemuck::Zeroable + Copy + Send + Sync>(
     encode: impl Fn(ProbeRows, &mut [T]) + Sync,
 ) -> Vec<T> {
     let mut out: Vec<T> = bytemuck::zeroed_vec(carried.lens.iter().sum());
-    let mut places = Vec::with_capacity(carried.lens.len());
-    let mut rest = out.as_mut_slice();
-    for &len in carried.lens {
-        let (place, tail) = std::mem::take(&mut rest).split_at_mut(len);
-        places.push(place);
-        rest = tail;
-    }
+    let places = crate::split_runs(&mut out, carried.lens);
+    let starts: Vec<usize> = places.iter().map(|&(start, _)| start).collect();
     tables
         .into_par_iter()
         .zip(places)
         .enumerate()
-        .for_each(|(p, (rows, place))| {
+        .for_each(|(p, (rows, (_, place)))| {
             if carried.from[p] == Some(p) {
                 encode(rows, place);
             }
         });
-    let mut starts = Vec::with_capacity(carried.lens.len());
-    let mut start = 0;
-    for &len in carried.lens {
-        starts.push(start);
-        start += len;
-    }
     for (p, from) in carried.from.iter().enumerate() {
         if let Some(q) = from.filter(|&q| q != p) {
             debug_assert_eq!(

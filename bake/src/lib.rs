@@ -247,6 +247,23 @@ pub struct BakeReport {
     pub file_bytes: u64,
 }
 
+/// `items` cut into consecutive runs of `lens` items (summing to at most `items.len()`), each
+/// with the index of its first item: a table filled run by run in parallel.
+pub(crate) fn split_runs<'a, T>(
+    mut items: &'a mut [T],
+    lens: &[usize],
+) -> Vec<(usize, &'a mut [T])> {
+    let mut runs = Vec::with_capacity(lens.len());
+    let mut start = 0;
+    for &len in lens {
+        let (run, rest) = std::mem::take(&mut items).split_at_mut(len);
+        runs.push((start, run));
+        items = rest;
+        start += len;
+    }
+    runs
+}
+
 /// Most worker threads a bake starts.
 pub const MAX_THREADS: usize = 1024;
 

@@ -78,7 +78,7 @@ pub fn surface_offset(
             };
             let tri = h.triangle as usize;
             let v = tracer.scene.triangles[tri];
-            let n = (v[1] - v[0]).cross(v[2] - v[0]).normalize_or_zero();
+            let n = tracer.normals[tri];
             if n == Vec3::ZERO {
                 continue;
             }
