@@ -121,9 +121,9 @@ impl Default for BakeSettings {
 }
 
 impl BakeSettings {
-    /// Higher accuracy: 8x the rays and half-size bricks. On the Cornell reference it brings the
-    /// mean irradiance error from about 3% to 0.5% (p95 1.2%), at about 5x the factors per probe
-    /// (runtime gather work and asset size) and 8x the trace time.
+    /// Higher accuracy: 8x the rays and half-size bricks. On the Cornell reference (27 probes at
+    /// 0.6 m) it brings the mean irradiance error from 4.0% to 0.5% (p95 1.3%), at 5.6x the
+    /// factors per probe (runtime gather work and asset size) and 8x the trace time.
     pub fn high_quality() -> Self {
         BakeSettings {
             rays: 4096,

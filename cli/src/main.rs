@@ -1,9 +1,10 @@
 //! `prt`: the command-line face of prt (conventions.md section 6). Each subcommand turns its
 //! options into a settings struct and calls one library function.
 
-mod bench;
+mod bench_accuracy;
 mod bench_bake;
 mod bench_fuzz;
+mod bench_gpu;
 mod bench_lights;
 mod bench_render;
 mod bench_surface;
@@ -36,10 +37,12 @@ enum Quality {
     /// The pure 512-direction lattice, fixed for good: what the data-equivalence tests against
     /// the reference renderer use (`default` may change as bake speed allows; today it is this).
     Fast,
-    /// 512 rays per probe.
+    /// 512 rays per probe: the same bake as `fast` today. More rays reach more bricks, so they
+    /// cost runtime gather work too (1024 rays: 1.7x the factors per probe on Sponza), a trade
+    /// left to `--rays` (README, "Presets").
     Default,
-    /// 4096 rays per probe and half-size bricks: about 6x lower error, 8x the trace time and
-    /// about 5x the factors per probe.
+    /// 4096 rays per probe and half-size bricks: about 8x lower error on the Cornell reference,
+    /// 8x the trace time and about 5.6x the factors per probe.
     High,
 }
 
@@ -75,28 +78,9 @@ enum BenchKind {
         #[arg(long)]
         double_sided: bool,
     },
-    /// Sweep rays, brick size, factor encoding and precision against a reference SH file.
-    Accuracy {
-        scene: PathBuf,
-        #[arg(long)]
-        lights: PathBuf,
-        /// Reference SH JSON (oracle output: probes[i].position and .sh).
-        #[arg(long)]
-        reference: PathBuf,
-        #[arg(long)]
-        spacing: Option<f32>,
-        #[arg(long, value_parser = parse_bounds, allow_hyphen_values = true)]
-        bounds: Option<[f32; 6]>,
-        #[arg(
-            long,
-            value_delimiter = ',',
-            default_value = "64,128,256,512,1024,2048,4096"
-        )]
-        rays: Vec<u32>,
-        /// Directory for accuracy.md and accuracy.svg.
-        #[arg(long, default_value = ".")]
-        out: PathBuf,
-    },
+    /// Sweep rays, brick size, factor encoding and precision against a reference SH file:
+    /// error against bake time, with the Pareto front (and earlier sweeps' with --previous).
+    Accuracy(bench_accuracy::AccuracyArgs),
     /// GPU runtime costs: update per probe at several probe counts, the gather alone, vs the
     /// prior art's per-probe surfels, an update when nothing changed, a multi-bounce update, and
     /// cost against light count (1, 32, 256, 1,024 lights).
@@ -483,39 +467,7 @@ fn run(cli: Cli) -> Result<()> {
                 println!("{}", bench_bake::bake(&scene, &settings)?);
                 Ok(())
             }
-            BenchKind::Accuracy {
-                scene,
-                lights,
-                reference,
-                spacing,
-                bounds,
-                rays,
-                out,
-            } => {
-                let lighting = prt_runtime::load_rig(&lights)?;
-                let text = std::fs::read_to_string(&reference)
-                    .with_context(|| format!("reading {}", reference.display()))?;
-                let reference_sh =
-                    prt_runtime::output::read_probe_sh(&serde_json::from_str(&text)?)
-                        .with_context(|| {
-                            format!("{}: no probes[i].position/.sh", reference.display())
-                        })?;
-                let base = BakeSettings {
-                    spacing,
-                    bounds,
-                    ..BakeSettings::default()
-                };
-                let (md, svg) = bench::accuracy(&scene, &lighting, &reference_sh, &base, &rays)?;
-                std::fs::create_dir_all(&out)?;
-                prt_format::io::write_bytes_atomic(&out.join("accuracy.md"), md.as_bytes())?;
-                prt_format::io::write_bytes_atomic(&out.join("accuracy.svg"), svg.as_bytes())?;
-                println!("{md}");
-                println!(
-                    "wrote {} and accuracy.svg",
-                    out.join("accuracy.md").display()
-                );
-                Ok(())
-            }
+            BenchKind::Accuracy(args) => bench_accuracy::run(args),
             BenchKind::Render {
                 scene,
                 lights,
@@ -553,7 +505,7 @@ fn run(cli: Cli) -> Result<()> {
                 let lighting = prt_runtime::load_rig(&lights)?;
                 println!(
                     "{}",
-                    bench::gpu(&scene, &lighting, &spacings, rays, cell_size)?
+                    bench_gpu::gpu(&scene, &lighting, &spacings, rays, cell_size)?
                 );
                 // Cost against light count, on the same scene (`prt bench lights` alone).
                 println!(

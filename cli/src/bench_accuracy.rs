@@ -1,0 +1,609 @@
+//! `prt bench accuracy`: irradiance error against an independent renderer's probe SH (Mitsuba 3,
+//! `../shared/oracle/`) over rays per probe, brick cell size, factor precision and encoding,
+//! against bake time. Bake speed is what buys accuracy (factors fold rays away, so more rays cost
+//! bake time, not runtime): the report's Pareto front says how little error a given bake time
+//! buys, and with `--previous` it is set beside the front of earlier sweeps (their
+//! `accuracy.md`, for example from an older build run in the same sitting).
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use prt_bake::{BakeSettings, NoProgress};
+use prt_eval::{compare, ErrorStats};
+use prt_format::{Asset, Factors, TransferPrecision};
+use prt_runtime::{CpuRelighter, Lighting};
+
+#[derive(clap::Args)]
+pub struct AccuracyArgs {
+    pub scene: PathBuf,
+    #[arg(long)]
+    pub lights: PathBuf,
+    /// Reference SH JSON (oracle output: probes[i].position and .sh).
+    #[arg(long)]
+    pub reference: PathBuf,
+    #[arg(long)]
+    pub spacing: Option<f32>,
+    #[arg(long, value_parser = crate::parse_bounds, allow_hyphen_values = true)]
+    pub bounds: Option<[f32; 6]>,
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "64,128,256,512,1024,2048,4096"
+    )]
+    pub rays: Vec<u32>,
+    /// Bakes per setting; the least time is reported (a bake of a small scene lasts
+    /// milliseconds, which a busy machine can double).
+    #[arg(long, default_value_t = 3)]
+    pub repeats: u32,
+    /// Earlier sweeps' accuracy.md files, comma-separated: their Pareto front (each setting's
+    /// least bake time over the files) is drawn and tabled beside the new one.
+    #[arg(long, value_delimiter = ',')]
+    pub previous: Vec<PathBuf>,
+    /// Directory for accuracy.md and accuracy.svg.
+    #[arg(long, default_value = ".")]
+    pub out: PathBuf,
+}
+
+/// One setting of the sweep.
+struct Row {
+    rays: u32,
+    merge: &'static str,
+    precision: TransferPrecision,
+    encoding: &'static str,
+    bake_s: f64,
+    relight_s: f64,
+    probes: usize,
+    bytes_per_probe: f64,
+    transport_per_probe: f64,
+    factors_per_probe: f64,
+    error: ErrorStats,
+    /// Error after Hanning-window deringing of the relit SH (width 4).
+    deringed: ErrorStats,
+}
+
+/// A setting's bake time and mean error, as a point of an error-against-time plot.
+#[derive(Debug)]
+struct Point {
+    setting: String,
+    merge: String,
+    flat: bool,
+    bake_ms: f64,
+    /// Mean error in percent.
+    error: f64,
+}
+
+/// Brick cell sizes of the sweep: name, cell size override, cells per probe spacing.
+const MERGES: [(&str, Option<f32>, f32); 4] = [
+    ("none", Some(0.0), 12.0),
+    ("spacing/24", None, 24.0),
+    ("spacing/12 (default)", None, 12.0),
+    ("spacing/6", None, 6.0),
+];
+
+/// Runs the sweep and writes `accuracy.md` and `accuracy.svg` to `args.out`.
+pub fn run(args: AccuracyArgs) -> Result<()> {
+    let lighting = prt_runtime::load_rig(&args.lights)?;
+    let text = std::fs::read_to_string(&args.reference)
+        .with_context(|| format!("reading {}", args.reference.display()))?;
+    let reference = prt_runtime::output::read_probe_sh(&serde_json::from_str(&text)?)
+        .with_context(|| format!("{}: no probes[i].position/.sh", args.reference.display()))?;
+    if args.repeats == 0 {
+        bail!("--repeats 0: at least one bake per setting is needed");
+    }
+    // Read before the sweep: a bad file fails in a second, not after it.
+    let previous = read_previous(&args.previous)?;
+    let base = BakeSettings {
+        spacing: args.spacing,
+        bounds: args.bounds,
+        ..BakeSettings::default()
+    };
+    let rows = sweep(&args, &lighting, &reference, &base)?;
+    let new: Vec<Point> = rows.iter().map(Row::point).collect();
+    let timed = match args.repeats {
+        1 => "one bake".to_owned(),
+        n => format!("the least of {n} bakes"),
+    };
+    let caption = format!(
+        "{}: {} probes, {} of them compared with the reference; bake time of {timed} on {} threads",
+        args.scene.display(),
+        rows.first().map_or(0, |r| r.probes),
+        rows.first().map_or(0, |r| r.error.probes),
+        std::thread::available_parallelism().map_or(1, usize::from),
+    );
+    let mut md = format!("{caption}.\n\n");
+    md.push_str(&table(&rows)?);
+    md.push_str(&fronts(&new, &previous)?);
+    let svg = plot(&new, &previous, &caption);
+    std::fs::create_dir_all(&args.out)?;
+    let md_path = args.out.join("accuracy.md");
+    prt_format::io::write_bytes_atomic(&md_path, md.as_bytes())?;
+    prt_format::io::write_bytes_atomic(&args.out.join("accuracy.svg"), svg.as_bytes())?;
+    println!("{md}");
+    println!("wrote {} and accuracy.svg", md_path.display());
+    Ok(())
+}
+
+/// Bakes every setting (`args.repeats` times, keeping the least time), relights it on the CPU
+/// and compares it with `reference`.
+fn sweep(
+    args: &AccuracyArgs,
+    lighting: &Lighting,
+    reference: &[([f32; 3], prt_format::sh::ShRgb)],
+    base: &BakeSettings,
+) -> Result<Vec<Row>> {
+    let mut rows = Vec::new();
+    for &n in &args.rays {
+        for (merge, cell_size, cells) in MERGES {
+            for precision in [
+                TransferPrecision::F32,
+                TransferPrecision::F16,
+                TransferPrecision::U8,
+            ] {
+                let settings = BakeSettings {
+                    rays: n,
+                    cell_size,
+                    cells_per_spacing: cells,
+                    transfer_precision: precision,
+                    ..base.clone()
+                };
+                let mut bake_s = f64::MAX;
+                let mut baked = None;
+                for _ in 0..args.repeats {
+                    let t = Instant::now();
+                    let (asset, _) = prt_bake::bake(&args.scene, &settings, &NoProgress)
+                        .with_context(|| format!("bake with {n} rays, cells {merge}"))?;
+                    let bytes = prt_format::encode(&asset)?.len();
+                    bake_s = bake_s.min(t.elapsed().as_secs_f64());
+                    baked = Some((asset, bytes));
+                }
+                let (asset, bytes) = baked.expect("at least one repeat");
+                let summary = prt_format::Summary::of(&asset, bytes as u64);
+                let mut encodings = vec![("sh9 + gradient", asset.clone())];
+                if cell_size != Some(0.0) && precision == TransferPrecision::F16 {
+                    encodings.push(("sh9, flat brick", without_offsets(asset)));
+                }
+                for (encoding, asset) in encodings {
+                    let relighter = CpuRelighter::new(&asset)?;
+                    let t = Instant::now();
+                    let relit = relighter.relight(lighting, 1)?;
+                    let relight_s = t.elapsed().as_secs_f64();
+                    let ours: Vec<_> = asset
+                        .probes
+                        .iter()
+                        .zip(&relit.sh)
+                        .map(|(p, c)| (p.position, p.is_valid(), *c))
+                        .collect();
+                    rows.push(Row {
+                        rays: n,
+                        merge,
+                        precision,
+                        encoding,
+                        bake_s,
+                        relight_s,
+                        probes: asset.probes.len(),
+                        bytes_per_probe: summary.bytes_per_probe,
+                        transport_per_probe: summary.transport_bytes_per_probe,
+                        factors_per_probe: asset.factors.len() as f64 / asset.probes.len() as f64,
+                        error: compare(&ours, reference, 1e-3),
+                        deringed: compare(&windowed(&ours), reference, 1e-3),
+                    });
+                }
+            }
+        }
+    }
+    Ok(rows)
+}
+
+impl Row {
+    fn point(&self) -> Point {
+        Point {
+            setting: setting(
+                &self.rays.to_string(),
+                self.merge,
+                &format!("{:?}", self.precision),
+                self.encoding,
+            ),
+            merge: self.merge.to_owned(),
+            flat: self.encoding == "sh9, flat brick",
+            bake_ms: self.bake_s * 1e3,
+            error: 100.0 * self.error.mean,
+        }
+    }
+}
+
+fn setting(rays: &str, merge: &str, precision: &str, encoding: &str) -> String {
+    format!("{rays} rays, cells {merge}, {precision}, {encoding}")
+}
+
+/// The sweep's table, one row per setting.
+fn table(rows: &[Row]) -> Result<String> {
+    let mut md = String::from("| rays | brick cells | transfer | encoding | bake ms | CPU relight ms | file bytes/probe | transport bytes/probe | factors/probe | mean err | p95 err | max err | max coeff / SH0 | mean err deringed |\n|---:|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+    for r in rows {
+        writeln!(
+            md,
+            "| {} | {} | {:?} | {} | {:.1} | {:.2} | {:.0} | {:.0} | {:.1} | {:.2}% | {:.2}% | {:.2}% | {:.1e} | {:.2}% |",
+            r.rays, r.merge, r.precision, r.encoding, r.bake_s * 1e3, r.relight_s * 1e3,
+            r.bytes_per_probe, r.transport_per_probe, r.factors_per_probe, 100.0 * r.error.mean, 100.0 * r.error.p95,
+            100.0 * r.error.max, r.error.max_coeff_rel, 100.0 * r.deringed.mean
+        )?;
+    }
+    Ok(md)
+}
+
+/// The Pareto front of `points`: those with less error than every point baked as fast or
+/// faster, by increasing bake time.
+fn front(points: &[Point]) -> Vec<&Point> {
+    let mut sorted: Vec<&Point> = points.iter().collect();
+    sorted.sort_by(|a, b| {
+        a.bake_ms
+            .total_cmp(&b.bake_ms)
+            .then(a.error.total_cmp(&b.error))
+    });
+    let mut best = f64::MAX;
+    sorted.retain(|p| {
+        let keep = p.error < best;
+        best = best.min(p.error);
+        keep
+    });
+    sorted
+}
+
+/// The least error of `front` within `ms` of bake time, if any point is that fast.
+fn best_within<'a>(front: &[&'a Point], ms: f64) -> Option<&'a Point> {
+    front.iter().rev().find(|p| p.bake_ms <= ms).copied()
+}
+
+/// The new front, and with earlier sweeps the error each buys at the previous front's times.
+fn fronts(new: &[Point], previous: &[Point]) -> Result<String> {
+    let new_front = front(new);
+    let mut md = String::from(
+        "\n### Pareto front: least error for a bake time\n\n| setting | bake ms | mean err |\n|---|---:|---:|\n",
+    );
+    for p in &new_front {
+        writeln!(md, "| {} | {:.1} | {:.2}% |", p.setting, p.bake_ms, p.error)?;
+    }
+    if previous.is_empty() {
+        return Ok(md);
+    }
+    md.push_str("\n### Against the previous front: the error the same bake time buys now\n\n| previous front | bake ms | mean err | now, within that time | bake ms | mean err |\n|---|---:|---:|---|---:|---:|\n");
+    for p in front(previous) {
+        let now = best_within(&new_front, p.bake_ms).map_or_else(
+            || "none as fast | | ".to_owned(),
+            |q| format!("{} | {:.1} | {:.2}%", q.setting, q.bake_ms, q.error),
+        );
+        writeln!(
+            md,
+            "| {} | {:.1} | {:.2}% | {now} |",
+            p.setting, p.bake_ms, p.error
+        )?;
+    }
+    Ok(md)
+}
+
+/// Every setting of earlier sweeps' tables (`accuracy.md` as this bench writes it) with its least
+/// bake time over the files.
+fn read_previous(paths: &[PathBuf]) -> Result<Vec<Point>> {
+    let mut best: BTreeMap<String, Point> = BTreeMap::new();
+    for path in paths {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("reading the previous sweep {}", path.display()))?;
+        for point in parse_table(&text, path)? {
+            match best.get_mut(&point.setting) {
+                Some(p) if p.bake_ms <= point.bake_ms => {}
+                _ => {
+                    best.insert(point.setting.clone(), point);
+                }
+            }
+        }
+    }
+    Ok(best.into_values().collect())
+}
+
+/// The settings of the first table in `text` (columns found by their headers).
+fn parse_table(text: &str, path: &Path) -> Result<Vec<Point>> {
+    let cells = |line: &str| -> Vec<String> {
+        line.trim()
+            .trim_matches('|')
+            .split('|')
+            .map(|c| c.trim().to_owned())
+            .collect()
+    };
+    let mut lines = text
+        .lines()
+        .enumerate()
+        .skip_while(|(_, l)| !l.starts_with('|'))
+        .take_while(|(_, l)| l.starts_with('|'));
+    let Some((_, header)) = lines.next() else {
+        bail!("{}: no table (a line starting with '|')", path.display());
+    };
+    let header = cells(header);
+    let column = |name: &str| {
+        header
+            .iter()
+            .position(|h| h == name)
+            .with_context(|| format!("{}: no column '{name}' in the table", path.display()))
+    };
+    let [rays, merge, precision, encoding, bake, error] = [
+        "rays",
+        "brick cells",
+        "transfer",
+        "encoding",
+        "bake ms",
+        "mean err",
+    ]
+    .map(column);
+    let (rays, merge, precision, encoding, bake, error) =
+        (rays?, merge?, precision?, encoding?, bake?, error?);
+    let mut points = Vec::new();
+    for (index, line) in lines.skip(1) {
+        let c = cells(line);
+        let get = |i: usize| {
+            c.get(i).map(String::as_str).with_context(|| {
+                format!(
+                    "{} line {}: {} cells, expected {}",
+                    path.display(),
+                    index + 1,
+                    c.len(),
+                    header.len()
+                )
+            })
+        };
+        let number = |i: usize| -> Result<f64> {
+            let s = get(i)?;
+            match s.trim_end_matches('%').parse::<f64>() {
+                Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
+                _ => bail!(
+                    "{} line {}: column '{}' is '{s}', not a non-negative number",
+                    path.display(),
+                    index + 1,
+                    header[i]
+                ),
+            }
+        };
+        points.push(Point {
+            setting: setting(get(rays)?, get(merge)?, get(precision)?, get(encoding)?),
+            merge: get(merge)?.to_owned(),
+            flat: get(encoding)? == "sh9, flat brick",
+            bake_ms: number(bake)?,
+            error: number(error)?,
+        });
+    }
+    if points.is_empty() {
+        bail!("{}: the table has no rows", path.display());
+    }
+    Ok(points)
+}
+
+/// Probe SH with Hanning-window deringing applied (`prt_format::sh::hanning_window`, width 4).
+fn windowed(
+    ours: &[([f32; 3], bool, prt_format::sh::ShRgb)],
+) -> Vec<([f32; 3], bool, prt_format::sh::ShRgb)> {
+    ours.iter()
+        .map(|(p, v, c)| (*p, *v, prt_format::sh::hanning_window(c, 4.0)))
+        .collect()
+}
+
+/// The same asset with every factor's offset zeroed: each brick seen as its mean radiance.
+fn without_offsets(mut asset: Asset) -> Asset {
+    match &mut asset.factors {
+        Factors::F32(f) => f.iter_mut().for_each(|f| f.offset = [0.0; 3]),
+        Factors::F16(f) => f.iter_mut().for_each(|f| f.offset = [0; 2]),
+        Factors::U8 { factors, .. } => factors.iter_mut().for_each(|f| f.packed[0] &= 0xff00_0000),
+    }
+    asset
+}
+
+/// Log-log axes of a plot: data ranges mapped into a `w` x `h` canvas with margin `m`.
+struct Axes {
+    x: (f64, f64),
+    y: (f64, f64),
+    w: f64,
+    h: f64,
+    m: f64,
+}
+
+impl Axes {
+    fn sx(&self, ms: f64) -> f64 {
+        let (x0, x1) = self.x;
+        self.m + (ms.log10() - x0) / (x1 - x0).max(1e-9) * (self.w - 2.0 * self.m)
+    }
+
+    fn sy(&self, percent: f64) -> f64 {
+        let (y0, y1) = self.y;
+        self.h - self.m - (percent.log10() - y0) / (y1 - y0).max(1e-9) * (self.h - 2.0 * self.m)
+    }
+
+    /// Axis lines and ticks at 1, 2 and 5 times the powers of ten inside the ranges.
+    fn draw(&self, s: &mut String) {
+        let (w, h, m) = (self.w, self.h, self.m);
+        let _ = writeln!(s, "<line x1='{m}' y1='{}' x2='{}' y2='{}' stroke='black'/><line x1='{m}' y1='{m}' x2='{m}' y2='{}' stroke='black'/>", h - m, w - m, h - m, h - m);
+        // Over more than three decades, 2 and 5 crowd the labels: powers of ten only.
+        let ticks = |(lo, hi): (f64, f64)| {
+            let steps: &[f64] = if hi - lo > 3.0 {
+                &[1.0]
+            } else {
+                &[1.0, 2.0, 5.0]
+            };
+            (lo.floor() as i32..=hi.ceil() as i32)
+                .flat_map(move |e| steps.iter().map(move |k| k * 10f64.powi(e)))
+                .filter(move |v| (lo..=hi).contains(&v.log10()))
+        };
+        for v in ticks(self.x) {
+            let x = self.sx(v);
+            let label = if v >= 1000.0 {
+                format!("{} s", v / 1000.0)
+            } else {
+                format!("{v} ms")
+            };
+            let _ = writeln!(s, "<line x1='{x:.1}' y1='{}' x2='{x:.1}' y2='{}' stroke='#ddd'/><text x='{x:.1}' y='{}' text-anchor='middle'>{label}</text>", m, h - m, h - m + 16.0);
+        }
+        for v in ticks(self.y) {
+            let y = self.sy(v);
+            let _ = writeln!(s, "<line x1='{m}' y1='{y:.1}' x2='{}' y2='{y:.1}' stroke='#ddd'/><text x='{}' y='{:.1}' text-anchor='end'>{v}%</text>", w - m, m - 4.0, y + 4.0);
+        }
+    }
+
+    /// The front of `points` as a polyline.
+    fn polyline(&self, points: &[&Point], style: &str) -> String {
+        let xy: Vec<String> = points
+            .iter()
+            .map(|p| format!("{:.1},{:.1}", self.sx(p.bake_ms), self.sy(p.error)))
+            .collect();
+        format!(
+            "<polyline points='{}' fill='none' {style}/>\n",
+            xy.join(" ")
+        )
+    }
+}
+
+/// SVG scatter of mean error against bake time, log-log, with the Pareto front, and the front
+/// of the previous sweeps (grey) when given.
+fn plot(new: &[Point], previous: &[Point], caption: &str) -> String {
+    let range = |f: fn(&Point) -> f64| {
+        new.iter()
+            .chain(previous)
+            .map(f)
+            .filter(|v| *v > 0.0)
+            .fold((f64::MAX, f64::MIN), |(a, b), v| {
+                (a.min(v.log10()), b.max(v.log10()))
+            })
+    };
+    // A margin of a few hundredths of a decade keeps the extreme points inside the frame.
+    let pad = |(lo, hi): (f64, f64), by: f64| (lo - by, hi + by);
+    let axes = Axes {
+        x: pad(range(|p| p.bake_ms), 0.03),
+        y: pad(range(|p| p.error), 0.04),
+        w: 760.0,
+        h: 480.0,
+        m: 60.0,
+    };
+    let color = |merge: &str| match merge {
+        "none" => "#d62728",
+        "spacing/24" => "#1f77b4",
+        "spacing/6" => "#2ca02c",
+        _ => "#ff7f0e",
+    };
+    let (w, m) = (axes.w, axes.m);
+    let mut s = format!("<svg xmlns='http://www.w3.org/2000/svg' width='{w}' height='{}' font-family='sans-serif' font-size='12'>\n<rect width='100%' height='100%' fill='white'/>\n", axes.h);
+    let _ = writeln!(s, "<text x='{}' y='20' text-anchor='middle' font-size='14'>Mean irradiance error against bake time (log-log)</text>", w / 2.0);
+    let _ = writeln!(
+        s,
+        "<text x='{}' y='38' text-anchor='middle' font-size='10' fill='#555'>{}</text>",
+        w / 2.0,
+        xml_escape(caption)
+    );
+    axes.draw(&mut s);
+    let shown = |p: &&Point| p.bake_ms > 0.0 && p.error > 0.0;
+    let previous_front: Vec<&Point> = front(previous).into_iter().filter(shown).collect();
+    if !previous_front.is_empty() {
+        s.push_str(&axes.polyline(
+            &previous_front,
+            "stroke='#999' stroke-width='2' stroke-dasharray='6 4'",
+        ));
+        for p in &previous_front {
+            let _ = writeln!(s, "<rect x='{:.1}' y='{:.1}' width='7' height='7' fill='#999'><title>previous: {}: {:.1} ms, {:.2}%</title></rect>", axes.sx(p.bake_ms) - 3.5, axes.sy(p.error) - 3.5, p.setting, p.bake_ms, p.error);
+        }
+    }
+    let new_front: Vec<&Point> = front(new).into_iter().filter(shown).collect();
+    s.push_str(&axes.polyline(&new_front, "stroke='#222' stroke-width='1.5'"));
+    for p in new.iter().filter(shown) {
+        let shape = if p.flat {
+            "fill='none' stroke-width='1.5' stroke"
+        } else {
+            "fill"
+        };
+        let _ = writeln!(s, "<circle cx='{:.1}' cy='{:.1}' r='4' {shape}='{}'><title>{}: {:.1} ms, {:.2}%</title></circle>", axes.sx(p.bake_ms), axes.sy(p.error), color(&p.merge), p.setting, p.bake_ms, p.error);
+    }
+    for (i, (merge, ..)) in MERGES.iter().enumerate() {
+        let y = m + 16.0 * i as f64;
+        let _ = writeln!(
+            s,
+            "<circle cx='{}' cy='{}' r='4' fill='{}'/><text x='{}' y='{}'>bricks: {merge}</text>",
+            w - 200.0,
+            y,
+            color(merge),
+            w - 190.0,
+            y + 4.0
+        );
+    }
+    let mut legend = vec!["hollow: flat brick radiance", "solid line: Pareto front"];
+    if !previous_front.is_empty() {
+        legend.push("grey dashed: previous front");
+    }
+    for (i, text) in legend.iter().enumerate() {
+        let _ = writeln!(
+            s,
+            "<text x='{}' y='{}'>{text}</text>",
+            w - 200.0,
+            m + 70.0 + 16.0 * i as f64
+        );
+    }
+    s.push_str("</svg>\n");
+    s
+}
+
+/// `text` with the characters XML gives a meaning escaped.
+fn xml_escape(text: &str) -> String {
+    text.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('\'', "&apos;")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn point(ms: f64, error: f64) -> Point {
+        Point {
+            setting: format!("{ms} {error}"),
+            merge: String::new(),
+            flat: false,
+            bake_ms: ms,
+            error,
+        }
+    }
+
+    #[test]
+    fn front_keeps_points_no_faster_point_beats() {
+        let points = [
+            point(3.0, 5.0),
+            point(1.0, 9.0),
+            point(2.0, 10.0),
+            point(4.0, 1.0),
+        ];
+        let f: Vec<(f64, f64)> = front(&points)
+            .iter()
+            .map(|p| (p.bake_ms, p.error))
+            .collect();
+        assert_eq!(f, [(1.0, 9.0), (3.0, 5.0), (4.0, 1.0)]);
+        assert_eq!(best_within(&front(&points), 3.5).unwrap().error, 5.0);
+        assert!(best_within(&front(&points), 0.5).is_none());
+    }
+
+    #[test]
+    fn previous_tables_parse_and_bad_cells_are_named() {
+        let md = "| rays | brick cells | transfer | encoding | bake ms | mean err |\n|---:|---|---|---|---:|---:|\n| 64 | none | F32 | sh9 + gradient | 2.9 | 27.70% |\n| 512 | spacing/6 | F16 | sh9, flat brick | 1.4 | 15.89% |\n\nafter the table\n";
+        let points = parse_table(md, Path::new("a.md")).unwrap();
+        assert_eq!(points.len(), 2);
+        assert_eq!(
+            points[0].setting,
+            "64 rays, cells none, F32, sh9 + gradient"
+        );
+        assert_eq!((points[1].bake_ms, points[1].error), (1.4, 15.89));
+        assert!(points[1].flat);
+        let bad = md.replace("2.9", "fast");
+        let e = parse_table(&bad, Path::new("a.md"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("a.md line 3") && e.contains("'bake ms'") && e.contains("'fast'"),
+            "{e}"
+        );
+        let e = parse_table("| rays |\n|---|\n| 1 |\n", Path::new("b.md")).unwrap_err();
+        assert!(e.to_string().contains("no column 'brick cells'"), "{e}");
+    }
+}
