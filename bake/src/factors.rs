@@ -68,21 +68,39 @@ pub fn probe_rows(
 /// One probe's factor rows while bricks are provisional, as close to their final form as that
 /// allows: f32 sums for f32 and f16 tables (the last field the sum of the rays' hit points until
 /// [`finish`] turns it into the offset); for u8 tables, the transfer already encoded (rows of
-/// more than 255 rays split) beside the rays' mean hit point, 32 bytes a row against 52 (the
+/// more than 255 rays split) beside the rays' mean hit point, 28 bytes a row against 52 (the
 /// rows are the largest thing the bake holds: 1.9 GB as sums at 105k Sponza probes).
 pub enum ProbeRows {
     Sums(Vec<FactorRow>),
     U8(Vec<RowU8>),
 }
 
-/// A u8 factor waiting for its brick's final number and centroid.
+/// A u8 factor waiting for its brick's final number and centroid, in 28 bytes: the provisional
+/// brick waits in the factor's own brick field, which [`FactorU8::place`] overwrites (a row
+/// beside it took 32 bytes; the rows are the bake's largest working set). A provisional brick
+/// past [`prt_format::U8_MAX_BRICK`] would not fit, but such a bake is refused before its rows are encoded
+/// (`pipeline::bricks_and_tables`: provisional and final bricks are as many).
 pub struct RowU8 {
-    /// Provisional brick.
-    brick: u32,
-    /// Transfer and rays ([`FactorU8::transfer`]).
+    /// Transfer and rays ([`FactorU8::transfer`]), provisional brick in the brick bits.
     factor: FactorU8,
     /// Mean hit point of the row's rays (all of them, before a split).
     mean: Vec3,
+}
+const _: () = assert!(std::mem::size_of::<RowU8>() == 28);
+
+impl RowU8 {
+    fn new(brick: u32, factor: FactorU8, mean: Vec3) -> Self {
+        let factor = FactorU8 {
+            brick_rays: factor.brick_rays | brick << 8,
+            ..factor
+        };
+        RowU8 { factor, mean }
+    }
+
+    /// The provisional brick.
+    fn brick(&self) -> usize {
+        (self.factor.brick_rays >> 8) as usize
+    }
 }
 
 impl ProbeRows {
@@ -103,11 +121,11 @@ impl ProbeRows {
                 let (brick, rays, sh, sum) = row;
                 let mean = Vec3::from(sum) / rays as f32;
                 for (_, part, sh, _) in split_row_for_u8((brick, rays, sh, mean.to_array())) {
-                    rows.push(RowU8 {
+                    rows.push(RowU8::new(
                         brick,
-                        factor: FactorU8::transfer(part, sh, ray_count),
+                        FactorU8::transfer(part, sh, ray_count),
                         mean,
-                    });
+                    ));
                 }
             }
         }
@@ -140,7 +158,7 @@ type Placed = (u32, Vec3);
 /// centroids, sorted by brick (a split row's parts in order).
 fn encode_u8(rows: &[RowU8], out: &mut [FactorU8], placed: &[Placed], offset_scale: f32) {
     for (f, r) in out.iter_mut().zip(rows) {
-        let (b, centroid) = placed[r.brick as usize];
+        let (b, centroid) = placed[r.brick()];
         *f = r
             .factor
             .place(b, (r.mean - centroid).to_array(), offset_scale);
