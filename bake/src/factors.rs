@@ -11,7 +11,7 @@ use glam::Vec3;
 use prt_format::sh::SH_COUNT;
 use prt_format::{
     split_row_for_u8, u8_offset_scale, Brick, FactorRow, FactorU8, Factors, TransferPrecision,
-    U8_MAX_RAYS,
+    U8_MAX_BRICK, U8_MAX_RAYS,
 };
 
 use rayon::prelude::*;
@@ -78,8 +78,9 @@ pub enum ProbeRows {
 /// A u8 factor waiting for its brick's final number and centroid, in 28 bytes: the provisional
 /// brick waits in the factor's own brick field, which [`FactorU8::place`] overwrites (a row
 /// beside it took 32 bytes; the rows are the bake's largest working set). A provisional brick
-/// past [`prt_format::U8_MAX_BRICK`] would not fit, but such a bake is refused before its rows are encoded
-/// (`pipeline::bricks_and_tables`: provisional and final bricks are as many).
+/// past [`U8_MAX_BRICK`] loses its high bits here, but such a bake is refused before
+/// [`encode_u8`] reads them (`pipeline::bricks_and_tables`; provisional and final bricks are as
+/// many).
 pub struct RowU8 {
     /// Transfer and rays ([`FactorU8::transfer`]), provisional brick in the brick bits.
     factor: FactorU8,
@@ -157,6 +158,10 @@ type Placed = (u32, Vec3);
 /// u8 rows encoded into `out` (one factor each): bricks renumbered, offsets from the bricks'
 /// centroids, sorted by brick (a split row's parts in order).
 fn encode_u8(rows: &[RowU8], out: &mut [FactorU8], placed: &[Placed], offset_scale: f32) {
+    debug_assert!(
+        placed.len() <= U8_MAX_BRICK as usize + 1,
+        "every provisional brick fits the row's brick field"
+    );
     for (f, r) in out.iter_mut().zip(rows) {
         let (b, centroid) = placed[r.brick()];
         *f = r

@@ -1,9 +1,10 @@
 //! `prt bench accuracy`: irradiance error against an independent renderer's probe SH (Mitsuba 3,
 //! `../shared/oracle/`) over rays per probe, brick cell size, factor precision and encoding,
-//! against bake time. Bake speed is what buys accuracy (factors fold rays away, so more rays cost
-//! bake time, not runtime): the report's Pareto front says how little error a given bake time
-//! buys, and with `--previous` it is set beside the front of earlier sweeps (their
-//! `accuracy.md`, for example from an older build run in the same sitting).
+//! against bake time. Bake speed is what buys accuracy (factors fold rays away, so more rays
+//! cost bake time and, as far as they reach more bricks, factors): the report's Pareto front
+//! says how little error a given bake time buys, and with `--previous` it is set beside the
+//! front of earlier sweeps (their `accuracy.md`, for example from an older build run in the
+//! same sitting).
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -209,7 +210,9 @@ impl Row {
             merge: self.merge.to_owned(),
             flat: self.encoding == "sh9, flat brick",
             bake_ms: self.bake_s * 1e3,
-            error: 100.0 * self.error.mean,
+            // As the table prints it, so that the new front and an earlier one (read from its
+            // table) are compared at one precision.
+            error: (1e4 * self.error.mean).round() / 100.0,
         }
     }
 }
@@ -302,29 +305,33 @@ fn read_previous(paths: &[PathBuf]) -> Result<Vec<Point>> {
     Ok(best.into_values().collect())
 }
 
+/// The cells of a Markdown table row.
+fn cells(line: &str) -> Vec<String> {
+    line.trim()
+        .trim_matches('|')
+        .split('|')
+        .map(|c| c.trim().to_owned())
+        .collect()
+}
+
 /// The settings of the first table in `text` (columns found by their headers).
 fn parse_table(text: &str, path: &Path) -> Result<Vec<Point>> {
-    let cells = |line: &str| -> Vec<String> {
-        line.trim()
-            .trim_matches('|')
-            .split('|')
-            .map(|c| c.trim().to_owned())
-            .collect()
-    };
     let mut lines = text
         .lines()
         .enumerate()
+        .map(|(i, l)| (i + 1, l))
         .skip_while(|(_, l)| !l.starts_with('|'))
         .take_while(|(_, l)| l.starts_with('|'));
-    let Some((_, header)) = lines.next() else {
+    let Some((header_line, header)) = lines.next() else {
         bail!("{}: no table (a line starting with '|')", path.display());
     };
+    let at = |line: usize| format!("{} line {line}", path.display());
     let header = cells(header);
     let column = |name: &str| {
         header
             .iter()
             .position(|h| h == name)
-            .with_context(|| format!("{}: no column '{name}' in the table", path.display()))
+            .with_context(|| format!("{}: no column '{name}' in the header", at(header_line)))
     };
     let [rays, merge, precision, encoding, bake, error] = [
         "rays",
@@ -337,34 +344,49 @@ fn parse_table(text: &str, path: &Path) -> Result<Vec<Point>> {
     .map(column);
     let (rays, merge, precision, encoding, bake, error) =
         (rays?, merge?, precision?, encoding?, bake?, error?);
+    let separator = |c: &String| !c.is_empty() && c.trim_matches(':').chars().all(|x| x == '-');
+    match lines.next() {
+        Some((_, l)) if cells(l).iter().all(separator) => {}
+        Some((n, l)) => bail!("{}: '{l}' is not the header's separator row", at(n)),
+        None => bail!("{}: a header and no rows", at(header_line)),
+    }
     let mut points = Vec::new();
-    for (index, line) in lines.skip(1) {
+    for (n, line) in lines {
         let c = cells(line);
         let get = |i: usize| {
             c.get(i).map(String::as_str).with_context(|| {
+                let (have, want) = (c.len(), header.len());
                 format!(
-                    "{} line {}: {} cells, expected {}",
-                    path.display(),
-                    index + 1,
-                    c.len(),
-                    header.len()
+                    "{}: no cell for column '{}' ({have} cells, the header has {want})",
+                    at(n),
+                    header[i]
                 )
             })
         };
+        let bad = |i: usize, what: &str| {
+            anyhow::anyhow!(
+                "{}: column '{}' is '{}', not {what}",
+                at(n),
+                header[i],
+                c[i]
+            )
+        };
         let number = |i: usize| -> Result<f64> {
-            let s = get(i)?;
-            match s.trim_end_matches('%').parse::<f64>() {
+            match get(i)?.trim_end_matches('%').parse::<f64>() {
                 Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
-                _ => bail!(
-                    "{} line {}: column '{}' is '{s}', not a non-negative number",
-                    path.display(),
-                    index + 1,
-                    header[i]
-                ),
+                _ => Err(bad(i, "a non-negative number")),
             }
         };
+        let ray_count = get(rays)?
+            .parse::<u32>()
+            .map_err(|_| bad(rays, "a ray count"))?;
         points.push(Point {
-            setting: setting(get(rays)?, get(merge)?, get(precision)?, get(encoding)?),
+            setting: setting(
+                &ray_count.to_string(),
+                get(merge)?,
+                get(precision)?,
+                get(encoding)?,
+            ),
             merge: get(merge)?.to_owned(),
             flat: get(encoding)? == "sh9, flat brick",
             bake_ms: number(bake)?,
@@ -372,7 +394,7 @@ fn parse_table(text: &str, path: &Path) -> Result<Vec<Point>> {
         });
     }
     if points.is_empty() {
-        bail!("{}: the table has no rows", path.display());
+        bail!("{}: a header and no rows", at(header_line));
     }
     Ok(points)
 }
@@ -480,12 +502,6 @@ fn plot(new: &[Point], previous: &[Point], caption: &str) -> String {
         h: 480.0,
         m: 60.0,
     };
-    let color = |merge: &str| match merge {
-        "none" => "#d62728",
-        "spacing/24" => "#1f77b4",
-        "spacing/6" => "#2ca02c",
-        _ => "#ff7f0e",
-    };
     let (w, m) = (axes.w, axes.m);
     let mut s = format!("<svg xmlns='http://www.w3.org/2000/svg' width='{w}' height='{}' font-family='sans-serif' font-size='12'>\n<rect width='100%' height='100%' fill='white'/>\n", axes.h);
     let _ = writeln!(s, "<text x='{}' y='20' text-anchor='middle' font-size='14'>Mean irradiance error against bake time (log-log)</text>", w / 2.0);
@@ -504,7 +520,7 @@ fn plot(new: &[Point], previous: &[Point], caption: &str) -> String {
             "stroke='#999' stroke-width='2' stroke-dasharray='6 4'",
         ));
         for p in &previous_front {
-            let _ = writeln!(s, "<rect x='{:.1}' y='{:.1}' width='7' height='7' fill='#999'><title>previous: {}: {:.1} ms, {:.2}%</title></rect>", axes.sx(p.bake_ms) - 3.5, axes.sy(p.error) - 3.5, p.setting, p.bake_ms, p.error);
+            let _ = writeln!(s, "<rect x='{:.1}' y='{:.1}' width='7' height='7' fill='#999'><title>previous: {}: {:.1} ms, {:.2}%</title></rect>", axes.sx(p.bake_ms) - 3.5, axes.sy(p.error) - 3.5, xml_escape(&p.setting), p.bake_ms, p.error);
         }
     }
     let new_front: Vec<&Point> = front(new).into_iter().filter(shown).collect();
@@ -515,34 +531,46 @@ fn plot(new: &[Point], previous: &[Point], caption: &str) -> String {
         } else {
             "fill"
         };
-        let _ = writeln!(s, "<circle cx='{:.1}' cy='{:.1}' r='4' {shape}='{}'><title>{}: {:.1} ms, {:.2}%</title></circle>", axes.sx(p.bake_ms), axes.sy(p.error), color(&p.merge), p.setting, p.bake_ms, p.error);
+        let _ = writeln!(s, "<circle cx='{:.1}' cy='{:.1}' r='4' {shape}='{}'><title>{}: {:.1} ms, {:.2}%</title></circle>", axes.sx(p.bake_ms), axes.sy(p.error), merge_color(&p.merge), xml_escape(&p.setting), p.bake_ms, p.error);
     }
+    legend(&mut s, w - 200.0, m, !previous_front.is_empty());
+    s.push_str("</svg>\n");
+    s
+}
+
+/// The plot's legend, its left edge at `x`, from `top` down.
+fn legend(s: &mut String, x: f64, top: f64, previous: bool) {
     for (i, (merge, ..)) in MERGES.iter().enumerate() {
-        let y = m + 16.0 * i as f64;
+        let y = top + 16.0 * i as f64;
         let _ = writeln!(
             s,
-            "<circle cx='{}' cy='{}' r='4' fill='{}'/><text x='{}' y='{}'>bricks: {merge}</text>",
-            w - 200.0,
-            y,
-            color(merge),
-            w - 190.0,
+            "<circle cx='{x}' cy='{y}' r='4' fill='{}'/><text x='{}' y='{}'>bricks: {merge}</text>",
+            merge_color(merge),
+            x + 10.0,
             y + 4.0
         );
     }
-    let mut legend = vec!["hollow: flat brick radiance", "solid line: Pareto front"];
-    if !previous_front.is_empty() {
-        legend.push("grey dashed: previous front");
+    let mut lines = vec!["hollow: flat brick radiance", "solid line: Pareto front"];
+    if previous {
+        lines.push("grey dashed: previous front");
     }
-    for (i, text) in legend.iter().enumerate() {
+    for (i, text) in lines.iter().enumerate() {
         let _ = writeln!(
             s,
-            "<text x='{}' y='{}'>{text}</text>",
-            w - 200.0,
-            m + 70.0 + 16.0 * i as f64
+            "<text x='{x}' y='{}'>{text}</text>",
+            top + 70.0 + 16.0 * i as f64
         );
     }
-    s.push_str("</svg>\n");
-    s
+}
+
+/// The colour of a brick size's points.
+fn merge_color(merge: &str) -> &'static str {
+    match merge {
+        "none" => "#d62728",
+        "spacing/24" => "#1f77b4",
+        "spacing/6" => "#2ca02c",
+        _ => "#ff7f0e",
+    }
 }
 
 /// `text` with the characters XML gives a meaning escaped.
@@ -604,6 +632,26 @@ mod tests {
             "{e}"
         );
         let e = parse_table("| rays |\n|---|\n| 1 |\n", Path::new("b.md")).unwrap_err();
-        assert!(e.to_string().contains("no column 'brick cells'"), "{e}");
+        assert!(
+            e.to_string()
+                .contains("b.md line 1: no column 'brick cells'"),
+            "{e}"
+        );
+        let no_separator: String = md
+            .lines()
+            .filter(|l| !l.starts_with("|---"))
+            .collect::<Vec<_>>()
+            .join("\n");
+        let e = parse_table(&no_separator, Path::new("c.md"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("c.md line 2") && e.contains("separator"), "{e}");
+        let e = parse_table(&md.replace("| 512 |", "| 5l2 |"), Path::new("d.md"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("d.md line 4: column 'rays' is '5l2', not a ray count"),
+            "{e}"
+        );
     }
 }
