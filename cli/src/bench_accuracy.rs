@@ -89,7 +89,9 @@ pub fn run(args: AccuracyArgs) -> Result<()> {
     let lighting = prt_runtime::load_rig(&args.lights)?;
     let text = std::fs::read_to_string(&args.reference)
         .with_context(|| format!("reading {}", args.reference.display()))?;
-    let reference = prt_runtime::output::read_probe_sh(&serde_json::from_str(&text)?)
+    let json = serde_json::from_str(&text)
+        .with_context(|| format!("{}: not JSON", args.reference.display()))?;
+    let reference = prt_runtime::output::read_probe_sh(&json)
         .with_context(|| format!("{}: no probes[i].position/.sh", args.reference.display()))?;
     if args.repeats == 0 {
         bail!("--repeats 0: at least one bake per setting is needed");
@@ -128,21 +130,24 @@ pub fn run(args: AccuracyArgs) -> Result<()> {
 }
 
 /// Bakes every setting (`args.repeats` times, keeping the least time), relights it on the CPU
-/// and compares it with `reference`.
+/// and compares it with `reference`; a line on stderr per setting shows the progress.
 fn sweep(
     args: &AccuracyArgs,
     lighting: &Lighting,
     reference: &[([f32; 3], prt_format::sh::ShRgb)],
     base: &BakeSettings,
 ) -> Result<Vec<Row>> {
+    const PRECISIONS: [TransferPrecision; 3] = [
+        TransferPrecision::F32,
+        TransferPrecision::F16,
+        TransferPrecision::U8,
+    ];
+    let total = args.rays.len() * MERGES.len() * PRECISIONS.len();
     let mut rows = Vec::new();
+    let mut step = 0;
     for &n in &args.rays {
         for (merge, cell_size, cells) in MERGES {
-            for precision in [
-                TransferPrecision::F32,
-                TransferPrecision::F16,
-                TransferPrecision::U8,
-            ] {
+            for precision in PRECISIONS {
                 let settings = BakeSettings {
                     rays: n,
                     cell_size,
@@ -150,50 +155,72 @@ fn sweep(
                     transfer_precision: precision,
                     ..base.clone()
                 };
-                let mut bake_s = f64::MAX;
-                let mut baked = None;
-                for _ in 0..args.repeats {
-                    let t = Instant::now();
-                    let (asset, _) = prt_bake::bake(&args.scene, &settings, &NoProgress)
-                        .with_context(|| format!("bake with {n} rays, cells {merge}"))?;
-                    let bytes = prt_format::encode(&asset)?.len();
-                    bake_s = bake_s.min(t.elapsed().as_secs_f64());
-                    baked = Some((asset, bytes));
-                }
-                let (asset, bytes) = baked.expect("at least one repeat");
-                let summary = prt_format::Summary::of(&asset, bytes as u64);
-                let mut encodings = vec![("sh9 + gradient", asset.clone())];
-                if cell_size != Some(0.0) && precision == TransferPrecision::F16 {
-                    encodings.push(("sh9, flat brick", without_offsets(asset)));
-                }
-                for (encoding, asset) in encodings {
-                    let relighter = CpuRelighter::new(&asset)?;
-                    let t = Instant::now();
-                    let relit = relighter.relight(lighting, 1)?;
-                    let relight_s = t.elapsed().as_secs_f64();
-                    let ours: Vec<_> = asset
-                        .probes
-                        .iter()
-                        .zip(&relit.sh)
-                        .map(|(p, c)| (p.position, p.is_valid(), *c))
-                        .collect();
-                    rows.push(Row {
-                        rays: n,
-                        merge,
-                        precision,
-                        encoding,
-                        bake_s,
-                        relight_s,
-                        probes: asset.probes.len(),
-                        bytes_per_probe: summary.bytes_per_probe,
-                        transport_per_probe: summary.transport_bytes_per_probe,
-                        factors_per_probe: asset.factors.len() as f64 / asset.probes.len() as f64,
-                        error: compare(&ours, reference, 1e-3),
-                        deringed: compare(&windowed(&ours), reference, 1e-3),
-                    });
-                }
+                let measured = measure(args, lighting, reference, &settings, merge)?;
+                step += 1;
+                eprintln!(
+                    "accuracy [{step}/{total}] {n} rays, cells {merge}, {precision:?}: bake {:.1} ms, mean error {:.2}%",
+                    measured[0].bake_s * 1e3,
+                    100.0 * measured[0].error.mean
+                );
+                rows.extend(measured);
             }
         }
+    }
+    Ok(rows)
+}
+
+/// The rows of one setting (named `merge` for its cell size): its bake, and the flat-brick
+/// variant of merged f16 bakes.
+fn measure(
+    args: &AccuracyArgs,
+    lighting: &Lighting,
+    reference: &[([f32; 3], prt_format::sh::ShRgb)],
+    settings: &BakeSettings,
+    merge: &'static str,
+) -> Result<Vec<Row>> {
+    let (n, precision) = (settings.rays, settings.transfer_precision);
+    let mut bake_s = f64::MAX;
+    let mut baked = None;
+    for _ in 0..args.repeats {
+        let t = Instant::now();
+        let (asset, _) = prt_bake::bake(&args.scene, settings, &NoProgress)
+            .with_context(|| format!("bake with {n} rays, cells {merge}"))?;
+        let bytes = prt_format::encode(&asset)?.len();
+        bake_s = bake_s.min(t.elapsed().as_secs_f64());
+        baked = Some((asset, bytes));
+    }
+    let (asset, bytes) = baked.context("--repeats 0: no bake")?;
+    let summary = prt_format::Summary::of(&asset, bytes as u64);
+    let mut encodings = vec![("sh9 + gradient", asset.clone())];
+    if settings.cell_size != Some(0.0) && precision == TransferPrecision::F16 {
+        encodings.push(("sh9, flat brick", without_offsets(asset)));
+    }
+    let mut rows = Vec::new();
+    for (encoding, asset) in encodings {
+        let relighter = CpuRelighter::new(&asset)?;
+        let t = Instant::now();
+        let relit = relighter.relight(lighting, 1)?;
+        let relight_s = t.elapsed().as_secs_f64();
+        let ours: Vec<_> = asset
+            .probes
+            .iter()
+            .zip(&relit.sh)
+            .map(|(p, c)| (p.position, p.is_valid(), *c))
+            .collect();
+        rows.push(Row {
+            rays: n,
+            merge,
+            precision,
+            encoding,
+            bake_s,
+            relight_s,
+            probes: asset.probes.len(),
+            bytes_per_probe: summary.bytes_per_probe,
+            transport_per_probe: summary.transport_bytes_per_probe,
+            factors_per_probe: asset.factors.len() as f64 / asset.probes.len() as f64,
+            error: compare(&ours, reference, 1e-3),
+            deringed: compare(&windowed(&ours), reference, 1e-3),
+        });
     }
     Ok(rows)
 }
