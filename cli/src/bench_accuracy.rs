@@ -19,16 +19,21 @@ use prt_runtime::{CpuRelighter, Lighting};
 
 #[derive(clap::Args)]
 pub struct AccuracyArgs {
+    /// glTF scene to bake.
     pub scene: PathBuf,
+    /// Light rig (JSON) every bake is relit with.
     #[arg(long)]
     pub lights: PathBuf,
     /// Reference SH JSON (oracle output: probes[i].position and .sh).
     #[arg(long)]
     pub reference: PathBuf,
+    /// Probe spacing in metres [default: about 1,000 probes over the bounds].
     #[arg(long)]
     pub spacing: Option<f32>,
+    /// Probe grid bounds MINX,MINY,MINZ,MAXX,MAXY,MAXZ [default: the scene's].
     #[arg(long, value_parser = crate::parse_bounds, allow_hyphen_values = true)]
     pub bounds: Option<[f32; 6]>,
+    /// Rays per probe, comma-separated: every brick size and precision is baked with each.
     #[arg(
         long,
         value_delimiter = ',',
