@@ -474,14 +474,15 @@ impl Loader<'_> {
                 self.scene.triangles.push(v);
                 self.scene.materials_of_triangles.push(material);
                 if keep_attributes {
+                    let white = TriangleAttributes::WHITE;
                     self.scene.attributes.push(TriangleAttributes {
                         uv: std::array::from_fn(|set| match &uvs[set] {
                             Some(u) => t.map(|i| u[i as usize]),
-                            None => [Vec2::ZERO; 3],
+                            None => white.uv[set],
                         }),
                         color: match &colors {
                             Some(c) => t.map(|i| c[i as usize]),
-                            None => [Vec4::ONE; 3],
+                            None => white.color,
                         },
                     });
                 }

@@ -1,10 +1,10 @@
-//! `prt bench accuracy`: irradiance error against an independent renderer's probe SH (Mitsuba 3,
-//! `../shared/oracle/`) over rays per probe, brick cell size, factor precision and encoding,
-//! against bake time. Bake speed is what buys accuracy (factors fold rays away, so more rays
-//! cost bake time and, as far as they reach more bricks, factors): the report's Pareto front
-//! says how little error a given bake time buys, and with `--previous` it is set beside the
-//! front of earlier sweeps (their `accuracy.md`, for example from an older build run in the
-//! same sitting).
+//! `prt bench accuracy`: irradiance error against an independent renderer's probe SH (Mitsuba 3;
+//! the Cornell room's is vendored in `fixtures/cornell/`) over rays per probe, brick cell size,
+//! factor precision and encoding, against bake time. Bake speed is what buys accuracy (factors
+//! fold rays away, so more rays cost bake time and, as far as they reach more bricks, factors):
+//! the report's Pareto front says how little error a given bake time buys, and with
+//! `--previous` it is set beside the front of earlier sweeps (their `accuracy.md`, for example
+//! from an older build run in the same sitting).
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
