@@ -20,6 +20,7 @@ use glam::{DMat3, DVec3, Vec3};
 use prt_format::{Brick, Surfel, BRICK_BACKFACE};
 use rayon::prelude::*;
 
+use crate::brick_index::{BrickIndex, MAX_BRICKS};
 use crate::chunked::Chunked;
 use crate::trace::Hit;
 use crate::BakeError;
@@ -44,7 +45,7 @@ pub fn dominant_axis(n: Vec3) -> u32 {
 }
 
 /// Brick cell (x, y, z) and flags (dominant axis | backface).
-type Key = (i32, i32, i32, u32);
+pub(crate) type Key = (i32, i32, i32, u32);
 
 fn flags_of(h: &Hit) -> u32 {
     dominant_axis(h.normal) | if h.backface { BRICK_BACKFACE } else { 0 }
@@ -59,10 +60,8 @@ fn flags_of(h: &Hit) -> u32 {
 /// so the result depends only on the hits and their order, never on how they were blocked or
 /// on the thread count (`tests::blocking_does_not_change_the_result`).
 ///
-/// A brick is found by hashing its key (foldhash, seeded per process: the keys come from where
-/// the file's geometry is, so a fixed fast hash could be made to collide; the map is only
-/// looked up, never iterated, so the seed never changes the result), then its cell's surfels
-/// through a list per cell. Sponza at 1.0 m, 6.2 M hits, 2 threads: the sort-based merge this
+/// A brick is found by hashing its key ([`BrickIndex`], seeded per process), then its cell's
+/// surfels through a list per cell. Sponza at 1.0 m, 6.2 M hits, 2 threads: the sort-based merge this
 /// replaces (every hit's key sorted, then grouped) took 1.65-2.45 s and held every hit, its
 /// key and its rank at once; scanning a brick's surfels for the hit's cell instead of one list
 /// per cell took 17% of the bake's CPU time.
@@ -71,7 +70,7 @@ pub struct BrickFolder {
     cell_size: f32,
     merge_normal_cos: f32,
     /// Brick key to provisional brick (arrival order).
-    index: foldhash::HashMap<Key, u32>,
+    index: BrickIndex,
     /// Per provisional brick: its key.
     keys: Vec<Key>,
     /// Per provisional brick and cell, its first surfel in `clusters` (merging only). Chunks
@@ -88,6 +87,9 @@ pub struct BrickFolder {
     next: Chunked<u32, 23>,
     /// Scratch: one probe's hits as (brick, cell, hit), reused.
     slots: Vec<(u32, u8, u32)>,
+    /// Scratch: one probe's hits' brick keys, then where each run of them is looked up.
+    keys_of_hits: Vec<Key>,
+    homes: Vec<usize>,
 }
 
 /// No surfel: the end of a cell's list.
@@ -107,13 +109,15 @@ impl BrickFolder {
             anchor,
             cell_size: cell_size.max(0.0),
             merge_normal_cos,
-            index: foldhash::HashMap::default(),
+            index: BrickIndex::default(),
             keys: Vec::new(),
             heads: Chunked::default(),
             surfel_counts: Vec::new(),
             clusters: Chunked::default(),
             next: Chunked::default(),
             slots: Vec::new(),
+            keys_of_hits: Vec::new(),
+            homes: Vec::new(),
         }
     }
 
@@ -131,8 +135,10 @@ impl BrickFolder {
     /// 4.59-4.80 s (one thread, five alternating bakes each). A brick's surfels depend only on
     /// the order of its own hits, which every one of these orders keeps.
     pub fn fold(&mut self, hits: &[Hit], brick_of_hit: &mut Vec<u32>) -> Result<(), BakeError> {
-        let room = NONE as usize - hits.len().min(NONE as usize);
-        if self.clusters.len() > room || self.keys.len() > room {
+        let room = |limit: u32| limit as usize - hits.len().min(limit as usize);
+        let unmerged = self.cell_size == 0.0;
+        let brick_room = room(if unmerged { NONE } else { MAX_BRICKS });
+        if self.clusters.len() > room(NONE) || self.keys.len() > brick_room {
             return Err(BakeError::Setting {
                 name: "spacing",
                 value: format!(
@@ -141,11 +147,12 @@ impl BrickFolder {
                     self.keys.len(),
                     hits.len()
                 ),
-                reason: "more than 2^32 - 1 surfels or bricks: use fewer probes or rays, or merge",
+                reason: "more than 2^32 - 1 surfels, or more bricks than can be numbered (2^28 \
+                         merged, 2^32 - 1 unmerged): use fewer probes or rays",
             });
         }
         let first = brick_of_hit.len();
-        if self.cell_size == 0.0 {
+        if unmerged {
             for h in hits {
                 brick_of_hit.push(self.keys.len() as u32);
                 self.keys.push((0, 0, 0, flags_of(h)));
@@ -154,29 +161,35 @@ impl BrickFolder {
             return Ok(());
         }
         let brick_size = 4.0 * self.cell_size;
-        let keys: Vec<Key> = hits
-            .iter()
-            .map(|h| {
-                let c = ((h.position - self.anchor) / brick_size)
-                    .to_array()
-                    .map(floor_i32);
-                (c[0], c[1], c[2], flags_of(h))
-            })
-            .collect();
+        let mut keys = std::mem::take(&mut self.keys_of_hits);
+        keys.clear();
+        keys.extend(hits.iter().map(|h| {
+            let c = ((h.position - self.anchor) / brick_size)
+                .to_array()
+                .map(floor_i32);
+            (c[0], c[1], c[2], flags_of(h))
+        }));
         brick_of_hit.resize(first + hits.len(), 0);
         let runs = || keys.chunk_by(|a, b| a == b);
-        // The bricks already known, looked up together so that their cache misses overlap.
-        let known: Vec<Option<u32>> = runs().map(|run| self.index.get(&run[0]).copied()).collect();
+        // Every run's slot asked for before any is looked up, so that their misses overlap.
+        self.index.reserve(keys.len());
+        let mut homes = std::mem::take(&mut self.homes);
+        homes.clear();
+        homes.extend(runs().map(|run| self.index.home(&run[0])));
         // Each hit's brick and cell.
         let mut slots = std::mem::take(&mut self.slots);
         slots.clear();
         let mut start = 0u32;
-        for (run, known) in runs().zip(known) {
+        for (run, &home) in runs().zip(&homes) {
             let key = run[0];
-            // Not known before this probe: made by an earlier run of it, or new.
-            let b = known
-                .or_else(|| self.index.get(&key).copied())
-                .unwrap_or_else(|| self.new_brick(key));
+            let b = match self.index.find(&key, home) {
+                Ok(b) => b,
+                Err(at) => {
+                    let b = self.new_brick(key);
+                    self.index.insert(at, &key, b);
+                    b
+                }
+            };
             let origin =
                 self.anchor + Vec3::new(key.0 as f32, key.1 as f32, key.2 as f32) * brick_size;
             for i in start..start + run.len() as u32 {
@@ -189,6 +202,8 @@ impl BrickFolder {
             }
             start += run.len() as u32;
         }
+        self.keys_of_hits = keys;
+        self.homes = homes;
         self.touch(&slots);
         for &(b, cell, i) in &slots {
             self.merge(b, usize::from(cell), &hits[i as usize]);
@@ -216,10 +231,9 @@ impl BrickFolder {
         }
     }
 
-    /// A new provisional brick for `key`.
+    /// A new provisional brick for `key` (the caller puts it in the index).
     fn new_brick(&mut self, key: Key) -> u32 {
         let b = self.keys.len() as u32;
-        self.index.insert(key, b);
         self.keys.push(key);
         self.heads.push([NONE; 64]);
         self.surfel_counts.push(0);
@@ -318,7 +332,7 @@ impl BrickFolder {
 /// Asks for the cache line holding `item` without waiting for it (`prefetcht0`).
 #[cfg(all(target_arch = "x86_64", target_feature = "sse"))]
 #[inline(always)]
-fn prefetch<T>(item: &T) {
+pub(crate) fn prefetch<T>(item: &T) {
     use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
     let p: *const T = item;
     // SAFETY: SSE is part of the x86-64 baseline, and a prefetch reads nothing and never faults.
@@ -329,7 +343,7 @@ fn prefetch<T>(item: &T) {
 /// where there is no prefetch instruction, independent loads still overlap their misses.
 #[cfg(not(all(target_arch = "x86_64", target_feature = "sse")))]
 #[inline(always)]
-fn prefetch<T>(item: &T) {
+pub(crate) fn prefetch<T>(item: &T) {
     let p: *const T = item;
     // SAFETY: `p` comes from a reference, so its first byte is valid to read.
     std::hint::black_box(unsafe { std::ptr::read_volatile(p.cast::<u8>()) });

@@ -24,15 +24,16 @@ use crate::trace::Hit;
 /// rays (encoding sorts them by final brick).
 ///
 /// Without a sort: the hits are put in ray order through a table of the lattice (a probe's
-/// rays are distinct), and grouped by a map from brick to row. Sorting (brick, ray) keys
-/// instead, Sponza at 1.0 m took 4.53-4.71 s of CPU time against 4.39-4.60 s (one thread, five
-/// alternating bakes each).
+/// rays are distinct), and grouped through `table`, a row per brick ([`RowTable`]). Sorting
+/// (brick, ray) keys instead, Sponza at 1.0 m took 4.53-4.71 s of CPU time against 4.39-4.60 s
+/// with a hash map from brick to row (one thread, five alternating bakes each).
 pub fn probe_rows(
     hits: &[Hit],
     hit_brick: &[u32],
     basis: &[[f32; SH_COUNT]],
     weight: f32,
     precision: TransferPrecision,
+    table: &mut RowTable,
 ) -> ProbeRows {
     const NO_HIT: u32 = u32::MAX;
     let mut by_ray = vec![NO_HIT; basis.len()];
@@ -40,16 +41,16 @@ pub fn probe_rows(
         debug_assert_eq!(by_ray[h.ray as usize], NO_HIT, "ray {} hit twice", h.ray);
         by_ray[h.ray as usize] = i as u32;
     }
-    let mut row_of: foldhash::HashMap<u32, u32> =
-        foldhash::HashMap::with_capacity_and_hasher(hits.len(), Default::default());
-    let mut rows: Vec<FactorRow> = Vec::new();
+    let probe = table.next_probe(hit_brick.iter().max().map_or(0, |&b| b as usize + 1));
+    let mut rows: Vec<FactorRow> = Vec::with_capacity(hits.len().min(256));
     for (ray, &i) in by_ray.iter().enumerate().filter(|&(_, &i)| i != NO_HIT) {
         let (brick, i) = (hit_brick[i as usize], i as usize);
-        let r = *row_of.entry(brick).or_insert_with(|| {
+        let entry = &mut table.rows[brick as usize];
+        if entry.0 != probe {
             rows.push((brick, 0, [0.0; SH_COUNT - 1], [0.0; 3]));
-            rows.len() as u32 - 1
-        });
-        let row = &mut rows[r as usize];
+            *entry = (probe, rows.len() as u32 - 1);
+        }
+        let row = &mut rows[entry.1 as usize];
         let y = &basis[ray];
         row.1 += 1;
         row.3 = (Vec3::from(row.3) + hits[i].position).to_array();
@@ -63,6 +64,35 @@ pub fn probe_rows(
         kept.push(row, ray_count);
     }
     kept
+}
+
+/// Per provisional brick, its row in the probe being grouped ([`probe_rows`]): the entry is
+/// that probe's only if it carries the probe's stamp, so nothing is cleared between probes.
+/// One table per thread, sized by the bricks (8 bytes each; 1.1 MB at Sponza's 1.0 m). With a
+/// hash map from brick to row made for every probe instead, Sponza at 1.0 m took 4.32-4.51 s
+/// of user time against 4.25-4.43 s (one thread, release build, five alternating bakes each).
+#[derive(Default)]
+pub struct RowTable {
+    /// The stamp of the probe being grouped (0: none yet).
+    probe: u32,
+    /// Per provisional brick: the stamp of the last probe that hit it, and its row there.
+    rows: Vec<(u32, u32)>,
+}
+
+impl RowTable {
+    /// A new probe's stamp, with room for bricks below `bricks`.
+    fn next_probe(&mut self, bricks: usize) -> u32 {
+        if self.rows.len() < bricks {
+            self.rows.resize(bricks, (0, 0));
+        }
+        self.probe = self.probe.wrapping_add(1);
+        if self.probe == 0 {
+            // Once every 2^32 probes: stamps restart, so old entries must go.
+            self.rows.fill((0, 0));
+            self.probe = 1;
+        }
+        self.probe
+    }
 }
 
 /// One probe's factor rows while bricks are provisional, as close to their final form as that
@@ -81,6 +111,7 @@ pub enum ProbeRows {
 /// past [`U8_MAX_BRICK`] loses its high bits here, but such a bake is refused before
 /// [`encode_u8`] reads them (`pipeline::bricks_and_tables`; provisional and final bricks are as
 /// many).
+#[derive(Clone, Copy)]
 pub struct RowU8 {
     /// Transfer and rays ([`FactorU8::transfer`]), provisional brick in the brick bits.
     factor: FactorU8,
@@ -131,22 +162,88 @@ impl ProbeRows {
             }
         }
     }
+}
 
-    /// Factors the probe's table will have.
-    pub(crate) fn len(&self) -> usize {
-        match self {
-            ProbeRows::Sums(rows) => rows.len(),
-            ProbeRows::U8(rows) => rows.len(),
+/// Every probe's factor rows, probe after probe, in chunks of [`Rows::CHUNK_BYTES`] or more
+/// (a probe's rows never span two), kept as `precision` keeps them ([`ProbeRows`]).
+///
+/// Why chunks: the rows are the bake's largest working set (1.0 GB at 105k Sponza probes), and
+/// a vector per probe came from the allocator's shared heaps, which kept the memory when the
+/// rows were freed: the bake's peak was reached while the factor table was written beside
+/// rows already encoded (2,369 MiB at 105k probes). Chunks this large are mapped on their own
+/// (glibc's mmap threshold rises to at most 32 MiB), so each goes back to the system as soon as
+/// its probes are encoded ([`encode_tables`]).
+pub enum Rows {
+    Sums(Chunks<FactorRow>),
+    U8(Chunks<RowU8>),
+}
+
+/// Rows of every probe in chunks ([`Rows`]).
+pub struct Chunks<T> {
+    /// Rows a chunk holds (more when one probe has more).
+    chunk_rows: usize,
+    chunks: Vec<Vec<T>>,
+    /// Per probe: its chunk, and where its rows start there and how many there are.
+    probes: Vec<(usize, usize, usize)>,
+}
+
+impl<T: Copy> Chunks<T> {
+    fn new(chunk_rows: usize) -> Self {
+        Chunks {
+            chunk_rows: chunk_rows.max(1),
+            chunks: Vec::new(),
+            probes: Vec::new(),
         }
     }
 
-    /// Sums rows finished ([`finish`]).
-    fn finished(self, placed: &[Placed]) -> Vec<FactorRow> {
-        let ProbeRows::Sums(mut rows) = self else {
-            unreachable!("f16 and f32 rows are kept as sums");
-        };
-        finish(&mut rows, placed);
-        rows
+    /// Appends the next probe's rows.
+    fn push(&mut self, rows: &[T]) {
+        let room = self.chunks.last().map_or(0, |c| c.capacity() - c.len());
+        if room < rows.len() {
+            self.chunks
+                .push(Vec::with_capacity(self.chunk_rows.max(rows.len())));
+        }
+        let chunk = self.chunks.len().saturating_sub(1);
+        let start = self.chunks.last().map_or(0, Vec::len);
+        if let Some(c) = self.chunks.last_mut() {
+            c.extend_from_slice(rows);
+        }
+        self.probes.push((chunk, start, rows.len()));
+    }
+}
+
+impl Rows {
+    /// Bytes of a chunk: above the 32 MiB past which glibc maps every allocation on its own.
+    pub const CHUNK_BYTES: usize = 64 << 20;
+
+    /// No probes yet; their rows kept as `precision` keeps them.
+    pub fn new(precision: TransferPrecision) -> Self {
+        Rows::in_chunks_of(precision, Rows::CHUNK_BYTES)
+    }
+
+    /// [`Rows::new`] with chunks of `bytes`.
+    fn in_chunks_of(precision: TransferPrecision, bytes: usize) -> Self {
+        match precision {
+            TransferPrecision::U8 => Rows::U8(Chunks::new(bytes / std::mem::size_of::<RowU8>())),
+            _ => Rows::Sums(Chunks::new(bytes / std::mem::size_of::<FactorRow>())),
+        }
+    }
+
+    /// Appends the next probe's rows.
+    pub fn push(&mut self, rows: &ProbeRows) {
+        match (self, rows) {
+            (Rows::U8(all), ProbeRows::U8(rows)) => all.push(rows),
+            (Rows::Sums(all), ProbeRows::Sums(rows)) => all.push(rows),
+            _ => unreachable!("a bake keeps all its rows in one form"),
+        }
+    }
+
+    /// Factors probe `p`'s table will have.
+    pub(crate) fn len(&self, p: usize) -> usize {
+        match self {
+            Rows::Sums(all) => all.probes[p].2,
+            Rows::U8(all) => all.probes[p].2,
+        }
     }
 }
 
@@ -162,18 +259,30 @@ fn encode_u8(rows: &[RowU8], out: &mut [FactorU8], placed: &[Placed], offset_sca
         placed.len() <= U8_MAX_BRICK as usize + 1,
         "every provisional brick fits the row's brick field"
     );
-    for (f, r) in out.iter_mut().zip(rows) {
+    // By brick; a split row's parts (the only factors of one brick) full ones first, as they
+    // were split. Full parts are equal byte for byte, so an unstable sort gives the order the
+    // stable sort by brick gave, at less cost (the stable sort was 2% of the bake's CPU time,
+    // Sponza at 1.0 m). The rows are sorted as integers, key above row index, then placed in
+    // that order: sorting the 16-byte factors by their key, the table encoding took 359-364 ms
+    // against 319-323 ms (Sponza at 1.0 m, one thread, release build).
+    const _: () = assert!(U8_MAX_RAYS == 0xff);
+    let mut order: Vec<u64> = rows
+        .iter()
+        .enumerate()
+        .map(|(i, r)| {
+            let b = placed[r.brick()].0;
+            let key = (b << 8 | r.factor.brick_rays & U8_MAX_RAYS) ^ U8_MAX_RAYS;
+            u64::from(key) << 32 | i as u64
+        })
+        .collect();
+    order.sort_unstable();
+    for (f, &o) in out.iter_mut().zip(&order) {
+        let r = &rows[o as u32 as usize];
         let (b, centroid) = placed[r.brick()];
         *f = r
             .factor
             .place(b, (r.mean - centroid).to_array(), offset_scale);
     }
-    // By brick; a split row's parts (the only factors of one brick) full ones first, as they
-    // were split. Full parts are equal byte for byte, so this unstable sort gives the order the
-    // stable sort by brick gave, at less cost (the stable sort was 2% of the bake's CPU time,
-    // Sponza at 1.0 m).
-    const _: () = assert!(U8_MAX_RAYS == 0xff);
-    out.sort_unstable_by_key(|f| f.brick_rays ^ U8_MAX_RAYS);
 }
 
 /// How the asset's factor table is laid out: per probe, whose table it carries (its own, a
@@ -190,7 +299,7 @@ pub struct Carried<'a> {
 /// Encoding a table per probe and joining them copied every factor once more: at Sponza's
 /// 1.0 m spacing (74 MB of factors, 2 threads) the assemble stage took 0.050 s, 0.001 s now.
 pub fn encode_tables(
-    tables: Vec<ProbeRows>,
+    rows: Rows,
     carried: Carried,
     remap: &[u32],
     bricks: &[Brick],
@@ -201,54 +310,68 @@ pub fn encode_tables(
         .map(|&b| (b, Vec3::from(bricks[b as usize].centroid)))
         .collect();
     let placed = &placed;
-    let sums = |rows: ProbeRows, precision| {
-        Factors::build(&rows.finished(placed), precision, ray_count, brick_size)
+    let sums = |rows: &[FactorRow], precision| {
+        let mut rows = rows.to_vec();
+        finish(&mut rows, placed);
+        Factors::build(&rows, precision, ray_count, brick_size)
     };
-    match precision {
-        TransferPrecision::U8 => {
+    match (precision, rows) {
+        (TransferPrecision::U8, Rows::U8(rows)) => {
             let offset_scale = u8_offset_scale(brick_size);
-            let factors = place_tables(tables, carried, |rows, out| match rows {
-                ProbeRows::U8(rows) => encode_u8(&rows, out, placed, offset_scale),
-                ProbeRows::Sums(_) => unreachable!("u8 rows are kept as u8"),
+            let factors = place_tables(rows, carried, |rows, out| {
+                encode_u8(rows, out, placed, offset_scale)
             });
             Factors::U8 {
                 factors,
                 offset_scale,
             }
         }
-        TransferPrecision::F16 => Factors::F16(place_tables(tables, carried, |rows, out| {
-            let Factors::F16(table) = sums(rows, precision) else {
-                unreachable!("built as f16");
-            };
-            out.copy_from_slice(&table);
-        })),
-        TransferPrecision::F32 => Factors::F32(place_tables(tables, carried, |rows, out| {
-            let Factors::F32(table) = sums(rows, precision) else {
-                unreachable!("built as f32");
-            };
-            out.copy_from_slice(&table);
-        })),
+        (TransferPrecision::F16, Rows::Sums(rows)) => {
+            Factors::F16(place_tables(rows, carried, |rows, out| {
+                let Factors::F16(table) = sums(rows, precision) else {
+                    unreachable!("built as f16");
+                };
+                out.copy_from_slice(&table);
+            }))
+        }
+        (TransferPrecision::F32, Rows::Sums(rows)) => {
+            Factors::F32(place_tables(rows, carried, |rows, out| {
+                let Factors::F32(table) = sums(rows, precision) else {
+                    unreachable!("built as f32");
+                };
+                out.copy_from_slice(&table);
+            }))
+        }
+        _ => unreachable!("u8 rows are kept as u8, f16 and f32 rows as sums"),
     }
 }
 
-/// [`encode_tables`] for one factor type: `encode` fills a probe's place from its rows.
-fn place_tables<T: bytemuck::Zeroable + Copy + Send + Sync>(
-    tables: Vec<ProbeRows>,
+/// [`encode_tables`] for one factor type: `encode` fills a probe's place from its rows. Chunk
+/// by chunk, its probes in parallel, then the chunk freed ([`Rows`]).
+fn place_tables<R: Sync + Send, T: bytemuck::Zeroable + Copy + Send + Sync>(
+    mut rows: Chunks<R>,
     carried: Carried,
-    encode: impl Fn(ProbeRows, &mut [T]) + Sync,
+    encode: impl Fn(&[R], &mut [T]) + Sync,
 ) -> Vec<T> {
     let mut out: Vec<T> = bytemuck::zeroed_vec(carried.lens.iter().sum());
-    let places = crate::split_runs(&mut out, carried.lens);
+    let mut places = crate::split_runs(&mut out, carried.lens);
     let starts: Vec<usize> = places.iter().map(|&(start, _)| start).collect();
-    tables
-        .into_par_iter()
-        .zip(places)
-        .enumerate()
-        .for_each(|(p, (rows, (_, place)))| {
-            if carried.from[p] == Some(p) {
-                encode(rows, place);
-            }
-        });
+    let mut first = 0;
+    for probes in rows.probes.chunk_by(|a, b| a.0 == b.0) {
+        let chunk = rows.chunks.get_mut(probes[0].0).map(std::mem::take);
+        let chunk = chunk.unwrap_or_default();
+        let these: Vec<_> = places.drain(..probes.len()).collect();
+        these.into_par_iter().zip(probes).enumerate().for_each(
+            |(i, ((_, place), &(_, start, len)))| {
+                let p = first + i;
+                if carried.from[p] == Some(p) {
+                    encode(&chunk[start..start + len], place);
+                }
+            },
+        );
+        first += probes.len();
+    }
+    drop(places);
     for (p, from) in carried.from.iter().enumerate() {
         if let Some(q) = from.filter(|&q| q != p) {
             debug_assert_eq!(
@@ -311,9 +434,14 @@ mod tests {
             .collect();
         let bricks: Vec<u32> = hits.iter().map(|_| next(40) * 3).collect();
         let weight = 4.0 * std::f32::consts::PI / n as f32;
-        let ProbeRows::Sums(mut got) =
-            probe_rows(&hits, &bricks, &basis, weight, TransferPrecision::F32)
-        else {
+        let ProbeRows::Sums(mut got) = probe_rows(
+            &hits,
+            &bricks,
+            &basis,
+            weight,
+            TransferPrecision::F32,
+            &mut RowTable::default(),
+        ) else {
             panic!("f32 rows are sums");
         };
         got.sort_by_key(|r| r.0);
@@ -343,6 +471,51 @@ mod tests {
         };
         assert_eq!(want.len(), got.len());
         assert_eq!(bits(&got), bits(&want));
+    }
+
+    /// The table is the same whatever the chunks: probes of no rows, a probe larger than a
+    /// chunk, a dilated probe and an invalid one, in chunks of 1,000 bytes and of 64 MiB.
+    #[test]
+    fn chunks_do_not_change_the_table() {
+        let bricks: Vec<Brick> = (0..40)
+            .map(|i| Brick {
+                centroid: [0.1 * i as f32, 0.5, -0.2],
+                ..Brick::default()
+            })
+            .collect();
+        let remap: Vec<u32> = (0..40).map(|i| (i * 7) % 40).collect();
+        let probe = |p: usize, rows: usize, precision| {
+            let mut kept = ProbeRows::new(precision);
+            for r in 0..rows {
+                let brick = ((p * 13 + r * 7) % 40) as u32;
+                let rays = 1 + ((p + r) % 300) as u32;
+                let sh = std::array::from_fn(|k| (k as f32 - 3.0) * 0.002 * rays as f32);
+                kept.push((brick, rays, sh, [0.1 * rays as f32, 0.0, 0.3]), 4096);
+            }
+            kept
+        };
+        let sizes = [3, 0, 17, 90, 0, 5, 40, 2];
+        let from = [0, 1, 2, 3, 4, 5, 6, 7].map(|p| match p {
+            5 => Some(2),
+            6 => None,
+            p => Some(p),
+        });
+        for precision in [TransferPrecision::U8, TransferPrecision::F16] {
+            let tables = [1000, Rows::CHUNK_BYTES].map(|bytes| {
+                let mut rows = Rows::in_chunks_of(precision, bytes);
+                for (p, &n) in sizes.iter().enumerate() {
+                    rows.push(&probe(p, n, precision));
+                }
+                let lens: Vec<usize> = from.iter().map(|f| f.map_or(0, |q| rows.len(q))).collect();
+                let carried = Carried {
+                    from: &from,
+                    lens: &lens,
+                };
+                encode_tables(rows, carried, &remap, &bricks, (precision, 4096, 0.5))
+            });
+            assert!(!tables[0].is_empty());
+            assert_eq!(tables[0], tables[1], "{precision:?}");
+        }
     }
 
     /// Rows encoded as u8 while bricks are provisional give the table that finishing the f32
@@ -377,12 +550,14 @@ mod tests {
         for row in rows {
             early.push(row, n);
         }
+        let mut rows = Rows::new(TransferPrecision::U8);
+        rows.push(&early);
         let carried = Carried {
             from: &[Some(0)],
-            lens: &[early.len()],
+            lens: &[rows.len(0)],
         };
         let settings = (TransferPrecision::U8, n, size);
-        let early = encode_tables(vec![early], carried, &remap, &bricks, settings);
+        let early = encode_tables(rows, carried, &remap, &bricks, settings);
         assert_eq!(early.len(), 7, "600 and 256 rays split in three and two");
         assert_eq!(early, late);
     }

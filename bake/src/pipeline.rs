@@ -278,7 +278,7 @@ fn load(
 /// rows as it goes; fails when u8 factors cannot address the bricks.
 fn bricks_and_tables(
     folder: bricks::BrickFolder,
-    tables: Vec<factors::ProbeRows>,
+    tables: factors::Rows,
     carried: factors::Carried,
     settings: &BakeSettings,
     ray_count: u32,
@@ -303,7 +303,7 @@ fn bricks_and_tables(
 fn carried_layout(
     valid: &[bool],
     sources: &[Option<usize>],
-    tables: &[factors::ProbeRows],
+    tables: &factors::Rows,
 ) -> Result<(Vec<Option<usize>>, Vec<usize>), BakeError> {
     let from: Vec<Option<usize>> = valid
         .iter()
@@ -313,7 +313,7 @@ fn carried_layout(
         .collect();
     let lens: Vec<usize> = from
         .iter()
-        .map(|f| f.map_or(0, |q| tables[q].len()))
+        .map(|f| f.map_or(0, |q| tables.len(q)))
         .collect();
     let factor_count: u64 = lens.iter().map(|&len| len as u64).sum();
     if factor_count > u64::from(u32::MAX) {

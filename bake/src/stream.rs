@@ -9,13 +9,15 @@
 //! a probe's hits in the order its rays were traced ([`crate::trace::coherent_order`]), so the
 //! result is the same for any block size or thread count.
 
+use std::sync::{Mutex, PoisonError};
+
 use glam::Vec3;
 use prt_format::{TransferPrecision, DEPTH_WORDS};
 use rayon::prelude::*;
 
 use crate::bricks::BrickFolder;
 use crate::depth::DepthFilter;
-use crate::factors::{self, ProbeRows};
+use crate::factors::{self, RowTable, Rows};
 use crate::trace::{ProbeRays, Tracer};
 use crate::{BakeError, Progress};
 
@@ -33,8 +35,8 @@ pub struct Traced {
     pub positions: Vec<(Vec3, bool)>,
     /// Per probe: sky mask, sky transfer and ray counts (the hits are folded and dropped).
     pub rays: Vec<ProbeRays>,
-    /// Per probe: factor rows keyed by provisional brick ([`factors::ProbeRows`]).
-    pub rows: Vec<ProbeRows>,
+    /// Per probe: factor rows keyed by provisional brick ([`factors::Rows`]).
+    pub rows: Rows,
     /// Per probe, its packed visibility map ([`DepthFilter::map`]), probe after probe.
     pub depth: Vec<u32>,
     pub folder: BrickFolder,
@@ -58,10 +60,11 @@ pub fn trace_and_fold(
     progress: &dyn Progress,
 ) -> Result<Traced, BakeError> {
     let depth_filter = DepthFilter::new(tracer.directions);
+    let tables = RowTables::new();
     let mut out = Traced {
         positions: Vec::with_capacity(probe_count),
         rays: Vec::with_capacity(probe_count),
-        rows: Vec::with_capacity(probe_count),
+        rows: Rows::new(precision),
         depth: Vec::with_capacity(probe_count * DEPTH_WORDS),
         folder,
     };
@@ -84,7 +87,8 @@ pub fn trace_and_fold(
             || (start < probe_count).then(|| trace_block(start)),
             || match pending.take() {
                 Some(block) => {
-                    fold_block(block, &mut out, tracer, &depth_filter, spacing, precision)
+                    let finish = (tracer, &depth_filter, &tables, spacing, precision);
+                    fold_block(block, &mut out, finish)
                 }
                 None => Ok(()),
             },
@@ -96,15 +100,43 @@ pub fn trace_and_fold(
     Ok(out)
 }
 
+/// What finishing a probe after the fold reads: the tracer, the visibility filter, the row
+/// tables, the probe spacing and the factors' precision.
+type Finish<'a> = (
+    &'a Tracer<'a>,
+    &'a DepthFilter,
+    &'a RowTables,
+    f32,
+    TransferPrecision,
+);
+
+/// A [`RowTable`] per thread of the pool, for the bake's duration.
+struct RowTables(Vec<Mutex<RowTable>>);
+
+impl RowTables {
+    fn new() -> Self {
+        RowTables(
+            (0..rayon::current_num_threads())
+                .map(|_| Mutex::default())
+                .collect(),
+        )
+    }
+
+    /// Runs `f` with the current thread's table (uncontended: one per worker; a caller outside
+    /// the pool shares the first). A table whose user panicked is still sound: its entries are
+    /// stamped with the probe they belong to ([`RowTable`]).
+    fn with<R>(&self, f: impl FnOnce(&mut RowTable) -> R) -> R {
+        let i = rayon::current_thread_index().unwrap_or(0) % self.0.len();
+        f(&mut self.0[i].lock().unwrap_or_else(PoisonError::into_inner))
+    }
+}
+
 /// Folds one block's hits into the bricks (in probe and ray order), then per probe, in
 /// parallel: factor rows, visibility map, and the hits dropped.
 fn fold_block(
     block: Block,
     out: &mut Traced,
-    tracer: &Tracer,
-    depth_filter: &DepthFilter,
-    spacing: f32,
-    precision: TransferPrecision,
+    (tracer, depth_filter, tables, spacing, precision): Finish,
 ) -> Result<(), BakeError> {
     let mut brick_of_hit = Vec::new();
     let mut hit_start = Vec::with_capacity(block.len() + 1);
@@ -118,7 +150,9 @@ fn fold_block(
         .enumerate()
         .map(|(i, (p, mut r, moved))| {
             let ids = &brick_of_hit[hit_start[i]..hit_start[i + 1]];
-            let rows = factors::probe_rows(&r.hits, ids, &tracer.basis, tracer.weight, precision);
+            let rows = tables.with(|table| {
+                factors::probe_rows(&r.hits, ids, &tracer.basis, tracer.weight, precision, table)
+            });
             let depth = depth_filter.map(p, &r, tracer.directions.len(), spacing);
             r.hits = Vec::new();
             ((p, moved), r, rows, depth)
@@ -127,7 +161,7 @@ fn fold_block(
     for (position, r, rows, depth) in finished {
         out.positions.push(position);
         out.rays.push(r);
-        out.rows.push(rows);
+        out.rows.push(&rows);
         out.depth.extend_from_slice(&depth);
     }
     Ok(())

@@ -274,6 +274,7 @@ impl FactorU8 {
     /// The 8-bit transfer of `rays` (at most [`U8_MAX_RAYS`]) of a probe's `ray_count` rays with
     /// transfer `sh` (k = 1..9), brick and offset left zero for [`FactorU8::place`]. The baker
     /// encodes a probe's transfers as it is traced, before its bricks are numbered.
+    #[inline]
     pub fn transfer(rays: u32, sh: [f32; 8], ray_count: u32) -> FactorU8 {
         let dc_per_ray = crate::directions::direction_weight(ray_count) * crate::sh::Y00;
         let dc = rays as f32 * dc_per_ray;
@@ -290,6 +291,7 @@ impl FactorU8 {
 
     /// This transfer from brick `brick` (at most [`U8_MAX_BRICK`]) whose rays' mean hit point
     /// is `offset` from its centroid (metres; `offset_scale` as in [`Factors::U8`]).
+    #[inline]
     pub fn place(self, brick: u32, offset: [f32; 3], offset_scale: f32) -> FactorU8 {
         let mut packed = self.packed;
         for (a, &o) in offset.iter().enumerate() {
@@ -319,6 +321,7 @@ pub const U8_MAX_BRICK: u32 = (1 << 24) - 1;
 /// Largest ray count of one 8-bit factor.
 pub const U8_MAX_RAYS: u32 = 255;
 
+#[inline]
 fn snorm8(v: f32) -> u32 {
     (round_small(v.clamp(-1.0, 1.0) * 127.0) as u32) & 0xff
 }
