@@ -37,6 +37,9 @@ pub struct DepthFilter {
     feeds: usize,
     rays: Vec<u32>,
     weights: Vec<f64>,
+    /// Per texel, the sum of its feeds' weights, added in the order [`DepthFilter::map`] adds
+    /// the weighted distances: every probe has the same, since sky rays count too.
+    weight_sums: Vec<f64>,
 }
 
 impl DepthFilter {
@@ -66,13 +69,15 @@ impl DepthFilter {
             feeds,
             rays: Vec::with_capacity(DEPTH_TEXELS * feeds),
             weights: Vec::with_capacity(DEPTH_TEXELS * feeds),
+            weight_sums: vec![0.0; DEPTH_TEXELS],
         };
-        for group in texels.chunks(GROUP) {
+        for (g, group) in texels.chunks(GROUP).enumerate() {
             for f in 0..feeds {
-                for texel in group {
+                for (l, texel) in group.iter().enumerate() {
                     let (ray, w) = texel.get(f).copied().unwrap_or((0, 0.0));
                     filter.rays.push(ray);
                     filter.weights.push(w);
+                    filter.weight_sums[g * GROUP + l] += w;
                 }
             }
         }
@@ -100,13 +105,13 @@ impl DepthFilter {
                 &self.rays[g * step..(g + 1) * step],
                 &self.weights[g * step..(g + 1) * step],
             );
-            let (mut w_sum, mut m1, mut m2) = ([0.0f64; GROUP], [0.0f64; GROUP], [0.0f64; GROUP]);
+            let w_sum = &self.weight_sums[g * GROUP..(g + 1) * GROUP];
+            let (mut m1, mut m2) = ([0.0f64; GROUP], [0.0f64; GROUP]);
             for (rays, weights) in rays.chunks_exact(GROUP).zip(weights.chunks_exact(GROUP)) {
                 for l in 0..GROUP {
-                    let (w, d) = (weights[l], f64::from(distance[rays[l] as usize]));
-                    w_sum[l] += w;
-                    m1[l] += w * d;
-                    m2[l] += w * d * d;
+                    let wd = weights[l] * f64::from(distance[rays[l] as usize]);
+                    m1[l] += wd;
+                    m2[l] += wd * f64::from(distance[rays[l] as usize]);
                 }
             }
             for (l, texel) in out.iter_mut().enumerate() {
