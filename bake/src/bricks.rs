@@ -61,10 +61,10 @@ fn flags_of(h: &Hit) -> u32 {
 /// on the thread count (`tests::blocking_does_not_change_the_result`).
 ///
 /// A brick is found by hashing its key ([`BrickIndex`], seeded per process), then its cell's
-/// surfels through a list per cell. Sponza at 1.0 m, 6.2 M hits, 2 threads: the sort-based merge this
-/// replaces (every hit's key sorted, then grouped) took 1.65-2.45 s and held every hit, its
-/// key and its rank at once; scanning a brick's surfels for the hit's cell instead of one list
-/// per cell took 17% of the bake's CPU time.
+/// surfels through a list per cell. Sponza at 1.0 m, 6.2 M hits, 2 threads: the sort-based
+/// merge this replaces (every hit's key sorted, then grouped) took 1.65-2.45 s and held every
+/// hit, its key and its rank at once; scanning a brick's surfels for the hit's cell instead of
+/// one list per cell took 17% of the bake's CPU time.
 pub struct BrickFolder {
     anchor: Vec3,
     cell_size: f32,
@@ -87,8 +87,9 @@ pub struct BrickFolder {
     next: Chunked<u32, 23>,
     /// Scratch: one probe's hits as (brick, cell, hit), reused.
     slots: Vec<(u32, u8, u32)>,
-    /// Scratch: one probe's hits' brick keys, then where each run of them is looked up.
+    /// Scratch: one probe's hits' brick keys.
     keys_of_hits: Vec<Key>,
+    /// Scratch: where each run of one probe's keys is looked up ([`BrickIndex::home`]).
     homes: Vec<usize>,
 }
 
@@ -122,8 +123,9 @@ impl BrickFolder {
     }
 
     /// Folds the next `hits` (one probe's) in and appends the provisional brick of each to
-    /// `brick_of_hit`. Fails, before any change, when the bricks or surfels would pass 2^32 - 1
-    /// (every hit adds at most one of each).
+    /// `brick_of_hit`. Fails, before any change, when the surfels would pass 2^32 - 1 or the
+    /// bricks what the index numbers ([`MAX_BRICKS`] merged, 2^32 - 1 unmerged; every hit adds
+    /// at most one of each).
     ///
     /// The hits are taken in their order, a brick looked up once for each run of consecutive
     /// hits in it (the coherent ray order makes runs common), all the runs' lookups together so
@@ -148,7 +150,7 @@ impl BrickFolder {
                     hits.len()
                 ),
                 reason: "more than 2^32 - 1 surfels, or more bricks than can be numbered (2^28 \
-                         merged, 2^32 - 1 unmerged): use fewer probes or rays",
+                         merged, 2^32 - 1 unmerged): use fewer probes or rays, or larger cells",
             });
         }
         let first = brick_of_hit.len();

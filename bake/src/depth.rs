@@ -109,9 +109,10 @@ impl DepthFilter {
             let (mut m1, mut m2) = ([0.0f64; GROUP], [0.0f64; GROUP]);
             for (rays, weights) in rays.chunks_exact(GROUP).zip(weights.chunks_exact(GROUP)) {
                 for l in 0..GROUP {
-                    let wd = weights[l] * f64::from(distance[rays[l] as usize]);
+                    let d = f64::from(distance[rays[l] as usize]);
+                    let wd = weights[l] * d;
                     m1[l] += wd;
-                    m2[l] += wd * f64::from(distance[rays[l] as usize]);
+                    m2[l] += wd * d;
                 }
             }
             for (l, texel) in out.iter_mut().enumerate() {

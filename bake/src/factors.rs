@@ -26,7 +26,8 @@ use crate::trace::Hit;
 /// Without a sort: the hits are put in ray order through a table of the lattice (a probe's
 /// rays are distinct), and grouped through `table`, a row per brick ([`RowTable`]). Sorting
 /// (brick, ray) keys instead, Sponza at 1.0 m took 4.53-4.71 s of CPU time against 4.39-4.60 s
-/// with a hash map from brick to row (one thread, five alternating bakes each).
+/// with the hash map from brick to row that the table replaced (one thread, five alternating
+/// bakes each, an earlier sitting).
 pub fn probe_rows(
     hits: &[Hit],
     hit_brick: &[u32],
@@ -41,11 +42,16 @@ pub fn probe_rows(
         debug_assert_eq!(by_ray[h.ray as usize], NO_HIT, "ray {} hit twice", h.ray);
         by_ray[h.ray as usize] = i as u32;
     }
-    let probe = table.next_probe(hit_brick.iter().max().map_or(0, |&b| b as usize + 1));
+    let low = hit_brick.iter().min().copied().unwrap_or(0);
+    let span = hit_brick
+        .iter()
+        .max()
+        .map_or(0, |&b| (b - low) as usize + 1);
+    let probe = table.next_probe(span);
     let mut rows: Vec<FactorRow> = Vec::with_capacity(hits.len().min(256));
     for (ray, &i) in by_ray.iter().enumerate().filter(|&(_, &i)| i != NO_HIT) {
         let (brick, i) = (hit_brick[i as usize], i as usize);
-        let entry = &mut table.rows[brick as usize];
+        let entry = &mut table.rows[(brick - low) as usize];
         if entry.0 != probe {
             rows.push((brick, 0, [0.0; SH_COUNT - 1], [0.0; 3]));
             *entry = (probe, rows.len() as u32 - 1);
@@ -66,24 +72,28 @@ pub fn probe_rows(
     kept
 }
 
-/// Per provisional brick, its row in the probe being grouped ([`probe_rows`]): the entry is
-/// that probe's only if it carries the probe's stamp, so nothing is cleared between probes.
-/// One table per thread, sized by the bricks (8 bytes each; 1.1 MB at Sponza's 1.0 m). With a
-/// hash map from brick to row made for every probe instead, Sponza at 1.0 m took 4.32-4.51 s
-/// of user time against 4.25-4.43 s (one thread, release build, five alternating bakes each).
+/// Per provisional brick of the probe being grouped ([`probe_rows`]), counted from the
+/// probe's lowest, its row: an entry is that probe's only if it carries the probe's stamp, so
+/// nothing is cleared between probes. One table per thread, as long as the widest span of
+/// bricks one probe hit: 8 bytes a brick when merging (a probe sees bricks made by the first
+/// probes and by itself; 1.1 MB at Sponza's 1.0 m, 3.6 MB at 105k probes), one entry per ray
+/// unmerged (each hit a brick of its own, numbered together). With a hash map from brick to row
+/// made for every probe instead, Sponza at 1.0 m took 4.32-4.51 s of user time against
+/// 4.25-4.43 s (one thread, release build, five alternating bakes each, this sitting).
 #[derive(Default)]
 pub struct RowTable {
     /// The stamp of the probe being grouped (0: none yet).
     probe: u32,
-    /// Per provisional brick: the stamp of the last probe that hit it, and its row there.
+    /// Per brick (less the probe's lowest): the stamp of the last probe that hit it, and its
+    /// row there.
     rows: Vec<(u32, u32)>,
 }
 
 impl RowTable {
-    /// A new probe's stamp, with room for bricks below `bricks`.
-    fn next_probe(&mut self, bricks: usize) -> u32 {
-        if self.rows.len() < bricks {
-            self.rows.resize(bricks, (0, 0));
+    /// A new probe's stamp, with room for `span` bricks.
+    fn next_probe(&mut self, span: usize) -> u32 {
+        if self.rows.len() < span {
+            self.rows.resize(span, (0, 0));
         }
         self.probe = self.probe.wrapping_add(1);
         if self.probe == 0 {
@@ -164,15 +174,16 @@ impl ProbeRows {
     }
 }
 
-/// Every probe's factor rows, probe after probe, in chunks of [`Rows::CHUNK_BYTES`] or more
-/// (a probe's rows never span two), kept as `precision` keeps them ([`ProbeRows`]).
+/// Every probe's factor rows, probe after probe, in chunks of about [`Rows::CHUNK_BYTES`] (a
+/// probe's rows never span two; a probe with more has a chunk of its own), kept as `precision` keeps them ([`ProbeRows`]).
 ///
 /// Why chunks: the rows are the bake's largest working set (1.0 GB at 105k Sponza probes), and
 /// a vector per probe came from the allocator's shared heaps, which kept the memory when the
 /// rows were freed: the bake's peak was reached while the factor table was written beside
-/// rows already encoded (2,369 MiB at 105k probes). Chunks this large are mapped on their own
-/// (glibc's mmap threshold rises to at most 32 MiB), so each goes back to the system as soon as
-/// its probes are encoded ([`encode_tables`]).
+/// rows already encoded. Chunks this large are mapped on their own (glibc's mmap threshold
+/// rises to at most 32 MiB), so each goes back to the system as soon as its probes are encoded
+/// ([`encode_tables`]). Sponza at 105k probes: peak 2,355-2,369 MiB then, 2,057 MiB now; at
+/// 1.0 m 512 then, 475 MiB now.
 pub enum Rows {
     Sums(Chunks<FactorRow>),
     U8(Chunks<RowU8>),
@@ -260,11 +271,11 @@ fn encode_u8(rows: &[RowU8], out: &mut [FactorU8], placed: &[Placed], offset_sca
         "every provisional brick fits the row's brick field"
     );
     // By brick; a split row's parts (the only factors of one brick) full ones first, as they
-    // were split. Full parts are equal byte for byte, so an unstable sort gives the order the
-    // stable sort by brick gave, at less cost (the stable sort was 2% of the bake's CPU time,
-    // Sponza at 1.0 m). The rows are sorted as integers, key above row index, then placed in
-    // that order: sorting the 16-byte factors by their key, the table encoding took 359-364 ms
-    // against 319-323 ms (Sponza at 1.0 m, one thread, release build).
+    // were split: the key is the final brick above the rays' complement. The rows are sorted
+    // as integers, key above row index (distinct, so any sort gives one order; only a split
+    // row's full parts share a key, and they are equal byte for byte), then placed in that
+    // order. Sorting the 16-byte factors by their key instead, the table encoding took
+    // 359-364 ms against 319-323 ms (Sponza at 1.0 m, one thread, release build).
     const _: () = assert!(U8_MAX_RAYS == 0xff);
     let mut order: Vec<u64> = rows
         .iter()
@@ -353,14 +364,22 @@ fn place_tables<R: Sync + Send, T: bytemuck::Zeroable + Copy + Send + Sync>(
     carried: Carried,
     encode: impl Fn(&[R], &mut [T]) + Sync,
 ) -> Vec<T> {
+    debug_assert_eq!(
+        rows.probes.len(),
+        carried.from.len(),
+        "a row entry per probe"
+    );
     let mut out: Vec<T> = bytemuck::zeroed_vec(carried.lens.iter().sum());
-    let mut places = crate::split_runs(&mut out, carried.lens);
+    let places = crate::split_runs(&mut out, carried.lens);
     let starts: Vec<usize> = places.iter().map(|&(start, _)| start).collect();
+    let mut places = places.into_iter();
     let mut first = 0;
+    // Probes with no rows before the first chunk count as the first chunk's ([`Chunks::push`]);
+    // with no chunk at all there is nothing to encode.
     for probes in rows.probes.chunk_by(|a, b| a.0 == b.0) {
         let chunk = rows.chunks.get_mut(probes[0].0).map(std::mem::take);
         let chunk = chunk.unwrap_or_default();
-        let these: Vec<_> = places.drain(..probes.len()).collect();
+        let these: Vec<_> = places.by_ref().take(probes.len()).collect();
         these.into_par_iter().zip(probes).enumerate().for_each(
             |(i, ((_, place), &(_, start, len)))| {
                 let p = first + i;
@@ -473,8 +492,9 @@ mod tests {
         assert_eq!(bits(&got), bits(&want));
     }
 
-    /// The table is the same whatever the chunks: probes of no rows, a probe larger than a
-    /// chunk, a dilated probe and an invalid one, in chunks of 1,000 bytes and of 64 MiB.
+    /// The table is each carried probe's own table, encoded alone, in probe order, whatever
+    /// the chunks: probes of no rows before any chunk, a probe larger than a chunk, a dilated
+    /// probe and an invalid one, in chunks of 1,000 bytes and of 64 MiB; and no rows at all.
     #[test]
     fn chunks_do_not_change_the_table() {
         let bricks: Vec<Brick> = (0..40)
@@ -494,28 +514,97 @@ mod tests {
             }
             kept
         };
-        let sizes = [3, 0, 17, 90, 0, 5, 40, 2];
-        let from = [0, 1, 2, 3, 4, 5, 6, 7].map(|p| match p {
-            5 => Some(2),
-            6 => None,
+        let from = [0, 1, 2, 3, 4, 5, 6, 7, 8].map(|p| match p {
+            6 => Some(3),
+            7 => None,
             p => Some(p),
         });
+        let encode = |sizes: &[usize], from: &[Option<usize>], bytes, precision| {
+            let mut rows = Rows::in_chunks_of(precision, bytes);
+            for (p, &n) in sizes.iter().enumerate() {
+                rows.push(&probe(p, n, precision));
+            }
+            let lens: Vec<usize> = from.iter().map(|f| f.map_or(0, |q| rows.len(q))).collect();
+            let carried = Carried { from, lens: &lens };
+            encode_tables(rows, carried, &remap, &bricks, (precision, 4096, 0.5))
+        };
+        let bytes = |f: &Factors| -> Vec<u8> {
+            match f {
+                Factors::U8 { factors, .. } => bytemuck::cast_slice(factors).to_vec(),
+                Factors::F16(v) => bytemuck::cast_slice(v).to_vec(),
+                Factors::F32(v) => bytemuck::cast_slice(v).to_vec(),
+            }
+        };
+        let sizes = [0, 0, 3, 17, 90, 0, 5, 40, 2];
         for precision in [TransferPrecision::U8, TransferPrecision::F16] {
-            let tables = [1000, Rows::CHUNK_BYTES].map(|bytes| {
-                let mut rows = Rows::in_chunks_of(precision, bytes);
-                for (p, &n) in sizes.iter().enumerate() {
-                    rows.push(&probe(p, n, precision));
-                }
-                let lens: Vec<usize> = from.iter().map(|f| f.map_or(0, |q| rows.len(q))).collect();
-                let carried = Carried {
-                    from: &from,
-                    lens: &lens,
-                };
-                encode_tables(rows, carried, &remap, &bricks, (precision, 4096, 0.5))
-            });
-            assert!(!tables[0].is_empty());
-            assert_eq!(tables[0], tables[1], "{precision:?}");
+            let mut alone = Vec::new();
+            for q in from.iter().flatten() {
+                let mut one = vec![0; sizes.len()];
+                one[*q] = sizes[*q];
+                let mut only = vec![None; sizes.len()];
+                only[*q] = Some(*q);
+                alone.extend(bytes(&encode(&one, &only, Rows::CHUNK_BYTES, precision)));
+            }
+            for chunk in [1000, Rows::CHUNK_BYTES] {
+                let table = encode(&sizes, &from, chunk, precision);
+                assert!(!table.is_empty());
+                assert_eq!(
+                    bytes(&table),
+                    alone,
+                    "{precision:?}, chunks of {chunk} bytes"
+                );
+            }
+            let none = encode(&[0; 9], &from, 1000, precision);
+            assert!(none.is_empty());
         }
+    }
+
+    /// One table grouping probe after probe, its stamps wrapping around, gives the rows that a
+    /// fresh table gives each probe.
+    #[test]
+    fn row_table_stamps_keep_probes_apart() {
+        let basis: Vec<[f32; SH_COUNT]> = (0..64)
+            .map(|r| std::array::from_fn(|k| ((r + k) % 5) as f32 * 0.1))
+            .collect();
+        let hit = |ray: u32| Hit {
+            ray,
+            position: Vec3::new(ray as f32, 0.0, 1.0),
+            normal: Vec3::Y,
+            albedo: [0.5; 3],
+            emission: [0.0; 3],
+            backface: false,
+            facing_away: false,
+        };
+        let probes: Vec<(Vec<Hit>, Vec<u32>)> = (0..4)
+            .map(|p| {
+                let hits: Vec<Hit> = (0..64).filter(|r| (r + p) % 3 != 0).map(hit).collect();
+                let bricks = hits.iter().map(|h| 100 + (h.ray * (p + 1)) % 9).collect();
+                (hits, bricks)
+            })
+            .collect();
+        let rows = |hits: &[Hit], bricks: &[u32], table: &mut RowTable| match probe_rows(
+            hits,
+            bricks,
+            &basis,
+            0.2,
+            TransferPrecision::F32,
+            table,
+        ) {
+            ProbeRows::Sums(rows) => rows,
+            ProbeRows::U8(_) => unreachable!("f32 rows are sums"),
+        };
+        let mut shared = RowTable {
+            probe: u32::MAX - 1,
+            ..RowTable::default()
+        };
+        for (hits, bricks) in &probes {
+            let fresh = rows(hits, bricks, &mut RowTable::default());
+            assert_eq!(rows(hits, bricks, &mut shared), fresh);
+        }
+        assert_eq!(
+            shared.probe, 3,
+            "stamps wrapped past u32::MAX and restarted at 1"
+        );
     }
 
     /// Rows encoded as u8 while bricks are provisional give the table that finishing the f32

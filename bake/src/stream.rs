@@ -87,8 +87,14 @@ pub fn trace_and_fold(
             || (start < probe_count).then(|| trace_block(start)),
             || match pending.take() {
                 Some(block) => {
-                    let finish = (tracer, &depth_filter, &tables, spacing, precision);
-                    fold_block(block, &mut out, finish)
+                    let per_probe = PerProbe {
+                        tracer,
+                        depth_filter: &depth_filter,
+                        tables: &tables,
+                        spacing,
+                        precision,
+                    };
+                    fold_block(block, &mut out, &per_probe)
                 }
                 None => Ok(()),
             },
@@ -100,15 +106,14 @@ pub fn trace_and_fold(
     Ok(out)
 }
 
-/// What finishing a probe after the fold reads: the tracer, the visibility filter, the row
-/// tables, the probe spacing and the factors' precision.
-type Finish<'a> = (
-    &'a Tracer<'a>,
-    &'a DepthFilter,
-    &'a RowTables,
-    f32,
-    TransferPrecision,
-);
+/// What a probe's factor rows and visibility map are made with once its block is folded.
+struct PerProbe<'a> {
+    tracer: &'a Tracer<'a>,
+    depth_filter: &'a DepthFilter,
+    tables: &'a RowTables,
+    spacing: f32,
+    precision: TransferPrecision,
+}
 
 /// A [`RowTable`] per thread of the pool, for the bake's duration.
 struct RowTables(Vec<Mutex<RowTable>>);
@@ -133,11 +138,14 @@ impl RowTables {
 
 /// Folds one block's hits into the bricks (in probe and ray order), then per probe, in
 /// parallel: factor rows, visibility map, and the hits dropped.
-fn fold_block(
-    block: Block,
-    out: &mut Traced,
-    (tracer, depth_filter, tables, spacing, precision): Finish,
-) -> Result<(), BakeError> {
+fn fold_block(block: Block, out: &mut Traced, per_probe: &PerProbe) -> Result<(), BakeError> {
+    let PerProbe {
+        tracer,
+        depth_filter,
+        tables,
+        spacing,
+        precision,
+    } = *per_probe;
     let mut brick_of_hit = Vec::new();
     let mut hit_start = Vec::with_capacity(block.len() + 1);
     for (_, r, _) in &block {
