@@ -29,6 +29,8 @@
 use glam::{BVec4A, Vec3, Vec4};
 use obvhs::{bvh2::Bvh2, triangle::Triangle};
 
+use crate::bvh::LeafOrder;
+
 /// Rays in a packet and children in a node.
 pub const LANES: usize = 8;
 
@@ -177,9 +179,10 @@ fn each_bit(mut mask: u8) -> impl Iterator<Item = usize> {
 }
 
 impl Bvh8 {
-    /// Collapses `bvh2`, built over `triangles` (whose indices are the scene's), with `below`
-    /// triangles under each node ([`crate::bvh::subtree_triangles`]).
-    pub fn from_bvh2(bvh2: &Bvh2, below: &[u32], triangles: &[Triangle]) -> Bvh8 {
+    /// Collapses `bvh2`, built over `triangles` (whose indices are the scene's), its triangles
+    /// in `order`.
+    pub(crate) fn from_bvh2(bvh2: &Bvh2, order: &LeafOrder, triangles: &[Triangle]) -> Bvh8 {
+        let below = &order.below;
         if bvh2.nodes.is_empty() || triangles.is_empty() {
             return Bvh8::default();
         }
@@ -198,8 +201,8 @@ impl Bvh8 {
                 }
                 if !inner(bvh2, below, c) {
                     let first = out.triangles.len();
-                    let mut n = 0;
-                    crate::bvh::leaf_primitives(bvh2, c, &mut |p| {
+                    let leaf = order.under(c);
+                    for (n, &p) in leaf.iter().enumerate() {
                         if n % TRI_LANES == 0 {
                             out.triangles.push(Tri4::EMPTY);
                         }
@@ -208,11 +211,10 @@ impl Bvh8 {
                         if let Some(q) = out.triangles.last_mut() {
                             q.set(n % TRI_LANES, v, p);
                         }
-                        n += 1;
-                    });
+                    }
                     // One Tri4: PLOC's leaves hold one triangle each, and a subtree becomes a
                     // leaf only when it has at most TRI_LANES of them.
-                    debug_assert!((1..=TRI_LANES).contains(&n), "{n} triangles in a leaf");
+                    debug_assert!((1..=TRI_LANES).contains(&leaf.len()), "{leaf:?} in a leaf");
                     node.index[k] = first as u32;
                     node.count[k] = (out.triangles.len() - first) as u8;
                 } else {

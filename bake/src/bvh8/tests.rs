@@ -20,7 +20,7 @@ impl Rng {
 fn build(tris: &[Triangle], fast: bool) -> Bvh8 {
     let rays = if fast { 0 } else { u64::MAX };
     let bvh2 = crate::bvh::ploc(tris, &crate::bvh::build_params(tris.len(), rays));
-    Bvh8::from_bvh2(&bvh2, &crate::bvh::subtree_triangles(&bvh2), tris)
+    Bvh8::from_bvh2(&bvh2, &LeafOrder::of(&bvh2), tris)
 }
 
 /// The hit a loop over every triangle finds: the same test, one ray and one triangle at a
