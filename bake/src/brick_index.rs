@@ -7,9 +7,10 @@
 //! two dependent cache misses. Here the fold hashes every run of a probe first and asks for
 //! their slots' lines together ([`BrickIndex::home`], [`crate::bricks::prefetch`]), then looks
 //! them up in order ([`BrickIndex::find`]). Hashing the key through foldhash's `Hasher` (the
-//! cell as a slice, length first, then the flags) cost more than the lookups: the fold's key and lookup part took
-//! 547 ms with the `HashMap`, 545 ms with this table and that hash, 470 ms with the one
-//! folded multiply of [`BrickIndex::hash`] (Sponza at 1.0 m, one thread, release build).
+//! cell as a slice, length first, then the flags) cost more than the lookups: the fold's key
+//! and lookup part took 547 ms with the `HashMap`, 545 ms with this table and that hash, 470 ms
+//! with the one folded multiply of [`BrickIndex::hash`] (Sponza at 1.0 m, one thread, release
+//! build).
 //!
 //! The hash is foldhash's folded multiply with a seed drawn per process from foldhash: the keys
 //! come from where the file's geometry is, so a fixed fast hash could be made to collide. The

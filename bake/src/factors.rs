@@ -175,7 +175,11 @@ impl ProbeRows {
 }
 
 /// Every probe's factor rows, probe after probe, in chunks of about [`Rows::CHUNK_BYTES`] (a
-/// probe's rows never span two; a probe with more has a chunk of its own), kept as `precision` keeps them ([`ProbeRows`]).
+/// probe's rows never span two; a probe with more has a chunk of its own), kept as `precision`
+/// keeps them ([`ProbeRows`]). Not [`crate::chunked::Chunked`]: its chunks are of a fixed
+/// number of items indexed as one vector, so a probe's rows could span two, and none is freed
+/// before the whole. Each probe's rows are grouped into a vector of their own in parallel
+/// ([`probe_rows`]), then copied here in probe order.
 ///
 /// Why chunks: the rows are the bake's largest working set (1.0 GB at 105k Sponza probes), and
 /// a vector per probe came from the allocator's shared heaps, which kept the memory when the
