@@ -58,6 +58,11 @@ pub enum BakeError {
         path: PathBuf,
         error: prt_format::FormatError,
     },
+    #[error("{path}: cannot keep factor rows in this temporary file: {error} (rows past the row memory budget wait there: point TMPDIR at a disk with room, or raise --row-memory)")]
+    Spill {
+        path: PathBuf,
+        error: std::io::Error,
+    },
     #[error("cannot start the thread pool: {0}")]
     ThreadPool(String),
 }

@@ -14,9 +14,12 @@ use prt_format::{
     U8_MAX_BRICK, U8_MAX_RAYS,
 };
 
+use bytemuck::Pod;
 use rayon::prelude::*;
 
+use crate::row_store::RowStore;
 use crate::trace::Hit;
+use crate::BakeError;
 
 /// Factor rows of one probe while bricks are provisional ([`crate::bricks::BrickFolder`]):
 /// one per provisional brick its rays hit, each row's sums taken ray by ray in lattice order,
@@ -121,12 +124,13 @@ pub enum ProbeRows {
 /// past [`U8_MAX_BRICK`] loses its high bits here, but such a bake is refused before
 /// [`encode_u8`] reads them (`pipeline::bricks_and_tables`; provisional and final bricks are as
 /// many).
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+#[repr(C)]
 pub struct RowU8 {
     /// Transfer and rays ([`FactorU8::transfer`]), provisional brick in the brick bits.
     factor: FactorU8,
     /// Mean hit point of the row's rays (all of them, before a split).
-    mean: Vec3,
+    mean: [f32; 3],
 }
 const _: () = assert!(std::mem::size_of::<RowU8>() == 28);
 
@@ -136,7 +140,10 @@ impl RowU8 {
             brick_rays: factor.brick_rays | brick << 8,
             ..factor
         };
-        RowU8 { factor, mean }
+        RowU8 {
+            factor,
+            mean: mean.to_array(),
+        }
     }
 
     /// The provisional brick.
@@ -174,81 +181,59 @@ impl ProbeRows {
     }
 }
 
-/// Every probe's factor rows, probe after probe, in chunks of about [`Rows::CHUNK_BYTES`] (a
-/// probe's rows never span two; a probe with more has a chunk of its own), kept as `precision`
-/// keeps them ([`ProbeRows`]). Not [`crate::chunked::Chunked`]: its chunks are of a fixed
-/// number of items indexed as one vector, so a probe's rows could span two, and none is freed
-/// before the whole. Each probe's rows are grouped into a vector of their own in parallel
-/// ([`probe_rows`]), then copied here in probe order.
-///
-/// Why chunks: the rows are the bake's largest working set (1.0 GB at 105k Sponza probes), and
-/// a vector per probe came from the allocator's shared heaps, which kept the memory when the
-/// rows were freed: the bake's peak was reached while the factor table was written beside
-/// rows already encoded. Chunks this large are mapped on their own (glibc's mmap threshold
-/// rises to at most 32 MiB), so each goes back to the system as soon as its probes are encoded
-/// ([`encode_tables`]). Sponza at 105k probes: peak 2,355-2,369 MiB then, 2,057 MiB now; at
-/// 1.0 m 512 then, 475 MiB now.
+/// Every probe's factor rows, probe after probe, kept as `precision` keeps them
+/// ([`ProbeRows`]), in memory up to a budget and in a temporary file past it ([`RowStore`]).
+/// Each probe's rows are grouped into a vector of their own in parallel ([`probe_rows`]), then
+/// copied here in probe order.
 pub enum Rows {
-    Sums(Chunks<FactorRow>),
-    U8(Chunks<RowU8>),
+    Sums(RowStore<RowSums>),
+    U8(RowStore<RowU8>),
 }
 
-/// Rows of every probe in chunks ([`Rows`]).
-pub struct Chunks<T> {
-    /// Rows a chunk holds (more when one probe has more).
-    chunk_rows: usize,
-    chunks: Vec<Vec<T>>,
-    /// Per probe: its chunk, and where its rows start there and how many there are.
-    probes: Vec<(usize, usize, usize)>,
+/// A row of sums ([`FactorRow`]) as words, for the row store's file: brick, rays, the 8
+/// transfer sums' bits, the hit point sum's bits.
+type RowSums = [u32; 13];
+
+fn to_words(r: &FactorRow) -> RowSums {
+    let mut w = [0; 13];
+    w[0] = r.0;
+    w[1] = r.1;
+    for k in 0..8 {
+        w[2 + k] = r.2[k].to_bits();
+    }
+    for a in 0..3 {
+        w[10 + a] = r.3[a].to_bits();
+    }
+    w
 }
 
-impl<T: Copy> Chunks<T> {
-    fn new(chunk_rows: usize) -> Self {
-        Chunks {
-            chunk_rows: chunk_rows.max(1),
-            chunks: Vec::new(),
-            probes: Vec::new(),
-        }
-    }
-
-    /// Appends the next probe's rows.
-    fn push(&mut self, rows: &[T]) {
-        let room = self.chunks.last().map_or(0, |c| c.capacity() - c.len());
-        if room < rows.len() {
-            self.chunks
-                .push(Vec::with_capacity(self.chunk_rows.max(rows.len())));
-        }
-        let chunk = self.chunks.len().saturating_sub(1);
-        let start = self.chunks.last().map_or(0, Vec::len);
-        if let Some(c) = self.chunks.last_mut() {
-            c.extend_from_slice(rows);
-        }
-        self.probes.push((chunk, start, rows.len()));
-    }
+fn from_words(w: &RowSums) -> FactorRow {
+    (
+        w[0],
+        w[1],
+        std::array::from_fn(|k| f32::from_bits(w[2 + k])),
+        std::array::from_fn(|a| f32::from_bits(w[10 + a])),
+    )
 }
 
 impl Rows {
-    /// Bytes of a chunk: above the 32 MiB past which glibc maps every allocation on its own.
-    pub const CHUNK_BYTES: usize = 64 << 20;
-
-    /// No probes yet; their rows kept as `precision` keeps them.
-    pub fn new(precision: TransferPrecision) -> Self {
-        Rows::in_chunks_of(precision, Rows::CHUNK_BYTES)
-    }
-
-    /// [`Rows::new`] with chunks of `bytes`.
-    fn in_chunks_of(precision: TransferPrecision, bytes: usize) -> Self {
+    /// No probes yet; their rows kept as `precision` keeps them, in memory up to about
+    /// `budget` bytes ([`RowStore::new`]).
+    pub fn new(precision: TransferPrecision, budget: usize) -> Self {
         match precision {
-            TransferPrecision::U8 => Rows::U8(Chunks::new(bytes / std::mem::size_of::<RowU8>())),
-            _ => Rows::Sums(Chunks::new(bytes / std::mem::size_of::<FactorRow>())),
+            TransferPrecision::U8 => Rows::U8(RowStore::new(budget)),
+            _ => Rows::Sums(RowStore::new(budget)),
         }
     }
 
-    /// Appends the next probe's rows.
-    pub fn push(&mut self, rows: &ProbeRows) {
+    /// Appends the next probe's rows; fails when rows past the budget cannot be written to
+    /// the temporary file.
+    pub fn push(&mut self, rows: &ProbeRows) -> Result<(), BakeError> {
         match (self, rows) {
             (Rows::U8(all), ProbeRows::U8(rows)) => all.push(rows),
-            (Rows::Sums(all), ProbeRows::Sums(rows)) => all.push(rows),
+            (Rows::Sums(all), ProbeRows::Sums(rows)) => {
+                all.push(&rows.iter().map(to_words).collect::<Vec<_>>())
+            }
             _ => unreachable!("a bake keeps all its rows in one form"),
         }
     }
@@ -256,8 +241,24 @@ impl Rows {
     /// Factors probe `p`'s table will have.
     pub(crate) fn len(&self, p: usize) -> usize {
         match self {
-            Rows::Sums(all) => all.probes[p].2,
-            Rows::U8(all) => all.probes[p].2,
+            Rows::Sums(all) => all.len(p),
+            Rows::U8(all) => all.len(p),
+        }
+    }
+
+    /// All rows are in ([`RowStore::end`]).
+    pub fn end(&mut self) -> Result<(), BakeError> {
+        match self {
+            Rows::Sums(all) => all.end(),
+            Rows::U8(all) => all.end(),
+        }
+    }
+
+    /// Bytes of rows written to the temporary file.
+    pub fn spilled_bytes(&self) -> u64 {
+        match self {
+            Rows::Sums(all) => all.spilled_bytes(),
+            Rows::U8(all) => all.spilled_bytes(),
         }
     }
 }
@@ -296,7 +297,7 @@ fn encode_u8(rows: &[RowU8], out: &mut [FactorU8], placed: &[Placed], offset_sca
         let (b, centroid) = placed[r.brick()];
         *f = r
             .factor
-            .place(b, (r.mean - centroid).to_array(), offset_scale);
+            .place(b, (Vec3::from(r.mean) - centroid).to_array(), offset_scale);
     }
 }
 
@@ -313,29 +314,30 @@ pub struct Carried<'a> {
 /// a dilated probe's copied from its source's, an invalid probe's rows dropped unencoded.
 /// Encoding a table per probe and joining them copied every factor once more: at Sponza's
 /// 1.0 m spacing (74 MB of factors, 2 threads) the assemble stage took 0.050 s, 0.001 s now.
+/// Fails when rows in the temporary file cannot be read back ([`RowStore`]).
 pub fn encode_tables(
     rows: Rows,
     carried: Carried,
     remap: &[u32],
     bricks: &[Brick],
     (precision, ray_count, brick_size): (TransferPrecision, u32, f32),
-) -> Factors {
+) -> Result<Factors, BakeError> {
     let placed: Vec<Placed> = remap
         .par_iter()
         .map(|&b| (b, Vec3::from(bricks[b as usize].centroid)))
         .collect();
     let placed = &placed;
-    let sums = |rows: &[FactorRow], precision| {
-        let mut rows = rows.to_vec();
+    let sums = |rows: &[RowSums], precision| {
+        let mut rows: Vec<FactorRow> = rows.iter().map(from_words).collect();
         finish(&mut rows, placed);
         Factors::build(&rows, precision, ray_count, brick_size)
     };
-    match (precision, rows) {
+    Ok(match (precision, rows) {
         (TransferPrecision::U8, Rows::U8(rows)) => {
             let offset_scale = u8_offset_scale(brick_size);
             let factors = place_tables(rows, carried, |rows, out| {
                 encode_u8(rows, out, placed, offset_scale)
-            });
+            })?;
             Factors::U8 {
                 factors,
                 offset_scale,
@@ -347,7 +349,7 @@ pub fn encode_tables(
                     unreachable!("built as f16");
                 };
                 out.copy_from_slice(&table);
-            }))
+            })?)
         }
         (TransferPrecision::F32, Rows::Sums(rows)) => {
             Factors::F32(place_tables(rows, carried, |rows, out| {
@@ -355,21 +357,21 @@ pub fn encode_tables(
                     unreachable!("built as f32");
                 };
                 out.copy_from_slice(&table);
-            }))
+            })?)
         }
         _ => unreachable!("u8 rows are kept as u8, f16 and f32 rows as sums"),
-    }
+    })
 }
 
 /// [`encode_tables`] for one factor type: `encode` fills a probe's place from its rows. Chunk
-/// by chunk, its probes in parallel, then the chunk freed ([`Rows`]).
-fn place_tables<R: Sync + Send, T: bytemuck::Zeroable + Copy + Send + Sync>(
-    mut rows: Chunks<R>,
+/// by chunk, its probes in parallel, then the chunk freed ([`RowStore::drain`]).
+fn place_tables<R: Pod + Sync + Send, T: bytemuck::Zeroable + Copy + Send + Sync>(
+    rows: RowStore<R>,
     carried: Carried,
     encode: impl Fn(&[R], &mut [T]) + Sync,
-) -> Vec<T> {
+) -> Result<Vec<T>, BakeError> {
     debug_assert_eq!(
-        rows.probes.len(),
+        rows.probe_count(),
         carried.from.len(),
         "a row entry per probe"
     );
@@ -377,23 +379,19 @@ fn place_tables<R: Sync + Send, T: bytemuck::Zeroable + Copy + Send + Sync>(
     let places = crate::split_runs(&mut out, carried.lens);
     let starts: Vec<usize> = places.iter().map(|&(start, _)| start).collect();
     let mut places = places.into_iter();
-    let mut first = 0;
-    // Probes with no rows before the first chunk count as the first chunk's ([`Chunks::push`]);
-    // with no chunk at all there is nothing to encode.
-    for probes in rows.probes.chunk_by(|a, b| a.0 == b.0) {
-        let chunk = rows.chunks.get_mut(probes[0].0).map(std::mem::take);
-        let chunk = chunk.unwrap_or_default();
-        let these: Vec<_> = places.by_ref().take(probes.len()).collect();
-        these.into_par_iter().zip(probes).enumerate().for_each(
-            |(i, ((_, place), &(_, start, len)))| {
+    rows.drain(|first, runs, chunk| {
+        let these: Vec<_> = places.by_ref().take(runs.len()).collect();
+        these
+            .into_par_iter()
+            .zip(runs)
+            .enumerate()
+            .for_each(|(i, ((_, place), &(start, len)))| {
                 let p = first + i;
                 if carried.from[p] == Some(p) {
                     encode(&chunk[start..start + len], place);
                 }
-            },
-        );
-        first += probes.len();
-    }
+            });
+    })?;
     drop(places);
     for (p, from) in carried.from.iter().enumerate() {
         if let Some(q) = from.filter(|&q| q != p) {
@@ -405,7 +403,7 @@ fn place_tables<R: Sync + Send, T: bytemuck::Zeroable + Copy + Send + Sync>(
             out.copy_within(starts[q]..starts[q] + carried.lens[q], starts[p]);
         }
     }
-    out
+    Ok(out)
 }
 
 /// The final rows of one probe, sorted by brick: provisional bricks renumbered ([`Placed`]), hit
@@ -497,8 +495,10 @@ mod tests {
     }
 
     /// The table is each carried probe's own table, encoded alone, in probe order, whatever
-    /// the chunks: probes of no rows before any chunk, a probe larger than a chunk, a dilated
-    /// probe and an invalid one, in chunks of 1,000 bytes and of 64 MiB; and no rows at all.
+    /// the chunks and whether they went through the temporary file: probes of no rows before
+    /// any chunk, a probe larger than a chunk, a dilated probe and an invalid one, with a
+    /// budget of no bytes (a chunk per probe, all but the last in the file), of 1,000 bytes
+    /// (one chunk that size held) and unbounded (chunks of 64 MiB, held); and no rows at all.
     #[test]
     fn chunks_do_not_change_the_table() {
         let bricks: Vec<Brick> = (0..40)
@@ -523,14 +523,16 @@ mod tests {
             7 => None,
             p => Some(p),
         });
-        let encode = |sizes: &[usize], from: &[Option<usize>], bytes, precision| {
-            let mut rows = Rows::in_chunks_of(precision, bytes);
+        let encode = |sizes: &[usize], from: &[Option<usize>], budget, precision| {
+            let mut rows = Rows::new(precision, budget);
             for (p, &n) in sizes.iter().enumerate() {
-                rows.push(&probe(p, n, precision));
+                rows.push(&probe(p, n, precision)).unwrap();
             }
+            let spilled = rows.spilled_bytes() > 0;
+            assert_eq!(spilled, budget < 10_000 && sizes.iter().sum::<usize>() > 0);
             let lens: Vec<usize> = from.iter().map(|f| f.map_or(0, |q| rows.len(q))).collect();
             let carried = Carried { from, lens: &lens };
-            encode_tables(rows, carried, &remap, &bricks, (precision, 4096, 0.5))
+            encode_tables(rows, carried, &remap, &bricks, (precision, 4096, 0.5)).unwrap()
         };
         let bytes = |f: &Factors| -> Vec<u8> {
             match f {
@@ -547,16 +549,12 @@ mod tests {
                 one[*q] = sizes[*q];
                 let mut only = vec![None; sizes.len()];
                 only[*q] = Some(*q);
-                alone.extend(bytes(&encode(&one, &only, Rows::CHUNK_BYTES, precision)));
+                alone.extend(bytes(&encode(&one, &only, usize::MAX, precision)));
             }
-            for chunk in [1000, Rows::CHUNK_BYTES] {
-                let table = encode(&sizes, &from, chunk, precision);
+            for budget in [0, 1000, usize::MAX] {
+                let table = encode(&sizes, &from, budget, precision);
                 assert!(!table.is_empty());
-                assert_eq!(
-                    bytes(&table),
-                    alone,
-                    "{precision:?}, chunks of {chunk} bytes"
-                );
+                assert_eq!(bytes(&table), alone, "{precision:?}, budget {budget} bytes");
             }
             let none = encode(&[0; 9], &from, 1000, precision);
             assert!(none.is_empty());
@@ -643,14 +641,14 @@ mod tests {
         for row in rows {
             early.push(row, n);
         }
-        let mut rows = Rows::new(TransferPrecision::U8);
-        rows.push(&early);
+        let mut rows = Rows::new(TransferPrecision::U8, usize::MAX);
+        rows.push(&early).unwrap();
         let carried = Carried {
             from: &[Some(0)],
             lens: &[rows.len(0)],
         };
         let settings = (TransferPrecision::U8, n, size);
-        let early = encode_tables(rows, carried, &remap, &bricks, settings);
+        let early = encode_tables(rows, carried, &remap, &bricks, settings).unwrap();
         assert_eq!(early.len(), 7, "600 and 256 rays split in three and two");
         assert_eq!(early, late);
     }

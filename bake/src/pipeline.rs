@@ -135,10 +135,15 @@ pub(crate) fn bake_in_pool(
         &trace_one,
         &tracer,
         folder,
-        spacing,
-        settings.transfer_precision,
+        &stream::Keep {
+            spacing,
+            precision: settings.transfer_precision,
+            row_memory: settings.row_memory,
+            rows_of: &|r| !is_inside(r),
+        },
         progress,
     )?;
+    report.rows_spilled = tables.spilled_bytes();
     lap(&mut report, "trace", Some("bricks"));
 
     let valid: Vec<bool> = traced.iter().map(|r| !is_inside(r)).collect();
@@ -294,7 +299,7 @@ fn bricks_and_tables(
         });
     }
     let encoding = (settings.transfer_precision, ray_count, 4.0 * cell_size);
-    let factors = factors::encode_tables(tables, carried, &remap, &bricked.bricks, encoding);
+    let factors = factors::encode_tables(tables, carried, &remap, &bricked.bricks, encoding)?;
     Ok((bricked, factors))
 }
 

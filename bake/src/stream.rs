@@ -48,15 +48,29 @@ pub type TraceProbe<'a> = dyn Fn(usize) -> (Vec3, ProbeRays, bool) + Sync + 'a;
 /// One block of traced probes, hits still attached.
 type Block = Vec<(Vec3, ProbeRays, bool)>;
 
+/// How [`trace_and_fold`] keeps what it folds.
+pub struct Keep<'a> {
+    /// The grid's spacing (for the visibility maps).
+    pub spacing: f32,
+    /// How factor rows are kept ([`factors::ProbeRows`]).
+    pub precision: TransferPrecision,
+    /// Bytes of factor rows held in memory; the rest wait in a temporary file
+    /// ([`crate::row_store`]).
+    pub row_memory: usize,
+    /// Whether a probe's factor rows are kept: an invalid probe's table is never encoded (a
+    /// dilated probe carries its valid source's), so its rows are not even made.
+    pub rows_of: &'a (dyn Fn(&ProbeRays) -> bool + Sync),
+}
+
 /// Traces `probe_count` probes with `trace` and folds their hits into `folder`; fails when the
-/// surfels or bricks outgrow 32-bit indices.
+/// surfels or bricks outgrow 32-bit indices, or when rows past the memory budget cannot be
+/// written to the temporary file.
 pub fn trace_and_fold(
     probe_count: usize,
     trace: &TraceProbe,
     tracer: &Tracer,
     folder: BrickFolder,
-    spacing: f32,
-    precision: TransferPrecision,
+    keep: &Keep,
     progress: &dyn Progress,
 ) -> Result<Traced, BakeError> {
     let depth_filter = DepthFilter::new(tracer.directions);
@@ -64,7 +78,7 @@ pub fn trace_and_fold(
     let mut out = Traced {
         positions: Vec::with_capacity(probe_count),
         rays: Vec::with_capacity(probe_count),
-        rows: Rows::new(precision),
+        rows: Rows::new(keep.precision, keep.row_memory),
         depth: Vec::with_capacity(probe_count * DEPTH_WORDS),
         folder,
     };
@@ -91,8 +105,7 @@ pub fn trace_and_fold(
                         tracer,
                         depth_filter: &depth_filter,
                         tables: &tables,
-                        spacing,
-                        precision,
+                        keep,
                     };
                     fold_block(block, &mut out, &per_probe)
                 }
@@ -103,6 +116,7 @@ pub fn trace_and_fold(
         next = (start + BLOCK_PROBES).min(probe_count);
         pending = traced;
     }
+    out.rows.end()?;
     Ok(out)
 }
 
@@ -111,8 +125,7 @@ struct PerProbe<'a> {
     tracer: &'a Tracer<'a>,
     depth_filter: &'a DepthFilter,
     tables: &'a RowTables,
-    spacing: f32,
-    precision: TransferPrecision,
+    keep: &'a Keep<'a>,
 }
 
 /// A [`RowTable`] per thread of the pool, for the bake's duration.
@@ -143,9 +156,11 @@ fn fold_block(block: Block, out: &mut Traced, per_probe: &PerProbe) -> Result<()
         tracer,
         depth_filter,
         tables,
-        spacing,
-        precision,
+        keep,
     } = *per_probe;
+    let Keep {
+        spacing, precision, ..
+    } = *keep;
     let mut brick_of_hit = Vec::new();
     let mut hit_start = Vec::with_capacity(block.len() + 1);
     for (_, r, _) in &block {
@@ -158,9 +173,13 @@ fn fold_block(block: Block, out: &mut Traced, per_probe: &PerProbe) -> Result<()
         .enumerate()
         .map(|(i, (p, mut r, moved))| {
             let ids = &brick_of_hit[hit_start[i]..hit_start[i + 1]];
-            let rows = tables.with(|table| {
-                factors::probe_rows(&r.hits, ids, &tracer.basis, tracer.weight, precision, table)
-            });
+            let rows = match (keep.rows_of)(&r) {
+                true => tables.with(|table| {
+                    let (basis, weight) = (&tracer.basis, tracer.weight);
+                    factors::probe_rows(&r.hits, ids, basis, weight, precision, table)
+                }),
+                false => factors::ProbeRows::new(precision),
+            };
             let depth = depth_filter.map(p, &r, tracer.directions.len(), spacing);
             r.hits = Vec::new();
             ((p, moved), r, rows, depth)
@@ -169,7 +188,7 @@ fn fold_block(block: Block, out: &mut Traced, per_probe: &PerProbe) -> Result<()
     for (position, r, rows, depth) in finished {
         out.positions.push(position);
         out.rays.push(r);
-        out.rows.push(&rows);
+        out.rows.push(&rows)?;
         out.depth.extend_from_slice(&depth);
     }
     Ok(())

@@ -148,6 +148,11 @@ pub fn bake(scene: &Path, settings: &BakeSettings) -> Result<String> {
     writeln!(md, "| peak memory of the bake (resident) | {peak} |")?;
     writeln!(
         md,
+        "| factor rows past the memory budget, through a temporary file | {:.1} MiB |",
+        report.rows_spilled as f64 / f64::from(1 << 20)
+    )?;
+    writeln!(
+        md,
         "| CPU time of the bake (system time: page faults and the file write) | {cpu} |"
     )?;
     writeln!(

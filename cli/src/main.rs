@@ -184,6 +184,10 @@ enum Command {
         /// Storage precision of factor transfers.
         #[arg(long, value_enum, default_value = "u8")]
         precision: Precision,
+        /// MiB of factor rows held in memory while probes are traced; past it the oldest wait
+        /// in a temporary file in $TMPDIR (the asset is the same).
+        #[arg(long, default_value_t = BakeSettings::default().row_memory >> 20)]
+        row_memory: usize,
     },
     /// Relight an asset once and write every probe's SH9 as JSON.
     Relight {
@@ -340,6 +344,7 @@ fn run(cli: Cli) -> Result<()> {
             no_dilation,
             no_surface_offset,
             precision,
+            row_memory,
         } => {
             let preset = match quality {
                 Quality::Fast | Quality::Default => BakeSettings::default(),
@@ -363,6 +368,7 @@ fn run(cli: Cli) -> Result<()> {
                     Precision::U8 => TransferPrecision::U8,
                 },
                 threads,
+                row_memory: row_memory.saturating_mul(1 << 20),
                 ..preset
             };
             let progress = progress::Bar::new();
@@ -379,7 +385,17 @@ fn run(cli: Cli) -> Result<()> {
                 .collect();
             println!("time             {}", times.join(" | "));
             if let Some(kb) = peak_rss_kib() {
-                println!("peak memory      {:.1} MiB resident", kb as f64 / 1024.0);
+                let spilled = match report.rows_spilled {
+                    0 => String::new(),
+                    b => format!(
+                        " ({:.1} MiB of factor rows past --row-memory waited in a temporary file)",
+                        b as f64 / f64::from(1 << 20)
+                    ),
+                };
+                println!(
+                    "peak memory      {:.1} MiB resident{spilled}",
+                    kb as f64 / 1024.0
+                );
             }
             println!("wrote            {}", output.display());
             Ok(())

@@ -712,3 +712,45 @@ fn quality_fast_is_todays_default() {
         bake("fast.prt", &["--quality", "fast"])
     );
 }
+
+/// Factor rows past `--row-memory` go to a file in `$TMPDIR`: the bake reports them, and when
+/// that directory cannot take them it fails with one line naming the file and the remedy, and
+/// writes nothing.
+#[test]
+fn row_memory_spills_to_tmpdir_or_says_why_not() {
+    let dir = Scratch::new("spill");
+    let out = dir.0.join("cornell.prt");
+    let input = cornell();
+    let bake = |tmpdir: &Path| {
+        Command::new(env!("CARGO_BIN_EXE_prt"))
+            .args([
+                "bake".as_ref(),
+                input.as_os_str(),
+                "-o".as_ref(),
+                out.as_os_str(),
+            ])
+            .args(["--rays", "64", "--row-memory", "0"])
+            .env("TMPDIR", tmpdir)
+            .output()
+            .expect("run prt")
+    };
+    let o = bake(&dir.0);
+    assert!(o.status.success(), "bake failed: {}", text(&o.stderr));
+    let stdout = text(&o.stdout);
+    assert!(
+        stdout.contains("of factor rows past --row-memory waited in a temporary file"),
+        "{stdout}"
+    );
+    assert_eq!(dir.entries(), ["cornell.prt"], "the row file is gone");
+    std::fs::remove_file(&out).unwrap();
+
+    let missing = dir.0.join("no_such_dir");
+    let o = bake(&missing);
+    let stderr = text(&o.stderr);
+    assert!(!o.status.success(), "exit status {:?}", o.status);
+    assert_eq!(stderr.lines().count(), 1, "{stderr:?}");
+    assert!(stderr.starts_with("error:"), "{stderr:?}");
+    assert!(stderr.contains("no_such_dir/prt-bake-rows-"), "{stderr:?}");
+    assert!(stderr.contains("TMPDIR"), "{stderr:?}");
+    assert!(dir.entries().is_empty(), "left {:?}", dir.entries());
+}

@@ -40,24 +40,30 @@ fn assert_valid_and_round_trips(asset: &Asset, what: &str) {
     );
 }
 
-/// Bakes `path` with threads 1 and 2 and asserts byte-identical encodings.
+/// Bakes `path` with threads 1 and 2, and with 2 and every factor row through the temporary
+/// file (`row_memory` 0), and asserts byte-identical encodings.
 fn assert_deterministic(path: &Path, settings: BakeSettings) {
-    let encode_with = |threads| {
+    let encode_with = |threads, row_memory| {
         let s = BakeSettings {
             threads: Some(threads),
+            row_memory,
             ..settings.clone()
         };
         prt_format::encode(&bake_ok(path, &s)).expect("encode")
     };
-    let one = encode_with(1);
-    let two = encode_with(2);
-    assert_eq!(one.len(), two.len(), "{}: sizes differ", path.display());
-    if let Some(i) = one.iter().zip(&two).position(|(a, b)| a != b) {
-        panic!(
-            "{}: 1 and 2 threads differ first at byte {i} of {}",
-            path.display(),
-            one.len()
-        );
+    let one = encode_with(1, settings.row_memory);
+    for (two, what) in [
+        (encode_with(2, settings.row_memory), "2 threads"),
+        (encode_with(2, 0), "2 threads, rows through a file"),
+    ] {
+        assert_eq!(one.len(), two.len(), "{}: sizes differ", path.display());
+        if let Some(i) = one.iter().zip(&two).position(|(a, b)| a != b) {
+            panic!(
+                "{}: 1 thread and {what} differ first at byte {i} of {}",
+                path.display(),
+                one.len()
+            );
+        }
     }
 }
 
@@ -223,20 +229,21 @@ fn empty_scene_without_bounds_is_no_triangles() {
 // ---------------------------------------------------------------------------------------------
 // 2. Determinism
 
-/// Cornell at 512 rays: 1 and 2 threads give byte-identical assets.
+/// Cornell at 512 rays: 1 and 2 threads, rows in memory or through a file, give
+/// byte-identical assets.
 #[test]
 fn deterministic_across_threads_cornell() {
     assert_deterministic(&cornell(), rays(512));
 }
 
-/// room.glb: 1 and 2 threads give byte-identical assets.
+/// room.glb: 1 and 2 threads, rows in memory or through a file, give byte-identical assets.
 #[test]
 fn deterministic_across_threads_room() {
     assert_deterministic(&fixture("scenes/room.glb"), rays(128));
 }
 
-/// Sponza (187k triangles, BVH built in parallel): 1 and 2 threads give byte-identical assets,
-/// BVH included.
+/// Sponza (187k triangles, BVH built in parallel): 1 and 2 threads, rows in memory or through
+/// a file, give byte-identical assets, BVH included.
 #[test]
 fn deterministic_across_threads_sponza() {
     let settings = BakeSettings {
