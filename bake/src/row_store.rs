@@ -2,14 +2,25 @@
 //! chunks: the newest in memory, older ones in a temporary file once the rows pass a budget.
 //!
 //! The rows are the bake's largest working set and the only one that grows with the probe
-//! count alone (Sponza at 105k probes: 35.9 million rows, 959 MiB, against a 1,060 MiB asset).
+//! count alone (Sponza at 105k probes: 35.9 million rows, 957 MiB, against a 1,060 MiB asset).
 //! They cannot be encoded as they arrive: a factor names its brick's final number and is placed
 //! from its brick's centroid, both known only once every probe is folded
 //! ([`crate::bricks::BrickFolder::finish`]). So past the budget the oldest chunks are written
 //! to a file and read back one at a time when the tables are encoded, which is also in probe
 //! order: the memory the rows hold stays within the budget whatever the probe count, and the
-//! asset's bytes do not change. The file is made in [`std::env::temp_dir`] (`TMPDIR`) and, on
-//! Unix, unlinked at once, so nothing is left behind however the bake ends.
+//! asset's bytes do not change. Once any chunk is in the file, the rest follow when the trace
+//! ends, before the bricks are finished (the bake's peak, with the surfels under merge and
+//! the final ones both held). Sponza at 105k probes: peak 2,057 MiB with every row in memory,
+//! 1,249 MiB with the default budget of 256 MiB.
+//!
+//! The file is made in [`std::env::temp_dir`] (`TMPDIR`) and, on Unix, unlinked at once, so
+//! nothing is left behind however the bake ends. On Linux it is opened for direct I/O where
+//! the file system allows it (`O_DIRECT`, else through the page cache): through the page cache,
+//! writing 957 MiB of rows cost 3-4 s of system time on this machine's ext4 (the kernel
+//! allocating and tracking every page, which is memory too: `dd` of 960 MiB to a new file
+//! takes 2.2-3.7 s, 0.24 s direct). Direct I/O waits for the disk instead, so a thread of its
+//! own writes each chunk while the bake goes on, and another reads the next chunk while the
+//! one before is encoded.
 //!
 //! Why chunks: a probe's rows never span two, so a chunk is freed as soon as its probes are
 //! encoded, and chunks of [`CHUNK_BYTES`] are mapped on their own (glibc's mmap threshold
@@ -21,6 +32,8 @@
 use std::fs::File;
 use std::io::{Read, Seek, SeekFrom, Write};
 use std::path::PathBuf;
+use std::sync::mpsc::{channel, sync_channel, Receiver, Sender, SyncSender};
+use std::thread::JoinHandle;
 
 use bytemuck::Pod;
 
@@ -40,22 +53,30 @@ pub struct RowStore<T> {
     first_held: usize,
     /// Per probe: its chunk, and where its rows start there and how many there are.
     probes: Vec<(usize, usize, usize)>,
-    spill: Option<SpillFile>,
-    /// The buffer of the chunk last written to the file, for the next chunk: a fresh 64 MiB
-    /// mapping costs a page fault per 4 KiB written into it.
-    spare: Vec<T>,
+    /// The file, through the thread writing to it while the rows come in, then alone.
+    spill: Spill<T>,
+    /// Bytes of the file so far, whole pages: where the next chunk goes.
+    end: u64,
+    /// Bytes of rows written (the file less the pages' padding).
+    written: u64,
 }
 
 enum Chunk<T> {
     Held(Vec<T>),
-    /// `len` rows at byte `at` of the spill file.
+    /// `len` rows at byte `at` of the file.
     Spilled {
         at: u64,
         len: usize,
     },
 }
 
-impl<T: Pod> RowStore<T> {
+enum Spill<T> {
+    None,
+    Writing(Writer<T>),
+    Written(SpillFile),
+}
+
+impl<T: Pod + Send> RowStore<T> {
     /// No probes yet; rows kept in memory up to about `budget` bytes (whole chunks of at most
     /// [`CHUNK_BYTES`], at least one chunk, a chunk at least one probe).
     pub fn new(budget: usize) -> Self {
@@ -71,13 +92,14 @@ impl<T: Pod> RowStore<T> {
             chunks: Vec::new(),
             first_held: 0,
             probes: Vec::new(),
-            spill: None,
-            spare: Vec::new(),
+            spill: Spill::None,
+            end: 0,
+            written: 0,
         }
     }
 
-    /// Appends the next probe's rows, first writing the oldest chunk to the file if a new
-    /// chunk would pass the budget; fails when the file cannot be made or written.
+    /// Appends the next probe's rows, first handing the oldest chunk to the file's writer if a
+    /// new chunk would pass the budget; fails when the file cannot be made or written.
     pub fn push(&mut self, rows: &[T]) -> Result<(), BakeError> {
         let room = match self.chunks.last() {
             Some(Chunk::Held(c)) => c.capacity() - c.len(),
@@ -88,7 +110,12 @@ impl<T: Pod> RowStore<T> {
                 self.spill_oldest()?;
             }
             let capacity = self.chunk_rows.max(rows.len());
-            let mut chunk = std::mem::take(&mut self.spare);
+            // The buffer of a written chunk if there is one (a fresh 64 MiB mapping costs a
+            // page fault per 4 KiB written into it); any others are freed.
+            let mut chunk = match &self.spill {
+                Spill::Writing(w) => w.done.try_iter().last().unwrap_or_default(),
+                _ => Vec::new(),
+            };
             chunk.clear();
             chunk.reserve(capacity);
             self.chunks.push(Chunk::Held(chunk));
@@ -103,36 +130,45 @@ impl<T: Pod> RowStore<T> {
         Ok(())
     }
 
-    /// The rows are all in: if some went to the file, the held ones follow them, since the
-    /// bricks are finished next ([`crate::bricks::BrickFolder::finish`], the bake's peak, with
-    /// the surfels under merge and the final ones both held) and then the rows are read back
-    /// in probe order anyway. A bake within the budget keeps its rows in memory.
+    /// The rows are all in: if some went to the file, the held ones follow them (module doc),
+    /// and the writer finishes. A bake within the budget keeps its rows in memory.
     pub fn end(&mut self) -> Result<(), BakeError> {
-        if self.spill.is_some() {
+        if let Spill::Writing(_) = self.spill {
             while self.first_held < self.chunks.len() {
                 self.spill_oldest()?;
             }
+            if let Spill::Writing(writer) = std::mem::replace(&mut self.spill, Spill::None) {
+                self.spill = Spill::Written(writer.finish()?);
+            }
         }
-        self.spare = Vec::new();
         Ok(())
     }
 
+    /// Hands the oldest held chunk to the writer (started with the file on first use).
     fn spill_oldest(&mut self) -> Result<(), BakeError> {
+        if let Spill::None = self.spill {
+            self.spill = Spill::Writing(Writer::start(SpillFile::create()?));
+        }
         let i = self.first_held;
-        let spill = match &mut self.spill {
-            Some(spill) => spill,
-            None => self.spill.insert(SpillFile::create()?),
-        };
         let len = match &self.chunks[i] {
             Chunk::Held(rows) => rows.len(),
             Chunk::Spilled { len, .. } => *len,
         };
-        let spilled = Chunk::Spilled { at: 0, len };
-        if let Chunk::Held(rows) = std::mem::replace(&mut self.chunks[i], spilled) {
-            let at = spill.append(bytemuck::cast_slice(&rows))?;
-            self.chunks[i] = Chunk::Spilled { at, len };
-            self.spare = rows;
+        let at = self.end;
+        let spilled = Chunk::Spilled { at, len };
+        if let (Chunk::Held(rows), Spill::Writing(writer)) =
+            (std::mem::replace(&mut self.chunks[i], spilled), &self.spill)
+        {
+            if writer.chunks.send(rows).is_err() {
+                // The writer stopped on an error: it says which.
+                if let Spill::Writing(writer) = std::mem::replace(&mut self.spill, Spill::None) {
+                    writer.finish()?;
+                }
+            }
         }
+        let bytes = (len * std::mem::size_of::<T>()) as u64;
+        self.end += bytes.next_multiple_of(PAGE as u64);
+        self.written += bytes;
         self.first_held += 1;
         Ok(())
     }
@@ -147,57 +183,155 @@ impl<T: Pod> RowStore<T> {
         self.probes[p].2
     }
 
-    /// Bytes written to the file so far.
+    /// Bytes of rows handed to the file so far.
     pub fn spilled_bytes(&self) -> u64 {
-        self.spill.as_ref().map_or(0, |s| s.written)
+        self.written
     }
 
-    /// Hands every chunk over in probe order, read back from the file if it was written
-    /// there, and frees it before the next: `f(first probe, its probes' (start, len) in the
-    /// chunk, the chunk's rows)`. Probes with no rows before the first chunk count as the first
-    /// chunk's; probes but no chunk at all are handed over once, with no rows. Fails when the
-    /// file cannot be read.
+    /// Hands every chunk over in probe order, read back from the file (by a thread of its own,
+    /// a chunk ahead) if it was written there, and frees it before the next: `f(first probe,
+    /// its probes' (start, len) in the chunk, the chunk's rows)`. Probes with no rows before
+    /// the first chunk count as the first chunk's; probes but no chunk at all are handed over
+    /// once, with no rows. Ends the store first ([`RowStore::end`]); fails when the file
+    /// cannot be written or read.
     pub fn drain(
         mut self,
         mut f: impl FnMut(usize, &[(usize, usize)], &[T]),
     ) -> Result<(), BakeError> {
-        let mut first = 0;
-        // Chunks from the file are read into one buffer, for the reason of `spare`.
-        let mut buffer: Vec<T> = Vec::new();
-        for probes in self.probes.chunk_by(|a, b| a.0 == b.0) {
-            let held;
-            let rows: &[T] = match self.chunks.get_mut(probes[0].0) {
-                Some(Chunk::Held(rows)) => {
-                    held = std::mem::take(rows);
-                    &held
-                }
-                Some(&mut Chunk::Spilled { at, len }) => match &mut self.spill {
-                    Some(spill) => {
-                        if buffer.len() < len {
-                            buffer.resize(len, T::zeroed());
-                        }
-                        spill.read(at, &mut buffer[..len])?;
-                        &buffer[..len]
-                    }
-                    None => unreachable!("a spilled chunk has a file"),
-                },
-                None => &[],
+        self.end()?;
+        let file = match std::mem::replace(&mut self.spill, Spill::None) {
+            Spill::Written(file) => Some(file),
+            Spill::None => None,
+            Spill::Writing(_) => unreachable!("`end` stops the writer"),
+        };
+        let spilled: Vec<(u64, usize)> = self
+            .chunks
+            .iter()
+            .filter_map(|c| match *c {
+                Chunk::Spilled { at, len } => Some((at, len * std::mem::size_of::<T>())),
+                Chunk::Held(_) => None,
+            })
+            .collect();
+        std::thread::scope(|scope| {
+            let (read, reused) = match &file {
+                Some(file) => Reader::start(scope, file, spilled),
+                None => Reader::idle(),
             };
-            let runs: Vec<(usize, usize)> = probes.iter().map(|&(_, s, n)| (s, n)).collect();
-            f(first, &runs, rows);
-            first += probes.len();
-        }
-        Ok(())
+            let mut first = 0;
+            for probes in self.probes.chunk_by(|a, b| a.0 == b.0) {
+                let runs: Vec<(usize, usize)> = probes.iter().map(|&(_, s, n)| (s, n)).collect();
+                match self.chunks.get_mut(probes[0].0) {
+                    Some(Chunk::Held(rows)) => f(first, &runs, &std::mem::take(rows)),
+                    Some(&mut Chunk::Spilled { len, .. }) => {
+                        let pages = match read.recv() {
+                            Ok(pages) => pages?,
+                            Err(_) => unreachable!("the reader sends every chunk"),
+                        };
+                        let bytes = len * std::mem::size_of::<T>();
+                        let page_bytes: &[u8] = bytemuck::cast_slice(&pages);
+                        f(first, &runs, bytemuck::cast_slice(&page_bytes[..bytes]));
+                        // Gone when the reader has read every chunk.
+                        let _ = reused.send(pages);
+                    }
+                    None => f(first, &runs, &[]),
+                }
+                first += probes.len();
+            }
+            Ok(())
+        })
     }
 }
 
+/// The thread writing chunks to the file in the order they come, each padded to whole
+/// pages, and handing their buffers back.
+struct Writer<T> {
+    /// At most one chunk waits while one is written (a rendezvous: `push` waits for the
+    /// writer rather than hold more than the budget and two chunks).
+    chunks: SyncSender<Vec<T>>,
+    /// Buffers of written chunks.
+    done: Receiver<Vec<T>>,
+    thread: JoinHandle<Result<SpillFile, BakeError>>,
+}
+
+impl<T: Pod + Send> Writer<T> {
+    fn start(mut file: SpillFile) -> Self {
+        let (chunks, to_write) = sync_channel::<Vec<T>>(0);
+        let (written, done) = channel();
+        let thread = std::thread::spawn(move || {
+            let mut staging = Vec::new();
+            for rows in to_write {
+                file.append(bytemuck::cast_slice(&rows), &mut staging)?;
+                // Gone when the store has stopped taking buffers back.
+                let _ = written.send(rows);
+            }
+            Ok(file)
+        });
+        Writer {
+            chunks,
+            done,
+            thread,
+        }
+    }
+
+    /// Waits for every chunk to be written; the file, or the writer's error.
+    fn finish(self) -> Result<SpillFile, BakeError> {
+        drop(self.chunks);
+        match self.thread.join() {
+            Ok(file) => file,
+            Err(panic) => std::panic::resume_unwind(panic),
+        }
+    }
+}
+
+/// The thread reading spilled chunks back in order, a chunk ahead of their encoding, into
+/// page buffers that come back to it once encoded.
+struct Reader;
+
+/// Chunks read (or the error), and buffers handed back.
+type ReadChannels = (Receiver<Result<Vec<Page>, BakeError>>, Sender<Vec<Page>>);
+
+impl Reader {
+    /// Reads the chunks at `spilled` (byte offset, bytes) of `file`.
+    fn start<'s>(
+        scope: &'s std::thread::Scope<'s, '_>,
+        file: &'s SpillFile,
+        spilled: Vec<(u64, usize)>,
+    ) -> ReadChannels {
+        let (send, read) = sync_channel(0);
+        let (reused, back) = channel::<Vec<Page>>();
+        scope.spawn(move || {
+            for (at, bytes) in spilled {
+                let mut pages = back.try_recv().unwrap_or_default();
+                let chunk = file.read(at, bytes, &mut pages).map(|()| pages);
+                let failed = chunk.is_err();
+                if send.send(chunk).is_err() || failed {
+                    return;
+                }
+            }
+        });
+        (read, reused)
+    }
+
+    /// Channels for a store with nothing in a file.
+    fn idle() -> ReadChannels {
+        let (_, read) = sync_channel(0);
+        let (reused, _) = channel();
+        (read, reused)
+    }
+}
+
+/// A page, aligned as direct I/O needs its buffers, lengths and file offsets to be.
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+#[repr(C, align(4096))]
+struct Page([u8; PAGE]);
+const PAGE: usize = 4096;
+
 /// The file chunks are written to: made on first use, unlinked at once on Unix (removed when
-/// dropped elsewhere).
+/// dropped elsewhere), opened for direct I/O on Linux where the file system allows it
+/// (module doc).
 struct SpillFile {
     file: File,
     path: PathBuf,
-    /// Bytes written so far (where the next chunk goes).
-    written: u64,
 }
 
 impl SpillFile {
@@ -214,38 +348,54 @@ impl SpillFile {
             MADE.fetch_add(1, Ordering::Relaxed)
         );
         let path = dir.join(name);
-        let file = std::fs::OpenOptions::new()
-            .read(true)
-            .write(true)
+        let mut options = std::fs::OpenOptions::new();
+        options.read(true).write(true);
+        let file = options
+            .clone()
             .create_new(true)
             .open(&path)
             .map_err(|error| spill_error(&path, error))?;
+        // Opened again for direct I/O, not created so: a file system that refuses the flag
+        // may do so after making the file.
+        #[cfg(target_os = "linux")]
+        let file = {
+            use std::os::unix::fs::OpenOptionsExt;
+            options
+                .custom_flags(libc::O_DIRECT)
+                .open(&path)
+                .unwrap_or(file)
+        };
         #[cfg(unix)]
         std::fs::remove_file(&path).map_err(|error| spill_error(&path, error))?;
-        Ok(SpillFile {
-            file,
-            path,
-            written: 0,
-        })
+        Ok(SpillFile { file, path })
     }
 
-    /// Writes `bytes` at the end; returns where they start.
-    fn append(&mut self, bytes: &[u8]) -> Result<u64, BakeError> {
-        let at = self.written;
-        self.file
-            .write_all(bytes)
-            .map_err(|error| spill_error(&self.path, error))?;
-        self.written += bytes.len() as u64;
-        Ok(at)
-    }
-
-    /// Reads the rows at byte `at` into `rows`.
-    fn read<T: Pod>(&mut self, at: u64, rows: &mut [T]) -> Result<(), BakeError> {
-        self.file
-            .seek(SeekFrom::Start(at))
-            .and_then(|_| self.file.read_exact(bytemuck::cast_slice_mut(rows)))
+    /// Writes `bytes` at the end through `staging`, padded to whole pages.
+    fn append(&mut self, bytes: &[u8], staging: &mut Vec<Page>) -> Result<(), BakeError> {
+        let staged = staged(staging, bytes.len());
+        staged[..bytes.len()].copy_from_slice(bytes);
+        (&self.file)
+            .write_all(staged)
             .map_err(|error| spill_error(&self.path, error))
     }
+
+    /// Reads the `bytes` at byte `at` (and the rest of their last page) into `pages`.
+    fn read(&self, at: u64, bytes: usize, pages: &mut Vec<Page>) -> Result<(), BakeError> {
+        let staged = staged(pages, bytes);
+        let mut file = &self.file;
+        file.seek(SeekFrom::Start(at))
+            .and_then(|_| file.read_exact(staged))
+            .map_err(|error| spill_error(&self.path, error))
+    }
+}
+
+/// The first `bytes` of `pages`, rounded up to whole pages (grown to that if shorter).
+fn staged(pages: &mut Vec<Page>, bytes: usize) -> &mut [u8] {
+    let count = bytes.div_ceil(PAGE);
+    if pages.len() < count {
+        pages.resize(count, Page([0; PAGE]));
+    }
+    &mut bytemuck::cast_slice_mut(pages)[..count * PAGE]
 }
 
 #[cfg(not(unix))]
@@ -333,11 +483,31 @@ mod tests {
     #[cfg(unix)]
     #[test]
     fn the_spill_file_is_unlinked() {
-        let store = filled(RowStore::in_chunks_of(64, 0));
-        let spill = store.spill.as_ref().unwrap();
-        assert!(spill.written > 0);
-        assert!(spill.path.starts_with(std::env::temp_dir()));
-        assert!(!spill.path.exists());
+        let mut store = filled(RowStore::in_chunks_of(64, 0));
+        store.end().unwrap();
+        let Spill::Written(file) = &store.spill else {
+            panic!("nothing written");
+        };
+        assert!(file.path.starts_with(std::env::temp_dir()));
+        assert!(!file.path.exists());
+    }
+
+    /// A write that fails (a full disk): the writer stops, and its error names the file.
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn a_full_disk_is_reported() {
+        let path = PathBuf::from("/dev/full");
+        let file = File::options().read(true).write(true).open(&path).unwrap();
+        let writer = Writer::<[u32; 2]>::start(SpillFile { file, path });
+        // The writer may already have stopped when the second chunk comes.
+        for _ in 0..2 {
+            let _ = writer.chunks.send(vec![[1, 2]; 1000]);
+        }
+        let Err(error) = writer.finish() else {
+            panic!("writing to /dev/full succeeded");
+        };
+        let message = error.to_string();
+        assert!(message.contains("/dev/full"), "{message}");
     }
 
     /// A directory the file cannot be made in: an error naming the file.
