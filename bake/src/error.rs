@@ -58,7 +58,7 @@ pub enum BakeError {
         path: PathBuf,
         error: prt_format::FormatError,
     },
-    #[error("{path}: cannot keep factor rows in this temporary file: {error} (rows past the row memory budget wait there: point TMPDIR at a disk with room, or raise --row-memory)")]
+    #[error("{path}: cannot keep factor rows in this temporary file: {error} (factor rows past the memory budget, --row-memory or BakeSettings::row_memory, wait there: point TMPDIR at a disk with room, or raise the budget)")]
     Spill {
         path: PathBuf,
         error: std::io::Error,

@@ -226,6 +226,15 @@ impl Rows {
         }
     }
 
+    /// [`Rows::new`] with chunks of `chunk_bytes` ([`RowStore::in_chunks_of`]).
+    #[cfg(test)]
+    fn in_chunks_of(precision: TransferPrecision, chunk_bytes: usize, budget: usize) -> Self {
+        match precision {
+            TransferPrecision::U8 => Rows::U8(RowStore::in_chunks_of(chunk_bytes, budget)),
+            _ => Rows::Sums(RowStore::in_chunks_of(chunk_bytes, budget)),
+        }
+    }
+
     /// Appends the next probe's rows; fails when rows past the budget cannot be written to
     /// the temporary file.
     pub fn push(&mut self, rows: &ProbeRows) -> Result<(), BakeError> {
@@ -496,9 +505,10 @@ mod tests {
 
     /// The table is each carried probe's own table, encoded alone, in probe order, whatever
     /// the chunks and whether they went through the temporary file: probes of no rows before
-    /// any chunk, a probe larger than a chunk, a dilated probe and an invalid one, with a
-    /// budget of no bytes (a chunk per probe, all but the last in the file), of 1,000 bytes
-    /// (one chunk that size held) and unbounded (chunks of 64 MiB, held); and no rows at all.
+    /// any chunk, a probe larger than a chunk, a dilated probe and an invalid one, in chunks
+    /// of one row with no budget (a chunk per probe, every one through the file), of 1,000
+    /// bytes with a budget of one chunk (through the file) and of all of them (held), and in
+    /// chunks of 64 MiB; and no rows at all.
     #[test]
     fn chunks_do_not_change_the_table() {
         let bricks: Vec<Brick> = (0..40)
@@ -523,8 +533,8 @@ mod tests {
             7 => None,
             p => Some(p),
         });
-        let encode = |sizes: &[usize], from: &[Option<usize>], budget, precision| {
-            let mut rows = Rows::new(precision, budget);
+        let encode = |sizes: &[usize], from: &[Option<usize>], (chunk, budget), precision| {
+            let mut rows = Rows::in_chunks_of(precision, chunk, budget);
             for (p, &n) in sizes.iter().enumerate() {
                 rows.push(&probe(p, n, precision)).unwrap();
             }
@@ -549,14 +559,20 @@ mod tests {
                 one[*q] = sizes[*q];
                 let mut only = vec![None; sizes.len()];
                 only[*q] = Some(*q);
-                alone.extend(bytes(&encode(&one, &only, usize::MAX, precision)));
+                alone.extend(bytes(&encode(
+                    &one,
+                    &only,
+                    (1 << 26, usize::MAX),
+                    precision,
+                )));
             }
-            for budget in [0, 1000, usize::MAX] {
-                let table = encode(&sizes, &from, budget, precision);
+            for (chunk, budget) in [(1, 0), (1000, 1000), (1000, usize::MAX), (1 << 26, 1 << 26)] {
+                let table = encode(&sizes, &from, (chunk, budget), precision);
                 assert!(!table.is_empty());
-                assert_eq!(bytes(&table), alone, "{precision:?}, budget {budget} bytes");
+                let what = format!("{precision:?}, chunks of {chunk} bytes, budget {budget}");
+                assert_eq!(bytes(&table), alone, "{what}");
             }
-            let none = encode(&[0; 9], &from, 1000, precision);
+            let none = encode(&[0; 9], &from, (1000, 1000), precision);
             assert!(none.is_empty());
         }
     }

@@ -8,19 +8,21 @@
 //! ([`crate::bricks::BrickFolder::finish`]). So past the budget the oldest chunks are written
 //! to a file and read back one at a time when the tables are encoded, which is also in probe
 //! order: the memory the rows hold stays within the budget whatever the probe count, and the
-//! asset's bytes do not change. Once any chunk is in the file, the rest follow when the trace
-//! ends, before the bricks are finished (the bake's peak, with the surfels under merge and
-//! the final ones both held). Sponza at 105k probes: peak 2,057 MiB with every row in memory,
-//! 1,249 MiB with the default budget of 256 MiB.
+//! asset's bytes do not change. Past the budget, two more chunks are held: the one being
+//! written and the writer's page-aligned copy of it. Once any chunk is in the file, the rest
+//! follow when the trace ends, before the bricks are finished (the bake's peak, with the
+//! surfels under merge and the final ones both held). Sponza at 105k probes: peak 2,057 MiB
+//! with every row in memory, 1,271-1,283 MiB with the default budget of 256 MiB.
 //!
 //! The file is made in [`std::env::temp_dir`] (`TMPDIR`) and, on Unix, unlinked at once, so
 //! nothing is left behind however the bake ends. On Linux it is opened for direct I/O where
-//! the file system allows it (`O_DIRECT`, else through the page cache): through the page cache,
-//! writing 957 MiB of rows cost 3-4 s of system time on this machine's ext4 (the kernel
-//! allocating and tracking every page, which is memory too: `dd` of 960 MiB to a new file
-//! takes 2.2-3.7 s, 0.24 s direct). Direct I/O waits for the disk instead, so a thread of its
-//! own writes each chunk while the bake goes on, and another reads the next chunk while the
-//! one before is encoded.
+//! the file system allows it (`O_DIRECT`, else through the page cache; a write refused for
+//! its alignment falls back to the page cache too): through the page cache, the 105k bake's
+//! system time was 3.9-6.9 s against 2.0-3.2 s with every row in memory (the kernel allocating
+//! and tracking a page for every 4 KiB, which is memory too: `dd` of 960 MiB to a new file on
+//! this machine's ext4 takes 2.2-3.7 s of system time, 0.24 s direct); direct, 2.3-2.7 s.
+//! Direct I/O waits for the disk instead, so a thread of its own writes each chunk while the
+//! bake goes on, and another reads the next chunk while the one before is encoded.
 //!
 //! Why chunks: a probe's rows never span two, so a chunk is freed as soon as its probes are
 //! encoded, and chunks of [`CHUNK_BYTES`] are mapped on their own (glibc's mmap threshold
@@ -41,6 +43,10 @@ use crate::BakeError;
 
 /// Bytes of a chunk: above the 32 MiB past which glibc maps every allocation on its own.
 pub const CHUNK_BYTES: usize = 64 << 20;
+
+/// Bytes of the smallest chunk, whatever the budget: with a chunk per probe (a budget of
+/// nothing), Sponza at 105k probes would write 105k chunks, each padded to a page.
+pub const MIN_CHUNK_BYTES: usize = 64 << 10;
 
 /// Every probe's rows in chunks, the oldest in a file past the budget (module doc).
 pub struct RowStore<T> {
@@ -77,10 +83,11 @@ enum Spill<T> {
 }
 
 impl<T: Pod + Send> RowStore<T> {
-    /// No probes yet; rows kept in memory up to about `budget` bytes (whole chunks of at most
-    /// [`CHUNK_BYTES`], at least one chunk, a chunk at least one probe).
+    /// No probes yet; rows kept in memory up to about `budget` bytes: whole chunks of
+    /// [`MIN_CHUNK_BYTES`] to [`CHUNK_BYTES`], at least one, a chunk at least one probe; a
+    /// chunk being written and the writer's copy of it come on top (module doc).
     pub fn new(budget: usize) -> Self {
-        Self::in_chunks_of(budget.min(CHUNK_BYTES), budget)
+        Self::in_chunks_of(budget.clamp(MIN_CHUNK_BYTES, CHUNK_BYTES), budget)
     }
 
     /// [`RowStore::new`] with chunks of `chunk_bytes`.
@@ -111,11 +118,17 @@ impl<T: Pod + Send> RowStore<T> {
             }
             let capacity = self.chunk_rows.max(rows.len());
             // The buffer of a written chunk if there is one (a fresh 64 MiB mapping costs a
-            // page fault per 4 KiB written into it); any others are freed.
+            // page fault per 4 KiB written into it), unless it was larger than this chunk is
+            // to be; any others are freed.
             let mut chunk = match &self.spill {
-                Spill::Writing(w) => w.done.try_iter().last().unwrap_or_default(),
-                _ => Vec::new(),
-            };
+                Spill::Writing(w) => w
+                    .done
+                    .try_iter()
+                    .filter(|b| b.capacity() <= capacity)
+                    .last(),
+                _ => None,
+            }
+            .unwrap_or_default();
             chunk.clear();
             chunk.reserve(capacity);
             self.chunks.push(Chunk::Held(chunk));
@@ -144,11 +157,14 @@ impl<T: Pod + Send> RowStore<T> {
         Ok(())
     }
 
-    /// Hands the oldest held chunk to the writer (started with the file on first use).
+    /// Hands the oldest held chunk to the writer (started with the file on first use, and
+    /// again should rows come after [`RowStore::end`]).
     fn spill_oldest(&mut self) -> Result<(), BakeError> {
-        if let Spill::None = self.spill {
-            self.spill = Spill::Writing(Writer::start(SpillFile::create()?));
-        }
+        self.spill = match std::mem::replace(&mut self.spill, Spill::None) {
+            Spill::None => Spill::Writing(Writer::start(SpillFile::create()?)?),
+            Spill::Written(file) => Spill::Writing(Writer::start(file)?),
+            writing => writing,
+        };
         let i = self.first_held;
         let len = match &self.chunks[i] {
             Chunk::Held(rows) => rows.len(),
@@ -159,10 +175,13 @@ impl<T: Pod + Send> RowStore<T> {
         if let (Chunk::Held(rows), Spill::Writing(writer)) =
             (std::mem::replace(&mut self.chunks[i], spilled), &self.spill)
         {
-            if writer.chunks.send(rows).is_err() {
+            if writer.send(rows).is_err() {
                 // The writer stopped on an error: it says which.
                 if let Spill::Writing(writer) = std::mem::replace(&mut self.spill, Spill::None) {
-                    writer.finish()?;
+                    match writer.finish() {
+                        Err(error) => return Err(error),
+                        Ok(_) => unreachable!("the writer stops early only on an error"),
+                    }
                 }
             }
         }
@@ -214,7 +233,7 @@ impl<T: Pod + Send> RowStore<T> {
             .collect();
         std::thread::scope(|scope| {
             let (read, reused) = match &file {
-                Some(file) => Reader::start(scope, file, spilled),
+                Some(file) => Reader::start(scope, file, spilled)?,
                 None => Reader::idle(),
             };
             let mut first = 0;
@@ -243,42 +262,66 @@ impl<T: Pod + Send> RowStore<T> {
 }
 
 /// The thread writing chunks to the file in the order they come, each padded to whole
-/// pages, and handing their buffers back.
+/// pages, and handing their buffers back. Dropped without [`Writer::finish`] (a bake failing
+/// for another reason), it still waits for the chunk being written.
 struct Writer<T> {
     /// At most one chunk waits while one is written (a rendezvous: `push` waits for the
-    /// writer rather than hold more than the budget and two chunks).
-    chunks: SyncSender<Vec<T>>,
+    /// writer rather than hold more than the budget and two chunks). `None` once finishing.
+    chunks: Option<SyncSender<Vec<T>>>,
     /// Buffers of written chunks.
     done: Receiver<Vec<T>>,
-    thread: JoinHandle<Result<SpillFile, BakeError>>,
+    thread: Option<JoinHandle<Result<SpillFile, BakeError>>>,
 }
 
 impl<T: Pod + Send> Writer<T> {
-    fn start(mut file: SpillFile) -> Self {
+    /// Starts the thread; fails when the system will not start one.
+    fn start(mut file: SpillFile) -> Result<Self, BakeError> {
         let (chunks, to_write) = sync_channel::<Vec<T>>(0);
         let (written, done) = channel();
-        let thread = std::thread::spawn(move || {
-            let mut staging = Vec::new();
-            for rows in to_write {
-                file.append(bytemuck::cast_slice(&rows), &mut staging)?;
-                // Gone when the store has stopped taking buffers back.
-                let _ = written.send(rows);
-            }
-            Ok(file)
-        });
-        Writer {
-            chunks,
+        let path = file.path.clone();
+        let thread = std::thread::Builder::new()
+            .name("prt-rows-writer".into())
+            .spawn(move || {
+                let mut staging = Vec::new();
+                for rows in to_write {
+                    file.append(bytemuck::cast_slice(&rows), &mut staging)?;
+                    // Gone when the store has stopped taking buffers back.
+                    let _ = written.send(rows);
+                }
+                Ok(file)
+            })
+            .map_err(|error| spill_error(&path, error))?;
+        Ok(Writer {
+            chunks: Some(chunks),
             done,
-            thread,
+            thread: Some(thread),
+        })
+    }
+
+    /// Hands `rows` over; fails when the writer has stopped (on an error: see `finish`).
+    fn send(&self, rows: Vec<T>) -> Result<(), ()> {
+        match &self.chunks {
+            Some(chunks) => chunks.send(rows).map_err(|_| ()),
+            None => Err(()),
         }
     }
 
     /// Waits for every chunk to be written; the file, or the writer's error.
-    fn finish(self) -> Result<SpillFile, BakeError> {
-        drop(self.chunks);
-        match self.thread.join() {
-            Ok(file) => file,
-            Err(panic) => std::panic::resume_unwind(panic),
+    fn finish(mut self) -> Result<SpillFile, BakeError> {
+        self.chunks = None;
+        match self.thread.take().map(JoinHandle::join) {
+            Some(Ok(file)) => file,
+            Some(Err(panic)) => std::panic::resume_unwind(panic),
+            None => unreachable!("a writer is finished once"),
+        }
+    }
+}
+
+impl<T> Drop for Writer<T> {
+    fn drop(&mut self) {
+        self.chunks = None;
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
         }
     }
 }
@@ -291,25 +334,29 @@ struct Reader;
 type ReadChannels = (Receiver<Result<Vec<Page>, BakeError>>, Sender<Vec<Page>>);
 
 impl Reader {
-    /// Reads the chunks at `spilled` (byte offset, bytes) of `file`.
+    /// Reads the chunks at `spilled` (byte offset, bytes) of `file`; fails when the system
+    /// will not start a thread.
     fn start<'s>(
         scope: &'s std::thread::Scope<'s, '_>,
         file: &'s SpillFile,
         spilled: Vec<(u64, usize)>,
-    ) -> ReadChannels {
+    ) -> Result<ReadChannels, BakeError> {
         let (send, read) = sync_channel(0);
         let (reused, back) = channel::<Vec<Page>>();
-        scope.spawn(move || {
-            for (at, bytes) in spilled {
-                let mut pages = back.try_recv().unwrap_or_default();
-                let chunk = file.read(at, bytes, &mut pages).map(|()| pages);
-                let failed = chunk.is_err();
-                if send.send(chunk).is_err() || failed {
-                    return;
+        std::thread::Builder::new()
+            .name("prt-rows-reader".into())
+            .spawn_scoped(scope, move || {
+                for (at, bytes) in spilled {
+                    let mut pages = back.try_recv().unwrap_or_default();
+                    let chunk = file.read(at, bytes, &mut pages).map(|()| pages);
+                    let failed = chunk.is_err();
+                    if send.send(chunk).is_err() || failed {
+                        return;
+                    }
                 }
-            }
-        });
-        (read, reused)
+            })
+            .map_err(|error| spill_error(&file.path, error))?;
+        Ok((read, reused))
     }
 
     /// Channels for a store with nothing in a file.
@@ -332,6 +379,11 @@ const PAGE: usize = 4096;
 struct SpillFile {
     file: File,
     path: PathBuf,
+    /// Bytes written, whole pages: where the next chunk goes.
+    end: u64,
+    /// Whether the file was opened for direct I/O (and has not fallen back since).
+    #[cfg(target_os = "linux")]
+    direct: bool,
 }
 
 impl SpillFile {
@@ -358,25 +410,65 @@ impl SpillFile {
         // Opened again for direct I/O, not created so: a file system that refuses the flag
         // may do so after making the file.
         #[cfg(target_os = "linux")]
-        let file = {
+        let (file, direct) = {
             use std::os::unix::fs::OpenOptionsExt;
-            options
-                .custom_flags(libc::O_DIRECT)
-                .open(&path)
-                .unwrap_or(file)
+            match options.custom_flags(libc::O_DIRECT).open(&path) {
+                Ok(direct) => (direct, true),
+                Err(_) => (file, false),
+            }
         };
         #[cfg(unix)]
         std::fs::remove_file(&path).map_err(|error| spill_error(&path, error))?;
-        Ok(SpillFile { file, path })
+        Ok(SpillFile {
+            file,
+            path,
+            end: 0,
+            #[cfg(target_os = "linux")]
+            direct,
+        })
     }
 
-    /// Writes `bytes` at the end through `staging`, padded to whole pages.
+    /// Writes `bytes` at the end through `staging`, padded to whole pages. A file system that
+    /// took the direct I/O flag but refuses the write (`EINVAL`: alignment it wants larger,
+    /// some network and FUSE file systems) gets it again through the page cache.
     fn append(&mut self, bytes: &[u8], staging: &mut Vec<Page>) -> Result<(), BakeError> {
         let staged = staged(staging, bytes.len());
         staged[..bytes.len()].copy_from_slice(bytes);
-        (&self.file)
-            .write_all(staged)
-            .map_err(|error| spill_error(&self.path, error))
+        let written = self.write_at(self.end, staged);
+        #[cfg(target_os = "linux")]
+        let written = match written {
+            Err(e) if self.direct && e.raw_os_error() == Some(libc::EINVAL) => self
+                .stop_direct()
+                .and_then(|()| self.write_at(self.end, staged)),
+            written => written,
+        };
+        written.map_err(|error| spill_error(&self.path, error))?;
+        self.end += staged.len() as u64;
+        Ok(())
+    }
+
+    fn write_at(&self, at: u64, bytes: &[u8]) -> std::io::Result<()> {
+        let mut file = &self.file;
+        file.seek(SeekFrom::Start(at))?;
+        file.write_all(bytes)
+    }
+
+    /// Clears the direct I/O flag (`fcntl`).
+    #[cfg(target_os = "linux")]
+    fn stop_direct(&mut self) -> std::io::Result<()> {
+        use std::os::fd::AsRawFd;
+        let fd = self.file.as_raw_fd();
+        // SAFETY: `fd` is this file's open descriptor; F_GETFL and F_SETFL read and set its
+        // status flags only.
+        let cleared = unsafe {
+            let flags = libc::fcntl(fd, libc::F_GETFL);
+            flags >= 0 && libc::fcntl(fd, libc::F_SETFL, flags & !libc::O_DIRECT) >= 0
+        };
+        if !cleared {
+            return Err(std::io::Error::last_os_error());
+        }
+        self.direct = false;
+        Ok(())
     }
 
     /// Reads the `bytes` at byte `at` (and the rest of their last page) into `pages`.
@@ -416,8 +508,7 @@ fn spill_error(path: &std::path::Path, error: std::io::Error) -> BakeError {
 mod tests {
     use super::*;
 
-    /// Probes of 0..=7 rows (a probe of no rows first, one larger than a chunk), each row its
-    /// probe and index: what `drain` hands over, per probe.
+    /// What `drain` hands over, per probe (checking each row's probe index on the way).
     fn drained(store: RowStore<[u32; 2]>) -> Vec<Vec<[u32; 2]>> {
         let mut out = Vec::new();
         store
@@ -432,40 +523,53 @@ mod tests {
         out
     }
 
-    fn filled(mut store: RowStore<[u32; 2]>) -> RowStore<[u32; 2]> {
-        for p in 0..40u32 {
-            let n = if p == 17 { 40 } else { (p * 5) % 8 };
-            let rows: Vec<[u32; 2]> = (0..n).map(|i| [p, i]).collect();
-            store.push(&rows).unwrap();
+    /// Probe `p`'s rows: 0..=7 of them (probe 0 none, probe 17 forty), each its probe and index.
+    fn rows_of(p: u32) -> Vec<[u32; 2]> {
+        let n = if p == 17 { 40 } else { (p * 5) % 8 };
+        (0..n).map(|i| [p, i]).collect()
+    }
+
+    fn filled(mut store: RowStore<[u32; 2]>, probes: std::ops::Range<u32>) -> RowStore<[u32; 2]> {
+        for p in probes {
+            store.push(&rows_of(p)).unwrap();
         }
         store
     }
 
-    /// Chunks of 8 rows (64 bytes) with a budget of one, two and all of them: the file
-    /// holds what does not fit (and everything, after `end`, once it holds anything), and
-    /// every probe comes back as it went in.
+    /// Chunks of 8 rows (64 bytes, each padded to a page in the file) with a budget of one, two
+    /// and all of them: the file holds what does not fit (and everything, after `end`, once it
+    /// holds anything), and every probe comes back as it went in, also when more come after
+    /// `end`.
     #[test]
     fn spilled_rows_come_back_as_they_went_in() {
-        let all = drained(filled(RowStore::in_chunks_of(64, usize::MAX)));
-        assert_eq!(all.len(), 40);
-        assert_eq!(all[17].len(), 40);
+        let want: Vec<Vec<[u32; 2]>> = (0..40).map(rows_of).collect();
+        let held = filled(RowStore::in_chunks_of(64, usize::MAX), 0..40);
+        assert_eq!(held.spilled_bytes(), 0);
+        assert_eq!(drained(held), want);
         for budget in [0, 64, 128] {
-            let store = filled(RowStore::in_chunks_of(64, budget));
+            let store = filled(RowStore::in_chunks_of(64, budget), 0..40);
             let held = store.chunks.len() - store.first_held;
             assert_eq!(held, (budget / 64).max(1), "budget {budget}");
             assert!(store.spilled_bytes() > 0);
-            assert_eq!(drained(store), all, "budget {budget}");
+            assert_eq!(drained(store), want, "budget {budget}");
         }
-        let mut store = filled(RowStore::in_chunks_of(64, 128));
+        let mut store = filled(RowStore::in_chunks_of(64, 128), 0..25);
         store.end().unwrap();
         assert_eq!(store.first_held, store.chunks.len(), "all in the file");
-        let rows: usize = all.iter().map(Vec::len).sum();
+        let rows: usize = want[..25].iter().map(Vec::len).sum();
         assert_eq!(store.spilled_bytes(), 8 * rows as u64);
-        assert_eq!(drained(store), all);
-        let mut held = filled(RowStore::in_chunks_of(64, usize::MAX));
-        held.end().unwrap();
-        assert_eq!(held.spilled_bytes(), 0);
-        assert_eq!(drained(held), all);
+        let store = filled(store, 25..40);
+        assert_eq!(drained(store), want);
+    }
+
+    /// A budget of nothing still writes chunks of `MIN_CHUNK_BYTES`, one held.
+    #[test]
+    fn chunks_have_a_floor() {
+        let store = RowStore::<[u32; 2]>::new(0);
+        assert_eq!(store.chunk_rows, MIN_CHUNK_BYTES / 8);
+        assert_eq!(store.held_max, 1);
+        let store = RowStore::<[u32; 2]>::new(usize::MAX);
+        assert_eq!(store.chunk_rows, CHUNK_BYTES / 8);
     }
 
     /// No probes, or only probes of no rows: nothing to hand over but them.
@@ -483,7 +587,7 @@ mod tests {
     #[cfg(unix)]
     #[test]
     fn the_spill_file_is_unlinked() {
-        let mut store = filled(RowStore::in_chunks_of(64, 0));
+        let mut store = filled(RowStore::in_chunks_of(64, 0), 0..40);
         store.end().unwrap();
         let Spill::Written(file) = &store.spill else {
             panic!("nothing written");
@@ -492,22 +596,47 @@ mod tests {
         assert!(!file.path.exists());
     }
 
-    /// A write that fails (a full disk): the writer stops, and its error names the file.
+    /// A file whose writes fail (a full disk): the store stops with an error naming it.
     #[cfg(target_os = "linux")]
     #[test]
     fn a_full_disk_is_reported() {
         let path = PathBuf::from("/dev/full");
         let file = File::options().read(true).write(true).open(&path).unwrap();
-        let writer = Writer::<[u32; 2]>::start(SpillFile { file, path });
-        // The writer may already have stopped when the second chunk comes.
-        for _ in 0..2 {
-            let _ = writer.chunks.send(vec![[1, 2]; 1000]);
-        }
-        let Err(error) = writer.finish() else {
+        let mut store = RowStore::<[u32; 2]>::in_chunks_of(64, 0);
+        store.spill = Spill::Written(SpillFile {
+            file,
+            path,
+            end: 0,
+            direct: false,
+        });
+        let pushed: Result<Vec<()>, BakeError> = (0..40).map(|p| store.push(&rows_of(p))).collect();
+        let Err(error) = pushed.and_then(|_| store.end()) else {
             panic!("writing to /dev/full succeeded");
         };
         let message = error.to_string();
         assert!(message.contains("/dev/full"), "{message}");
+    }
+
+    /// Direct I/O given up (as when a file system refuses its writes): the file goes on through
+    /// the page cache, chunks where they belong.
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn direct_io_falls_back() {
+        let mut file = SpillFile::create().unwrap();
+        let mut staging = Vec::new();
+        file.append(&[1; 100], &mut staging).unwrap();
+        file.stop_direct().unwrap();
+        file.append(&[2; 5000], &mut staging).unwrap();
+        assert_eq!(file.end, 3 * PAGE as u64);
+        let mut pages = Vec::new();
+        file.read(0, 100, &mut pages).unwrap();
+        assert!(bytemuck::cast_slice::<Page, u8>(&pages)[..100]
+            .iter()
+            .all(|&b| b == 1));
+        file.read(PAGE as u64, 5000, &mut pages).unwrap();
+        assert!(bytemuck::cast_slice::<Page, u8>(&pages)[..5000]
+            .iter()
+            .all(|&b| b == 2));
     }
 
     /// A directory the file cannot be made in: an error naming the file.

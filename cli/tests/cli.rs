@@ -729,7 +729,7 @@ fn row_memory_spills_to_tmpdir_or_says_why_not() {
                 "-o".as_ref(),
                 out.as_os_str(),
             ])
-            .args(["--rays", "64", "--row-memory", "0"])
+            .args(["--row-memory", "0"])
             .env("TMPDIR", tmpdir)
             .output()
             .expect("run prt")
