@@ -12,7 +12,7 @@
 //! written and the writer's page-aligned copy of it. Once any chunk is in the file, the rest
 //! follow when the trace ends, before the bricks are finished (the bake's peak, with the
 //! surfels under merge and the final ones both held). Sponza at 105k probes: peak 2,057 MiB
-//! with every row in memory, 1,271-1,283 MiB with the default budget of 256 MiB.
+//! with every row in memory, 1,266-1,283 MiB with the default budget of 256 MiB.
 //!
 //! The file is made in [`std::env::temp_dir`] (`TMPDIR`) and, on Unix, unlinked at once, so
 //! nothing is left behind however the bake ends. On Linux it is opened for direct I/O where
