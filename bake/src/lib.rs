@@ -99,9 +99,9 @@ pub struct BakeSettings {
     /// Worker threads; `None` uses all cores.
     pub threads: Option<usize>,
     /// Bytes of factor rows held in memory between the trace and the table encoding (whole
-    /// chunks of at most 64 MiB, at least one); past it the oldest rows wait in a temporary
-    /// file in [`std::env::temp_dir`] (`TMPDIR`), and the asset does not change
-    /// ([`row_store`]). The rows are what grows with the probe count: 28 bytes a factor at u8,
+    /// chunks of 64 KiB to 64 MiB, at least one, and two more while rows are written); past
+    /// it the oldest rows wait in a temporary file in [`std::env::temp_dir`] (`TMPDIR`), and
+    /// the asset does not change ([`row_store`]). The rows are what grows with the probe count: 28 bytes a factor at u8,
     /// 52 at f16 and f32 (Sponza at 1.0 m: 143 MB; at 105k probes 1.0 GB).
     pub row_memory: usize,
 }
