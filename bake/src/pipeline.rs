@@ -160,7 +160,7 @@ pub(crate) fn bake_in_pool(
         from: &from,
         lens: &lens,
     };
-    let (bricked, factors) = bricks_and_tables(folder, tables, carried, settings, n, cell_size)?;
+    let (bricked, factors) = bricks_and_tables(folder, tables, carried, settings, cell_size)?;
     lap(&mut report, "bricks", Some("assemble"));
 
     let Assembled {
@@ -286,7 +286,6 @@ fn bricks_and_tables(
     tables: factors::Rows,
     carried: factors::Carried,
     settings: &BakeSettings,
-    ray_count: u32,
     cell_size: f32,
 ) -> Result<(bricks::Bricked, Factors), BakeError> {
     let (bricked, remap) = folder.finish();
@@ -298,7 +297,7 @@ fn bricks_and_tables(
             reason: "the 8-bit factor encoding addresses at most 16,777,216 bricks; use f16",
         });
     }
-    let encoding = (settings.transfer_precision, ray_count, 4.0 * cell_size);
+    let encoding = (settings.transfer_precision, 4.0 * cell_size);
     let factors = factors::encode_tables(tables, carried, &remap, &bricked.bricks, encoding)?;
     Ok((bricked, factors))
 }

@@ -160,31 +160,26 @@ impl<T: Pod + Send> RowStore<T> {
     /// Hands the oldest held chunk to the writer (started with the file on first use, and
     /// again should rows come after [`RowStore::end`]).
     fn spill_oldest(&mut self) -> Result<(), BakeError> {
-        self.spill = match std::mem::replace(&mut self.spill, Spill::None) {
-            Spill::None => Spill::Writing(Writer::start(SpillFile::create()?)?),
-            Spill::Written(file) => Spill::Writing(Writer::start(file)?),
-            writing => writing,
+        let writer = match std::mem::replace(&mut self.spill, Spill::None) {
+            Spill::None => Writer::start(SpillFile::create()?)?,
+            Spill::Written(file) => Writer::start(file)?,
+            Spill::Writing(writer) => writer,
         };
-        let i = self.first_held;
-        let len = match &self.chunks[i] {
-            Chunk::Held(rows) => rows.len(),
-            Chunk::Spilled { len, .. } => *len,
+        let (i, at) = (self.first_held, self.end);
+        let held = std::mem::replace(&mut self.chunks[i], Chunk::Spilled { at, len: 0 });
+        let Chunk::Held(rows) = held else {
+            unreachable!("chunks from `first_held` on are in memory");
         };
-        let at = self.end;
-        let spilled = Chunk::Spilled { at, len };
-        if let (Chunk::Held(rows), Spill::Writing(writer)) =
-            (std::mem::replace(&mut self.chunks[i], spilled), &self.spill)
-        {
-            if writer.send(rows).is_err() {
-                // The writer stopped on an error: it says which.
-                if let Spill::Writing(writer) = std::mem::replace(&mut self.spill, Spill::None) {
-                    match writer.finish() {
-                        Err(error) => return Err(error),
-                        Ok(_) => unreachable!("the writer stops early only on an error"),
-                    }
-                }
-            }
+        let len = rows.len();
+        self.chunks[i] = Chunk::Spilled { at, len };
+        if writer.send(rows).is_err() {
+            // The writer stopped on an error: it says which.
+            return match writer.finish() {
+                Err(error) => Err(error),
+                Ok(_) => unreachable!("the writer stops early only on an error"),
+            };
         }
+        self.spill = Spill::Writing(writer);
         let bytes = (len * std::mem::size_of::<T>()) as u64;
         self.end += bytes.next_multiple_of(PAGE as u64);
         self.written += bytes;
@@ -232,16 +227,19 @@ impl<T: Pod + Send> RowStore<T> {
             })
             .collect();
         std::thread::scope(|scope| {
-            let (read, reused) = match &file {
-                Some(file) => Reader::start(scope, file, spilled)?,
-                None => Reader::idle(),
-            };
+            let reader = file
+                .as_ref()
+                .map(|file| Reader::start(scope, file, spilled));
+            let reader = reader.transpose()?;
             let mut first = 0;
             for probes in self.probes.chunk_by(|a, b| a.0 == b.0) {
                 let runs: Vec<(usize, usize)> = probes.iter().map(|&(_, s, n)| (s, n)).collect();
                 match self.chunks.get_mut(probes[0].0) {
                     Some(Chunk::Held(rows)) => f(first, &runs, &std::mem::take(rows)),
                     Some(&mut Chunk::Spilled { len, .. }) => {
+                        let Some((read, reused)) = &reader else {
+                            unreachable!("a spilled chunk has a file");
+                        };
                         let pages = match read.recv() {
                             Ok(pages) => pages?,
                             Err(_) => unreachable!("the reader sends every chunk"),
@@ -357,13 +355,6 @@ impl Reader {
             })
             .map_err(|error| spill_error(&file.path, error))?;
         Ok((read, reused))
-    }
-
-    /// Channels for a store with nothing in a file.
-    fn idle() -> ReadChannels {
-        let (_, read) = sync_channel(0);
-        let (reused, _) = channel();
-        (read, reused)
     }
 }
 

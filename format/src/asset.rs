@@ -245,6 +245,19 @@ pub struct FactorF32 {
 }
 const _: () = assert!(std::mem::size_of::<FactorF32>() == 56);
 
+impl FactorF32 {
+    /// One finished row (brick, rays, transfer k = 1..9, offset) as an f32 factor.
+    pub fn of(&(brick, rays, sh, offset): &FactorRow) -> FactorF32 {
+        FactorF32 {
+            brick,
+            rays,
+            sh,
+            offset,
+            _pad: 0,
+        }
+    }
+}
+
 /// One factor, half-float transfer: as [`FactorF32`]; `sh` packs the 8 halves two per word and
 /// `offset` the 3 offset halves (and a zero), low half first (WGSL `unpack2x16float` order).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable, Serialize, Deserialize)]
@@ -256,6 +269,18 @@ pub struct FactorF16 {
     pub offset: [u32; 2],
 }
 const _: () = assert!(std::mem::size_of::<FactorF16>() == 32);
+
+impl FactorF16 {
+    /// One finished row (brick, rays, transfer k = 1..9, offset) as a half-float factor.
+    pub fn of(&(brick, rays, sh, o): &FactorRow) -> FactorF16 {
+        FactorF16 {
+            brick,
+            rays,
+            sh: std::array::from_fn(|w| pack2(sh[2 * w], sh[2 * w + 1])),
+            offset: [pack2(o[0], o[1]), pack2(o[2], 0.0)],
+        }
+    }
+}
 
 /// One factor, 8-bit encoding ([`TransferPrecision::U8`]): `brick_rays` = brick << 8 | rays
 /// (1..=255; the baker splits larger counts over several factors of the same brick);
@@ -485,27 +510,8 @@ impl Factors {
                     offset_scale,
                 }
             }
-            TransferPrecision::F32 => Factors::F32(
-                rows.iter()
-                    .map(|&(brick, rays, sh, offset)| FactorF32 {
-                        brick,
-                        rays,
-                        sh,
-                        offset,
-                        _pad: 0,
-                    })
-                    .collect(),
-            ),
-            TransferPrecision::F16 => Factors::F16(
-                rows.iter()
-                    .map(|&(brick, rays, sh, o)| FactorF16 {
-                        brick,
-                        rays,
-                        sh: std::array::from_fn(|w| pack2(sh[2 * w], sh[2 * w + 1])),
-                        offset: [pack2(o[0], o[1]), pack2(o[2], 0.0)],
-                    })
-                    .collect(),
-            ),
+            TransferPrecision::F32 => Factors::F32(rows.iter().map(FactorF32::of).collect()),
+            TransferPrecision::F16 => Factors::F16(rows.iter().map(FactorF16::of).collect()),
         }
     }
 
