@@ -189,22 +189,19 @@ impl Bvh8 {
     /// Collapses `bvh2`, built over `triangles` (whose indices are the scene's), its triangles
     /// in `order`: one walk lays out the nodes and numbers the leaves, then the leaves' triangles
     /// are gathered into their [`Tri4`]s in parallel. The walk chases the binary tree's nodes
-    /// (a cache miss each); gathering inside it added a miss per triangle to that serial path,
-    /// the BVH stage's longest (Sponza, 187k triangles, 2 threads, 1.9 m: the collapse took
-    /// 36-50 ms beside the asset BVH's 20-30 ms; the BVH stage 84-98 ms against 96-105 ms,
-    /// six alternating bakes each).
+    /// (a cache miss each); gathering inside it, as the collapse did before, added a miss per
+    /// triangle to that serial path, the BVH stage's longest: Sponza (187k triangles, 2 threads,
+    /// 1.9 m), the collapse then took 36-50 ms beside the asset BVH's 20-30 ms. With the gather
+    /// in parallel (and [`open`] without allocating), the BVH stage took 84-98 ms against
+    /// 96-105 ms (six alternating bakes each).
     pub(crate) fn from_bvh2(bvh2: &Bvh2, order: &LeafOrder, triangles: &[Triangle]) -> Bvh8 {
         let below = &order.below;
         if bvh2.nodes.is_empty() || triangles.is_empty() {
             return Bvh8::default();
         }
-        // Room for the most there can be (fewer inner nodes than triangles), so that the array
-        // is never moved as it grows (each move a copy on the BVH stage's serial path); pages
-        // reserved but never written are never faulted in.
-        let mut nodes = Vec::with_capacity(triangles.len());
-        nodes.push(Node::EMPTY);
+        let mut nodes = vec![Node::EMPTY];
         // The binary node of each leaf, in the order its Tri4 takes.
-        let mut leaves: Vec<usize> = Vec::with_capacity(triangles.len());
+        let mut leaves: Vec<usize> = Vec::new();
         let mut work = vec![(0usize, 0usize)];
         while let Some((src, dst)) = work.pop() {
             let mut node = Node::EMPTY;
@@ -234,9 +231,11 @@ impl Bvh8 {
             .par_iter()
             .map(|&c| {
                 let leaf = order.under(c);
-                debug_assert!((1..=TRI_LANES).contains(&leaf.len()), "{leaf:?} in a leaf");
+                // A panic, not a wrong tree, if a build ever made bigger leaves (the bake reports
+                // it as an error of the BVH stage).
+                assert!((1..=TRI_LANES).contains(&leaf.len()), "{leaf:?} in a leaf");
                 let mut tri4 = Tri4::EMPTY;
-                for (n, &p) in leaf.iter().enumerate().take(TRI_LANES) {
+                for (n, &p) in leaf.iter().enumerate() {
                     let t = &triangles[p as usize];
                     tri4.set(n, [t.v0, t.v1, t.v2].map(Vec3::from), p);
                 }
@@ -290,8 +289,8 @@ impl Bvh8 {
         }
         let mut p = Packet::new(origin, dirs, tmax);
         let all = u8::MAX >> (LANES - dirs.len());
+        // Empty: every traversal pops it empty before putting it back.
         let mut stack = STACK.take();
-        stack.clear();
         stack.push(Entry {
             index: 0,
             count: 0,
@@ -513,21 +512,24 @@ fn inner(bvh2: &Bvh2, below: &[u32], i: usize) -> bool {
 /// node itself when it is a leaf or small enough to be one, else its children, opening the
 /// inner child with the largest surface area until there are eight (ties to the first).
 fn open(bvh2: &Bvh2, below: &[u32], node: usize) -> ([usize; LANES], usize) {
-    // Each kid's half area, or -1 when it is not opened (a leaf): computed once per kid.
-    let area = |i: usize| match inner(bvh2, below, i) {
-        true => bvh2.nodes[i].aabb().half_area(),
-        false => -1.0,
-    };
+    // Each kid's half area, computed once; `None` for a kid that cannot be opened (a leaf, or
+    // at most TRI_LANES triangles). A later kid replaces the widest so far unless that one's
+    // area is at least its own: ties go to the first, and a kid whose area is NaN (a box with
+    // an infinite side and a zero one) is opened too, so that every inner node is opened and
+    // the collapse ends.
+    let area = |i: usize| inner(bvh2, below, i).then(|| bvh2.nodes[i].aabb().half_area());
     let (mut kids, mut areas) = ([node; LANES], [area(node); LANES]);
     let mut len = 1;
     while len < LANES {
-        let mut widest = None;
-        for k in 0..len {
-            if areas[k] >= 0.0 && widest.is_none_or(|w: usize| areas[k] > areas[w]) {
-                widest = Some(k);
+        let mut widest: Option<(usize, f32)> = None;
+        for (k, a) in areas[..len].iter().enumerate() {
+            match (widest, *a) {
+                (_, None) => {}
+                (Some((_, best)), Some(a)) if best >= a => {}
+                (_, Some(a)) => widest = Some((k, a)),
             }
         }
-        let Some(k) = widest else { break };
+        let Some((k, _)) = widest else { break };
         let first = bvh2.nodes[kids[k]].first_index as usize;
         kids.copy_within(k + 1..len, k + 2);
         areas.copy_within(k + 1..len, k + 2);

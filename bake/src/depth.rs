@@ -92,6 +92,40 @@ impl DepthFilter {
         ray_count: usize,
         spacing: f32,
     ) -> [u32; DEPTH_WORDS] {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx") {
+            // SAFETY: the CPU has AVX.
+            return unsafe { self.map_avx(origin, rays, ray_count, spacing) };
+        }
+        self.map_in(origin, rays, ray_count, spacing)
+    }
+
+    /// [`DepthFilter::map`] compiled for AVX: a group's four f64 sums in one vector instead of
+    /// two SSE2 ones. The same bits (the same IEEE operations lane for lane; Rust never fuses a
+    /// multiply and an add). Sponza at 1.0 m, the maps' CPU time summed over the bake: 160-168
+    /// ms against 198-223 ms for the SSE2 copy (three alternating bakes; AVX2, whose gathers
+    /// could load the distances, 165-191 ms).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    fn map_avx(
+        &self,
+        origin: Vec3,
+        rays: &ProbeRays,
+        ray_count: usize,
+        spacing: f32,
+    ) -> [u32; DEPTH_WORDS] {
+        self.map_in(origin, rays, ray_count, spacing)
+    }
+
+    /// The body of [`DepthFilter::map`], inlined into each instruction set's copy.
+    #[inline(always)]
+    fn map_in(
+        &self,
+        origin: Vec3,
+        rays: &ProbeRays,
+        ray_count: usize,
+        spacing: f32,
+    ) -> [u32; DEPTH_WORDS] {
         let mut distance = vec![MAX_DEPTH; ray_count.max(1)];
         for h in &rays.hits {
             if let Some(d) = distance.get_mut(h.ray as usize) {
@@ -131,5 +165,63 @@ impl DepthFilter {
             let (a, b) = (texels[2 * w], texels[2 * w + 1]);
             u32::from_le_bytes([a[0], a[1], b[0], b[1]])
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::trace::Hit;
+
+    /// The copy compiled for AVX gives the SSE2 copy's bits, probe after probe (hits at
+    /// pseudo-random distances on a pseudo-random half of the rays, the rest sky).
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn map_compiled_for_avx_gives_the_same_bits() {
+        if !std::arch::is_x86_feature_detected!("avx") {
+            eprintln!("skipped: this CPU has no AVX");
+            return;
+        }
+        let directions: Vec<Vec3> = prt_format::directions::fibonacci_directions(512)
+            .into_iter()
+            .map(Vec3::from)
+            .collect();
+        let filter = DepthFilter::new(&directions);
+        let mut state = 0x9e37_79b9u32;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 17;
+            state ^= state << 5;
+            state
+        };
+        for probe in 0..20 {
+            let origin = Vec3::new(probe as f32, 0.5, -2.0);
+            let hits = (0..512u32)
+                .filter_map(|ray| {
+                    let r = next();
+                    (r % 2 == 0).then_some((ray, (r >> 1) % 10_000))
+                })
+                .map(|(ray, t)| {
+                    let t = t as f32 * 1e-3;
+                    Hit {
+                        ray,
+                        position: origin + directions[ray as usize] * t,
+                        normal: Vec3::Z,
+                        albedo: [0.5; 3],
+                        emission: [0.0; 3],
+                        backface: false,
+                        facing_away: false,
+                    }
+                })
+                .collect();
+            let rays = ProbeRays {
+                hits,
+                ..ProbeRays::default()
+            };
+            let sse2 = filter.map_in(origin, &rays, 512, 1.3);
+            // SAFETY: the CPU has AVX (checked above).
+            let avx = unsafe { filter.map_avx(origin, &rays, 512, 1.3) };
+            assert_eq!(sse2, avx, "probe {probe}");
+        }
     }
 }
