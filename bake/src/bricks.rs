@@ -507,15 +507,7 @@ mod tests {
     }
 
     fn hit(p: [f32; 3], n: [f32; 3]) -> Hit {
-        Hit {
-            ray: 0,
-            position: Vec3::from(p),
-            normal: Vec3::from(n),
-            albedo: [0.5; 3],
-            emission: [0.0; 3],
-            backface: false,
-            facing_away: false,
-        }
+        Hit::grey(0, Vec3::from(p), Vec3::from(n))
     }
 
     #[test]

@@ -202,16 +202,8 @@ mod tests {
                     (r % 2 == 0).then_some((ray, (r >> 1) % 10_000))
                 })
                 .map(|(ray, t)| {
-                    let t = t as f32 * 1e-3;
-                    Hit {
-                        ray,
-                        position: origin + directions[ray as usize] * t,
-                        normal: Vec3::Z,
-                        albedo: [0.5; 3],
-                        emission: [0.0; 3],
-                        backface: false,
-                        facing_away: false,
-                    }
+                    let position = origin + directions[ray as usize] * (t as f32 * 1e-3);
+                    Hit::grey(ray, position, Vec3::Z)
                 })
                 .collect();
             let rays = ProbeRays {

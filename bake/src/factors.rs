@@ -450,14 +450,9 @@ mod tests {
         }
         let hits: Vec<Hit> = rays
             .iter()
-            .map(|&ray| Hit {
-                ray,
-                position: Vec3::new(next(1000) as f32 * 0.01, 0.3, -(ray as f32) * 0.001),
-                normal: Vec3::Y,
-                albedo: [0.5; 3],
-                emission: [0.0; 3],
-                backface: false,
-                facing_away: false,
+            .map(|&ray| {
+                let position = Vec3::new(next(1000) as f32 * 0.01, 0.3, -(ray as f32) * 0.001);
+                Hit::grey(ray, position, Vec3::Y)
             })
             .collect();
         let bricks: Vec<u32> = hits.iter().map(|_| next(40) * 3).collect();
@@ -582,15 +577,7 @@ mod tests {
         let basis: Vec<[f32; SH_COUNT]> = (0..64)
             .map(|r| std::array::from_fn(|k| ((r + k) % 5) as f32 * 0.1))
             .collect();
-        let hit = |ray: u32| Hit {
-            ray,
-            position: Vec3::new(ray as f32, 0.0, 1.0),
-            normal: Vec3::Y,
-            albedo: [0.5; 3],
-            emission: [0.0; 3],
-            backface: false,
-            facing_away: false,
-        };
+        let hit = |ray: u32| Hit::grey(ray, Vec3::new(ray as f32, 0.0, 1.0), Vec3::Y);
         let probes: Vec<(Vec<Hit>, Vec<u32>)> = (0..4)
             .map(|p| {
                 let hits: Vec<Hit> = (0..64).filter(|r| (r + p) % 3 != 0).map(hit).collect();

@@ -27,6 +27,23 @@ pub struct Hit {
     pub facing_away: bool,
 }
 
+#[cfg(test)]
+impl Hit {
+    /// A front-facing hit of ray `ray` on a grey (albedo 0.5), unlit surface: the hit the unit
+    /// tests of merging, factor rows and visibility maps build their probes from.
+    pub(crate) fn grey(ray: u32, position: Vec3, normal: Vec3) -> Hit {
+        Hit {
+            ray,
+            position,
+            normal,
+            albedo: [0.5; 3],
+            emission: [0.0; 3],
+            backface: false,
+            facing_away: false,
+        }
+    }
+}
+
 /// Everything one probe's rays found.
 #[derive(Clone, Debug, Default)]
 pub struct ProbeRays {
