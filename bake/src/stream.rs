@@ -29,6 +29,21 @@ use crate::{BakeError, Progress};
 /// memory at 1.0 m 832 MiB against 1,076 MiB.
 pub const BLOCK_PROBES: usize = 256;
 
+/// Probes in the smallest block: the blocks taper towards the end ([`block_len`]).
+pub const TAIL_PROBES: usize = 32;
+
+/// The length of the block that starts with `remaining` probes left: [`BLOCK_PROBES`], then
+/// halves over the last ones down to [`TAIL_PROBES`]. The last block's fold has no tracing
+/// beside it to overlap, so a short last block leaves less of the pool idle; each block's fold
+/// (on one thread, about a third of its tracing time there) still fits beside the tracing of
+/// the next, half as long. Sponza at 1.9 m, 2 threads: the last block of 256 probes took about
+/// 9 ms to fold with the other thread idle.
+pub fn block_len(remaining: usize) -> usize {
+    (remaining / 2)
+        .clamp(TAIL_PROBES, BLOCK_PROBES)
+        .min(remaining)
+}
+
 /// Everything the bake keeps of its probes after tracing.
 pub struct Traced {
     /// Per probe: where it was traced from, and whether that is off its grid point.
@@ -83,8 +98,7 @@ pub fn trace_and_fold(
         folder,
     };
     let trace_block = |start: usize| -> Block {
-        let end = (start + BLOCK_PROBES).min(probe_count);
-        (start..end)
+        (start..start + block_len(probe_count - start))
             .into_par_iter()
             .map(|p| {
                 let traced = trace(p);
@@ -113,7 +127,7 @@ pub fn trace_and_fold(
             },
         );
         folded?;
-        next = (start + BLOCK_PROBES).min(probe_count);
+        next = start + block_len(probe_count - start);
         pending = traced;
     }
     out.rows.end()?;
@@ -192,4 +206,28 @@ fn fold_block(block: Block, out: &mut Traced, per_probe: &PerProbe) -> Result<()
         out.depth.extend_from_slice(&depth);
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Blocks cover every probe once, never grow, and end with one of at most
+    /// [`TAIL_PROBES`] (unless the bake has fewer probes in all).
+    #[test]
+    fn blocks_taper_to_a_short_last_one() {
+        for count in [1, 31, 32, 33, 100, 256, 257, 511, 512, 3024, 16758] {
+            let mut lens = Vec::new();
+            let mut start = 0;
+            while start < count {
+                let len = block_len(count - start);
+                assert!((1..=BLOCK_PROBES).contains(&len), "{count}: {len}");
+                lens.push(len);
+                start += len;
+            }
+            assert_eq!(start, count);
+            assert!(lens.windows(2).all(|w| w[0] >= w[1]), "{count}: {lens:?}");
+            assert!(*lens.last().unwrap() <= TAIL_PROBES, "{count}: {lens:?}");
+        }
+    }
 }
