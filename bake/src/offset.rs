@@ -78,12 +78,14 @@ pub fn surface_offset(
             };
             let tri = h.triangle as usize;
             let v = tracer.scene.triangles[tri];
-            let n = tracer.normals[tri];
+            let trace::TriangleShading {
+                normal: n,
+                material,
+            } = tracer.shading[tri];
             if n == Vec3::ZERO {
                 continue;
             }
-            let material =
-                &tracer.scene.materials[tracer.scene.materials_of_triangles[tri] as usize];
+            let material = &tracer.scene.materials[material as usize];
             let double_sided = material.double_sided || tracer.double_sided;
             // Signed distance of the probe from the triangle's plane (front positive).
             let side = (at - v[0]).dot(n);

@@ -80,7 +80,7 @@ pub(crate) fn bake_in_pool(
         weight,
         double_sided: settings.double_sided,
         srgb: texture::srgb_to_linear_table(),
-        normals: trace::triangle_normals(&scene.triangles),
+        shading: trace::triangle_shading(&scene),
     };
     progress.start("trace", positions.len() as u64);
     let is_inside = |r: &trace::ProbeRays| {
