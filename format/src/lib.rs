@@ -36,6 +36,7 @@ pub mod io;
 pub mod rig;
 mod sections;
 pub mod sh;
+mod snorm;
 pub mod summary;
 pub mod validate;
 
