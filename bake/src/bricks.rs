@@ -276,13 +276,15 @@ impl BrickFolder {
     /// not depend on each other, but the walk of the cells waited for each in turn. Sponza at
     /// 1.0 m (1.47 M surfels, 2 threads, release build, four alternating bakes, the noisiest
     /// left out): the surfels took 103-114 ms to write against 133-146 ms.
-    fn prefetch_brick(&self, next: Option<u32>, b: u32) {
+    fn prefetch_brick(&self, b: u32, next: Option<u32>) {
         if self.cell_size == 0.0 {
             return;
         }
         if let Some(n) = next {
-            for line in self.heads[n as usize].chunks(16) {
-                prefetch(&line[0]);
+            // 256 bytes, on five lines unless they start on one.
+            let heads = &self.heads[n as usize];
+            for i in [0, 16, 32, 48, 63] {
+                prefetch(&heads[i]);
             }
         }
         for &head in &self.heads[b as usize] {
@@ -337,7 +339,7 @@ impl BrickFolder {
             .zip(runs)
             .enumerate()
             .map(|(final_index, (&b, (first, run)))| {
-                self.prefetch_brick(order.get(final_index + 1).copied(), b);
+                self.prefetch_brick(b, order.get(final_index + 1).copied());
                 let flags = self.keys[b as usize].3;
                 let backface = flags & BRICK_BACKFACE != 0;
                 for (out, cl) in run.iter_mut().zip(self.clusters_of(b)) {

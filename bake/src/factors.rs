@@ -156,9 +156,10 @@ impl ProbeRows {
         }
     }
 
-    /// A probe's finished rows (see [`ProbeRows::push`]) of a lattice of `ray_count` rays, kept
-    /// as `precision` keeps them: sums as they are, u8 rows encoded into a vector with room for
-    /// them all.
+    /// A probe's finished rows (brick, rays, transfer sums, hit point sum: those of
+    /// [`probe_rows`]) of a lattice of `ray_count` rays, kept as `precision` keeps them: sums
+    /// as they are; u8 rows encoded ([`push_u8`]) into a vector with room for one factor a row
+    /// (more only when a row passes 255 rays and is split).
     fn of(rows: Vec<FactorRow>, precision: TransferPrecision, ray_count: u32) -> Self {
         match precision {
             TransferPrecision::U8 => {
@@ -172,19 +173,11 @@ impl ProbeRows {
             _ => ProbeRows::Sums(rows),
         }
     }
-
-    /// Adds a finished row (a row of [`probe_rows`]: brick, rays, transfer sums, hit point
-    /// sum) of a lattice of `ray_count` rays.
-    pub fn push(&mut self, row: FactorRow, ray_count: u32) {
-        match self {
-            ProbeRows::Sums(rows) => rows.push(row),
-            ProbeRows::U8(rows) => push_u8(rows, row, FactorU8::dc_per_ray(ray_count)),
-        }
-    }
 }
 
-/// Encodes a finished row ([`ProbeRows::push`]) into `rows`, split into rows of at most
-/// [`U8_MAX_RAYS`] rays, for a lattice whose rays carry `dc_per_ray` ([`FactorU8::dc_per_ray`]).
+/// Encodes a finished row ([`ProbeRows::of`]) into `rows`, split into rows of at most
+/// [`U8_MAX_RAYS`] rays, for a lattice whose rays carry `dc_per_ray` ([`FactorU8::dc_per_ray`]:
+/// worked out once per probe, an f64 division a row otherwise).
 fn push_u8(rows: &mut Vec<RowU8>, row: FactorRow, dc_per_ray: f32) {
     let (brick, rays, sh, sum) = row;
     let mean = Vec3::from(sum) / rays as f32;
@@ -421,8 +414,9 @@ fn place_tables<R: Pod + Sync + Send, T: bytemuck::Zeroable + Copy + Send + Sync
 /// Asks for the [`Placed`] entries of the provisional bricks `bricks` (one probe's rows) before
 /// any is read: a probe's bricks are scattered over the table, a cache miss each, and the
 /// loads that follow do not wait for one another once the lines are on their way. Sponza at
-/// 1.0 m (5.1 M factors, 2 threads, release build, twelve alternating bakes): the tables were
-/// encoded in 123-168 ms against 123-205 ms (medians 137 and 175 ms), ten of twelve faster.
+/// 1.0 m (5.1 M u8 factors, 2 threads, release build, twelve alternating bakes): the tables
+/// were encoded in 123-168 ms against 123-205 ms (medians 137 and 175 ms), ten of twelve
+/// faster. Rows of sums (f16 and f32 tables) read the same table the same way; not measured.
 fn prefetch_placed(bricks: impl Iterator<Item = usize>, placed: &[Placed]) {
     for b in bricks {
         if let Some(p) = placed.get(b) {
@@ -540,14 +534,15 @@ mod tests {
             .collect();
         let remap: Vec<u32> = (0..40).map(|i| (i * 7) % 40).collect();
         let probe = |p: usize, rows: usize, precision| {
-            let mut kept = ProbeRows::new(precision);
-            for r in 0..rows {
-                let brick = ((p * 13 + r * 7) % 40) as u32;
-                let rays = 1 + ((p + r) % 300) as u32;
-                let sh = std::array::from_fn(|k| (k as f32 - 3.0) * 0.002 * rays as f32);
-                kept.push((brick, rays, sh, [0.1 * rays as f32, 0.0, 0.3]), 4096);
-            }
-            kept
+            let rows = (0..rows)
+                .map(|r| {
+                    let brick = ((p * 13 + r * 7) % 40) as u32;
+                    let rays = 1 + ((p + r) % 300) as u32;
+                    let sh = std::array::from_fn(|k| (k as f32 - 3.0) * 0.002 * rays as f32);
+                    (brick, rays, sh, [0.1 * rays as f32, 0.0, 0.3])
+                })
+                .collect();
+            ProbeRows::of(rows, precision, 4096)
         };
         let from = [0, 1, 2, 3, 4, 5, 6, 7, 8].map(|p| match p {
             6 => Some(3),
@@ -666,10 +661,7 @@ mod tests {
         finish(&mut late, &placed);
         let late: Vec<FactorRow> = late.into_iter().flat_map(split_row_for_u8).collect();
         let late = Factors::build(&late, TransferPrecision::U8, n, size);
-        let mut early = ProbeRows::new(TransferPrecision::U8);
-        for row in rows {
-            early.push(row, n);
-        }
+        let early = ProbeRows::of(rows, TransferPrecision::U8, n);
         let mut rows = Rows::new(TransferPrecision::U8, usize::MAX);
         rows.push(&early).unwrap();
         let carried = Carried {

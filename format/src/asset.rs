@@ -314,7 +314,8 @@ impl FactorU8 {
 
     /// [`FactorU8::transfer`] with the lattice's [`FactorU8::dc_per_ray`] worked out once for
     /// all of a probe's rows (an f64 division a row otherwise). The eight terms are quantised
-    /// together ([`crate::snorm`]); one at a time, the baker spent about 50 ns a row here.
+    /// together (SSE2, in the crate's `snorm` module); one at a time, the baker spent about
+    /// 50 ns a row here.
     #[inline]
     pub fn transfer_with(rays: u32, sh: [f32; 8], dc_per_ray: f32) -> FactorU8 {
         let dc = rays as f32 * dc_per_ray;
@@ -650,6 +651,30 @@ pub fn f16_to_f32(h: u16) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The factor's bytes as the loops before the quantiser took several terms at a time put
+    /// them: term k of the transfer in byte 3 + k, offset axis a in byte a.
+    #[test]
+    fn transfer_and_offset_bytes_keep_their_places() {
+        let q = |v: f32| crate::snorm::snorm8_div4([v; 4], 1.0)[0];
+        for (rays, n) in [(1, 512), (37, 512), (255, 4096)] {
+            let sh = std::array::from_fn(|k| (k as f32 - 3.5) * 0.01 * rays as f32);
+            let dc = rays as f32 * FactorU8::dc_per_ray(n);
+            let mut packed = [0u32; 3];
+            for k in 0..8 {
+                let b = 3 + k;
+                packed[b / 4] |= q(sh[k] / (U8_SH_RANGE * dc)) << (8 * (b % 4));
+            }
+            let offset = [0.3, -0.7, 0.05];
+            let scale = 0.8;
+            for (a, &o) in offset.iter().enumerate() {
+                packed[0] |= q(o / scale) << (8 * a);
+            }
+            let got = FactorU8::transfer(rays, sh, n).place(99, offset, scale);
+            assert_eq!(got.packed, packed, "{rays} rays of {n}");
+            assert_eq!(got.brick_rays, 99 << 8 | rays);
+        }
+    }
 
     #[test]
     fn half_round_trip() {
