@@ -181,18 +181,6 @@ impl ProbeRows {
 fn push_u8(rows: &mut Vec<RowU8>, row: FactorRow, dc_per_ray: f32) {
     let (brick, rays, sh, sum) = row;
     let mean = Vec3::from(sum) / rays as f32;
-    if rays <= U8_MAX_RAYS {
-        // Nearly every row: the split would give it back whole, its transfer times a share of
-        // exactly 1, after a division the encoding waited for (2.3% of the bake's samples at
-        // 1.0 m sat on it; rows made in 291-329 ms of CPU time against 286-343 ms for the first
-        // 16,000 probes, medians 307 and 326 ms, five alternating release bakes).
-        rows.push(RowU8::new(
-            brick,
-            FactorU8::transfer_with(rays, sh, dc_per_ray),
-            mean,
-        ));
-        return;
-    }
     for (_, part, sh, _) in split_row_for_u8((brick, rays, sh, mean.to_array())) {
         let factor = FactorU8::transfer_with(part, sh, dc_per_ray);
         rows.push(RowU8::new(brick, factor, mean));

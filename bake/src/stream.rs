@@ -100,8 +100,8 @@ pub fn trace_and_fold(
         depth: Vec::with_capacity(probe_count * DEPTH_WORDS),
         folder,
     };
-    let trace_block = |start: usize| -> Block {
-        (start..start + block_len(probe_count - start))
+    let trace_block = |probes: std::ops::Range<usize>| -> Block {
+        probes
             .into_par_iter()
             .map(|p| {
                 let traced = trace(p);
@@ -113,9 +113,9 @@ pub fn trace_and_fold(
     let mut pending: Option<Block> = None;
     let mut next = 0;
     while next < probe_count || pending.is_some() {
-        let start = next;
+        let (start, end) = (next, next + block_len(probe_count - next));
         let (traced, folded) = rayon::join(
-            || (start < probe_count).then(|| trace_block(start)),
+            || (start < end).then(|| trace_block(start..end)),
             || match pending.take() {
                 Some(block) => {
                     let per_probe = PerProbe {
@@ -130,7 +130,7 @@ pub fn trace_and_fold(
             },
         );
         folded?;
-        next = start + block_len(probe_count - start);
+        next = end;
         pending = traced;
     }
     out.rows.end()?;
