@@ -443,6 +443,7 @@ impl Factors {
     }
 
     /// Brick index and ray count of factor `f`.
+    #[inline]
     pub fn brick_and_rays(&self, f: usize) -> (u32, u32) {
         match self {
             Factors::F32(t) => (t[f].brick, t[f].rays),
