@@ -15,7 +15,7 @@ pub const MAX_BVH_STACK: usize = 64;
 /// Fails when a value of `v` is not finite. Always inlined, its error built out of line: the
 /// loops over the asset's millions of floats called it once per field, a third of the
 /// validation's time ([`validate`]). With [`Factors::brick_and_rays`] inlined too, Sponza's
-/// assets at 1.9 m and 1.0 m (59 and 229 MB), best of 15 validations, three alternating runs:
+/// assets at 1.9 m and 1.0 m (56 and 219 MiB), best of 15 validations, three alternating runs:
 /// 9.6-12.7 ms against 17.7-32.4 ms, and 34.5-47.5 ms against 61-101 ms.
 #[inline(always)]
 fn finite(section: &'static str, index: usize, what: &str, v: &[f32]) -> Result<(), FormatError> {
