@@ -77,6 +77,11 @@ enum BenchKind {
         rays: u32,
         #[arg(long)]
         double_sided: bool,
+        /// Bakes, each followed by bare obvhs tracing of its rays, in turn: the first run's
+        /// report in full, then a row of every run's ratio (one run's swings by 10-20% on a
+        /// shared machine); the bakes after the first are `prt bake` processes of their own.
+        #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=100))]
+        runs: u32,
     },
     /// Sweep rays, brick size, factor encoding and precision against a reference SH file:
     /// error against bake time, with the Pareto front (and earlier sweeps' with --previous).
@@ -506,6 +511,7 @@ fn run(cli: Cli) -> Result<()> {
                 bounds,
                 rays,
                 double_sided,
+                runs,
             } => {
                 let settings = BakeSettings {
                     rays,
@@ -514,7 +520,7 @@ fn run(cli: Cli) -> Result<()> {
                     double_sided,
                     ..BakeSettings::default()
                 };
-                println!("{}", bench_bake::bake(&scene, &settings)?);
+                println!("{}", bench_bake::bake(&scene, &settings, runs as usize)?);
                 Ok(())
             }
             BenchKind::Accuracy(args) => bench_accuracy::run(args),
