@@ -62,6 +62,9 @@ struct Bare {
     /// The bake's packet tracer from the asset's probe positions, the bake's order and lattice
     /// order.
     packets: [(f64, usize); 2],
+    /// The obvhs tracer (`None` as above) and the rays, for [`repeated`] runs.
+    tracer: Option<ObvhsTracer>,
+    rays: Rays,
 }
 
 /// Times bare tracing of `asset`'s probes and lattice (`rays` per probe) through obvhs and
@@ -82,14 +85,13 @@ fn bare(scene: &Path, asset: &prt_format::Asset, rays: u32) -> Result<Bare> {
         ref dirs,
         ref probes,
         ref lattice,
-        ..
     } = rays_of;
     let grid = prt_bake::probes::positions(&asset.header.grid);
     let coherent = prt_bake::trace::coherent_order(dirs);
-    let obvhs = std::panic::catch_unwind(|| ObvhsTracer::build(&loaded.triangles, scale)).ok();
-    let obvhs = obvhs.map(|o| {
+    let tracer = std::panic::catch_unwind(|| ObvhsTracer::build(&loaded.triangles, scale)).ok();
+    let obvhs = tracer.as_ref().map(|o| {
         let run = [(probes, lattice), (probes, &coherent), (&grid, &coherent)];
-        run.map(|(positions, order)| rays_of.obvhs(&o, positions, order))
+        run.map(|(positions, order)| rays_of.obvhs(o, positions, order))
     });
     // The bake's BVH: built with the preset the bake chose for these rays.
     let traced = probes.len() as u64 * u64::from(rays);
@@ -107,10 +109,15 @@ fn bare(scene: &Path, asset: &prt_format::Asset, rays: u32) -> Result<Bare> {
                 .sum()
         })
     });
-    Ok(Bare { obvhs, packets })
+    Ok(Bare {
+        obvhs,
+        packets,
+        tracer,
+        rays: rays_of,
+    })
 }
 
-/// A bake's rays: its probes' positions and its lattice, in the tracing frame's `scale`.
+/// A bake's rays: its probes' positions and its lattice, with the tracing frame's `scale`.
 struct Rays {
     scale: f32,
     dirs: Vec<Vec3>,
@@ -150,31 +157,40 @@ fn timed(positions: &[Vec3], per_probe: &(dyn Fn(Vec3) -> usize + Sync)) -> (f64
     (t.elapsed().as_secs_f64(), hits)
 }
 
-/// A report row: the ratio of `runs` end-to-end bakes to bare obvhs tracing of their rays in
-/// lattice order, taken in turn, the first pair `first` (bake seconds, obvhs seconds). The
-/// bakes after the first are `prt bake` processes of their own, timed from their start to
-/// their exit: a process's first bake pays for every page it touches (2.1-2.5 us a page
-/// fault here), and later bakes in the same process reuse what the allocator kept (Sponza at
-/// 1.9 m: 0.47-0.50 s against 0.54 s for the first, 14-21k page faults against 44k), which is
-/// not the issue's "process start to file written". On a shared machine one run's ratio swings
-/// by 10-20%; pairs taken in turn see the same conditions.
+/// A report row: the throughput ratio of `runs` end-to-end bakes to bare obvhs tracing of
+/// their rays in lattice order (`bare`'s tracer), taken in turn, the first pair `first` (bake
+/// seconds, obvhs seconds), and the median. The bakes after the first are `prt bake` processes
+/// of their own, timed from their start to their exit: a process's first bake pays for every
+/// page it touches (2.1-2.5 us a page fault here), and later bakes in the same process reuse
+/// what the allocator kept (Sponza at 1.9 m: 0.47-0.50 s against 0.54 s for the first, 14-21k
+/// page faults against 44k), which is not the issue's "process start to file written". On a
+/// shared machine one run's ratio swings by 10-20%; pairs taken in turn see the same
+/// conditions. A run that fails ends the row with its error; the rest of the report stands.
 fn repeated(
     scene: &Path,
     settings: &BakeSettings,
-    asset: &prt_format::Asset,
+    bare: &Bare,
     runs: usize,
     first: (f64, f64),
-) -> Result<String> {
-    let loaded = prt_bake::scene::load(scene)?;
-    let rays = Rays::of(asset, settings.rays);
-    let Ok(o) = std::panic::catch_unwind(|| ObvhsTracer::build(&loaded.triangles, rays.scale))
-    else {
-        return Ok("| repeated runs | n/a: obvhs panicked building its BVH |\n".into());
+) -> String {
+    let label = format!(
+        "end-to-end throughput / bare obvhs throughput, lattice order, {runs} runs in turn \
+         (the first in this process, then `prt bake` processes)"
+    );
+    let Some(o) = &bare.tracer else {
+        return format!("| {label} | n/a: obvhs panicked building its BVH |\n");
     };
+    let rays = &bare.rays;
     let mut pairs = vec![first];
-    for _ in 1..runs {
-        let bake_s = bake_process(scene, settings)?;
-        pairs.push((bake_s, rays.obvhs(&o, &rays.probes, &rays.lattice).0));
+    let mut failed = String::new();
+    for run in 1..runs {
+        match bake_process(scene, settings) {
+            Ok(bake_s) => pairs.push((bake_s, rays.obvhs(o, &rays.probes, &rays.lattice).0)),
+            Err(e) => {
+                failed = format!("; run {} failed: {e:#}", run + 1);
+                break;
+            }
+        }
     }
     let mut ratios: Vec<f64> = pairs.iter().map(|(b, o)| 100.0 * o / b).collect();
     let listed = ratios
@@ -182,20 +198,19 @@ fn repeated(
         .map(|r| format!("{r:.0}%"))
         .collect::<Vec<_>>();
     ratios.sort_by(f64::total_cmp);
+    let n = ratios.len();
+    let median = 0.5 * (ratios[(n - 1) / 2] + ratios[n / 2]);
     let range = |f: fn(&(f64, f64)) -> f64| {
         let v = pairs.iter().map(f);
         let (lo, hi) = v.fold((f64::INFINITY, 0.0f64), |(l, h), x| (l.min(x), h.max(x)));
         format!("{lo:.3}-{hi:.3} s")
     };
-    Ok(format!(
-        "| end-to-end throughput / bare obvhs throughput, lattice order, {runs} runs in turn \
-         (the first in this process, then `prt bake` processes) | {} (median {:.0}%); bakes {}, \
-         obvhs {} |\n",
+    format!(
+        "| {label} | {} (median {median:.0}%); bakes {}, obvhs {}{failed} |\n",
         listed.join(", "),
-        ratios[ratios.len() / 2],
         range(|p| p.0),
         range(|p| p.1),
-    ))
+    )
 }
 
 /// Seconds from starting a `prt bake` process with `settings` (this executable, the options
@@ -236,26 +251,17 @@ fn bake_process(scene: &Path, settings: &BakeSettings) -> Result<f64> {
     Ok(bake_s)
 }
 
-/// One bake to a temporary file, synced, as `prt bake` does (the issue's "process start to file
-/// written"): seconds, and the asset and report.
-fn bake_once(
-    scene: &Path,
-    settings: &BakeSettings,
-) -> Result<(f64, (prt_format::Asset, prt_bake::BakeReport))> {
-    let out = std::env::temp_dir().join(format!("prt-bench-bake-{}.prt", std::process::id()));
-    let start = Instant::now();
-    let baked = prt_bake::bake_to_file(scene, &out, settings, &NoProgress);
-    let bake_s = start.elapsed().as_secs_f64();
-    std::fs::remove_file(&out).ok();
-    Ok((bake_s, baked?))
-}
-
 /// Bake throughput against bare obvhs tracing of the same rays, and asset size per probe.
 /// With `runs` above 1, more bakes and obvhs runs in turn after the first ([`repeated`]).
 pub fn bake(scene: &Path, settings: &BakeSettings, runs: usize) -> Result<String> {
-    let before = usage();
-    let (bake_s, (asset, report)) = bake_once(scene, settings)?;
+    // To a file, synced, as `prt bake` does: the issue's "process start to file written".
+    let out = std::env::temp_dir().join(format!("prt-bench-bake-{}.prt", std::process::id()));
+    let (start, before) = (Instant::now(), usage());
+    let baked = prt_bake::bake_to_file(scene, &out, settings, &NoProgress);
+    let bake_s = start.elapsed().as_secs_f64();
     let cpu = cpu_since(before);
+    std::fs::remove_file(&out).ok();
+    let (asset, report) = baked?;
     let peak = crate::peak_rss_kib().map_or("unknown".into(), |kb| {
         format!("{:.0} MiB", kb as f64 / 1024.0)
     });
@@ -308,9 +314,6 @@ pub fn bake(scene: &Path, settings: &BakeSettings, runs: usize) -> Result<String
         rays / trace_s / 1e6
     )?;
     baseline_rows(&mut md, &bare, rays, bake_s)?;
-    if let (true, Some([(obvhs_s, _), ..])) = (runs > 1, bare.obvhs) {
-        md.push_str(&repeated(scene, settings, &asset, runs, (bake_s, obvhs_s))?);
-    }
     writeln!(
         md,
         "| stage times | {} |",
@@ -322,6 +325,10 @@ pub fn bake(scene: &Path, settings: &BakeSettings, runs: usize) -> Result<String
             .join(", ")
     )?;
     sizes(&mut md, &summary)?;
+    if runs > 1 {
+        let obvhs_s = bare.obvhs.map_or(f64::NAN, |[(s, _), ..]| s);
+        md.push_str(&repeated(scene, settings, &bare, runs, (bake_s, obvhs_s)));
+    }
     Ok(md)
 }
 

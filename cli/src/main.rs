@@ -78,8 +78,9 @@ enum BenchKind {
         #[arg(long)]
         double_sided: bool,
         /// Bakes, each followed by bare obvhs tracing of its rays, in turn: the first run's
-        /// report in full, then a row of every run's ratio (one run's swings by 10-20% on a
-        /// shared machine); the bakes after the first are `prt bake` processes of their own.
+        /// report in full, then a last row of every run's ratio and their median (one run's
+        /// swings by 10-20% on a shared machine); the bakes after the first are `prt bake`
+        /// processes of their own.
         #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=100))]
         runs: u32,
     },
@@ -182,8 +183,8 @@ enum Command {
         /// neighbour's data (dilation).
         #[arg(long)]
         no_dilation: bool,
-        /// Keep probes that lie on a surface where they are (by default they move a tenth of a
-        /// spacing off it).
+        /// Keep probes that lie on a surface where they are (by default they move a twentieth
+        /// of a spacing off it).
         #[arg(long)]
         no_surface_offset: bool,
         /// Storage precision of factor transfers.
