@@ -312,10 +312,17 @@ impl BrickFolder {
     /// final number of every provisional brick.
     pub fn finish(self) -> (Bricked, Vec<u32>) {
         let unmerged = self.cell_size == 0.0;
-        let mut order: Vec<u32> = (0..self.keys.len() as u32).collect();
-        if !unmerged {
-            order.par_sort_unstable_by_key(|&b| self.keys[b as usize]);
-        }
+        // Keys sorted beside their bricks, not bricks through their keys: each comparison read
+        // two keys scattered over the table (Sponza at 1.0 m, 134k bricks: about 20 ms of the
+        // bricks stage). Keys are distinct, so any sort gives one order.
+        let order: Vec<u32> = match unmerged {
+            true => (0..self.keys.len() as u32).collect(),
+            false => {
+                let mut keyed: Vec<(Key, u32)> = self.keys.iter().copied().zip(0..).collect();
+                keyed.par_sort_unstable();
+                keyed.into_iter().map(|(_, b)| b).collect()
+            }
+        };
         let mut remap = vec![0u32; order.len()];
         for (final_index, &b) in order.iter().enumerate() {
             remap[b as usize] = final_index as u32;

@@ -516,8 +516,14 @@ fn open(bvh2: &Bvh2, below: &[u32], node: usize) -> ([usize; LANES], usize) {
     // at most TRI_LANES triangles). A later kid replaces the widest so far unless that one's
     // area is at least its own: ties go to the first, and a kid whose area is NaN (a box with
     // an infinite side and a zero one) is opened too, so that every inner node is opened and
-    // the collapse ends.
-    let area = |i: usize| inner(bvh2, below, i).then(|| bvh2.nodes[i].aabb().half_area());
+    // the collapse ends. An inner kid is opened here or becomes a node of the walk: its children
+    // are asked for as soon as it is seen ([`crate::bvh::prefetch_children`]).
+    let area = |i: usize| {
+        inner(bvh2, below, i).then(|| {
+            crate::bvh::prefetch_children(bvh2, i);
+            bvh2.nodes[i].aabb().half_area()
+        })
+    };
     let (mut kids, mut areas) = ([node; LANES], [area(node); LANES]);
     let mut len = 1;
     while len < LANES {
