@@ -39,11 +39,12 @@ pub fn winding_warning(w: &Winding) -> String {
 }
 
 /// The warning for a grid whose probes are mostly inside geometry (`valid`: per probe), with the
-/// likely reason; `None` when at least half are valid.
+/// likely reason; `None` when at least half are valid. The scene's winding is asked of
+/// `winding` only for the warning's text.
 pub fn inside_warning(
     valid: &[bool],
     settings: &crate::BakeSettings,
-    winding: &Winding,
+    winding: impl FnOnce() -> Winding,
     winding_hint: bool,
 ) -> Option<String> {
     let inside = valid.iter().filter(|v| !**v).count();
@@ -53,6 +54,7 @@ pub fn inside_warning(
     let reason = if winding_hint {
         "the winding is inconsistent (warned above): bake with --double-sided".to_string()
     } else {
+        let winding = winding();
         format!(
             "the winding is consistent ({} of {} shared edges inconsistent), so the back faces \
              are the model's own: check the bounds, and bake with --double-sided if its surfaces \
@@ -168,6 +170,29 @@ const WINDING_SEED: u64 = 0x243f_6a88_85a3_08d3;
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The winding is counted for the warning only when it is given: never when most probes
+    /// are valid.
+    #[test]
+    fn the_inside_warning_counts_the_winding_only_when_it_warns() {
+        let settings = crate::BakeSettings::default();
+        let counted = || Winding {
+            shared_edges: 12,
+            inconsistent_edges: 0,
+        };
+        let unused = || -> Winding { panic!("winding counted for no warning") };
+        assert_eq!(
+            inside_warning(&[true, true, false], &settings, unused, false),
+            None
+        );
+        let w = inside_warning(&[true, false, false], &settings, counted, false).unwrap();
+        assert!(
+            w.starts_with("2 of 3 probes") && w.contains("(0 of 12 shared edges"),
+            "{w}"
+        );
+        let hinted = inside_warning(&[false; 3], &settings, unused, true).unwrap();
+        assert!(hinted.contains("bake with --double-sided"), "{hinted}");
+    }
 
     #[test]
     fn a_flipped_triangle_is_found() {
