@@ -313,8 +313,9 @@ impl BrickFolder {
     pub fn finish(self) -> (Bricked, Vec<u32>) {
         let unmerged = self.cell_size == 0.0;
         // Keys sorted beside their bricks, not bricks through their keys: each comparison read
-        // two keys scattered over the table (Sponza at 1.0 m, 134k bricks: about 20 ms of the
-        // bricks stage). Keys are distinct, so any sort gives one order.
+        // two keys scattered over the table (Sponza at 1.0 m, 134k bricks, release build: the
+        // bricks stage took 0.250-0.290 s against 0.245-0.310 s, medians about 0.27 s against
+        // 0.30 s, eight alternating bakes). Keys are distinct, so any sort gives one order.
         let order: Vec<u32> = match unmerged {
             true => (0..self.keys.len() as u32).collect(),
             false => {

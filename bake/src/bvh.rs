@@ -110,9 +110,11 @@ impl SceneBvh {
     /// reinsertion take every thread; the collapse (the triangles put in leaf order by one walk,
     /// [`LeafOrder`], then the two trees walked out of it side by side) is serial work that
     /// leaves room on the pool.
-    /// The bake runs its winding check there: beside the PLOC build instead, the BVH stage took
+    /// A single-sided bake runs its winding check there: beside the PLOC build instead, the BVH
+    /// stage took
     /// 0.113 s against 0.106 s (Sponza at 1.9 m with `medium_build`, 2 threads, least of 8
-    /// alternating bakes).
+    /// alternating bakes); with `fast_build`, least of 20 builds in one process, 65.6-70.8 ms
+    /// against 54.7-57.8 ms.
     pub fn build_beside<R: Send>(
         triangles: &[[Vec3; 3]],
         scale: f32,
@@ -252,8 +254,8 @@ pub const LEAF_TRIANGLES: u32 = 4;
 /// a walk over it is about a cache miss a node. Counting each subtree's triangles in one walk
 /// and then walking every leaf's subtree again in both collapses, Sponza's BVH stage at 1.9 m
 /// took 0.154-0.201 s on one thread against 0.141-0.188 s now (eight alternating bakes each,
-/// release build; on two threads the collapse shares the time with the winding check, and the
-/// stage took about as long either way).
+/// release build; on two threads the collapse shares the time with the winding check of a
+/// single-sided bake, and the stage took about as long either way).
 pub(crate) struct LeafOrder {
     /// Per node reachable from the root: the triangles under it.
     pub below: Vec<u32>,
@@ -295,8 +297,8 @@ impl LeafOrder {
                 }
                 stack.push((i, true));
                 // Right pushed first, so the left subtree's triangles come first.
-                stack.push((n.first_index as usize + 1, false));
-                stack.push((n.first_index as usize, false));
+                stack.push((l + 1, false));
+                stack.push((l, false));
             }
         }
         order
@@ -313,17 +315,30 @@ impl LeafOrder {
 /// breadth-first walk says which nodes come next, so their cache misses can overlap.
 const PREFETCH_AHEAD: usize = 8;
 
-/// Asks for inner node `i`'s two children (48 bytes each: the pair spans two or three cache
-/// lines). The reinsertion optimiser leaves the node array in no order a walk could stream, so
+/// Asks for inner node `i`'s two children: every cache line of the pair (96 bytes from a
+/// 16-byte boundary: two or three lines, so its first, 64th and last bytes). The reinsertion
+/// optimiser leaves the node array in no order a walk could stream, so
 /// each walk over the binary tree ([`LeafOrder::of`], [`flatten`], the wide BVH's collapse)
 /// waited for a miss a node. With the children of the nodes in sight asked for ahead, Sponza's
-/// collapse (all three, the winding check beside them, 2 threads) took 31.9-35.9 ms against
-/// 36.4-39.7 ms (least of 15 builds in one process, three alternating runs each).
+/// collapse (all three, with the winding check of a single-sided bake beside them, 2 threads)
+/// took 31.9-35.9 ms against 36.4-39.7 ms asking for each child's first line only (least of
+/// 15 builds in one process, three alternating runs each); asking for every line, the collapse
+/// alone took 39.9-49.6 ms against 46.2-53.7 ms for the first lines (least of 20, four
+/// alternating runs, a slower sitting).
 pub(crate) fn prefetch_children(bvh2: &Bvh2, i: usize) {
     let first = bvh2.nodes[i].first_index as usize;
     if let Some(pair) = bvh2.nodes.get(first..first + 2) {
-        crate::bricks::prefetch(&pair[0]);
-        crate::bricks::prefetch(&pair[1]);
+        prefetch_lines(bytemuck::cast_slice(pair));
+    }
+}
+
+/// Asks for every cache line of `bytes` (at most 128 of them: its first, 64th and last bytes).
+fn prefetch_lines(bytes: &[u8]) {
+    debug_assert!(bytes.len() <= 128);
+    for at in [0, 64, bytes.len().saturating_sub(1)] {
+        if let Some(b) = bytes.get(at) {
+            crate::bricks::prefetch(b);
+        }
     }
 }
 
@@ -337,7 +352,7 @@ fn flatten(bvh2: &Bvh2, order: &LeafOrder, triangles: &[[Vec3; 3]], unscale: f32
     let mut queue = VecDeque::from([0usize]);
     while let Some(src) = queue.pop_front() {
         if let Some(&ahead) = queue.get(PREFETCH_AHEAD) {
-            crate::bricks::prefetch(&bvh2.nodes[ahead]);
+            prefetch_lines(bytemuck::bytes_of(&bvh2.nodes[ahead]));
         }
         let n = &bvh2.nodes[src];
         let aabb = n.aabb();

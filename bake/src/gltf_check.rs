@@ -229,6 +229,11 @@ fn check_accessors(path: &Path, root: &json::Root, budget: u64) -> Result<(), Ba
         let e = |m: String| err(path, format!("accessor {i}: {m}"));
         let elem = element_size(a);
         let count = a.count.0;
+        // The glTF reader computes `count - 1` elements past the first (a panic at 0 where
+        // overflow is checked).
+        if count == 0 {
+            return Err(e("count 0 (glTF 2.0: at least 1)".into()));
+        }
         match a.buffer_view {
             Some(view) => {
                 let Some(v) = root.buffer_views.get(view.value()) else {
@@ -242,12 +247,9 @@ fn check_accessors(path: &Path, root: &json::Root, budget: u64) -> Result<(), Ba
                     )));
                 }
                 let offset = a.byte_offset.map_or(0, |o| o.0);
-                let need = match count {
-                    0 => 0,
-                    n => offset
-                        .saturating_add(stride.saturating_mul(n - 1))
-                        .saturating_add(elem),
-                };
+                let need = offset
+                    .saturating_add(stride.saturating_mul(count - 1))
+                    .saturating_add(elem);
                 if need > v.byte_length.0 {
                     return Err(e(format!(
                         "{count} elements of {elem} bytes (stride {stride}, offset {offset}) need {need} bytes; bufferView {} has {}",

@@ -153,8 +153,8 @@ pub(crate) fn bake_in_pool(
     lap(&mut report, "trace", Some("bricks"));
 
     let valid: Vec<bool> = traced.iter().map(|r| !is_inside(r)).collect();
-    let winding = || winding.unwrap_or_else(|| diagnostics::winding(&scene.triangles));
-    if let Some(w) = diagnostics::inside_warning(&valid, settings, winding, winding_hint) {
+    let count_winding = || winding.unwrap_or_else(|| diagnostics::winding(&scene.triangles));
+    if let Some(w) = diagnostics::inside_warning(&valid, settings, count_winding, winding_hint) {
         report.warnings.push(w);
     }
     let sources = if settings.dilate {

@@ -480,12 +480,13 @@ impl Loader<'_> {
         Ok(())
     }
 
-    /// Appends a primitive's triangles (vertex indices `tris` into `positions`, their order
-    /// reversed where `flip`) with their material and, when given, their vertex attributes,
+    /// Appends a primitive's triangles (vertex indices `tris` into `positions`, corners 1 and 2
+    /// swapped where `flip`) with their material and, when given, their vertex attributes,
     /// skipping degenerate ones. The corners are gathered in parallel straight into one vector
     /// (an indexed collect), which becomes the scene's when it is the first primitive: pushed
-    /// one by one, Sponza's 187k triangles took 6-9 ms of the load stage, most of it page
-    /// faults of the growing vectors, with the other threads idle.
+    /// one by one, Sponza's 187k triangles (one primitive, no attributes kept) took 6-9 ms of
+    /// the load stage, most of it page faults of the growing vectors, with the other threads
+    /// idle.
     fn add_triangles(
         &mut self,
         tris: &[[u32; 3]],
@@ -502,6 +503,7 @@ impl Loader<'_> {
             .map(|&t| order(t).map(|i| positions[i as usize]))
             .collect();
         if let Some((uvs, colors)) = attributes {
+            self.scene.attributes.reserve(corners.len());
             let white = TriangleAttributes::WHITE;
             let kept = tris.iter().zip(&corners).filter(|(_, v)| !degenerate(v));
             self.scene.attributes.extend(kept.map(|(&t, _)| {
@@ -534,9 +536,10 @@ impl Loader<'_> {
 /// The elements of a plain accessor (no sparse values, a buffer view), `size` bytes each, read
 /// as the glTF reader reads them (gltf 1.4 `accessor::util::Iter`: element `i` at `i * stride`
 /// of the view, from the accessor's offset), without its per-element dispatch: Sponza's 562k
-/// indices took 5-7 ms through the reader's converting iterator. `None` for any other accessor,
-/// or one the reader would refuse (past its view or buffer, a stride below the element): the
-/// caller then asks the reader, for its values or its refusal.
+/// indices took 5-7 ms through the reader's converting iterator. `None` for any other accessor
+/// and for one that runs past its view or buffer: the caller then asks the reader, for its
+/// values or its refusal. (`gltf_check` has refused a stride below the element and a count of
+/// 0 before.)
 fn plain_elements<'s>(
     a: &gltf::Accessor,
     buffers: &'s [gltf::buffer::Data],
@@ -577,21 +580,17 @@ fn le_f32s<const N: usize>(bytes: &[u8]) -> [f32; N] {
 /// A plain index accessor's indices ([`plain_elements`]), `None` as there.
 fn plain_indices(a: &gltf::Accessor, buffers: &[gltf::buffer::Data]) -> Option<Vec<u32>> {
     use gltf::accessor::DataType;
-    let size = match a.data_type() {
-        DataType::U8 => 1,
-        DataType::U16 => 2,
-        DataType::U32 => 4,
-        _ => return None,
-    };
-    let elements = plain_elements(a, buffers, size)?;
-    Some(match size {
-        1 => elements.map(|e| u32::from(e[0])).collect(),
-        2 => elements
+    Some(match a.data_type() {
+        DataType::U8 => plain_elements(a, buffers, 1)?
+            .map(|e| u32::from(e[0]))
+            .collect(),
+        DataType::U16 => plain_elements(a, buffers, 2)?
             .map(|e| u32::from(u16::from_le_bytes([e[0], e[1]])))
             .collect(),
-        _ => elements
+        DataType::U32 => plain_elements(a, buffers, 4)?
             .map(|e| u32::from_le_bytes([e[0], e[1], e[2], e[3]]))
             .collect(),
+        _ => return None,
     })
 }
 
@@ -633,8 +632,8 @@ where
 /// every triangle keeps the orientation of the first; fans share vertex 0. A list is the indices
 /// themselves, not a copy (2.2 MB at Sponza).
 fn triangulate(mode: Mode, ix: &[u32]) -> Cow<'_, [[u32; 3]]> {
-    Cow::Owned(match mode {
-        Mode::Triangles => return Cow::Borrowed(bytemuck::cast_slice(&ix[..ix.len() / 3 * 3])),
+    match mode {
+        Mode::Triangles => Cow::Borrowed(bytemuck::cast_slice(&ix[..ix.len() / 3 * 3])),
         Mode::TriangleStrip => (0..ix.len().saturating_sub(2))
             .map(|i| {
                 if i % 2 == 0 {
@@ -647,8 +646,8 @@ fn triangulate(mode: Mode, ix: &[u32]) -> Cow<'_, [[u32; 3]]> {
         Mode::TriangleFan => (1..ix.len().saturating_sub(1))
             .map(|i| [ix[i], ix[i + 1], ix[0]])
             .collect(),
-        _ => Vec::new(),
-    })
+        _ => Cow::Borrowed(&[]),
+    }
 }
 
 /// The scene file's name without directories, for the asset header.

@@ -52,6 +52,7 @@ refused! {
     indices_signed: "indices_signed.gltf" => ["indices", "I16"];
     indices_float: "indices_float.gltf" => ["accessor 3", "bufferView 3"];
     byte_stride_below_element_size: "stride_too_small.gltf" => ["accessor 0", "byteStride 4"];
+    accessor_without_elements: "count_zero.gltf" => ["accessor 0", "count 0"];
     attribute_accessor_out_of_range: "attribute_index_out_of_range.gltf" => ["accessor 99", "does not exist"];
     image_view_without_mime_type: "image_view_without_mime.gltf" => ["image 0", "mimeType"];
     // Allocations far beyond the file's size, and instancing that never ends.
