@@ -111,10 +111,9 @@ impl SceneBvh {
     /// [`LeafOrder`], then the two trees walked out of it side by side) is serial work that
     /// leaves room on the pool.
     /// A single-sided bake runs its winding check there: beside the PLOC build instead, the BVH
-    /// stage took
-    /// 0.113 s against 0.106 s (Sponza at 1.9 m with `medium_build`, 2 threads, least of 8
-    /// alternating bakes); with `fast_build`, least of 20 builds in one process, 65.6-70.8 ms
-    /// against 54.7-57.8 ms.
+    /// stage took 0.113 s against 0.106 s (Sponza at 1.9 m with `medium_build`, 2 threads,
+    /// least of 8 alternating bakes); with `fast_build`, least of 20 builds in one process,
+    /// 65.6-70.8 ms against 54.7-57.8 ms.
     pub fn build_beside<R: Send>(
         triangles: &[[Vec3; 3]],
         scale: f32,

@@ -545,7 +545,7 @@ fn plain_elements<'s>(
     buffers: &'s [gltf::buffer::Data],
     size: usize,
 ) -> Option<impl ExactSizeIterator<Item = &'s [u8]>> {
-    if a.sparse().is_some() || a.count() == 0 || a.size() != size {
+    if a.sparse().is_some() || a.size() != size {
         return None;
     }
     let view = a.view()?;
@@ -558,7 +558,7 @@ fn plain_elements<'s>(
         .0
         .get(view.offset()..view.offset().checked_add(view.length())?)?;
     let end = stride
-        .checked_mul(a.count() - 1)?
+        .checked_mul(a.count().checked_sub(1)?)?
         .checked_add(size)?
         .checked_add(a.offset())?;
     let bytes = view_bytes.get(a.offset()..end)?;

@@ -1,7 +1,7 @@
 //! `prt bench bake`: bake throughput against bare obvhs tracing of the same rays.
 
 use std::fmt::Write as _;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result};
@@ -213,11 +213,17 @@ fn repeated(
     )
 }
 
+/// Where the bench's bakes write their asset (one at a time, removed after each): a file in the
+/// temporary directory named after this process.
+fn output_path() -> PathBuf {
+    std::env::temp_dir().join(format!("prt-bench-bake-{}.prt", std::process::id()))
+}
+
 /// Seconds from starting a `prt bake` process with `settings` (this executable, the options
 /// the bench takes, the rest at their defaults) to its exit, the asset written to a temporary
 /// file and removed.
 fn bake_process(scene: &Path, settings: &BakeSettings) -> Result<f64> {
-    let out = std::env::temp_dir().join(format!("prt-bench-bake-{}.prt", std::process::id()));
+    let out = output_path();
     let mut args: Vec<std::ffi::OsString> = vec!["bake".into(), scene.into(), "-o".into()];
     args.push(out.clone().into());
     args.extend(["--rays".into(), settings.rays.to_string().into()]);
@@ -255,7 +261,7 @@ fn bake_process(scene: &Path, settings: &BakeSettings) -> Result<f64> {
 /// With `runs` above 1, more bakes and obvhs runs in turn after the first ([`repeated`]).
 pub fn bake(scene: &Path, settings: &BakeSettings, runs: usize) -> Result<String> {
     // To a file, synced, as `prt bake` does: the "process start to file written".
-    let out = std::env::temp_dir().join(format!("prt-bench-bake-{}.prt", std::process::id()));
+    let out = output_path();
     let (start, before) = (Instant::now(), usage());
     let baked = prt_bake::bake_to_file(scene, &out, settings, &NoProgress);
     let bake_s = start.elapsed().as_secs_f64();
