@@ -160,12 +160,13 @@ fn timed(positions: &[Vec3], per_probe: &(dyn Fn(Vec3) -> usize + Sync)) -> (f64
 /// A report row: the throughput ratio of `runs` end-to-end bakes to bare obvhs tracing of
 /// their rays in lattice order (`bare`'s tracer), taken in turn, the first pair `first` (bake
 /// seconds, obvhs seconds), and the median. The bakes after the first are `prt bake` processes
-/// of their own, timed from their start to their exit: a process's first bake pays for every
-/// page it touches (2.1-2.5 us a page fault here), and later bakes in the same process reuse
-/// what the allocator kept (Sponza at 1.9 m: 0.47-0.50 s against 0.54 s for the first, 14-21k
-/// page faults against 44k), which is not the issue's "process start to file written". On a
-/// shared machine one run's ratio swings by 10-20%; pairs taken in turn see the same
-/// conditions. A run that fails ends the row with its error; the rest of the report stands.
+/// of their own ([`bake_process`]), timed from their start to the asset written (the issue's
+/// "process start to file written") and, in a second median, to their exit: a process's first
+/// bake pays for every page it touches (2.1-2.5 us a page fault here), and later bakes in the
+/// same process reuse what the allocator kept (Sponza at 1.9 m: 0.47-0.50 s against 0.54 s
+/// for the first, 14-21k page faults against 44k), which would flatter the bake. On a shared
+/// machine one run's ratio swings by 10-20%; pairs taken in turn see the same conditions. A
+/// run that fails ends the row with its error; the rest of the report stands.
 fn repeated(
     scene: &Path,
     settings: &BakeSettings,
@@ -175,41 +176,54 @@ fn repeated(
 ) -> String {
     let label = format!(
         "end-to-end throughput / bare obvhs throughput, lattice order, {runs} runs in turn \
-         (the first in this process, then `prt bake` processes)"
+         (the first in this process, then `prt bake` processes to the file written; in \
+         brackets, to their exit)"
     );
     let Some(o) = &bare.tracer else {
         return format!("| {label} | n/a: obvhs panicked building its BVH |\n");
     };
     let rays = &bare.rays;
-    let mut pairs = vec![first];
+    // (to the file written, to exit, obvhs); the first bake ran in this process.
+    let mut runs_s = vec![(first.0, first.0, first.1)];
     let mut failed = String::new();
     for run in 1..runs {
         match bake_process(scene, settings) {
-            Ok(bake_s) => pairs.push((bake_s, rays.obvhs(o, &rays.probes, &rays.lattice).0)),
+            Ok(ProcessTimes { written, exit }) => {
+                let obvhs_s = rays.obvhs(o, &rays.probes, &rays.lattice).0;
+                runs_s.push((written, exit, obvhs_s));
+            }
             Err(e) => {
                 failed = format!("; run {} failed: {e:#}", run + 1);
                 break;
             }
         }
     }
-    let mut ratios: Vec<f64> = pairs.iter().map(|(b, o)| 100.0 * o / b).collect();
-    let listed = ratios
+    let ratios = |bake: fn(&(f64, f64, f64)) -> f64| -> Vec<f64> {
+        runs_s.iter().map(|r| 100.0 * r.2 / bake(r)).collect()
+    };
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        let n = v.len();
+        0.5 * (v[(n - 1) / 2] + v[n / 2])
+    };
+    let written = ratios(|r| r.0);
+    let listed = written
         .iter()
         .map(|r| format!("{r:.0}%"))
         .collect::<Vec<_>>();
-    ratios.sort_by(f64::total_cmp);
-    let n = ratios.len();
-    let median = 0.5 * (ratios[(n - 1) / 2] + ratios[n / 2]);
-    let range = |f: fn(&(f64, f64)) -> f64| {
-        let v = pairs.iter().map(f);
+    let range = |f: fn(&(f64, f64, f64)) -> f64| {
+        let v = runs_s.iter().map(f);
         let (lo, hi) = v.fold((f64::INFINITY, 0.0f64), |(l, h), x| (l.min(x), h.max(x)));
         format!("{lo:.3}-{hi:.3} s")
     };
     format!(
-        "| {label} | {} (median {median:.0}%); bakes {}, obvhs {}{failed} |\n",
+        "| {label} | {} (median {:.0}% [{:.0}%]); bakes {} [{}], obvhs {}{failed} |\n",
         listed.join(", "),
-        range(|p| p.0),
-        range(|p| p.1),
+        median(written),
+        median(ratios(|r| r.1)),
+        range(|r| r.0),
+        range(|r| r.1),
+        range(|r| r.2),
     )
 }
 
@@ -219,10 +233,19 @@ fn output_path() -> PathBuf {
     std::env::temp_dir().join(format!("prt-bench-bake-{}.prt", std::process::id()))
 }
 
-/// Seconds from starting a `prt bake` process with `settings` (this executable, the options
-/// the bench takes, the rest at their defaults) to its exit, the asset written to a temporary
-/// file and removed.
-fn bake_process(scene: &Path, settings: &BakeSettings) -> Result<f64> {
+/// Seconds of a `prt bake` process from its start.
+struct ProcessTimes {
+    /// To its "wrote" line, printed once the asset is renamed into place.
+    written: f64,
+    /// To its exit: after the file is written, the process frees what it holds and the kernel
+    /// tears it down (Sponza, 2 threads: 9-20 ms at 1.9 m, 33-48 ms at 1.0 m).
+    exit: f64,
+}
+
+/// Runs `prt bake` with `settings` (this executable, the options the bench takes, the rest
+/// at their defaults), the asset written to a temporary file and removed, and times it.
+fn bake_process(scene: &Path, settings: &BakeSettings) -> Result<ProcessTimes> {
+    use std::io::{BufRead, Read};
     let out = output_path();
     let mut args: Vec<std::ffi::OsString> = vec!["bake".into(), scene.into(), "-o".into()];
     args.push(out.clone().into());
@@ -239,22 +262,44 @@ fn bake_process(scene: &Path, settings: &BakeSettings) -> Result<f64> {
     }
     let exe = std::env::current_exe().context("finding this executable to run `prt bake`")?;
     let start = Instant::now();
-    let run = std::process::Command::new(&exe)
+    let mut child = std::process::Command::new(&exe)
         .args(&args)
-        .stdout(std::process::Stdio::null())
+        .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
-        .output();
-    let bake_s = start.elapsed().as_secs_f64();
+        .spawn()
+        .with_context(|| format!("running {}", exe.display()))?;
+    let (stdout, mut stderr) = (child.stdout.take(), child.stderr.take());
+    // Stderr drained beside stdout, so that neither pipe fills while the other is read.
+    let (written, errors) = std::thread::scope(|s| {
+        let errors = s.spawn(move || {
+            let mut text = String::new();
+            if let Some(e) = stderr.as_mut() {
+                e.read_to_string(&mut text).ok();
+            }
+            text
+        });
+        let mut written = None;
+        for line in stdout
+            .into_iter()
+            .flat_map(|o| std::io::BufReader::new(o).lines())
+        {
+            if line.is_ok_and(|l| l.starts_with("wrote")) {
+                written = Some(start.elapsed().as_secs_f64());
+            }
+        }
+        (written, errors.join().unwrap_or_default())
+    });
+    let status = child.wait();
+    let exit = start.elapsed().as_secs_f64();
     std::fs::remove_file(&out).ok();
-    let run = run.with_context(|| format!("running {}", exe.display()))?;
-    if !run.status.success() {
-        anyhow::bail!(
-            "`prt bake` for the repeated runs failed ({}): {}",
-            run.status,
-            String::from_utf8_lossy(&run.stderr).trim()
-        );
+    let status = status.with_context(|| format!("waiting for {}", exe.display()))?;
+    match (status.success(), written) {
+        (true, Some(written)) => Ok(ProcessTimes { written, exit }),
+        _ => anyhow::bail!(
+            "`prt bake` for the repeated runs failed ({status}): {}",
+            errors.trim()
+        ),
     }
-    Ok(bake_s)
 }
 
 /// Bake throughput against bare obvhs tracing of the same rays, and asset size per probe.
