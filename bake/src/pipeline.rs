@@ -35,68 +35,186 @@ pub(crate) fn bake_in_pool(
         }
     };
     progress.start("load", 0);
-    let Loaded {
-        scene,
-        source_hash,
-        bounds: (min, max),
-        winding_warning_at,
-    } = load(scene_path, settings, &mut report)?;
+    let loaded = load(scene_path, settings, &mut report)?;
     lap(&mut report, "load", Some("bvh"));
 
+    let (min, max) = loaded.bounds;
     let spacing = settings
         .spacing
         .unwrap_or_else(|| probes::default_spacing(min, max));
     // The grid first: a spacing far too small for the scene is refused before any other work.
     let grid = probes::grid(min, max, spacing, settings.max_probes)?;
+    let scene = &loaded.scene;
+    let built = bvh_stage(
+        scene,
+        &grid,
+        settings,
+        &mut report,
+        loaded.winding_warning_at,
+    )?;
+    lap(&mut report, "bvh", None);
+
+    progress.start("trace", grid.probe_count());
+    let cell_size = cell_size(settings, spacing);
+    let traced = trace_stage(scene, &built.bvh, &grid, loaded.bounds, settings, progress)?;
+    report.rows_spilled = traced.rows.spilled_bytes();
+    lap(&mut report, "trace", Some("bricks"));
+
+    let valid = validity(&traced.rays, settings, &built, scene, &mut report);
+    let (from, lens) = carried_layout(&grid, &valid, settings, &traced.rows)?;
+    let carried = factors::Carried {
+        from: &from,
+        lens: &lens,
+    };
+    let stream::Traced {
+        positions,
+        rays: traced,
+        rows: tables,
+        depth: probe_depth,
+        folder,
+    } = traced;
+    let (bricked, factors) = bricks_and_tables(folder, tables, carried, settings, cell_size)?;
+    lap(&mut report, "bricks", Some("assemble"));
+
+    let Assembled {
+        probes: probes_out,
+        sky_mask,
+        sky_transfer,
+    } = assemble_probes(&traced, &positions, carried);
+    let header = header(scene_path, &loaded, grid, settings, cell_size, &traced);
+    let asset = Asset {
+        header,
+        probes: probes_out,
+        sky_mask,
+        sky_transfer,
+        probe_depth,
+        factors,
+        bricks: bricked.bricks,
+        surfels: bricked.surfels,
+        geometry: built.bvh.geometry,
+        lights: loaded.scene.lights,
+    };
+    lap(&mut report, "assemble", None);
+    Ok((asset, report))
+}
+
+/// Whether a probe's rays say it lies inside geometry: too many of them hit back faces, or it
+/// sees no sky and too many of its hits face away from it (conventions.md, probe validity).
+fn inside(settings: &BakeSettings, r: &trace::ProbeRays) -> bool {
+    let n = settings.rays as f32;
+    r.backface_rays as f32 > settings.invalid_backface_fraction * n
+        || (r.sky_rays == 0 && r.facing_away_rays as f32 > settings.inside_facing_away_fraction * n)
+}
+
+/// What the BVH stage gives the bake.
+struct Built {
+    bvh: bvh::SceneBvh,
+    /// The winding check, when it ran beside the BVH (single-sided bakes only).
+    winding: Option<diagnostics::Winding>,
+    /// Whether the report warns of inconsistent winding (the inside warning then hints at it).
+    winding_hint: bool,
+}
+
+/// The BVH stage: both BVHs of `scene`, built for the rays of `grid`'s probes, with the winding
+/// check of a single-sided bake beside them; its warning goes into the report at `warning_at`.
+fn bvh_stage(
+    scene: &scene::Scene,
+    grid: &prt_format::Grid,
+    settings: &BakeSettings,
+    report: &mut BakeReport,
+    warning_at: usize,
+) -> Result<Built, BakeError> {
     let rays = grid.probe_count().saturating_mul(u64::from(settings.rays));
+    let scale = bvh::trace_scale(grid.spacing);
     // Baked double-sided, the winding changes no hit's shading and needs no hint: it is then
     // counted only for the rare warning that names it (most probes inside geometry), not on
     // every bake (Sponza, 562k edges: about 24 ms of CPU time beside the BVH's collapse).
-    let (bvh, winding) =
-        bvh::SceneBvh::build_checked(&scene.triangles, bvh::trace_scale(spacing), rays, || {
-            (!settings.double_sided).then(|| diagnostics::winding(&scene.triangles))
-        })?;
+    let (bvh, winding) = bvh::SceneBvh::build_checked(&scene.triangles, scale, rays, || {
+        (!settings.double_sided).then(|| diagnostics::winding(&scene.triangles))
+    })?;
     let winding_hint = match &winding {
         Some(w) if w.inconsistent_fraction() > WINDING_WARNING => {
-            let warning = diagnostics::winding_warning(w);
-            report.warnings.insert(winding_warning_at, warning);
+            report
+                .warnings
+                .insert(warning_at, diagnostics::winding_warning(w));
             true
         }
         _ => false,
     };
-    lap(&mut report, "bvh", None);
+    Ok(Built {
+        bvh,
+        winding,
+        winding_hint,
+    })
+}
 
-    let positions = probes::positions(&grid);
-    let n = settings.rays;
-    let dirs: Vec<Vec3> = directions::fibonacci_directions(n)
-        .into_iter()
-        .map(Vec3::from)
-        .collect();
-    let weight = directions::direction_weight(n);
-    let order = trace::coherent_order(&dirs);
-    let tracer = trace::Tracer {
-        scene: &scene,
-        bvh: &bvh,
-        directions: &dirs,
-        basis: dirs
-            .iter()
-            .map(|d| prt_format::sh::basis(d.to_array()))
-            .collect(),
-        order: &order,
-        weight,
-        double_sided: settings.double_sided,
-        srgb: texture::srgb_to_linear_table(),
-        shading: trace::triangle_shading(&scene),
-    };
-    progress.start("trace", positions.len() as u64);
-    let is_inside = |r: &trace::ProbeRays| {
-        r.backface_rays as f32 > settings.invalid_backface_fraction * n as f32
-            || (r.sky_rays == 0
-                && r.facing_away_rays as f32 > settings.inside_facing_away_fraction * n as f32)
-    };
-    let [nx, ny, nz] = grid.counts;
-    let trace_one = |index: usize| {
-        let grid_p = positions[index];
+/// A bake's ray lattice: its directions, their weight, and the order they are traced in.
+struct Lattice {
+    dirs: Vec<Vec3>,
+    weight: f32,
+    order: Vec<u32>,
+}
+
+impl Lattice {
+    /// The `n`-direction lattice of conventions.md section 5.
+    fn of(n: u32) -> Lattice {
+        let dirs: Vec<Vec3> = directions::fibonacci_directions(n)
+            .into_iter()
+            .map(Vec3::from)
+            .collect();
+        Lattice {
+            weight: directions::direction_weight(n),
+            order: trace::coherent_order(&dirs),
+            dirs,
+        }
+    }
+
+    /// The tracer of this lattice's rays through `bvh` over `scene`.
+    fn tracer<'a>(
+        &'a self,
+        scene: &'a scene::Scene,
+        bvh: &'a bvh::SceneBvh,
+        double_sided: bool,
+    ) -> trace::Tracer<'a> {
+        trace::Tracer {
+            scene,
+            bvh,
+            directions: &self.dirs,
+            basis: self
+                .dirs
+                .iter()
+                .map(|d| prt_format::sh::basis(d.to_array()))
+                .collect(),
+            order: &self.order,
+            weight: self.weight,
+            double_sided,
+            srgb: texture::srgb_to_linear_table(),
+            shading: trace::triangle_shading(scene),
+        }
+    }
+}
+
+/// How each probe of the grid is traced ([`stream::TraceProbe`]).
+struct ProbeTrace<'a> {
+    tracer: &'a trace::Tracer<'a>,
+    settings: &'a BakeSettings,
+    /// The grid points, and how many along each axis.
+    positions: &'a [Vec3],
+    counts: [u32; 3],
+    /// The grid's bounds.
+    bounds: (Vec3, Vec3),
+    spacing: f32,
+}
+
+impl ProbeTrace<'_> {
+    /// Probe `index`: moved off a surface its grid point lies on ([`offset::surface_offset`],
+    /// towards the grid's inside), traced, and moved out of geometry it turns out to be inside
+    /// ([`offset::virtual_offset`]), as the settings ask; its position, rays, and whether it
+    /// left its grid point.
+    fn trace(&self, index: usize) -> (Vec3, trace::ProbeRays, bool) {
+        let settings = self.settings;
+        let grid_p = self.positions[index];
+        let [nx, ny, nz] = self.counts;
         let (i, j, k) = (
             index as u32 % nx,
             (index as u32 / nx) % ny,
@@ -106,116 +224,121 @@ pub(crate) fn bake_in_pool(
         let outer = ijk.iter().any(|&(c, n)| n > 1 && (c == 0 || c == n - 1));
         let inwards = Vec3::from_array(ijk.map(|(c, n)| if 2 * c > n - 1 { -1.0 } else { 1.0 }));
         let p = if settings.surface_offset {
+            let (min, max) = self.bounds;
             let centre = outer.then_some((min + max) * 0.5);
-            offset::surface_offset(&tracer, grid_p, spacing, inwards, centre)
+            offset::surface_offset(self.tracer, grid_p, self.spacing, inwards, centre)
         } else {
             grid_p
         };
-        let r = tracer.trace_probe(p);
+        let r = self.tracer.trace_probe(p);
+        let is_inside = |r: &trace::ProbeRays| inside(settings, r);
         if settings.virtual_offset && is_inside(&r) {
             if let Some((moved, again)) =
-                offset::virtual_offset(&tracer, p, &r, spacing, &is_inside)
+                offset::virtual_offset(self.tracer, p, &r, self.spacing, &is_inside)
             {
                 return (moved, again, true);
             }
         }
         (p, r, p != grid_p)
+    }
+}
+
+/// The trace stage: every probe of `grid` (within `bounds`) traced through `bvh` over `scene`
+/// and its hits folded into bricks as they come ([`stream::trace_and_fold`]).
+fn trace_stage(
+    scene: &scene::Scene,
+    bvh: &bvh::SceneBvh,
+    grid: &prt_format::Grid,
+    bounds: (Vec3, Vec3),
+    settings: &BakeSettings,
+    progress: &dyn Progress,
+) -> Result<stream::Traced, BakeError> {
+    let lattice = Lattice::of(settings.rays);
+    let tracer = lattice.tracer(scene, bvh, settings.double_sided);
+    let probe_trace = ProbeTrace {
+        tracer: &tracer,
+        settings,
+        positions: &probes::positions(grid),
+        counts: grid.counts,
+        bounds,
+        spacing: grid.spacing,
     };
-    let cell_size = settings
-        .cell_size
-        .unwrap_or(spacing / settings.cells_per_spacing);
+    let cell_size = cell_size(settings, grid.spacing);
     // Half a cell off the origin: see `bricks::BrickFolder::new`.
     let folder = bricks::BrickFolder::new(
         cell_size,
         settings.merge_normal_cos,
         Vec3::splat(-0.5 * cell_size),
     );
-    let stream::Traced {
-        positions,
-        rays: traced,
-        rows: tables,
-        depth: probe_depth,
-        folder,
-    } = stream::trace_and_fold(
-        positions.len(),
-        &trace_one,
+    stream::trace_and_fold(
+        probe_trace.positions.len(),
+        &|index| probe_trace.trace(index),
         &tracer,
         folder,
         &stream::Keep {
-            spacing,
+            spacing: grid.spacing,
             precision: settings.transfer_precision,
             row_memory: settings.row_memory,
-            rows_of: &|r| !is_inside(r),
+            rows_of: &|r| !inside(settings, r),
         },
         progress,
-    )?;
-    report.rows_spilled = tables.spilled_bytes();
-    lap(&mut report, "trace", Some("bricks"));
+    )
+}
 
-    let valid: Vec<bool> = traced.iter().map(|r| !is_inside(r)).collect();
-    let count_winding = || winding.unwrap_or_else(|| diagnostics::winding(&scene.triangles));
-    if let Some(w) = diagnostics::inside_warning(&valid, settings, count_winding, winding_hint) {
-        report.warnings.push(w);
+/// The surfel cells' size: the settings', or the spacing over `cells_per_spacing`.
+fn cell_size(settings: &BakeSettings, spacing: f32) -> f32 {
+    settings
+        .cell_size
+        .unwrap_or(spacing / settings.cells_per_spacing)
+}
+
+/// The asset's header: what was baked (`scene_path`, as `loaded`) on which `grid`, how
+/// (`settings`, cells of `cell_size`), and the counts of the `traced` rays.
+fn header(
+    scene_path: &Path,
+    loaded: &Loaded,
+    grid: prt_format::Grid,
+    settings: &BakeSettings,
+    cell_size: f32,
+    traced: &[trace::ProbeRays],
+) -> Header {
+    Header {
+        generator: format!("prt-bake {}", env!("CARGO_PKG_VERSION")),
+        source_name: scene::source_name(scene_path),
+        source_hash: loaded.source_hash,
+        ray_count: settings.rays,
+        settings: settings_record(settings, grid.spacing, cell_size),
+        stats: stats(&loaded.scene, traced, settings.rays),
+        grid,
     }
-    let sources = if settings.dilate {
-        dilate::sources(&grid, &valid)
-    } else {
-        vec![None; valid.len()]
-    };
-    let (from, lens) = carried_layout(&valid, &sources, &tables)?;
-    let carried = factors::Carried {
-        from: &from,
-        lens: &lens,
-    };
-    let (bricked, factors) = bricks_and_tables(folder, tables, carried, settings, cell_size)?;
-    lap(&mut report, "bricks", Some("assemble"));
+}
 
-    let Assembled {
-        probes: probes_out,
-        sky_mask,
-        sky_transfer,
-    } = assemble_probes(&traced, &positions, carried);
+/// The settings as the asset records them.
+fn settings_record(settings: &BakeSettings, spacing: f32, cell_size: f32) -> BakeSettingsRecord {
+    BakeSettingsRecord {
+        spacing,
+        bounds: settings.bounds,
+        cell_size,
+        merge_distance: cell_size,
+        merge_normal_cos: settings.merge_normal_cos,
+        double_sided_override: settings.double_sided,
+        invalid_backface_fraction: settings.invalid_backface_fraction,
+        transfer_precision: settings.transfer_precision,
+    }
+}
+
+/// The bake's counts for the asset's header: `traced` probes of `n` rays each over `scene`.
+fn stats(scene: &scene::Scene, traced: &[trace::ProbeRays], n: u32) -> BakeStats {
     // Every ray hits a surface or the sky.
     let hits: u64 = traced.iter().map(|r| u64::from(n - r.sky_rays)).sum();
-    let stats = BakeStats {
+    BakeStats {
         triangles: scene.triangles.len() as u64,
         degenerate_triangles_skipped: scene.degenerate_skipped,
         rays: traced.len() as u64 * u64::from(n),
         ray_hits: hits,
         backface_hits: traced.iter().map(|r| u64::from(r.backface_rays)).sum(),
         surfels_unmerged: hits,
-    };
-    let asset = Asset {
-        header: Header {
-            generator: format!("prt-bake {}", env!("CARGO_PKG_VERSION")),
-            source_name: scene::source_name(scene_path),
-            source_hash,
-            grid,
-            ray_count: n,
-            settings: BakeSettingsRecord {
-                spacing,
-                bounds: settings.bounds,
-                cell_size,
-                merge_distance: cell_size,
-                merge_normal_cos: settings.merge_normal_cos,
-                double_sided_override: settings.double_sided,
-                invalid_backface_fraction: settings.invalid_backface_fraction,
-                transfer_precision: settings.transfer_precision,
-            },
-            stats,
-        },
-        probes: probes_out,
-        sky_mask,
-        sky_transfer,
-        probe_depth,
-        factors,
-        bricks: bricked.bricks,
-        surfels: bricked.surfels,
-        geometry: bvh.geometry,
-        lights: scene.lights,
-    };
-    lap(&mut report, "assemble", None);
-    Ok((asset, report))
+    }
 }
 
 /// Validates a baked asset (`scene_path` names the scene in the error): a failure here is a bug
@@ -309,16 +432,46 @@ fn bricks_and_tables(
     Ok((bricked, factors))
 }
 
-/// Per probe: whose factor table it carries (its own when valid, else its dilation source's,
-/// else none) and how many factors that is; fails when they pass 2^32 in all.
+/// Per probe, whether it is valid (not inside geometry, [`inside`]); warns when most probes
+/// are not, with the winding hint when the BVH stage found inconsistent winding (counting it
+/// now if it did not run then).
+fn validity(
+    rays: &[trace::ProbeRays],
+    settings: &BakeSettings,
+    built: &Built,
+    scene: &scene::Scene,
+    report: &mut BakeReport,
+) -> Vec<bool> {
+    let valid: Vec<bool> = rays.iter().map(|r| !inside(settings, r)).collect();
+    let count_winding = || {
+        built
+            .winding
+            .unwrap_or_else(|| diagnostics::winding(&scene.triangles))
+    };
+    let hint = built.winding_hint;
+    if let Some(w) = diagnostics::inside_warning(&valid, settings, count_winding, hint) {
+        report.warnings.push(w);
+    }
+    valid
+}
+
+/// Per probe of `grid`: whose factor table it carries (its own when valid, else its dilation
+/// source's when the settings dilate, else none) and how many factors that is; fails when they
+/// pass 2^32 in all.
 fn carried_layout(
+    grid: &prt_format::Grid,
     valid: &[bool],
-    sources: &[Option<usize>],
+    settings: &BakeSettings,
     tables: &factors::Rows,
 ) -> Result<(Vec<Option<usize>>, Vec<usize>), BakeError> {
+    let sources = if settings.dilate {
+        dilate::sources(grid, valid)
+    } else {
+        vec![None; valid.len()]
+    };
     let from: Vec<Option<usize>> = valid
         .iter()
-        .zip(sources)
+        .zip(&sources)
         .enumerate()
         .map(|(p, (&valid, &source))| if valid { Some(p) } else { source })
         .collect();

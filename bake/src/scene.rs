@@ -379,18 +379,11 @@ impl Loader<'_> {
     }
 
     fn mesh(&mut self, mesh: &gltf::Mesh, world: Mat4) -> Result<(), BakeError> {
-        let flip = world.determinant() < 0.0;
         let mesh_name = match mesh.name() {
             Some(n) => format!("{} ({n:?})", mesh.index()),
             None => mesh.index().to_string(),
         };
         for prim in mesh.primitives() {
-            let err = |message: String| BakeError::Primitive {
-                path: self.path.to_owned(),
-                mesh: mesh_name.clone(),
-                primitive: prim.index(),
-                message,
-            };
             let mode = prim.mode();
             if !matches!(
                 mode,
@@ -402,81 +395,55 @@ impl Loader<'_> {
                 ));
                 continue;
             }
-            check_accessor_formats(&prim).map_err(err)?;
-            let buffers = &self.buffers;
-            let reader = prim.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
-            let Some(pos_accessor) = prim.get(&gltf::Semantic::Positions) else {
-                return Err(err("has no POSITION attribute".into()));
-            };
-            let positions: Vec<Vec3> = match plain_elements(&pos_accessor, buffers, 12) {
-                Some(elements) => elements
-                    .map(|e| world.transform_point3(Vec3::from(le_f32s::<3>(e))))
-                    .collect(),
-                None => reader
-                    .read_positions()
-                    .ok_or_else(|| {
-                        err(format!(
-                            "POSITION accessor {} runs past its buffer view or buffer",
-                            pos_accessor.index()
-                        ))
-                    })?
-                    .map(|p| world.transform_point3(Vec3::from(p)))
-                    .collect(),
-            };
-            let vertex_count = positions.len();
-            if let Some((v, p)) = positions.iter().enumerate().find(|(_, p)| !p.is_finite()) {
-                return Err(err(format!("vertex {v} has non-finite position {p}")));
-            }
-            let indices: Vec<u32> = match prim.indices() {
-                Some(a) => match plain_indices(&a, buffers) {
-                    Some(ix) => ix,
-                    None => match reader.read_indices() {
-                        Some(ix) => ix.into_u32().collect(),
-                        None => {
-                            return Err(err(format!(
-                                "index accessor {} runs past its buffer view or buffer",
-                                a.index()
-                            )))
-                        }
-                    },
-                },
-                None => (0..vertex_count as u32).collect(),
-            };
-            if let Some((i, &ix)) = indices
-                .iter()
-                .enumerate()
-                .find(|(_, &ix)| ix as usize >= vertex_count)
-            {
-                return Err(err(format!(
-                    "index {i} is {ix}, but there are only {vertex_count} vertices"
-                )));
-            }
-            let tris = triangulate(mode, &indices);
-            let material = match prim.material().index() {
-                Some(m) => m as u32,
-                None => self.default_material,
-            };
-            let textured = self
-                .scene
-                .materials
-                .get(material as usize)
-                .is_some_and(|m| m.base_texture.is_some() || m.emissive_texture.is_some());
-            let attributes = vertex_attributes(&reader, vertex_count, textured).map_err(err)?;
-            self.scene.has_vertex_colors |= attributes.1.is_some();
-            // Attributes from the first primitive that needs them on (shading reads them for
-            // every triangle once any primitive has COLOR_0), the triangles before it given the
-            // defaults (white, no texture coordinates).
-            let keep_attributes =
-                textured || self.scene.has_vertex_colors || !self.scene.attributes.is_empty();
-            if keep_attributes {
-                let before = self.scene.triangles.len();
-                self.scene
-                    .attributes
-                    .resize(before, TriangleAttributes::WHITE);
-            }
-            let attributes = keep_attributes.then_some(&attributes);
-            self.add_triangles(&tris, &positions, flip, material, attributes);
+            self.primitive(&prim, world)
+                .map_err(|message| BakeError::Primitive {
+                    path: self.path.to_owned(),
+                    mesh: mesh_name.clone(),
+                    primitive: prim.index(),
+                    message,
+                })?;
         }
+        Ok(())
+    }
+
+    /// Adds the triangles of a primitive of triangles (a list, strip or fan) placed by `world`;
+    /// fails with what is wrong with its data.
+    fn primitive(&mut self, prim: &gltf::Primitive, world: Mat4) -> Result<(), String> {
+        check_accessor_formats(prim)?;
+        let buffers = &self.buffers;
+        let reader = prim.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
+        let positions = world_positions(prim, &reader, buffers, world)?;
+        let vertex_count = positions.len();
+        if let Some((v, p)) = positions.iter().enumerate().find(|(_, p)| !p.is_finite()) {
+            return Err(format!("vertex {v} has non-finite position {p}"));
+        }
+        let indices = vertex_indices(prim, &reader, buffers, vertex_count)?;
+        let tris = triangulate(prim.mode(), &indices);
+        let material = match prim.material().index() {
+            Some(m) => m as u32,
+            None => self.default_material,
+        };
+        let textured = self
+            .scene
+            .materials
+            .get(material as usize)
+            .is_some_and(|m| m.base_texture.is_some() || m.emissive_texture.is_some());
+        let attributes = vertex_attributes(&reader, vertex_count, textured)?;
+        self.scene.has_vertex_colors |= attributes.1.is_some();
+        // Attributes from the first primitive that needs them on (shading reads them for
+        // every triangle once any primitive has COLOR_0), the triangles before it given the
+        // defaults (white, no texture coordinates).
+        let keep_attributes =
+            textured || self.scene.has_vertex_colors || !self.scene.attributes.is_empty();
+        if keep_attributes {
+            let before = self.scene.triangles.len();
+            self.scene
+                .attributes
+                .resize(before, TriangleAttributes::WHITE);
+        }
+        let attributes = keep_attributes.then_some(&attributes);
+        let flip = world.determinant() < 0.0;
+        self.add_triangles(&tris, &positions, flip, material, attributes);
         Ok(())
     }
 
@@ -596,6 +563,74 @@ fn plain_indices(a: &gltf::Accessor, buffers: &[gltf::buffer::Data]) -> Option<V
 
 /// Per vertex of a primitive: TEXCOORD_0 and TEXCOORD_1, and COLOR_0, where it has them.
 type VertexAttributes = ([Option<Vec<Vec2>>; 2], Option<Vec<Vec4>>);
+
+/// A primitive's POSITION values placed by `world`: read straight from the buffer when the
+/// accessor is plain ([`plain_elements`]), else through the reader.
+fn world_positions<'a, 's, F>(
+    prim: &gltf::Primitive,
+    reader: &gltf::mesh::Reader<'a, 's, F>,
+    buffers: &[gltf::buffer::Data],
+    world: Mat4,
+) -> Result<Vec<Vec3>, String>
+where
+    F: Clone + Fn(gltf::Buffer<'a>) -> Option<&'s [u8]>,
+{
+    let Some(accessor) = prim.get(&gltf::Semantic::Positions) else {
+        return Err("has no POSITION attribute".into());
+    };
+    if let Some(elements) = plain_elements(&accessor, buffers, 12) {
+        let place = |e: &[u8]| world.transform_point3(Vec3::from(le_f32s::<3>(e)));
+        return Ok(elements.map(place).collect());
+    }
+    let read = reader.read_positions().ok_or_else(|| {
+        format!(
+            "POSITION accessor {} runs past its buffer view or buffer",
+            accessor.index()
+        )
+    })?;
+    Ok(read
+        .map(|p| world.transform_point3(Vec3::from(p)))
+        .collect())
+}
+
+/// A primitive's vertex indices (`0..vertex_count` when it has none), each checked against
+/// `vertex_count`: read straight from the buffer when the accessor is plain
+/// ([`plain_indices`]), else through the reader.
+fn vertex_indices<'a, 's, F>(
+    prim: &gltf::Primitive,
+    reader: &gltf::mesh::Reader<'a, 's, F>,
+    buffers: &[gltf::buffer::Data],
+    vertex_count: usize,
+) -> Result<Vec<u32>, String>
+where
+    F: Clone + Fn(gltf::Buffer<'a>) -> Option<&'s [u8]>,
+{
+    let indices: Vec<u32> = match prim.indices() {
+        Some(a) => match plain_indices(&a, buffers) {
+            Some(ix) => ix,
+            None => match reader.read_indices() {
+                Some(ix) => ix.into_u32().collect(),
+                None => {
+                    return Err(format!(
+                        "index accessor {} runs past its buffer view or buffer",
+                        a.index()
+                    ))
+                }
+            },
+        },
+        None => (0..vertex_count as u32).collect(),
+    };
+    match indices
+        .iter()
+        .enumerate()
+        .find(|(_, &ix)| ix as usize >= vertex_count)
+    {
+        Some((i, &ix)) => Err(format!(
+            "index {i} is {ix}, but there are only {vertex_count} vertices"
+        )),
+        None => Ok(indices),
+    }
+}
 
 /// A primitive's texture coordinates (read only when its material is `textured`; their counts
 /// checked either way) and COLOR_0.
