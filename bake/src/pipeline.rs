@@ -44,22 +44,16 @@ pub(crate) fn bake_in_pool(
         .unwrap_or_else(|| probes::default_spacing(min, max));
     // The grid first: a spacing far too small for the scene is refused before any other work.
     let grid = probes::grid(min, max, spacing, settings.max_probes)?;
-    let scene = &loaded.scene;
-    let built = bvh_stage(
-        scene,
-        &grid,
-        settings,
-        &mut report,
-        loaded.winding_warning_at,
-    )?;
+    let built = bvh_stage(&loaded, &grid, settings, &mut report)?;
     lap(&mut report, "bvh", None);
 
     progress.start("trace", grid.probe_count());
-    let cell_size = cell_size(settings, spacing);
-    let traced = trace_stage(scene, &built.bvh, &grid, loaded.bounds, settings, progress)?;
+    let cell_size = settings.cell_size_for(spacing);
+    let traced = trace_stage(&loaded, &built.bvh, &grid, settings, cell_size, progress)?;
     report.rows_spilled = traced.rows.spilled_bytes();
     lap(&mut report, "trace", Some("bricks"));
 
+    let scene = &loaded.scene;
     let valid = validity(&traced.rays, settings, &built, scene, &mut report);
     let (from, lens) = carried_layout(&grid, &valid, settings, &traced.rows)?;
     let carried = factors::Carried {
@@ -115,15 +109,16 @@ struct Built {
     winding_hint: bool,
 }
 
-/// The BVH stage: both BVHs of `scene`, built for the rays of `grid`'s probes, with the winding
-/// check of a single-sided bake beside them; its warning goes into the report at `warning_at`.
+/// The BVH stage: both BVHs of the `loaded` scene, built for the rays of `grid`'s probes, with
+/// the winding check of a single-sided bake beside them (its warning goes into the report where
+/// `loaded` says).
 fn bvh_stage(
-    scene: &scene::Scene,
+    loaded: &Loaded,
     grid: &prt_format::Grid,
     settings: &BakeSettings,
     report: &mut BakeReport,
-    warning_at: usize,
 ) -> Result<Built, BakeError> {
+    let scene = &loaded.scene;
     let rays = grid.probe_count().saturating_mul(u64::from(settings.rays));
     let scale = bvh::trace_scale(grid.spacing);
     // Baked double-sided, the winding changes no hit's shading and needs no hint: it is then
@@ -134,9 +129,8 @@ fn bvh_stage(
     })?;
     let winding_hint = match &winding {
         Some(w) if w.inconsistent_fraction() > WINDING_WARNING => {
-            report
-                .warnings
-                .insert(warning_at, diagnostics::winding_warning(w));
+            let warning = diagnostics::winding_warning(w);
+            report.warnings.insert(loaded.winding_warning_at, warning);
             true
         }
         _ => false,
@@ -156,7 +150,7 @@ struct Lattice {
 }
 
 impl Lattice {
-    /// The `n`-direction lattice of conventions.md section 5.
+    /// The `n`-direction spherical Fibonacci lattice of conventions.md section 2.
     fn of(n: u32) -> Lattice {
         let dirs: Vec<Vec3> = directions::fibonacci_directions(n)
             .into_iter()
@@ -201,7 +195,7 @@ struct ProbeTrace<'a> {
     /// The grid points, and how many along each axis.
     positions: &'a [Vec3],
     counts: [u32; 3],
-    /// The grid's bounds.
+    /// The grid's bounds, whose centre the outer probes move towards off a surface.
     bounds: (Vec3, Vec3),
     spacing: f32,
 }
@@ -243,27 +237,26 @@ impl ProbeTrace<'_> {
     }
 }
 
-/// The trace stage: every probe of `grid` (within `bounds`) traced through `bvh` over `scene`
-/// and its hits folded into bricks as they come ([`stream::trace_and_fold`]).
+/// The trace stage: every probe of `grid` traced through `bvh` over the `loaded` scene and its
+/// hits folded into bricks of cells of `cell_size` as they come ([`stream::trace_and_fold`]).
 fn trace_stage(
-    scene: &scene::Scene,
+    loaded: &Loaded,
     bvh: &bvh::SceneBvh,
     grid: &prt_format::Grid,
-    bounds: (Vec3, Vec3),
     settings: &BakeSettings,
+    cell_size: f32,
     progress: &dyn Progress,
 ) -> Result<stream::Traced, BakeError> {
     let lattice = Lattice::of(settings.rays);
-    let tracer = lattice.tracer(scene, bvh, settings.double_sided);
+    let tracer = lattice.tracer(&loaded.scene, bvh, settings.double_sided);
     let probe_trace = ProbeTrace {
         tracer: &tracer,
         settings,
         positions: &probes::positions(grid),
         counts: grid.counts,
-        bounds,
+        bounds: loaded.bounds,
         spacing: grid.spacing,
     };
-    let cell_size = cell_size(settings, grid.spacing);
     // Half a cell off the origin: see `bricks::BrickFolder::new`.
     let folder = bricks::BrickFolder::new(
         cell_size,
@@ -283,13 +276,6 @@ fn trace_stage(
         },
         progress,
     )
-}
-
-/// The surfel cells' size: the settings', or the spacing over `cells_per_spacing`.
-fn cell_size(settings: &BakeSettings, spacing: f32) -> f32 {
-    settings
-        .cell_size
-        .unwrap_or(spacing / settings.cells_per_spacing)
 }
 
 /// The asset's header: what was baked (`scene_path`, as `loaded`) on which `grid`, how

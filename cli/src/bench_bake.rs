@@ -159,9 +159,10 @@ fn timed(positions: &[Vec3], per_probe: &(dyn Fn(Vec3) -> usize + Sync)) -> (f64
 
 /// A report row: the throughput ratio of `runs` end-to-end bakes to bare obvhs tracing of
 /// their rays in lattice order (`bare`'s tracer), taken in turn, the first pair `first` (bake
-/// seconds, obvhs seconds), and the median. The bakes after the first are `prt bake` processes
-/// of their own ([`bake_process`]), timed from their start to the asset written (the issue's
-/// "process start to file written") and, in a second median, to their exit: a process's first
+/// seconds, obvhs seconds), and their median. The bakes after the first are `prt bake`
+/// processes of their own ([`bake_process`]), timed from their start to the asset written (the
+/// issue's "process start to file written") and, for a second median and range over them
+/// alone (in brackets), to their exit: a process's first
 /// bake pays for every page it touches (2.1-2.5 us a page fault here), and later bakes in the
 /// same process reuse what the allocator kept (Sponza at 1.9 m: 0.47-0.50 s against 0.54 s
 /// for the first, 14-21k page faults against 44k), which would flatter the bake. On a shared
@@ -177,7 +178,7 @@ fn repeated(
     let label = format!(
         "end-to-end throughput / bare obvhs throughput, lattice order, {runs} runs in turn \
          (the first in this process, then `prt bake` processes to the file written; in \
-         brackets, to their exit)"
+         brackets, the processes to their exit)"
     );
     let Some(o) = &bare.tracer else {
         return format!("| {label} | n/a: obvhs panicked building its BVH |\n");
@@ -198,32 +199,41 @@ fn repeated(
             }
         }
     }
-    let ratios = |bake: fn(&(f64, f64, f64)) -> f64| -> Vec<f64> {
-        runs_s.iter().map(|r| 100.0 * r.2 / bake(r)).collect()
+    // The first run has no exit of its own: the bracketed figures leave it out.
+    let processes = &runs_s[1..];
+    let ratios = |runs: &[(f64, f64, f64)], bake: fn(&(f64, f64, f64)) -> f64| -> Vec<f64> {
+        runs.iter().map(|r| 100.0 * r.2 / bake(r)).collect()
     };
-    let median = |mut v: Vec<f64>| {
+    let median = |mut v: Vec<f64>| -> String {
         v.sort_by(f64::total_cmp);
-        let n = v.len();
-        0.5 * (v[(n - 1) / 2] + v[n / 2])
+        match v.len() {
+            0 => "n/a".into(),
+            n => format!("{:.0}%", 0.5 * (v[(n - 1) / 2] + v[n / 2])),
+        }
     };
-    let written = ratios(|r| r.0);
+    let range = |runs: &[(f64, f64, f64)], f: fn(&(f64, f64, f64)) -> f64| {
+        let (lo, hi) = runs
+            .iter()
+            .map(f)
+            .fold((f64::INFINITY, 0.0f64), |(l, h), x| (l.min(x), h.max(x)));
+        match runs.is_empty() {
+            true => "n/a".into(),
+            false => format!("{lo:.3}-{hi:.3} s"),
+        }
+    };
+    let written = ratios(&runs_s, |r| r.0);
     let listed = written
         .iter()
         .map(|r| format!("{r:.0}%"))
         .collect::<Vec<_>>();
-    let range = |f: fn(&(f64, f64, f64)) -> f64| {
-        let v = runs_s.iter().map(f);
-        let (lo, hi) = v.fold((f64::INFINITY, 0.0f64), |(l, h), x| (l.min(x), h.max(x)));
-        format!("{lo:.3}-{hi:.3} s")
-    };
     format!(
-        "| {label} | {} (median {:.0}% [{:.0}%]); bakes {} [{}], obvhs {}{failed} |\n",
+        "| {label} | {} (median {} [{}]); bakes {} [{}], obvhs {}{failed} |\n",
         listed.join(", "),
         median(written),
-        median(ratios(|r| r.1)),
-        range(|r| r.0),
-        range(|r| r.1),
-        range(|r| r.2),
+        median(ratios(processes, |r| r.1)),
+        range(&runs_s, |r| r.0),
+        range(processes, |r| r.1),
+        range(&runs_s, |r| r.2),
     )
 }
 
@@ -264,6 +274,7 @@ fn bake_process(scene: &Path, settings: &BakeSettings) -> Result<ProcessTimes> {
     let start = Instant::now();
     let mut child = std::process::Command::new(&exe)
         .args(&args)
+        .stdin(std::process::Stdio::null())
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
         .spawn()
@@ -295,7 +306,8 @@ fn bake_process(scene: &Path, settings: &BakeSettings) -> Result<ProcessTimes> {
     let status = status.with_context(|| format!("waiting for {}", exe.display()))?;
     match (status.success(), written) {
         (true, Some(written)) => Ok(ProcessTimes { written, exit }),
-        _ => anyhow::bail!(
+        (true, None) => anyhow::bail!("`prt bake` for the repeated runs printed no \"wrote\" line"),
+        (false, _) => anyhow::bail!(
             "`prt bake` for the repeated runs failed ({status}): {}",
             errors.trim()
         ),

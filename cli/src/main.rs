@@ -80,7 +80,8 @@ enum BenchKind {
         /// Bakes, each followed by bare obvhs tracing of its rays, in turn: the first run's
         /// report in full, then a last row of every run's ratio and their median (one run's
         /// swings by 10-20% on a shared machine); the bakes after the first are `prt bake`
-        /// processes of their own.
+        /// processes of their own, timed to the asset written and, in a second median, to
+        /// their exit.
         #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=100))]
         runs: u32,
     },
@@ -437,6 +438,7 @@ fn run(cli: Cli) -> Result<()> {
                     kb as f64 / 1024.0
                 );
             }
+            // `prt bench bake --runs` times a bake to this line: keep its first word.
             println!("wrote            {}", output.display());
             Ok(())
         }
