@@ -44,9 +44,25 @@ fn count(section: &'static str, found: usize, expected: usize) -> Result<(), For
     }
 }
 
-/// Checks that `asset` is internally consistent.
+/// Checks that `asset` is internally consistent, section by section; the first failing check
+/// is the error.
 pub fn validate(asset: &Asset) -> Result<(), FormatError> {
-    let h = &asset.header;
+    header(&asset.header)?;
+    probe_sections(asset)?;
+    probe_records(asset)?;
+    factor_table(asset)?;
+    bricks(asset)?;
+    surfels(&asset.surfels)?;
+    geometry(&asset.geometry)?;
+    for (i, l) in asset.lights.iter().enumerate() {
+        l.validate(i)
+            .map_err(|e| FormatError::invalid("lights", i, e.to_string()))?;
+    }
+    Ok(())
+}
+
+/// The header: the grid's origin, spacing, steps and counts, and the ray count.
+fn header(h: &Header) -> Result<(), FormatError> {
     let g = &h.grid;
     finite("header.grid", 0, "origin", &g.origin)?;
     if !(g.spacing.is_finite() && g.spacing > 0.0) {
@@ -83,6 +99,14 @@ pub fn validate(asset: &Asset) -> Result<(), FormatError> {
             format!("ray_count {} outside 1..={MAX_RAYS}", h.ray_count),
         ));
     }
+    Ok(())
+}
+
+/// The per-probe sections' lengths (the probes, sky masks, sky transfers, visibility maps)
+/// against the grid, and the sky transfers' values.
+fn probe_sections(asset: &Asset) -> Result<(), FormatError> {
+    let h = &asset.header;
+    let g = &h.grid;
     let probes = asset.probes.len();
     if g.probe_count() != probes as u64 {
         return Err(FormatError::Count {
@@ -105,7 +129,13 @@ pub fn validate(asset: &Asset) -> Result<(), FormatError> {
         asset.probe_depth.len(),
         probes * crate::asset::DEPTH_WORDS,
     )?;
+    Ok(())
+}
 
+/// Each probe's record: finite position, ray counts within the ray count, flags, and factor
+/// tables that follow one another and add up to the factor table.
+fn probe_records(asset: &Asset) -> Result<(), FormatError> {
+    let h = &asset.header;
     let factors = &asset.factors;
     let mut next_factor = 0u64;
     for (i, p) in asset.probes.iter().enumerate() {
@@ -143,6 +173,12 @@ pub fn validate(asset: &Asset) -> Result<(), FormatError> {
             expected: next_factor as usize,
         });
     }
+    Ok(())
+}
+
+/// The factor table: its offset scale, and each factor's brick, ray count and values.
+fn factor_table(asset: &Asset) -> Result<(), FormatError> {
+    let (h, factors) = (&asset.header, &asset.factors);
     if let Factors::U8 { offset_scale, .. } = factors {
         if !(offset_scale.is_finite() && *offset_scale > 0.0) {
             return Err(FormatError::invalid(
@@ -179,7 +215,12 @@ pub fn validate(asset: &Asset) -> Result<(), FormatError> {
             finite("factors", f, "offset", &factors.offset(f))?;
         }
     }
+    Ok(())
+}
 
+/// The bricks: finite bounds, flags, surfel runs that follow one another, and each surfel of a
+/// brick inside its bounds and naming it.
+fn bricks(asset: &Asset) -> Result<(), FormatError> {
     let mut next_surfel = 0u64;
     for (i, b) in asset.bricks.iter().enumerate() {
         finite("bricks", i, "min", &b.min)?;
@@ -237,7 +278,12 @@ pub fn validate(asset: &Asset) -> Result<(), FormatError> {
         }
     }
     count("surfels", asset.surfels.len(), next_surfel as usize)?;
-    for (i, s) in asset.surfels.iter().enumerate() {
+    Ok(())
+}
+
+/// Each surfel's values: finite, with a positive weight.
+fn surfels(surfels: &[Surfel]) -> Result<(), FormatError> {
+    for (i, s) in surfels.iter().enumerate() {
         finite("surfels", i, "position", &s.position)?;
         finite("surfels", i, "normal", &s.normal)?;
         finite("surfels", i, "albedo", &s.albedo)?;
@@ -251,8 +297,13 @@ pub fn validate(asset: &Asset) -> Result<(), FormatError> {
             ));
         }
     }
+    Ok(())
+}
 
-    let geo = &asset.geometry;
+/// The BVH: nodes and triangles together or neither, finite boxes, children after their
+/// parent and in range, a tree (no shared children), a stack runtimes can hold, and finite
+/// triangles.
+fn geometry(geo: &Geometry) -> Result<(), FormatError> {
     let nodes = geo.nodes.len();
     let tris = geo.triangles.len();
     if (nodes == 0) != (tris == 0) {
@@ -307,10 +358,6 @@ pub fn validate(asset: &Asset) -> Result<(), FormatError> {
         finite("geometry.triangles", i, "v0", &t.v0)?;
         finite("geometry.triangles", i, "v1", &t.v1)?;
         finite("geometry.triangles", i, "v2", &t.v2)?;
-    }
-    for (i, l) in asset.lights.iter().enumerate() {
-        l.validate(i)
-            .map_err(|e| FormatError::invalid("lights", i, e.to_string()))?;
     }
     Ok(())
 }
