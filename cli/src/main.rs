@@ -1,6 +1,7 @@
 //! `prt`: the command-line face of prt (conventions.md section 6). Each subcommand turns its
 //! options into a settings struct and calls one library function.
 
+mod bake;
 mod bench_accuracy;
 mod bench_bake;
 mod bench_fuzz;
@@ -9,6 +10,7 @@ mod bench_lights;
 mod bench_render;
 mod bench_surface;
 mod progress;
+mod relight;
 mod render;
 mod sample;
 mod signals;
@@ -18,7 +20,6 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
 use prt_bake::BakeSettings;
-use prt_format::TransferPrecision;
 use render::{parse_size, parse_vec3};
 
 #[derive(Parser)]
@@ -30,28 +31,6 @@ use render::{parse_size, parse_vec3};
 struct Cli {
     #[command(subcommand)]
     command: Command,
-}
-
-#[derive(Clone, Copy, ValueEnum)]
-enum Quality {
-    /// The pure 512-direction lattice, fixed for good: what the data-equivalence tests against
-    /// the reference renderer use (`default` may change as bake speed allows; today it is this).
-    Fast,
-    /// 512 rays per probe: the same bake as `fast` today. More rays reach more bricks, so they
-    /// cost runtime gather work too (1024 rays: 1.7x the factors per probe on Sponza), a trade
-    /// left to `--rays` (README, "Presets").
-    Default,
-    /// 4096 rays per probe and half-size bricks: about 8x lower error on the Cornell reference,
-    /// 8x the trace time and about 5.6x the factors per probe.
-    High,
-}
-
-#[derive(Clone, Copy, ValueEnum)]
-enum Precision {
-    F16,
-    F32,
-    /// 16-byte factors: 8-bit SH terms and offsets (half the size of f16).
-    U8,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -137,81 +116,9 @@ enum BenchKind {
 #[derive(Subcommand)]
 enum Command {
     /// Bake a glTF 2.0 scene into a PRT asset.
-    Bake {
-        /// The scene (.gltf or .glb).
-        scene: PathBuf,
-        /// Output asset (.prt), written atomically.
-        #[arg(short, long)]
-        output: PathBuf,
-        /// Probe spacing in metres [default: about 1,000 probes over the bounds].
-        #[arg(long)]
-        spacing: Option<f32>,
-        /// Bake bounds MINX,MINY,MINZ,MAXX,MAXY,MAXZ [default: the scene's bounds].
-        #[arg(long, value_parser = parse_bounds, allow_hyphen_values = true)]
-        bounds: Option<[f32; 6]>,
-        /// Rays per probe [default: 512, or the --quality preset's].
-        #[arg(long)]
-        rays: Option<u32>,
-        /// Accuracy preset.
-        #[arg(long, value_enum, default_value = "default")]
-        quality: Quality,
-        /// Worker threads [default: all cores].
-        #[arg(long)]
-        threads: Option<usize>,
-        /// Refuse grids with more probes than this.
-        #[arg(long, default_value_t = 1 << 20)]
-        max_probes: u64,
-        /// Surfel cell size in metres (bricks are 4x4x4 cells) [default: spacing / 12, or / 24 with --quality high]; 0 = no merging.
-        #[arg(long)]
-        cell_size: Option<f32>,
-        /// Keep every ray hit as its own surfel and brick (same as --cell-size 0).
-        #[arg(long)]
-        no_merge: bool,
-        /// Treat every material as double-sided (for files with inconsistent winding).
-        #[arg(long)]
-        double_sided: bool,
-        /// Move probes inside geometry out through the nearest back face (within half a spacing).
-        #[arg(long)]
-        virtual_offset: bool,
-        /// Probes with more than this fraction of back-face hits are invalid.
-        #[arg(long, default_value_t = 0.1)]
-        invalid_backface_fraction: f32,
-        /// Probes that see no sky and hit the back of their triangles' winding with more than
-        /// this fraction of their rays are inside closed geometry (double-sided thick walls).
-        #[arg(long, default_value_t = 0.75)]
-        inside_facing_away_fraction: f32,
-        /// Leave probes inside geometry empty instead of copying their nearest valid
-        /// neighbour's data (dilation).
-        #[arg(long)]
-        no_dilation: bool,
-        /// Keep probes that lie on a surface where they are (by default they move a twentieth
-        /// of a spacing off it).
-        #[arg(long)]
-        no_surface_offset: bool,
-        /// Storage precision of factor transfers.
-        #[arg(long, value_enum, default_value = "u8")]
-        precision: Precision,
-        /// MiB of factor rows held in memory while probes are traced; past it the oldest wait
-        /// in a temporary file in $TMPDIR (the asset is the same).
-        #[arg(long, default_value_t = BakeSettings::default().row_memory >> 20)]
-        row_memory: usize,
-    },
+    Bake(bake::BakeArgs),
     /// Relight an asset once and write every probe's SH9 as JSON.
-    Relight {
-        asset: PathBuf,
-        /// Light rig JSON [default: the scene's KHR_lights_punctual lights, black sky].
-        #[arg(long)]
-        lights: Option<PathBuf>,
-        #[arg(long, value_enum, default_value = "cpu")]
-        backend: Backend,
-        /// Light bounces (1 = direct light at surfels only: the one-bounce contract; more feed
-        /// the volume back into the surfels, sampled as the engine samples it).
-        #[arg(long, default_value_t = 1)]
-        bounces: u32,
-        /// Output JSON, written atomically.
-        #[arg(long)]
-        json: PathBuf,
-    },
+    Relight(relight::RelightArgs),
     /// Measure speed and accuracy (not tests; see README for the figures).
     Bench {
         #[command(subcommand)]
@@ -367,223 +274,9 @@ fn main() {
 
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
-        Command::Bake {
-            scene,
-            output,
-            spacing,
-            bounds,
-            rays,
-            quality,
-            threads,
-            max_probes,
-            cell_size,
-            no_merge,
-            double_sided,
-            virtual_offset,
-            invalid_backface_fraction,
-            inside_facing_away_fraction,
-            no_dilation,
-            no_surface_offset,
-            precision,
-            row_memory,
-        } => {
-            let preset = match quality {
-                Quality::Fast | Quality::Default => BakeSettings::default(),
-                Quality::High => BakeSettings::high_quality(),
-            };
-            let settings = BakeSettings {
-                rays: rays.unwrap_or(preset.rays),
-                spacing,
-                bounds,
-                max_probes,
-                cell_size: if no_merge { Some(0.0) } else { cell_size },
-                double_sided,
-                virtual_offset,
-                invalid_backface_fraction,
-                inside_facing_away_fraction,
-                dilate: !no_dilation,
-                surface_offset: !no_surface_offset,
-                transfer_precision: match precision {
-                    Precision::F16 => TransferPrecision::F16,
-                    Precision::F32 => TransferPrecision::F32,
-                    Precision::U8 => TransferPrecision::U8,
-                },
-                threads,
-                row_memory: row_memory.saturating_mul(1 << 20),
-                ..preset
-            };
-            let progress = progress::Bar::new();
-            let (asset, report) = prt_bake::bake_to_file(&scene, &output, &settings, &progress)
-                .with_context(|| format!("baking {}", scene.display()))?;
-            for w in &report.warnings {
-                eprintln!("warning: {w}");
-            }
-            println!("{}", prt_format::Summary::of(&asset, report.file_bytes));
-            let times: Vec<String> = report
-                .timings
-                .iter()
-                .map(|(stage, d)| format!("{stage} {:.3} s", d.as_secs_f64()))
-                .collect();
-            println!("time             {}", times.join(" | "));
-            if let Some(kb) = peak_rss_kib() {
-                let spilled = match report.rows_spilled {
-                    0 => String::new(),
-                    b => format!(
-                        " ({:.1} MiB of factor rows past --row-memory waited in a temporary file)",
-                        b as f64 / f64::from(1 << 20)
-                    ),
-                };
-                println!(
-                    "peak memory      {:.1} MiB resident{spilled}",
-                    kb as f64 / 1024.0
-                );
-            }
-            // `prt bench bake --runs` times a bake to this line: keep its first word.
-            println!("wrote            {}", output.display());
-            Ok(())
-        }
-        Command::Relight {
-            asset,
-            lights,
-            backend,
-            bounces,
-            json,
-        } => {
-            let mut inputs = vec![asset.as_path()];
-            inputs.extend(lights.as_deref());
-            ensure_not_input(&json, &inputs)?;
-            let loaded = prt_format::read_asset(&asset)
-                .with_context(|| format!("loading {}", asset.display()))?;
-            let lighting = lighting_of(lights.as_deref(), &loaded)?;
-            let start = std::time::Instant::now();
-            let (sh, stats, name) = match backend {
-                Backend::Cpu => {
-                    let relit =
-                        prt_runtime::CpuRelighter::new(&loaded)?.relight(&lighting, bounces)?;
-                    println!("{}", relit.stats);
-                    (
-                        relit.sh,
-                        prt_runtime::output::cpu_stats(&relit.stats),
-                        "cpu",
-                    )
-                }
-                Backend::Gpu => {
-                    let (sh, counters, info) = prt_runtime::gpu::relight_once(
-                        &loaded,
-                        &lighting,
-                        prt_runtime::gpu::RuntimeSettings {
-                            bounces: prt_runtime::gpu::Bounces::Fixed(bounces),
-                            ..prt_runtime::gpu::RuntimeSettings::default()
-                        }
-                        .with_room_for(lighting.rig.lights.len()),
-                    )?;
-                    eprintln!("adapter: {} ({:?})", info.name, info.backend);
-                    println!(
-                        "gpu work: {} bricks relit, {} surfels relit, {} shadow rays, {} probes gathered",
-                        counters.bricks_relit,
-                        counters.surfels_relit,
-                        counters.shadow_rays,
-                        counters.probes_gathered
-                    );
-                    if counters.probes_clamped > 0 {
-                        eprintln!(
-                            "warning: {} probes exceed the f16 volume's range (+-65504) and are clamped in it (the SH written here are exact)",
-                            counters.probes_clamped
-                        );
-                    }
-                    (sh, prt_runtime::output::gpu_stats(&counters), "gpu")
-                }
-            };
-            let seconds = start.elapsed().as_secs_f64();
-            prt_runtime::relight::check_finite(&sh, &lighting)?;
-            let doc = prt_runtime::output::relight_json(&loaded, &sh, name, stats);
-            let text = serde_json::to_vec_pretty(&doc)?;
-            prt_format::io::write_bytes_atomic(&json, &text)
-                .with_context(|| format!("writing {}", json.display()))?;
-            println!(
-                "relit {} probes ({name}, {bounces} bounce(s)) in {seconds:.3} s",
-                sh.len()
-            );
-            println!("wrote {}", json.display());
-            Ok(())
-        }
-        Command::Bench { kind } => match kind {
-            BenchKind::Bake {
-                scene,
-                spacing,
-                bounds,
-                rays,
-                double_sided,
-                runs,
-            } => {
-                let settings = BakeSettings {
-                    rays,
-                    spacing,
-                    bounds,
-                    double_sided,
-                    ..BakeSettings::default()
-                };
-                println!("{}", bench_bake::bake(&scene, &settings, runs as usize)?);
-                Ok(())
-            }
-            BenchKind::Accuracy(args) => bench_accuracy::run(args),
-            BenchKind::Render {
-                scene,
-                lights,
-                tiles,
-                size,
-                eye,
-                target,
-                fov,
-                double_sided,
-                frames,
-            } => {
-                let camera = render::camera_of(eye, target, Some(fov))?;
-                let bench = bench_render::RenderBench {
-                    scene: &scene,
-                    bake: BakeSettings {
-                        double_sided,
-                        ..BakeSettings::default()
-                    },
-                    camera,
-                    lights,
-                    tiles,
-                    size,
-                    frames: frames.max(1),
-                };
-                println!("{}", bench_render::render(&bench)?);
-                Ok(())
-            }
-            BenchKind::Gpu {
-                scene,
-                lights,
-                spacings,
-                rays,
-                cell_size,
-            } => {
-                let lighting = prt_runtime::load_rig(&lights)?;
-                println!(
-                    "{}",
-                    bench_gpu::gpu(&scene, &lighting, &spacings, rays, cell_size)?
-                );
-                // Cost against light count, on the same scene (`prt bench lights` alone).
-                println!(
-                    "{}",
-                    bench_lights::table(&bench_lights::LightsArgs {
-                        scene,
-                        lights: vec![1, 32, 256, 1024],
-                        spacing: None,
-                        rays,
-                        double_sided: false,
-                        repeats: 5,
-                    })?
-                );
-                Ok(())
-            }
-            BenchKind::Surface(args) => bench_surface::run(args),
-            BenchKind::Fuzz(args) => bench_fuzz::run(args),
-            BenchKind::Lights(args) => bench_lights::run(args),
-        },
+        Command::Bake(args) => bake::run(args),
+        Command::Relight(args) => relight::run(args),
+        Command::Bench { kind } => bench(kind),
         Command::Sample(args) => sample::run(args),
         Command::Render(args) => render::run(args),
         Command::Inspect { asset, json } => {
@@ -599,5 +292,86 @@ fn run(cli: Cli) -> Result<()> {
             }
             Ok(())
         }
+    }
+}
+
+/// `prt bench`: the benchmark `kind` asks for, its report printed.
+fn bench(kind: BenchKind) -> Result<()> {
+    match kind {
+        BenchKind::Bake {
+            scene,
+            spacing,
+            bounds,
+            rays,
+            double_sided,
+            runs,
+        } => {
+            let settings = BakeSettings {
+                rays,
+                spacing,
+                bounds,
+                double_sided,
+                ..BakeSettings::default()
+            };
+            println!("{}", bench_bake::bake(&scene, &settings, runs as usize)?);
+            Ok(())
+        }
+        BenchKind::Accuracy(args) => bench_accuracy::run(args),
+        BenchKind::Render {
+            scene,
+            lights,
+            tiles,
+            size,
+            eye,
+            target,
+            fov,
+            double_sided,
+            frames,
+        } => {
+            let camera = render::camera_of(eye, target, Some(fov))?;
+            let bench = bench_render::RenderBench {
+                scene: &scene,
+                bake: BakeSettings {
+                    double_sided,
+                    ..BakeSettings::default()
+                },
+                camera,
+                lights,
+                tiles,
+                size,
+                frames: frames.max(1),
+            };
+            println!("{}", bench_render::render(&bench)?);
+            Ok(())
+        }
+        BenchKind::Gpu {
+            scene,
+            lights,
+            spacings,
+            rays,
+            cell_size,
+        } => {
+            let lighting = prt_runtime::load_rig(&lights)?;
+            println!(
+                "{}",
+                bench_gpu::gpu(&scene, &lighting, &spacings, rays, cell_size)?
+            );
+            // Cost against light count, on the same scene (`prt bench lights` alone).
+            println!(
+                "{}",
+                bench_lights::table(&bench_lights::LightsArgs {
+                    scene,
+                    lights: vec![1, 32, 256, 1024],
+                    spacing: None,
+                    rays,
+                    double_sided: false,
+                    repeats: 5,
+                })?
+            );
+            Ok(())
+        }
+        BenchKind::Surface(args) => bench_surface::run(args),
+        BenchKind::Fuzz(args) => bench_fuzz::run(args),
+        BenchKind::Lights(args) => bench_lights::run(args),
     }
 }

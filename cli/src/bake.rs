@@ -1,0 +1,172 @@
+//! `prt bake`: the bake's options, turned into [`BakeSettings`] for [`prt_bake::bake_to_file`],
+//! and the summary printed once the asset is written.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use clap::{Args, ValueEnum};
+use prt_bake::BakeSettings;
+use prt_format::TransferPrecision;
+
+use crate::{parse_bounds, peak_rss_kib, progress};
+
+#[derive(Clone, Copy, ValueEnum)]
+enum Quality {
+    /// The pure 512-direction lattice, fixed for good: what the data-equivalence tests against
+    /// the reference renderer use (`default` may change as bake speed allows; today it is this).
+    Fast,
+    /// 512 rays per probe: the same bake as `fast` today. More rays reach more bricks, so they
+    /// cost runtime gather work too (1024 rays: 1.7x the factors per probe on Sponza), a trade
+    /// left to `--rays` (README, "Presets").
+    Default,
+    /// 4096 rays per probe and half-size bricks: about 8x lower error on the Cornell reference,
+    /// 8x the trace time and about 5.6x the factors per probe.
+    High,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum Precision {
+    F16,
+    F32,
+    /// 16-byte factors: 8-bit SH terms and offsets (half the size of f16).
+    U8,
+}
+
+#[derive(Args)]
+pub(crate) struct BakeArgs {
+    /// The scene (.gltf or .glb).
+    scene: PathBuf,
+    /// Output asset (.prt), written atomically.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Probe spacing in metres [default: about 1,000 probes over the bounds].
+    #[arg(long)]
+    spacing: Option<f32>,
+    /// Bake bounds MINX,MINY,MINZ,MAXX,MAXY,MAXZ [default: the scene's bounds].
+    #[arg(long, value_parser = parse_bounds, allow_hyphen_values = true)]
+    bounds: Option<[f32; 6]>,
+    /// Rays per probe [default: 512, or the --quality preset's].
+    #[arg(long)]
+    rays: Option<u32>,
+    /// Accuracy preset.
+    #[arg(long, value_enum, default_value = "default")]
+    quality: Quality,
+    /// Worker threads [default: all cores].
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Refuse grids with more probes than this.
+    #[arg(long, default_value_t = 1 << 20)]
+    max_probes: u64,
+    /// Surfel cell size in metres (bricks are 4x4x4 cells) [default: spacing / 12, or / 24 with --quality high]; 0 = no merging.
+    #[arg(long)]
+    cell_size: Option<f32>,
+    /// Keep every ray hit as its own surfel and brick (same as --cell-size 0).
+    #[arg(long)]
+    no_merge: bool,
+    /// Treat every material as double-sided (for files with inconsistent winding).
+    #[arg(long)]
+    double_sided: bool,
+    /// Move probes inside geometry out through the nearest back face (within half a spacing).
+    #[arg(long)]
+    virtual_offset: bool,
+    /// Probes with more than this fraction of back-face hits are invalid.
+    #[arg(long, default_value_t = 0.1)]
+    invalid_backface_fraction: f32,
+    /// Probes that see no sky and hit the back of their triangles' winding with more than
+    /// this fraction of their rays are inside closed geometry (double-sided thick walls).
+    #[arg(long, default_value_t = 0.75)]
+    inside_facing_away_fraction: f32,
+    /// Leave probes inside geometry empty instead of copying their nearest valid
+    /// neighbour's data (dilation).
+    #[arg(long)]
+    no_dilation: bool,
+    /// Keep probes that lie on a surface where they are (by default they move a twentieth
+    /// of a spacing off it).
+    #[arg(long)]
+    no_surface_offset: bool,
+    /// Storage precision of factor transfers.
+    #[arg(long, value_enum, default_value = "u8")]
+    precision: Precision,
+    /// MiB of factor rows held in memory while probes are traced; past it the oldest wait
+    /// in a temporary file in $TMPDIR (the asset is the same).
+    #[arg(long, default_value_t = BakeSettings::default().row_memory >> 20)]
+    row_memory: usize,
+}
+
+/// Bakes as `args` say, prints the summary, and fails with the bake's error named by its scene.
+pub(crate) fn run(args: BakeArgs) -> Result<()> {
+    let BakeArgs {
+        scene,
+        output,
+        spacing,
+        bounds,
+        rays,
+        quality,
+        threads,
+        max_probes,
+        cell_size,
+        no_merge,
+        double_sided,
+        virtual_offset,
+        invalid_backface_fraction,
+        inside_facing_away_fraction,
+        no_dilation,
+        no_surface_offset,
+        precision,
+        row_memory,
+    } = args;
+    let preset = match quality {
+        Quality::Fast | Quality::Default => BakeSettings::default(),
+        Quality::High => BakeSettings::high_quality(),
+    };
+    let settings = BakeSettings {
+        rays: rays.unwrap_or(preset.rays),
+        spacing,
+        bounds,
+        max_probes,
+        cell_size: if no_merge { Some(0.0) } else { cell_size },
+        double_sided,
+        virtual_offset,
+        invalid_backface_fraction,
+        inside_facing_away_fraction,
+        dilate: !no_dilation,
+        surface_offset: !no_surface_offset,
+        transfer_precision: match precision {
+            Precision::F16 => TransferPrecision::F16,
+            Precision::F32 => TransferPrecision::F32,
+            Precision::U8 => TransferPrecision::U8,
+        },
+        threads,
+        row_memory: row_memory.saturating_mul(1 << 20),
+        ..preset
+    };
+    let progress = progress::Bar::new();
+    let (asset, report) = prt_bake::bake_to_file(&scene, &output, &settings, &progress)
+        .with_context(|| format!("baking {}", scene.display()))?;
+    for w in &report.warnings {
+        eprintln!("warning: {w}");
+    }
+    println!("{}", prt_format::Summary::of(&asset, report.file_bytes));
+    let times: Vec<String> = report
+        .timings
+        .iter()
+        .map(|(stage, d)| format!("{stage} {:.3} s", d.as_secs_f64()))
+        .collect();
+    println!("time             {}", times.join(" | "));
+    if let Some(kb) = peak_rss_kib() {
+        let spilled = match report.rows_spilled {
+            0 => String::new(),
+            b => format!(
+                " ({:.1} MiB of factor rows past --row-memory waited in a temporary file)",
+                b as f64 / f64::from(1 << 20)
+            ),
+        };
+        println!(
+            "peak memory      {:.1} MiB resident{spilled}",
+            kb as f64 / 1024.0
+        );
+    }
+    // `prt bench bake --runs` times a bake to this line: keep its first word.
+    println!("wrote            {}", output.display());
+    Ok(())
+}
