@@ -1,5 +1,5 @@
-//! `prt bake`: the bake's options, turned into [`BakeSettings`] for [`prt_bake::bake_to_file`],
-//! and the summary printed once the asset is written.
+//! `prt bake` (conventions.md section 6): the bake's options, turned into [`BakeSettings`] for
+//! [`prt_bake::bake_to_file`], and the summary printed once the asset is written.
 
 use std::path::PathBuf;
 
@@ -33,7 +33,7 @@ enum Precision {
 }
 
 #[derive(Args)]
-pub(crate) struct BakeArgs {
+pub struct BakeArgs {
     /// The scene (.gltf or .glb).
     scene: PathBuf,
     /// Output asset (.prt), written atomically.
@@ -94,7 +94,7 @@ pub(crate) struct BakeArgs {
 }
 
 /// Bakes as `args` say, prints the summary, and fails with the bake's error named by its scene.
-pub(crate) fn run(args: BakeArgs) -> Result<()> {
+pub fn run(args: BakeArgs) -> Result<()> {
     let BakeArgs {
         scene,
         output,

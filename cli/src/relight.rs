@@ -1,5 +1,5 @@
-//! `prt relight`: one relight of an asset on the CPU reference or the GPU, every probe's SH9
-//! written as JSON.
+//! `prt relight` (conventions.md section 6): one relight of an asset on the CPU reference or
+//! the GPU, every probe's SH9 written as JSON.
 
 use std::path::PathBuf;
 
@@ -9,7 +9,7 @@ use clap::Args;
 use crate::{ensure_not_input, lighting_of, Backend};
 
 #[derive(Args)]
-pub(crate) struct RelightArgs {
+pub struct RelightArgs {
     asset: PathBuf,
     /// Light rig JSON [default: the scene's KHR_lights_punctual lights, black sky].
     #[arg(long)]
@@ -25,8 +25,9 @@ pub(crate) struct RelightArgs {
     json: PathBuf,
 }
 
-/// Relights as `args` say and writes the JSON atomically.
-pub(crate) fn run(args: RelightArgs) -> Result<()> {
+/// Relights as `args` say and writes the JSON atomically (other tools read it: never half
+/// written).
+pub fn run(args: RelightArgs) -> Result<()> {
     let RelightArgs {
         asset,
         lights,

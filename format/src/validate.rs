@@ -132,8 +132,9 @@ fn probe_sections(asset: &Asset) -> Result<(), FormatError> {
     Ok(())
 }
 
-/// Each probe's record: finite position, ray counts within the ray count, flags, and factor
-/// tables that follow one another and add up to the factor table.
+/// Each probe's record: a finite position, sky and back-face ray counts within the header's
+/// `ray_count`, dilated only if valid, and factor runs that follow one another and add up to
+/// the factor table's length.
 fn probe_records(asset: &Asset) -> Result<(), FormatError> {
     let h = &asset.header;
     let factors = &asset.factors;
