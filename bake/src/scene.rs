@@ -578,9 +578,9 @@ where
     let Some(accessor) = prim.get(&gltf::Semantic::Positions) else {
         return Err("has no POSITION attribute".into());
     };
+    let place = |p: [f32; 3]| world.transform_point3(Vec3::from(p));
     if let Some(elements) = plain_elements(&accessor, buffers, 12) {
-        let place = |e: &[u8]| world.transform_point3(Vec3::from(le_f32s::<3>(e)));
-        return Ok(elements.map(place).collect());
+        return Ok(elements.map(le_f32s::<3>).map(place).collect());
     }
     let read = reader.read_positions().ok_or_else(|| {
         format!(
@@ -588,9 +588,7 @@ where
             accessor.index()
         )
     })?;
-    Ok(read
-        .map(|p| world.transform_point3(Vec3::from(p)))
-        .collect())
+    Ok(read.map(place).collect())
 }
 
 /// A primitive's vertex indices (`0..vertex_count` when it has none), each checked against

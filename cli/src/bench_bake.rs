@@ -162,7 +162,7 @@ fn timed(positions: &[Vec3], per_probe: &(dyn Fn(Vec3) -> usize + Sync)) -> (f64
 /// seconds, obvhs seconds), and their median. The bakes after the first are `prt bake`
 /// processes of their own ([`bake_process`]), timed from their start to the asset written (the
 /// issue's "process start to file written") and, for a second median and range over them
-/// alone (in brackets), to their exit: a process's first
+/// alone (in brackets), to their exit. Processes, not more bakes in this one: a process's first
 /// bake pays for every page it touches (2.1-2.5 us a page fault here), and later bakes in the
 /// same process reuse what the allocator kept (Sponza at 1.9 m: 0.47-0.50 s against 0.54 s
 /// for the first, 14-21k page faults against 44k), which would flatter the bake. On a shared
