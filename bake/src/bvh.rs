@@ -2,8 +2,8 @@
 //! (Meister & Bittner, "Parallel Locally-Ordered Clustering for Bounding Volume Hierarchy
 //! Construction", 2018, with parallel reinsertion):
 //!
-//! - an uncompressed 8-wide BVH that the bake traces its probe rays with, eight rays from one
-//!   probe at a time ([`crate::bvh8`]);
+//! - an uncompressed 8-wide BVH that the bake traces its probe rays with, a packet of rays
+//!   from one probe at a time ([`crate::bvh8`]);
 //! - the binary BVH it was made from, flattened with children after parents and triangles in
 //!   leaf order, which the asset carries so that the runtime (CPU reference and WGSL alike) can
 //!   trace shadow rays with a plain stack traversal.
@@ -21,7 +21,7 @@ use obvhs::{
 use prt_format::{BvhNode, Geometry};
 use rayon::prelude::*;
 
-use crate::bvh8::{Bvh8, LANES};
+use crate::bvh8::{Bvh8, PACKET};
 
 /// The power of two nearest `1 / spacing`: the bake traces in a frame where the probe spacing is
 /// about one unit. The triangle test's normal and `ng . (v0 - origin)` grow with the square and
@@ -195,7 +195,7 @@ impl SceneBvh {
         }
     }
 
-    /// [`SceneBvh::closest_hit`] of up to [`LANES`] rays from one origin, traced as a packet
+    /// [`SceneBvh::closest_hit`] of up to [`PACKET`] rays from one origin, traced as a packet
     /// (each ray gets the hit it gets alone).
     #[inline]
     pub fn closest_hits(
@@ -203,7 +203,7 @@ impl SceneBvh {
         origin: Vec3,
         dirs: &[Vec3],
         tmax: f32,
-    ) -> [Option<TriangleHit>; LANES] {
+    ) -> [Option<TriangleHit>; PACKET] {
         self.bvh8
             .closest_hits(origin * self.scale, dirs, tmax * self.scale)
             .map(|hit| self.unscaled(hit))

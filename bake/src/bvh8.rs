@@ -1,15 +1,15 @@
 //! An uncompressed 8-wide BVH traced by packets of rays that leave one point.
 //!
 //! Every probe shoots its lattice directions from one origin, in Morton order of the octahedral
-//! map ([`crate::trace::coherent_order`]), so consecutive rays span a narrow cone. Tracing eight
-//! of them together (ray packets: Wald, Slusallek, Benthin, Wagner, "Interactive Rendering with
-//! Coherent Ray Tracing", 2001) fetches each node once for the packet. Inside a node the work is
+//! map ([`crate::trace::coherent_order`]), so consecutive rays span a narrow cone. Tracing
+//! [`PACKET`] of them together (ray packets: Wald, Slusallek, Benthin, Wagner, "Interactive
+//! Rendering with Coherent Ray Tracing", 2001) fetches each node once for the packet. Inside a node the work is
 //! per ray, SIMD across the node (as Embree's single-ray BVH8 traversal): each ray still in the
 //! packet tests the eight child boxes in one AVX vector (two SSE vectors where the CPU lacks
 //! AVX, [`Bvh8::closest_hits`] choosing at run time), and each leaf's four triangles, stored
 //! structure of arrays, in one SSE vector. Rays that left the packet cost nothing: at Sponza's
-//! probes a packet arrives at an inner node with 3.8 of its 8 rays on average, and at a leaf
-//! with 2.1. The shared origin makes `box - origin`, `v0 - origin` and
+//! probes (1.9 m) a packet arrives at an inner node with 6.6 of its 32 rays on average, and at a
+//! leaf with 2.5. The shared origin makes `box - origin`, `v0 - origin` and
 //! `ng . (v0 - origin)` one value per node or leaf, not one per ray. Boxes are plain f32, not
 //! obvhs' compressed nodes, which trade decode work per ray for memory.
 //!
@@ -20,7 +20,7 @@
 //! lowest triangle index. Box tests are conservative (boxes grown past what the triangle test's
 //! edge tolerance can reach, the far distance widened by `4 eps` after Ize, "Robust BVH Ray
 //! Traversal", JCGT 2013) and a child is entered when its near distance equals a ray's best `t`,
-//! so a ray gets the same hit whichever packet carries it, alone or with seven others (unit tests
+//! so a ray gets the same hit whichever packet carries it, alone or with others (unit tests
 //! against a brute-force loop over every triangle). One caveat: rounding in the triangle test of
 //! a near-degenerate sliver hit at a grazing angle could put its hit outside its grown box, and
 //! then whether it is found depends on the packet; the bake stays deterministic, since packets are
@@ -32,11 +32,21 @@ use rayon::prelude::*;
 
 use crate::bvh::LeafOrder;
 
-/// Rays in a packet and children in a node.
+/// Children in a node.
 pub const LANES: usize = 8;
 
-// Ray sets are `u8` masks.
-const _: () = assert!(LANES == 8);
+/// Rays in a packet. The tracing is bound by the latency of fetching nodes and leaves, so the
+/// more rays share a fetch the better, until the packet's cone grows wide enough to visit many
+/// nodes that few of its rays need. Sponza at 1.9 m (3,024 probes, 512 rays each), from packets
+/// of 8 to 16, 32 and 64: inner-node visits 2.86 M, 2.13 M, 1.66 M (3.7, 5.0 and 6.6 rays a
+/// visit; ray-box tests 10.5 M, 10.7 M, 10.9 M), leaf visits 1.73 M, 1.51 M, 1.34 M; one
+/// thread, least of 9 in one process, four alternating runs each: 305-333 ms, 266-298 ms,
+/// 252-264 ms (one outlier 335) and 295-312 ms. The hits are the same for any packet size.
+pub const PACKET: usize = 32;
+
+/// A set of a packet's rays.
+type RayMask = u32;
+const _: () = assert!(PACKET <= RayMask::BITS as usize);
 
 /// Triangles in a leaf: one SSE vector of them ([`Tri4`]).
 pub const TRI_LANES: usize = 4;
@@ -125,26 +135,26 @@ pub struct Bvh8 {
 struct Entry {
     index: u32,
     count: u8,
-    mask: u8,
+    mask: RayMask,
     near: f32,
 }
 
 thread_local! {
     /// Each thread's traversal stack, reused by every packet it traces: a stack allocated per
-    /// packet (eight rays) was a malloc and a free every two microseconds or so.
+    /// packet (of eight rays, then) was a malloc and a free every two microseconds or so.
     static STACK: std::cell::Cell<Vec<Entry>> = const { std::cell::Cell::new(Vec::new()) };
 }
 
-/// Up to eight rays from one origin.
+/// Up to [`PACKET`] rays from one origin.
 struct Packet {
     origin: Vec3,
-    dir: [Lanes; 3],
+    dir: [[f32; PACKET]; 3],
     /// Inverse directions ([`TINY`] for zero components).
-    inv: [Lanes; 3],
+    inv: [[f32; PACKET]; 3],
     /// Best distance so far (`tmax`: none).
-    t: Lanes,
+    t: [f32; PACKET],
     /// Triangle (scene index) at `t`, `u32::MAX` for none.
-    hit: [u32; LANES],
+    hit: [u32; PACKET],
 }
 
 /// `_mm_min_ps` of one lane: `a` when it is the lesser, else `b`.
@@ -175,7 +185,7 @@ fn bits(m: BVec4A) -> u8 {
 
 /// The set bits of `mask`, lowest first.
 #[inline(always)]
-fn each_bit(mut mask: u8) -> impl Iterator<Item = usize> {
+fn each_bit(mut mask: RayMask) -> impl Iterator<Item = usize> {
     std::iter::from_fn(move || {
         (mask != 0).then(|| {
             let k = mask.trailing_zeros() as usize;
@@ -245,14 +255,14 @@ impl Bvh8 {
         Bvh8 { nodes, triangles }
     }
 
-    /// Closest hits within `tmax` of up to [`LANES`] rays from `origin` along `dirs`: per ray,
+    /// Closest hits within `tmax` of up to [`PACKET`] rays from `origin` along `dirs`: per ray,
     /// the scene's triangle index and the distance in units of `dirs`' length.
     pub fn closest_hits(
         &self,
         origin: Vec3,
         dirs: &[Vec3],
         tmax: f32,
-    ) -> [Option<(u32, f32)>; LANES] {
+    ) -> [Option<(u32, f32)>; PACKET] {
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx") {
             // SAFETY: the CPU has AVX.
@@ -270,7 +280,7 @@ impl Bvh8 {
         origin: Vec3,
         dirs: &[Vec3],
         tmax: f32,
-    ) -> [Option<(u32, f32)>; LANES] {
+    ) -> [Option<(u32, f32)>; PACKET] {
         self.closest_hits_in(origin, dirs, tmax)
     }
 
@@ -281,14 +291,14 @@ impl Bvh8 {
         origin: Vec3,
         dirs: &[Vec3],
         tmax: f32,
-    ) -> [Option<(u32, f32)>; LANES] {
-        assert!(dirs.len() <= LANES, "a packet holds at most {LANES} rays");
-        let mut hits = [None; LANES];
+    ) -> [Option<(u32, f32)>; PACKET] {
+        assert!(dirs.len() <= PACKET, "a packet holds at most {PACKET} rays");
+        let mut hits = [None; PACKET];
         if self.nodes.is_empty() || dirs.is_empty() {
             return hits;
         }
         let mut p = Packet::new(origin, dirs, tmax);
-        let all = u8::MAX >> (LANES - dirs.len());
+        let all = RayMask::MAX >> (RayMask::BITS as usize - dirs.len());
         // Empty: every traversal pops it empty before putting it back.
         let mut stack = STACK.take();
         stack.push(Entry {
@@ -375,12 +385,12 @@ impl Bvh8 {
     /// Sponza at 1.9 m, bare tracing: 0.27-0.28 s with the same test written as two glam
     /// `Vec4`s, 0.21-0.28 s as arrays for SSE, 0.17-0.19 s for AVX.
     #[inline(always)]
-    fn visit(&self, node: &Node, p: &Packet, mask: u8, stack: &mut Vec<Entry>) {
+    fn visit(&self, node: &Node, p: &Packet, mask: RayMask, stack: &mut Vec<Entry>) {
         let rel = |planes: &[Lanes; 3]| -> [Lanes; 3] {
             std::array::from_fn(|a| planes[a].map(|v| v - p.origin[a]))
         };
         let (lo, hi) = (rel(&node.min), rel(&node.max));
-        let mut rays = [0u8; LANES];
+        let mut rays = [0 as RayMask; LANES];
         let mut near = [f32::INFINITY; LANES];
         for k in each_bit(mask) {
             let inv = [p.inv[0][k], p.inv[1][k], p.inv[2][k]];
@@ -394,7 +404,7 @@ impl Bvh8 {
                 }
                 let enter = tn <= min_ps(tf * FAR_SLACK, limit);
                 near[c] = if enter { min_ps(near[c], tn) } else { near[c] };
-                rays[c] |= u8::from(enter) << k;
+                rays[c] |= RayMask::from(enter) << k;
             }
         }
         let base = stack.len();
@@ -421,14 +431,14 @@ impl Bvh8 {
 }
 
 impl Packet {
-    /// The rays from `origin` along `dirs` (at most [`LANES`]), none hit within `tmax` yet.
+    /// The rays from `origin` along `dirs` (at most [`PACKET`]), none hit within `tmax` yet.
     fn new(origin: Vec3, dirs: &[Vec3], tmax: f32) -> Packet {
         let mut p = Packet {
             origin,
-            dir: [[0.0; LANES]; 3],
-            inv: [[0.0; LANES]; 3],
-            t: [tmax; LANES],
-            hit: [u32::MAX; LANES],
+            dir: [[0.0; PACKET]; 3],
+            inv: [[0.0; PACKET]; 3],
+            t: [tmax; PACKET],
+            hit: [u32::MAX; PACKET],
         };
         for (k, d) in dirs.iter().enumerate() {
             for a in 0..3 {
@@ -455,7 +465,7 @@ impl Packet {
     /// `tests/tests/geometry.rs`), for each ray in `mask` against four triangles at once,
     /// keeping the nearer hit (ties to the lower triangle index).
     #[inline(always)]
-    fn intersect(&mut self, tri: &Tri4, mask: u8) {
+    fn intersect(&mut self, tri: &Tri4, mask: RayMask) {
         let o = self.origin;
         let c = [0, 1, 2].map(|a| tri.v0[a] - Vec4::splat(o[a]));
         let [ngx, ngy, ngz] = tri.ng;
@@ -478,7 +488,7 @@ impl Packet {
                 & w.cmpge(eps)
                 & t.cmpge(Vec4::ZERO)
                 & t.cmple(Vec4::splat(self.t[k]));
-            for j in each_bit(bits(candidate)) {
+            for j in each_bit(RayMask::from(bits(candidate))) {
                 let (t, index) = (t[j], tri.index[j]);
                 if t < self.t[k] || (t == self.t[k] && index < self.hit[k]) {
                     self.t[k] = t;

@@ -6,7 +6,7 @@ use prt_format::sh::SH_COUNT;
 use rayon::prelude::*;
 
 use crate::bvh::{SceneBvh, TriangleHit};
-use crate::bvh8::LANES;
+use crate::bvh8::PACKET;
 use crate::scene::{Material, Scene};
 use crate::texture;
 
@@ -111,8 +111,8 @@ impl Tracer<'_> {
             sky_mask: vec![0; n.div_ceil(32)],
             ..ProbeRays::default()
         };
-        for packet in self.order.chunks(LANES) {
-            let mut dirs = [Vec3::ZERO; LANES];
+        for packet in self.order.chunks(PACKET) {
+            let mut dirs = [Vec3::ZERO; PACKET];
             for (d, &i) in dirs.iter_mut().zip(packet) {
                 *d = self.directions[i as usize];
             }

@@ -100,7 +100,7 @@ fn bare(scene: &Path, asset: &prt_format::Asset, rays: u32) -> Result<Bare> {
     let packets = [&coherent, lattice].map(|order| {
         timed(probes, &|p| {
             order
-                .chunks(prt_bake::bvh8::LANES)
+                .chunks(prt_bake::bvh8::PACKET)
                 .map(|packet| {
                     let d: Vec<Vec3> = packet.iter().map(|&i| dirs[i as usize]).collect();
                     let hits = bvh.closest_hits(p, &d, f32::INFINITY);
@@ -427,7 +427,8 @@ fn baseline_rows(md: &mut String, bare: &Bare, rays: f64, bake_s: f64) -> Result
     let [packets, lattice_packets] = bare.packets;
     writeln!(
         md,
-        "| bare packet tracing, the bake's BVH8 and order (8 rays a packet, {} hits) | {} |",
+        "| bare packet tracing, the bake's BVH8 and order ({} rays a packet, {} hits) | {} |",
+        prt_bake::bvh8::PACKET,
         packets.1,
         timed(packets)
     )?;

@@ -55,7 +55,7 @@ fn check(tris: &[Triangle], origins: &[Vec3], dirs: &[Vec3]) -> usize {
 fn check_with(bvh: &Bvh8, tris: &[Triangle], origins: &[Vec3], dirs: &[Vec3]) -> usize {
     let mut hits = 0;
     for &o in origins {
-        for packet in dirs.chunks(LANES) {
+        for packet in dirs.chunks(PACKET) {
             let got = bvh.closest_hits(o, packet, f32::INFINITY);
             // The copy compiled for the baseline instruction set agrees with the one the CPU
             // runs (AVX where it has it).
@@ -197,7 +197,7 @@ fn packets_find_the_brute_force_hit_on_axis_aligned_faces() {
 /// [`Bvh8::visit`] compiled for AVX.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx")]
-fn visit_avx(bvh: &Bvh8, node: &Node, p: &Packet, mask: u8, stack: &mut Vec<Entry>) {
+fn visit_avx(bvh: &Bvh8, node: &Node, p: &Packet, mask: RayMask, stack: &mut Vec<Entry>) {
     bvh.visit(node, p, mask, stack);
 }
 
@@ -223,7 +223,7 @@ fn box_test_compiled_for_avx_gives_the_same_bits() {
         })
         .collect();
     let bvh = build(&tris, false);
-    let mut dirs: Vec<Vec3> = prt_format::directions::fibonacci_directions(64)
+    let mut dirs: Vec<Vec3> = prt_format::directions::fibonacci_directions(256)
         .into_iter()
         .map(Vec3::from)
         .collect();
@@ -234,7 +234,7 @@ fn box_test_compiled_for_avx_gives_the_same_bits() {
             dirs.push(d);
         }
     }
-    let entries = |stack: &[Entry]| -> Vec<(u32, u8, u8, u32)> {
+    let entries = |stack: &[Entry]| -> Vec<(u32, u8, RayMask, u32)> {
         stack
             .iter()
             .map(|e| (e.index, e.count, e.mask, e.near.to_bits()))
@@ -245,11 +245,11 @@ fn box_test_compiled_for_avx_gives_the_same_bits() {
         let corner = Vec3::new(node.min[0][0], node.min[1][0], node.min[2][0]);
         for origin in [rng.vec(10.0), corner] {
             for (packet, tmax) in dirs
-                .chunks(LANES)
+                .chunks(PACKET)
                 .zip([f32::INFINITY, 3.0, 0.5].iter().cycle())
             {
                 let p = Packet::new(origin, packet, *tmax);
-                let mask = u8::MAX >> (LANES - packet.len());
+                let mask = RayMask::MAX >> (RayMask::BITS as usize - packet.len());
                 let (mut base, mut avx) = (Vec::new(), Vec::new());
                 bvh.visit(node, &p, mask, &mut base);
                 // SAFETY: the CPU has AVX (checked above).
