@@ -314,10 +314,10 @@ impl LeafOrder {
 /// breadth-first walk says which nodes come next, so their cache misses can overlap.
 const PREFETCH_AHEAD: usize = 8;
 
-/// Asks for inner node `i`'s two children: every cache line of the pair (96 bytes from a
-/// 16-byte boundary: two or three lines, so its first, 64th and last bytes). The reinsertion
-/// optimiser leaves the node array in no order a walk could stream, so
-/// each walk over the binary tree ([`LeafOrder::of`], [`flatten`], the wide BVH's collapse)
+/// Asks for inner node `i`'s two children: every cache line of the pair (64 bytes from a
+/// 16-byte boundary with obvhs' `small_bvh2_node`: one or two lines, so its first and last
+/// bytes; 96 bytes without it, hence also the 64th). The reinsertion optimiser leaves the node
+/// array in no order a walk could stream, so each walk over the binary tree ([`LeafOrder::of`], [`flatten`], the wide BVH's collapse)
 /// waited for a miss a node. With the children of the nodes in sight asked for ahead, Sponza's
 /// collapse (all three, with the winding check of a single-sided bake beside them, 2 threads)
 /// took 31.9-35.9 ms against 36.4-39.7 ms asking for each child's first line only (least of
