@@ -13,7 +13,7 @@ use std::collections::VecDeque;
 
 use glam::Vec3;
 use obvhs::{
-    bvh2::{reinsertion::ReinsertionOptimizer, Bvh2},
+    bvh2::{node::Bvh2Node, reinsertion::ReinsertionOptimizer, Bvh2},
     ploc::PlocBuilder,
     triangle::Triangle,
     BvhBuildParams,
@@ -69,9 +69,19 @@ pub fn build_params(triangles: usize, rays: u64) -> BvhBuildParams {
     }
 }
 
-/// The binary BVH over `tris` by PLOC and reinsertion, as `params` set them.
-pub(crate) fn ploc(tris: &[Triangle], params: &BvhBuildParams) -> Bvh2 {
-    let mut bvh2 = PlocBuilder::with_capacity(tris.len()).build(
+/// The binary BVH over `tris` by PLOC and reinsertion, as `params` set them, in `memory` when
+/// given (obvhs grows what is too small: a reallocation of a block that large moves its pages,
+/// not its bytes).
+pub(crate) fn ploc(tris: &[Triangle], params: &BvhBuildParams, memory: Option<PlocMemory>) -> Bvh2 {
+    let PlocMemory {
+        mut builder,
+        mut bvh2,
+    } = memory.unwrap_or_else(|| PlocMemory {
+        builder: PlocBuilder::with_capacity(tris.len()),
+        bvh2: Bvh2::default(),
+    });
+    builder.build_with_bvh(
+        &mut bvh2,
         params.ploc_search_distance,
         tris,
         (0..tris.len() as u32).collect(),
@@ -80,6 +90,42 @@ pub(crate) fn ploc(tris: &[Triangle], params: &BvhBuildParams) -> Bvh2 {
     );
     ReinsertionOptimizer::default().run(&mut bvh2, params.reinsertion_batch_ratio, None);
     bvh2
+}
+
+/// What obvhs' PLOC builds a binary BVH in, its pages already written, so that the build does
+/// not stop at each first touch of a page. The development machine's kernel takes 2.6 us a
+/// page (`docs/bake_bench_sponza.md`), and PLOC touches its arrays from its serial passes:
+/// Sponza's 187k triangles fault in about 6,600 pages, some 17 ms. The bake makes it beside
+/// the load, whose single thread leaves the pool's other threads idle
+/// ([`crate::scene::load_bytes_declaring`]). Sponza at 1.9 m (dist, twelve alternating bakes
+/// each, twice): the load stage's median 29.5 ms against 19-20.5 ms (it now ends when the
+/// memory is ready), the BVH stage's 80.5-86.5 ms against 105.5-106.5 ms.
+pub struct PlocMemory {
+    builder: PlocBuilder,
+    bvh2: Bvh2,
+}
+
+impl PlocMemory {
+    /// Room for `n` triangles, every page written once: the sorted leaves and their copy, the
+    /// Morton codes (two 64-bit codes a slot with obvhs' `SortPrecision::U64`, which both build
+    /// presets the bake uses take), and the nodes.
+    pub fn faulted(n: usize) -> PlocMemory {
+        fn written<T: Copy>(len: usize, value: T) -> Vec<T> {
+            let mut v = Vec::with_capacity(len);
+            v.resize(len, value);
+            v
+        }
+        let node = Bvh2Node::default();
+        let mut builder = PlocBuilder::new();
+        builder.current_nodes = written(n, node);
+        builder.next_nodes = written(n, node);
+        builder.mortons = written(n.div_ceil(2), [0; 2]);
+        let bvh2 = Bvh2 {
+            nodes: written((2 * n).saturating_sub(1), node),
+            ..Bvh2::default()
+        };
+        PlocMemory { builder, bvh2 }
+    }
 }
 
 /// The scene's BVHs.
@@ -102,14 +148,14 @@ impl SceneBvh {
     /// Builds both BVHs (in parallel on the current rayon pool), the traced one in the frame
     /// scaled by `scale` (a power of two, [`trace_scale`]), for many rays ([`build_params`]).
     pub fn build(triangles: &[[Vec3; 3]], scale: f32) -> SceneBvh {
-        SceneBvh::build_beside(triangles, scale, u64::MAX, || ()).0
+        SceneBvh::build_beside(triangles, scale, u64::MAX, None, || ()).0
     }
 
-    /// [`SceneBvh::build`] for tracing about `rays` rays ([`build_params`]), running `beside`
-    /// on the pool while the binary BVH is collapsed into the two the bake uses. PLOC and
-    /// reinsertion take every thread; the collapse (the triangles put in leaf order by one walk,
-    /// [`LeafOrder`], then the two trees walked out of it side by side) is serial work that
-    /// leaves room on the pool.
+    /// [`SceneBvh::build`] for tracing about `rays` rays ([`build_params`]), PLOC working in
+    /// `memory` when given, running `beside` on the pool while the binary BVH is collapsed into
+    /// the two the bake uses. PLOC and reinsertion take every thread; the collapse (the
+    /// triangles put in leaf order by one walk, [`LeafOrder`], then the two trees walked out of
+    /// it side by side) is serial work that leaves room on the pool.
     /// A single-sided bake runs its winding check there: beside the PLOC build instead, the BVH
     /// stage took 0.113 s against 0.106 s (Sponza at 1.9 m with `medium_build`, 2 threads,
     /// least of 8 alternating bakes); with `fast_build`, least of 20 builds in one process,
@@ -118,6 +164,7 @@ impl SceneBvh {
         triangles: &[[Vec3; 3]],
         scale: f32,
         rays: u64,
+        memory: Option<PlocMemory>,
         beside: impl FnOnce() -> R + Send,
     ) -> (SceneBvh, R) {
         if triangles.is_empty() {
@@ -129,7 +176,7 @@ impl SceneBvh {
             return (empty, beside());
         }
         let tris = traced_triangles(triangles, scale);
-        let bvh2 = ploc(&tris, &build_params(triangles.len(), rays));
+        let bvh2 = ploc(&tris, &build_params(triangles.len(), rays), memory);
         let collapse = || {
             let order = LeafOrder::of(&bvh2);
             let (bvh8, geometry) = rayon::join(
@@ -153,6 +200,7 @@ impl SceneBvh {
         triangles: &[[Vec3; 3]],
         scale: f32,
         rays: u64,
+        memory: Option<PlocMemory>,
         beside: impl FnOnce() -> R + Send + std::panic::UnwindSafe,
     ) -> Result<(SceneBvh, R), BakeError> {
         // Triangle indices are u32, u32::MAX meaning no hit.
@@ -163,19 +211,18 @@ impl SceneBvh {
                 reason: "more than 2^32 - 2 triangles",
             });
         }
-        crate::catch_quietly(|| SceneBvh::build_beside(triangles, scale, rays, beside)).map_err(
-            |message| {
-                let extent = triangles
-                    .iter()
-                    .flatten()
-                    .fold(0.0f32, |m, v| m.max(v.abs().max_element()));
-                BakeError::Bvh {
-                    message,
-                    extent,
-                    unit: 1.0 / scale,
-                }
-            },
-        )
+        let build = || SceneBvh::build_beside(triangles, scale, rays, memory, beside);
+        crate::catch_quietly(build).map_err(|message| {
+            let extent = triangles
+                .iter()
+                .flatten()
+                .fold(0.0f32, |m, v| m.max(v.abs().max_element()));
+            BakeError::Bvh {
+                message,
+                extent,
+                unit: 1.0 / scale,
+            }
+        })
     }
 
     /// Closest hit along `origin + t dir`, `t` in `[0, tmax]` (ties to the lowest triangle).

@@ -35,7 +35,7 @@ pub(crate) fn bake_in_pool(
         }
     };
     progress.start("load", 0);
-    let loaded = load(scene_path, settings, &mut report)?;
+    let (loaded, ploc_memory) = load(scene_path, settings, &mut report)?;
     lap(&mut report, "load", Some("bvh"));
 
     let (min, max) = loaded.bounds;
@@ -44,7 +44,7 @@ pub(crate) fn bake_in_pool(
         .unwrap_or_else(|| probes::default_spacing(min, max));
     // The grid first: a spacing far too small for the scene is refused before any other work.
     let grid = probes::grid(min, max, spacing, settings.max_probes)?;
-    let built = bvh_stage(&loaded, &grid, settings, &mut report)?;
+    let built = bvh_stage(&loaded, ploc_memory, &grid, settings, &mut report)?;
     lap(&mut report, "bvh", None);
 
     progress.start("trace", grid.probe_count());
@@ -109,11 +109,12 @@ struct Built {
     winding_hint: bool,
 }
 
-/// The BVH stage: both BVHs of the `loaded` scene, built for the rays of `grid`'s probes, with
-/// the winding check of a single-sided bake beside them (its warning goes into the report where
-/// `loaded` says).
+/// The BVH stage: both BVHs of the `loaded` scene (in `memory` made ready beside the load),
+/// built for the rays of `grid`'s probes, with the winding check of a single-sided bake beside
+/// them (its warning goes into the report where `loaded` says).
 fn bvh_stage(
     loaded: &Loaded,
+    memory: Option<bvh::PlocMemory>,
     grid: &prt_format::Grid,
     settings: &BakeSettings,
     report: &mut BakeReport,
@@ -124,9 +125,10 @@ fn bvh_stage(
     // Baked double-sided, the winding changes no hit's shading and needs no hint: it is then
     // counted only for the rare warning that names it (most probes inside geometry), not on
     // every bake (Sponza, 562k edges: about 24 ms of CPU time beside the BVH's collapse).
-    let (bvh, winding) = bvh::SceneBvh::build_checked(&scene.triangles, scale, rays, || {
-        (!settings.double_sided).then(|| diagnostics::winding(&scene.triangles))
-    })?;
+    let (bvh, winding) =
+        bvh::SceneBvh::build_checked(&scene.triangles, scale, rays, memory, || {
+            (!settings.double_sided).then(|| diagnostics::winding(&scene.triangles))
+        })?;
     let winding_hint = match &winding {
         Some(w) if w.inconsistent_fraction() > WINDING_WARNING => {
             let warning = diagnostics::winding_warning(w);
@@ -349,19 +351,28 @@ struct Loaded {
 }
 
 /// The load stage: reads and parses the scene, warns about what it skipped, and picks the
-/// bounds; fails on an unreadable file or a scene with neither triangles nor bounds.
+/// bounds, while the pool's idle threads make ready the memory of the BVH build
+/// ([`bvh::PlocMemory`]; `None` for a scene that declares no triangles); fails on an unreadable
+/// file or a scene with neither triangles nor bounds.
 fn load(
     scene_path: &Path,
     settings: &BakeSettings,
     report: &mut BakeReport,
-) -> Result<Loaded, BakeError> {
+) -> Result<(Loaded, Option<bvh::PlocMemory>), BakeError> {
     let source_bytes =
         prt_format::read_regular_file(scene_path).map_err(|error| BakeError::Io {
             path: scene_path.to_owned(),
             error,
         })?;
     let source_hash = xxhash_rust::xxh3::xxh3_64(&source_bytes);
-    let scene = scene::load_bytes(scene_path, &source_bytes)?;
+    let memory = std::sync::Mutex::new(None);
+    let prepare = |triangles| {
+        let ready = (triangles > 0).then(|| bvh::PlocMemory::faulted(triangles));
+        *memory
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner) = ready;
+    };
+    let scene = scene::load_bytes_declaring(scene_path, &source_bytes, &prepare)?;
     drop(source_bytes);
     report.warnings.extend(scene.warnings.iter().cloned());
     let winding_warning_at = report.warnings.len();
@@ -386,12 +397,16 @@ fn load(
             .warnings
             .push("the scene has no triangles: every probe sees only sky".into());
     }
-    Ok(Loaded {
+    let loaded = Loaded {
         scene,
         source_hash,
         bounds,
         winding_warning_at,
-    })
+    };
+    let memory = memory
+        .into_inner()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    Ok((loaded, memory))
 }
 
 /// The bricks stage: numbers the bricks and finishes their surfels, then encodes the factor

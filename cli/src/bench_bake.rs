@@ -96,7 +96,7 @@ fn bare(scene: &Path, asset: &prt_format::Asset, rays: u32) -> Result<Bare> {
     // The bake's BVH: built with the preset the bake chose for these rays.
     let traced = probes.len() as u64 * u64::from(rays);
     let (bvh, ()) =
-        prt_bake::bvh::SceneBvh::build_checked(&loaded.triangles, scale, traced, || ())?;
+        prt_bake::bvh::SceneBvh::build_checked(&loaded.triangles, scale, traced, None, || ())?;
     let packets = [&coherent, lattice].map(|order| {
         timed(probes, &|p| {
             order

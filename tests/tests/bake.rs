@@ -581,6 +581,33 @@ fn strips_and_fans_triangulate() {
     }
 }
 
+/// The triangles a scene declares to the bake as soon as its document is parsed (the BVH
+/// build's memory is made ready from the count beside the rest of the load): every triangle of
+/// its triangle lists, strips and fans, per instance, before degenerate ones are dropped, and
+/// none of its points or lines.
+#[test]
+fn declared_triangles_are_what_the_loader_reads() {
+    let cases = [
+        "strips_fans.gltf",
+        "nested_transforms.gltf",
+        "cornell/cornell.gltf",
+        "scenes/room.glb",
+        "scenes/sponza_lod4.glb",
+    ];
+    for case in cases {
+        let path = fixture(case);
+        let bytes = std::fs::read(&path).expect("read");
+        let declared = std::sync::Mutex::new(None);
+        let scene = scene::load_bytes_declaring(&path, &bytes, &|n| {
+            *declared.lock().unwrap() = Some(n);
+        })
+        .expect("load");
+        let read = scene.triangles.len() as u64 + scene.degenerate_skipped;
+        let declared = declared.into_inner().unwrap().expect("declared");
+        assert_eq!(declared as u64, read, "{case}");
+    }
+}
+
 /// lights.gltf: the three KHR_lights_punctual lights with their kinds, node positions,
 /// directions (node -Z, rotated to -Y), colours, intensities, range and cone angles.
 #[test]

@@ -19,7 +19,7 @@ impl Rng {
 /// `fast_build` ([`crate::bvh::build_params`]): hits must not depend on which.
 fn build(tris: &[Triangle], fast: bool) -> Bvh8 {
     let rays = if fast { 0 } else { u64::MAX };
-    let bvh2 = crate::bvh::ploc(tris, &crate::bvh::build_params(tris.len(), rays));
+    let bvh2 = crate::bvh::ploc(tris, &crate::bvh::build_params(tris.len(), rays), None);
     Bvh8::from_bvh2(&bvh2, &LeafOrder::of(&bvh2), tris)
 }
 
@@ -109,6 +109,39 @@ fn packets_find_the_brute_force_hit_in_a_triangle_soup() {
             hits > 1000,
             "{hits} hits: the test needs hits to mean anything"
         );
+    }
+}
+
+/// PLOC in memory made ready beforehand ([`crate::bvh::PlocMemory`]), too small, exact or too
+/// large, builds the tree it builds in its own: the same nodes and primitive order, bit for bit.
+#[test]
+fn ploc_in_memory_made_ready_builds_the_same_tree() {
+    let mut rng = Rng(0x5eed_0001);
+    let tris: Vec<Triangle> = (0..5000)
+        .map(|_| {
+            let c = rng.vec(50.0);
+            Triangle {
+                v0: (c + rng.vec(2.0)).into(),
+                v1: (c + rng.vec(2.0)).into(),
+                v2: (c + rng.vec(2.0)).into(),
+            }
+        })
+        .collect();
+    for params in [
+        obvhs::BvhBuildParams::fast_build(),
+        obvhs::BvhBuildParams::medium_build(),
+    ] {
+        let own = crate::bvh::ploc(&tris, &params, None);
+        for room in [0, 1000, tris.len(), 3 * tris.len()] {
+            let memory = crate::bvh::PlocMemory::faulted(room);
+            let given = crate::bvh::ploc(&tris, &params, Some(memory));
+            let bytes = |b: &Bvh2| bytemuck::cast_slice::<_, u8>(&b.nodes).to_vec();
+            assert_eq!(bytes(&given), bytes(&own), "room for {room}");
+            assert_eq!(
+                given.primitive_indices, own.primitive_indices,
+                "room for {room}"
+            );
+        }
     }
 }
 
