@@ -70,8 +70,8 @@ pub fn build_params(triangles: usize, rays: u64) -> BvhBuildParams {
 }
 
 /// The binary BVH over `tris` by PLOC and reinsertion, as `params` set them, in `memory` when
-/// given (obvhs grows what is too small: a reallocation of a block that large moves its pages,
-/// not its bytes).
+/// given (obvhs grows what is too small; glibc may then move a block that large by remapping
+/// its pages rather than copying them).
 pub(crate) fn ploc(tris: &[Triangle], params: &BvhBuildParams, memory: Option<PlocMemory>) -> Bvh2 {
     let PlocMemory {
         mut builder,
@@ -99,7 +99,9 @@ pub(crate) fn ploc(tris: &[Triangle], params: &BvhBuildParams, memory: Option<Pl
 /// the load, whose single thread leaves the pool's other threads idle
 /// ([`crate::scene::load_bytes_declaring`]). Sponza at 1.9 m (dist, twelve alternating bakes
 /// each, twice): the load stage's median 29.5 ms against 19-20.5 ms (it now ends when the
-/// memory is ready), the BVH stage's 80.5-86.5 ms against 105.5-106.5 ms.
+/// memory is ready), the BVH stage's 80.5-86.5 ms against 105.5-106.5 ms, end to end 538-556 ms
+/// against 565-573 ms; the bricks stage ran 3-7 ms longer (glibc's allocator: with its mmap
+/// threshold fixed, 4 ms) and the peak was 7 MiB higher (168 MiB).
 pub struct PlocMemory {
     builder: PlocBuilder,
     bvh2: Bvh2,
@@ -361,16 +363,16 @@ impl LeafOrder {
 /// breadth-first walk says which nodes come next, so their cache misses can overlap.
 const PREFETCH_AHEAD: usize = 8;
 
-/// Asks for inner node `i`'s two children: every cache line of the pair (64 bytes from a
-/// 16-byte boundary with obvhs' `small_bvh2_node`: one or two lines, so its first and last
-/// bytes; 96 bytes without it, hence also the 64th). The reinsertion optimiser leaves the node
-/// array in no order a walk could stream, so each walk over the binary tree ([`LeafOrder::of`], [`flatten`], the wide BVH's collapse)
-/// waited for a miss a node. With the children of the nodes in sight asked for ahead, Sponza's
-/// collapse (all three, with the winding check of a single-sided bake beside them, 2 threads)
-/// took 31.9-35.9 ms against 36.4-39.7 ms asking for each child's first line only (least of
-/// 15 builds in one process, three alternating runs each); asking for every line, the collapse
-/// alone took 39.9-49.6 ms against 46.2-53.7 ms for the first lines (least of 20, four
-/// alternating runs, a slower sitting).
+/// Asks for inner node `i`'s two children: every cache line of the pair (64 bytes from a 16-byte
+/// boundary with obvhs' `small_bvh2_node`: one or two lines, so its first and last bytes; 96 bytes
+/// without it, hence also the 64th). The reinsertion optimiser leaves the node array in no order a
+/// walk could stream, so each walk over the binary tree ([`LeafOrder::of`], [`flatten`], the wide
+/// BVH's collapse) waited for a miss a node. With the children of the nodes in sight asked for
+/// ahead, Sponza's collapse (all three, with the winding check of a single-sided bake beside them,
+/// 2 threads) took 31.9-35.9 ms against 36.4-39.7 ms asking for each child's first line only (least
+/// of 15 builds in one process, three alternating runs each); asking for every line, the collapse
+/// alone took 39.9-49.6 ms against 46.2-53.7 ms for the first lines (least of 20, four alternating
+/// runs, a slower sitting).
 pub(crate) fn prefetch_children(bvh2: &Bvh2, i: usize) {
     let first = bvh2.nodes[i].first_index as usize;
     if let Some(pair) = bvh2.nodes.get(first..first + 2) {

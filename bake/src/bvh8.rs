@@ -1,17 +1,17 @@
 //! An uncompressed 8-wide BVH traced by packets of rays that leave one point.
 //!
-//! Every probe shoots its lattice directions from one origin, in Morton order of the octahedral
-//! map ([`crate::trace::coherent_order`]), so consecutive rays span a narrow cone. Tracing
-//! [`PACKET`] of them together (ray packets: Wald, Slusallek, Benthin, Wagner, "Interactive
-//! Rendering with Coherent Ray Tracing", 2001) fetches each node once for the packet. Inside a node the work is
+//! Every probe shoots its lattice directions from one origin, in Morton order of the octahedral map
+//! ([`crate::trace::coherent_order`]), so consecutive rays span a narrow cone. Tracing [`PACKET`]
+//! of them together (ray packets: Wald, Slusallek, Benthin, Wagner, "Interactive Rendering with
+//! Coherent Ray Tracing", 2001) fetches each node once for the packet. Inside a node the work is
 //! per ray, SIMD across the node (as Embree's single-ray BVH8 traversal): each ray still in the
-//! packet tests the eight child boxes in one AVX vector (two SSE vectors where the CPU lacks
-//! AVX, [`Bvh8::closest_hits`] choosing at run time), and each leaf's four triangles, stored
-//! structure of arrays, in one SSE vector. Rays that left the packet cost nothing: at Sponza's
-//! probes (1.9 m) a packet arrives at an inner node with 6.6 of its 32 rays on average, and at a
-//! leaf with 2.5. The shared origin makes `box - origin`, `v0 - origin` and
-//! `ng . (v0 - origin)` one value per node or leaf, not one per ray. Boxes are plain f32, not
-//! obvhs' compressed nodes, which trade decode work per ray for memory.
+//! packet tests the eight child boxes in one AVX vector (two SSE vectors where the CPU lacks AVX,
+//! [`Bvh8::closest_hits`] choosing at run time), and each leaf's four triangles, stored structure
+//! of arrays, in one SSE vector. Rays that left the packet cost nothing: at Sponza's probes (1.9 m)
+//! a packet arrives at an inner node with 6.6 of its 32 rays on average, and at a leaf with 2.5.
+//! The shared origin makes `box - origin`, `v0 - origin` and `ng . (v0 - origin)` one value per
+//! node or leaf, not one per ray. Boxes are plain f32, not obvhs' compressed nodes, which trade
+//! decode work per ray for memory.
 //!
 //! The tree is obvhs' PLOC binary BVH collapsed greedily (open the child with the largest
 //! surface area until eight), with subtrees of at most [`TRI_LANES`] triangles as leaves.
@@ -37,11 +37,12 @@ pub const LANES: usize = 8;
 
 /// Rays in a packet. The tracing is bound by the latency of fetching nodes and leaves, so the
 /// more rays share a fetch the better, until the packet's cone grows wide enough to visit many
-/// nodes that few of its rays need. Sponza at 1.9 m (3,024 probes, 512 rays each), from packets
-/// of 8 to 16, 32 and 64: inner-node visits 2.86 M, 2.13 M, 1.66 M (3.7, 5.0 and 6.6 rays a
-/// visit; ray-box tests 10.5 M, 10.7 M, 10.9 M), leaf visits 1.73 M, 1.51 M, 1.34 M; one
-/// thread, least of 9 in one process, four alternating runs each: 305-333 ms, 266-298 ms,
-/// 252-264 ms (one outlier 335) and 295-312 ms. The hits are the same for any packet size.
+/// nodes that few of its rays need. Sponza at 1.9 m (3,024 probes, 512 rays each), packets of
+/// 8, 16 and 32: inner-node visits 2.86 M, 2.13 M, 1.66 M (3.7, 5.0 and 6.6 rays a visit;
+/// ray-box tests 10.5 M, 10.7 M, 10.9 M), leaf visits 1.73 M, 1.51 M, 1.34 M (64 not counted);
+/// one thread, least of 9 in one process, four alternating runs each, packets of 8, 16, 32 and
+/// 64: 305-333 ms, 266-298 ms, 252-264 ms (one outlier 335) and 295-312 ms. The hits are the
+/// same for any packet size.
 pub const PACKET: usize = 32;
 
 /// A set of a packet's rays.

@@ -94,13 +94,21 @@ fn percent_decode(uri: &str) -> String {
     String::from_utf8_lossy(&out).into_owned()
 }
 
-/// Checks the document before its buffers are read; returns warnings.
+/// What [`check_document`] found in a document it accepts.
+pub struct Checked {
+    /// What the loader will skip or not implement.
+    pub warnings: Vec<String>,
+    /// The triangles the node graph instances (each instance's, degenerate ones included).
+    pub triangles: u64,
+}
+
+/// Checks the document before its buffers are read.
 pub fn check_document(
     path: &Path,
     root: &json::Root,
     base: &Path,
     input_bytes: u64,
-) -> Result<Vec<String>, BakeError> {
+) -> Result<Checked, BakeError> {
     let e = |m: String| err(path, m);
     if !root.asset.version.starts_with("2.") {
         return Err(e(format!(
@@ -113,7 +121,7 @@ pub fn check_document(
     check_accessors(path, root, allocation_budget(input_bytes))?;
     let mut warnings = Vec::new();
     check_meshes(path, root, &mut warnings)?;
-    check_nodes(path, root)?;
+    let triangles = check_nodes(path, root)?;
     check_materials(path, root)?;
     if root
         .extensions_used
@@ -125,7 +133,10 @@ pub fn check_document(
                 .to_owned(),
         );
     }
-    Ok(warnings)
+    Ok(Checked {
+        warnings,
+        triangles,
+    })
 }
 
 fn check_buffers(path: &Path, root: &json::Root, base: &Path) -> Result<(), BakeError> {
@@ -399,7 +410,8 @@ fn mesh_triangles(root: &json::Root, mesh: &json::Mesh) -> u64 {
         .sum()
 }
 
-fn check_nodes(path: &Path, root: &json::Root) -> Result<(), BakeError> {
+/// Checks the node graph; returns the triangles it instances.
+fn check_nodes(path: &Path, root: &json::Root) -> Result<u64, BakeError> {
     let n = root.nodes.len();
     for (i, node) in root.nodes.iter().enumerate() {
         let trs = node.translation.is_some() || node.rotation.is_some() || node.scale.is_some();
@@ -485,7 +497,7 @@ fn check_nodes(path: &Path, root: &json::Root) -> Result<(), BakeError> {
             ),
         ));
     }
-    Ok(())
+    Ok(triangles)
 }
 
 fn check_materials(path: &Path, root: &json::Root) -> Result<(), BakeError> {

@@ -365,14 +365,8 @@ fn load(
             error,
         })?;
     let source_hash = xxhash_rust::xxh3::xxh3_64(&source_bytes);
-    let memory = std::sync::Mutex::new(None);
-    let prepare = |triangles| {
-        let ready = (triangles > 0).then(|| bvh::PlocMemory::faulted(triangles));
-        *memory
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner) = ready;
-    };
-    let scene = scene::load_bytes_declaring(scene_path, &source_bytes, &prepare)?;
+    let prepare = |triangles| (triangles > 0).then(|| bvh::PlocMemory::faulted(triangles));
+    let (scene, memory) = scene::load_bytes_declaring(scene_path, &source_bytes, prepare)?;
     drop(source_bytes);
     report.warnings.extend(scene.warnings.iter().cloned());
     let winding_warning_at = report.warnings.len();
@@ -403,10 +397,7 @@ fn load(
         bounds,
         winding_warning_at,
     };
-    let memory = memory
-        .into_inner()
-        .unwrap_or_else(std::sync::PoisonError::into_inner);
-    Ok((loaded, memory))
+    Ok((loaded, memory.flatten()))
 }
 
 /// The bricks stage: numbers the bricks and finishes their surfels, then encodes the factor

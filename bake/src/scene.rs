@@ -129,20 +129,23 @@ pub fn load(path: &Path) -> Result<Scene, BakeError> {
 /// [`load`] of the file's bytes, already read (`path` resolves external buffers and images and
 /// names the file in errors): callers that also hash the file read it once.
 pub fn load_bytes(path: &Path, bytes: &[u8]) -> Result<Scene, BakeError> {
-    load_bytes_declaring(path, bytes, &|_| ())
+    load_bytes_declaring(path, bytes, |_| ()).map(|(scene, _)| scene)
 }
 
-/// [`load_bytes`], calling `declared` beside the rest of the load (on the current rayon pool),
-/// as soon as the document is parsed, with the triangles its primitives declare
-/// ([`declared_triangles`]), at most a third of `bytes` (a triangle of 8-bit indices): the bake
-/// uses the time to make ready the memory its BVH build will need. A count larger than the
-/// scene's is then memory made ready for nothing, so the count only believes what the file can
-/// hold; a scene with external buffers or instanced meshes has more triangles than that.
-pub fn load_bytes_declaring(
+/// [`load_bytes`], running `declared` beside the rest of the load (on the current rayon pool)
+/// as soon as the document is checked, with the triangles its node graph instances (counted by
+/// [`gltf_check::check_document`]) but at most a third of the bytes the file and its external
+/// buffers hold, and returning what it returns (`None` when the document fails before). The
+/// bake makes ready there the memory its BVH build will need ([`crate::bvh::PlocMemory`]). The
+/// cap keeps a small file that declares buffers it does not hold from costing that memory
+/// before its load fails; for instanced meshes, and strips and fans of 8-bit indices (about a
+/// byte a triangle), it undercounts. A panic of `declared` is reported as one of the glTF
+/// reader.
+pub fn load_bytes_declaring<R: Send>(
     path: &Path,
     bytes: &[u8],
-    declared: &(dyn Fn(usize) + Sync + std::panic::RefUnwindSafe),
-) -> Result<Scene, BakeError> {
+    declared: impl FnOnce(usize) -> R + Send + std::panic::UnwindSafe,
+) -> Result<(Scene, Option<R>), BakeError> {
     crate::catch_quietly(|| load_checked(path, bytes, declared)).unwrap_or_else(|message| {
         Err(BakeError::Gltf {
             path: path.to_owned(),
@@ -151,11 +154,11 @@ pub fn load_bytes_declaring(
     })
 }
 
-fn load_checked(
+fn load_checked<R: Send>(
     path: &Path,
     bytes: &[u8],
-    declared: &(dyn Fn(usize) + Sync + std::panic::RefUnwindSafe),
-) -> Result<Scene, BakeError> {
+    declared: impl FnOnce(usize) -> R + Send,
+) -> Result<(Scene, Option<R>), BakeError> {
     let gltf_err = |message: String| BakeError::Gltf {
         path: path.to_owned(),
         message,
@@ -166,21 +169,25 @@ fn load_checked(
         gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| gltf_err(e.to_string()))?;
     let base = path.parent().unwrap_or(Path::new("."));
     let json = gltf.document.as_json();
-    let declared_bytes = json
-        .buffers
-        .iter()
-        .fold(0u64, |a, b| a.saturating_add(b.byte_length.0));
-    let warnings =
+    let (mut declared_bytes, mut external_bytes) = (0u64, 0u64);
+    for b in &json.buffers {
+        declared_bytes = declared_bytes.saturating_add(b.byte_length.0);
+        if b.uri.as_ref().is_some_and(|uri| !uri.starts_with("data:")) {
+            // check_document makes sure the file holds them.
+            external_bytes = external_bytes.saturating_add(b.byte_length.0);
+        }
+    }
+    let checked =
         gltf_check::check_document(path, json, base, bytes.len() as u64 + declared_bytes)?;
     let doc = gltf::Document::from_json(gltf.document.into_json())
         .map_err(|e| gltf_err(e.to_string()))?;
-    let roots = root_nodes(&doc);
-    let triangles = declared_triangles(&roots).min(bytes.len() / 3);
-    let (scene, ()) = rayon::join(
-        || read_scene(path, &doc, gltf.blob, warnings, &roots),
-        || declared(triangles),
+    let held = (bytes.len() as u64).saturating_add(external_bytes) / 3;
+    let triangles = checked.triangles.min(held);
+    let (scene, ready) = rayon::join(
+        || read_scene(path, &doc, gltf.blob, checked.warnings),
+        || declared(usize::try_from(triangles).unwrap_or(usize::MAX)),
     );
-    scene
+    Ok((scene?, Some(ready)))
 }
 
 /// The nodes the scene is read from: the default scene's roots (or the first scene's), or
@@ -200,49 +207,13 @@ fn root_nodes(doc: &gltf::Document) -> Vec<gltf::Node<'_>> {
     }
 }
 
-/// Nodes [`declared_triangles`] looks at before it stops counting.
-const DECLARED_NODES: usize = 1 << 20;
-
-/// The triangles the primitives of triangles under `roots` declare by the counts of their
-/// indices or vertices, before any is checked or found degenerate, counting only accessors
-/// stored plainly in a buffer (a sparse accessor may declare any count); stops at a node tree
-/// deeper than the loader reads or at [`DECLARED_NODES`] nodes.
-fn declared_triangles(roots: &[gltf::Node]) -> usize {
-    let mut count = 0usize;
-    let mut work: Vec<(gltf::Node, u32)> = roots.iter().map(|n| (n.clone(), 0)).collect();
-    let mut seen = 0;
-    while let Some((node, depth)) = work.pop() {
-        seen += 1;
-        if depth > 256 || seen > DECLARED_NODES {
-            break;
-        }
-        for prim in node.mesh().iter().flat_map(|m| m.primitives()) {
-            let plain =
-                |a: gltf::Accessor| (a.sparse().is_none() && a.view().is_some()).then(|| a.count());
-            let vertices = match prim.indices() {
-                Some(indices) => plain(indices),
-                None => prim.get(&gltf::Semantic::Positions).and_then(plain),
-            };
-            let triangles = match prim.mode() {
-                Mode::Triangles => vertices.unwrap_or(0) / 3,
-                Mode::TriangleStrip | Mode::TriangleFan => vertices.unwrap_or(0).saturating_sub(2),
-                _ => 0,
-            };
-            count = count.saturating_add(triangles);
-        }
-        work.extend(node.children().map(|c| (c, depth + 1)));
-    }
-    count
-}
-
-/// The scene under `roots` of the checked document `doc` (its binary chunk `blob`), with the
-/// document's `warnings`.
+/// The scene of the checked document `doc` (its binary chunk `blob`), with the document's
+/// `warnings`.
 fn read_scene(
     path: &Path,
     doc: &gltf::Document,
     blob: Option<Vec<u8>>,
     mut warnings: Vec<String>,
-    roots: &[gltf::Node],
 ) -> Result<Scene, BakeError> {
     let base = path.parent().unwrap_or(Path::new("."));
     let json = doc.as_json();
@@ -275,8 +246,8 @@ fn read_scene(
         },
         default_material,
     };
-    for node in roots {
-        loader.visit(node, Mat4::IDENTITY, 0)?;
+    for node in root_nodes(doc) {
+        loader.visit(&node, Mat4::IDENTITY, 0)?;
     }
     Ok(loader.scene)
 }
