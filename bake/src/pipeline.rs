@@ -397,7 +397,7 @@ fn load(
         bounds,
         winding_warning_at,
     };
-    Ok((loaded, memory.flatten()))
+    Ok((loaded, memory))
 }
 
 /// The bricks stage: numbers the bricks and finishes their surfels, then encodes the factor

@@ -135,7 +135,7 @@ pub fn load_bytes(path: &Path, bytes: &[u8]) -> Result<Scene, BakeError> {
 /// [`load_bytes`], running `declared` beside the rest of the load (on the current rayon pool)
 /// as soon as the document is checked, with the triangles its node graph instances (counted by
 /// [`gltf_check::check_document`]) but at most a third of the bytes the file and its external
-/// buffers hold, and returning what it returns (`None` when the document fails before). The
+/// buffers hold, and returning what it returns beside the scene. The
 /// bake makes ready there the memory its BVH build will need ([`crate::bvh::PlocMemory`]). The
 /// cap keeps a small file that declares buffers it does not hold from costing that memory
 /// before its load fails; for instanced meshes, and strips and fans of 8-bit indices (about a
@@ -145,7 +145,7 @@ pub fn load_bytes_declaring<R: Send>(
     path: &Path,
     bytes: &[u8],
     declared: impl FnOnce(usize) -> R + Send + std::panic::UnwindSafe,
-) -> Result<(Scene, Option<R>), BakeError> {
+) -> Result<(Scene, R), BakeError> {
     crate::catch_quietly(|| load_checked(path, bytes, declared)).unwrap_or_else(|message| {
         Err(BakeError::Gltf {
             path: path.to_owned(),
@@ -158,7 +158,7 @@ fn load_checked<R: Send>(
     path: &Path,
     bytes: &[u8],
     declared: impl FnOnce(usize) -> R + Send,
-) -> Result<(Scene, Option<R>), BakeError> {
+) -> Result<(Scene, R), BakeError> {
     let gltf_err = |message: String| BakeError::Gltf {
         path: path.to_owned(),
         message,
@@ -177,8 +177,12 @@ fn load_checked<R: Send>(
             external_bytes = external_bytes.saturating_add(b.byte_length.0);
         }
     }
-    let checked =
-        gltf_check::check_document(path, json, base, bytes.len() as u64 + declared_bytes)?;
+    let checked = gltf_check::check_document(
+        path,
+        json,
+        base,
+        declared_bytes.saturating_add(bytes.len() as u64),
+    )?;
     let doc = gltf::Document::from_json(gltf.document.into_json())
         .map_err(|e| gltf_err(e.to_string()))?;
     let held = (bytes.len() as u64).saturating_add(external_bytes) / 3;
@@ -187,7 +191,7 @@ fn load_checked<R: Send>(
         || read_scene(path, &doc, gltf.blob, checked.warnings),
         || declared(usize::try_from(triangles).unwrap_or(usize::MAX)),
     );
-    Ok((scene?, Some(ready)))
+    Ok((scene?, ready))
 }
 
 /// The nodes the scene is read from: the default scene's roots (or the first scene's), or
