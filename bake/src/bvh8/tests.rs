@@ -13,6 +13,20 @@ impl Rng {
     fn vec(&mut self, scale: f32) -> Vec3 {
         Vec3::new(self.next(), self.next(), self.next()) * scale
     }
+    /// `n` triangles, each with corners up to `size` from a point up to `spread` from `offset`
+    /// along each axis.
+    fn soup(&mut self, n: usize, offset: Vec3, spread: f32, size: f32) -> Vec<Triangle> {
+        (0..n)
+            .map(|_| {
+                let c = offset + self.vec(spread);
+                Triangle {
+                    v0: (c + self.vec(size)).into(),
+                    v1: (c + self.vec(size)).into(),
+                    v2: (c + self.vec(size)).into(),
+                }
+            })
+            .collect()
+    }
 }
 
 /// The bake's wide BVH over `tris`, built with obvhs' `medium_build` preset or (`fast`) its
@@ -91,16 +105,7 @@ fn packets_find_the_brute_force_hit_in_a_triangle_soup() {
     // steps of their coordinates matters there).
     for offset in [Vec3::ZERO, Vec3::new(1e4, -1e4, 3e3)] {
         let mut rng = Rng(0x9e37_79b9);
-        let tris: Vec<Triangle> = (0..600)
-            .map(|_| {
-                let c = offset + rng.vec(10.0);
-                Triangle {
-                    v0: (c + rng.vec(3.0)).into(),
-                    v1: (c + rng.vec(3.0)).into(),
-                    v2: (c + rng.vec(3.0)).into(),
-                }
-            })
-            .collect();
+        let tris = rng.soup(600, offset, 10.0, 3.0);
         let origins: Vec<Vec3> = (0..20).map(|_| offset + rng.vec(10.0)).collect();
         let dirs: Vec<Vec3> = prt_format::directions::fibonacci_directions(203)
             .into_iter()
@@ -122,16 +127,7 @@ fn packets_find_the_brute_force_hit_in_a_triangle_soup() {
 #[test]
 fn ploc_in_memory_made_ready_builds_the_same_tree() {
     let mut rng = Rng(0x5eed_0001);
-    let tris: Vec<Triangle> = (0..5000)
-        .map(|_| {
-            let c = rng.vec(50.0);
-            Triangle {
-                v0: (c + rng.vec(2.0)).into(),
-                v1: (c + rng.vec(2.0)).into(),
-                v2: (c + rng.vec(2.0)).into(),
-            }
-        })
-        .collect();
+    let tris = rng.soup(5000, Vec3::ZERO, 50.0, 2.0);
     for params in [
         obvhs::BvhBuildParams::fast_build(),
         obvhs::BvhBuildParams::medium_build(),
@@ -250,16 +246,7 @@ fn box_test_compiled_for_avx_gives_the_same_bits() {
         return;
     }
     let mut rng = Rng(0x0bad_cafe);
-    let tris: Vec<Triangle> = (0..500)
-        .map(|_| {
-            let c = rng.vec(10.0);
-            Triangle {
-                v0: (c + rng.vec(2.0)).into(),
-                v1: (c + rng.vec(2.0)).into(),
-                v2: (c + rng.vec(2.0)).into(),
-            }
-        })
-        .collect();
+    let tris = rng.soup(500, Vec3::ZERO, 10.0, 2.0);
     let bvh = build(&tris, false);
     let mut dirs: Vec<Vec3> = prt_format::directions::fibonacci_directions(256)
         .into_iter()
