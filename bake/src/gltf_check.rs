@@ -100,6 +100,9 @@ pub struct Checked {
     pub warnings: Vec<String>,
     /// The triangles the node graph instances (each instance's, degenerate ones included).
     pub triangles: u64,
+    /// The bytes its external buffer files hold (their `byteLength`s, which the files were
+    /// found to hold).
+    pub external_bytes: u64,
 }
 
 /// Checks the document before its buffers are read.
@@ -116,7 +119,7 @@ pub fn check_document(
             root.asset.version
         )));
     }
-    check_buffers(path, root, base)?;
+    let external_bytes = check_buffers(path, root, base)?;
     check_views(path, root)?;
     check_accessors(path, root, allocation_budget(input_bytes))?;
     let mut warnings = Vec::new();
@@ -136,10 +139,14 @@ pub fn check_document(
     Ok(Checked {
         warnings,
         triangles,
+        external_bytes,
     })
 }
 
-fn check_buffers(path: &Path, root: &json::Root, base: &Path) -> Result<(), BakeError> {
+/// Checks that external buffer and image files exist and that buffer files hold their
+/// `byteLength`; returns the bytes those buffers declare.
+fn check_buffers(path: &Path, root: &json::Root, base: &Path) -> Result<u64, BakeError> {
+    let mut external_bytes = 0u64;
     for (i, b) in root.buffers.iter().enumerate() {
         let Some(uri) = &b.uri else { continue };
         if uri.starts_with("data:") {
@@ -161,6 +168,7 @@ fn check_buffers(path: &Path, root: &json::Root, base: &Path) -> Result<(), Bake
                 message: format!("the file has {len} bytes, byteLength says {want}"),
             });
         }
+        external_bytes = external_bytes.saturating_add(want);
     }
     for (i, img) in root.images.iter().enumerate() {
         match (&img.uri, img.buffer_view) {
@@ -183,7 +191,7 @@ fn check_buffers(path: &Path, root: &json::Root, base: &Path) -> Result<(), Bake
             _ => {}
         }
     }
-    Ok(())
+    Ok(external_bytes)
 }
 
 fn check_views(path: &Path, root: &json::Root) -> Result<(), BakeError> {

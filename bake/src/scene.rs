@@ -135,12 +135,11 @@ pub fn load_bytes(path: &Path, bytes: &[u8]) -> Result<Scene, BakeError> {
 /// [`load_bytes`], running `declared` beside the rest of the load (on the current rayon pool)
 /// as soon as the document is checked, with the triangles its node graph instances (counted by
 /// [`gltf_check::check_document`]) but at most a third of the bytes the file and its external
-/// buffers hold, and returning what it returns beside the scene. The
-/// bake makes ready there the memory its BVH build will need ([`crate::bvh::PlocMemory`]). The
-/// cap keeps a small file that declares buffers it does not hold from costing that memory
-/// before its load fails; for instanced meshes, and strips and fans of 8-bit indices (about a
-/// byte a triangle), it undercounts. A panic of `declared` is reported as one of the glTF
-/// reader.
+/// buffers hold, and returning what it returns beside the scene. The bake makes ready there the
+/// memory its BVH build will need ([`crate::bvh::PlocMemory`]). The cap keeps a small file that
+/// declares buffers it does not hold from costing that memory before its load fails; for
+/// instanced meshes, and strips and fans of 8-bit indices (about a byte a triangle), it
+/// undercounts. A panic of `declared` is reported as one of the glTF reader.
 pub fn load_bytes_declaring<R: Send>(
     path: &Path,
     bytes: &[u8],
@@ -169,14 +168,10 @@ fn load_checked<R: Send>(
         gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| gltf_err(e.to_string()))?;
     let base = path.parent().unwrap_or(Path::new("."));
     let json = gltf.document.as_json();
-    let (mut declared_bytes, mut external_bytes) = (0u64, 0u64);
-    for b in &json.buffers {
-        declared_bytes = declared_bytes.saturating_add(b.byte_length.0);
-        if b.uri.as_ref().is_some_and(|uri| !uri.starts_with("data:")) {
-            // check_document makes sure the file holds them.
-            external_bytes = external_bytes.saturating_add(b.byte_length.0);
-        }
-    }
+    let declared_bytes = json
+        .buffers
+        .iter()
+        .fold(0u64, |a, b| a.saturating_add(b.byte_length.0));
     let checked = gltf_check::check_document(
         path,
         json,
@@ -185,10 +180,10 @@ fn load_checked<R: Send>(
     )?;
     let doc = gltf::Document::from_json(gltf.document.into_json())
         .map_err(|e| gltf_err(e.to_string()))?;
-    let held = (bytes.len() as u64).saturating_add(external_bytes) / 3;
+    let held = (bytes.len() as u64).saturating_add(checked.external_bytes) / 3;
     let triangles = checked.triangles.min(held);
     let (scene, ready) = rayon::join(
-        || read_scene(path, &doc, gltf.blob, checked.warnings),
+        || read_scene(path, base, &doc, gltf.blob, checked.warnings),
         || declared(usize::try_from(triangles).unwrap_or(usize::MAX)),
     );
     Ok((scene?, ready))
@@ -211,15 +206,15 @@ fn root_nodes(doc: &gltf::Document) -> Vec<gltf::Node<'_>> {
     }
 }
 
-/// The scene of the checked document `doc` (its binary chunk `blob`), with the document's
-/// `warnings`.
+/// The scene of the checked document `doc` (its binary chunk `blob`; external files relative to
+/// `base`), with the document's `warnings`.
 fn read_scene(
     path: &Path,
+    base: &Path,
     doc: &gltf::Document,
     blob: Option<Vec<u8>>,
     mut warnings: Vec<String>,
 ) -> Result<Scene, BakeError> {
-    let base = path.parent().unwrap_or(Path::new("."));
     let json = doc.as_json();
     let buffers = gltf::import_buffers(doc, Some(base), blob)
         .map_err(|e| buffer_error(path, base, doc, e))?;
