@@ -164,7 +164,7 @@ struct ShadeOut {
 fn fs_main(in: VertexOut, @builtin(front_facing) front: bool) -> ShadeOut {
     let m = materials[in.material];
     // Only double-sided materials are drawn without back-face culling: their back faces are lit
-    // with the normal turned towards the viewer (conventions.md section 4).
+    // with the normal turned towards the viewer (docs/conventions.md section 4).
     var n = normalize(in.normal);
     if !front {
         n = -n;

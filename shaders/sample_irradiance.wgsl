@@ -195,7 +195,7 @@ fn prt_sample_sh(world_pos: vec3<f32>, normal: vec3<f32>) -> PrtSample {
 fn sample_irradiance(world_pos: vec3<f32>, normal: vec3<f32>) -> vec3<f32> {
     let c = prt_sample_sh(world_pos, normal).sh;
     let n = normal;
-    // Clamped-cosine factors A_l (pi, 2pi/3, pi/4) times the basis of conventions.md section 2.
+    // Clamped-cosine factors A_l (pi, 2pi/3, pi/4) times the basis of docs/conventions.md section 2.
     let e = PRT_A0 * PRT_SH_Y00 * c[0]
         + PRT_A1 * PRT_SH_Y1 * (n.y * c[1] + n.z * c[2] + n.x * c[3])
         + PRT_A2 * PRT_SH_Y2_OFF * (n.x * n.y * c[4] + n.y * n.z * c[5] + n.x * n.z * c[7])

@@ -148,7 +148,7 @@ struct Params {
 
 const PI: f32 = 3.14159265358979;
 
-// Real SH up to L2, conventions.md section 2.
+// Real SH up to L2, docs/conventions.md section 2.
 fn sh_basis(d: vec3<f32>) -> array<f32, 9> {
     return array<f32, 9>(
         SH_Y00,

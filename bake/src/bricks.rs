@@ -11,7 +11,7 @@
 //! surfel and one radiance per brick (the weighted mean), shared by every probe that sees it.
 //!
 //! `cell_size == 0` switches merging off: every hit is its own surfel and its own brick, which
-//! makes the relit probe exactly the Monte Carlo estimate of conventions.md section 5.
+//! makes the relit probe exactly the Monte Carlo estimate of docs/conventions.md section 5.
 //!
 //! Hits are folded in as they are traced ([`BrickFolder`]); bricks are numbered by sorted key,
 //! so the result does not depend on the number of threads.

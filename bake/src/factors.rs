@@ -5,7 +5,7 @@
 //! rescaled cosine between a brick's normal and the probe direction; every (probe, brick) pair is
 //! kept however many there are. With `L_b` the brick's radiance, the probe's SH is
 //! `sum_f transfer_k(f) L_{b(f)}` plus the sky term: the Monte Carlo projection of
-//! conventions.md section 2 with each hit's radiance replaced by its brick's.
+//! docs/conventions.md section 2 with each hit's radiance replaced by its brick's.
 
 use glam::Vec3;
 use prt_format::sh::SH_COUNT;

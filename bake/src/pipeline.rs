@@ -93,7 +93,7 @@ pub(crate) fn bake_in_pool(
 }
 
 /// Whether a probe's rays say it lies inside geometry: too many of them hit back faces, or it
-/// sees no sky and too many of its hits face away from it (conventions.md, probe validity).
+/// sees no sky and too many of its hits face away from it (docs/conventions.md, probe validity).
 fn inside(settings: &BakeSettings, r: &trace::ProbeRays) -> bool {
     let n = settings.rays as f32;
     r.backface_rays as f32 > settings.invalid_backface_fraction * n
@@ -152,7 +152,7 @@ struct Lattice {
 }
 
 impl Lattice {
-    /// The `n`-direction spherical Fibonacci lattice of conventions.md section 2.
+    /// The `n`-direction spherical Fibonacci lattice of docs/conventions.md section 2.
     fn of(n: u32) -> Lattice {
         let dirs: Vec<Vec3> = directions::fibonacci_directions(n)
             .into_iter()

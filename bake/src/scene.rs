@@ -26,7 +26,7 @@ use crate::error::BakeError;
 use crate::gltf_check;
 use crate::texture::{is_nearest, Image, TextureRef};
 
-/// Surface description used at ray hits (conventions.md section 4).
+/// Surface description used at ray hits (docs/conventions.md section 4).
 #[derive(Clone, Debug)]
 pub struct Material {
     pub base_color: [f32; 3],

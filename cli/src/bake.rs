@@ -1,4 +1,4 @@
-//! `prt bake` (conventions.md section 6): the bake's options, turned into [`BakeSettings`] for
+//! `prt bake` (docs/conventions.md section 6): the bake's options, turned into [`BakeSettings`] for
 //! [`prt_bake::bake_to_file`], and the summary printed once the asset is written.
 
 use std::path::PathBuf;

@@ -1,4 +1,4 @@
-//! `prt`: the command-line face of prt (conventions.md section 6). Each subcommand turns its
+//! `prt`: the command-line face of prt (docs/conventions.md section 6). Each subcommand turns its
 //! options into a settings struct and calls one library function.
 
 mod bake;
@@ -250,7 +250,7 @@ fn main() {
         Ok(cli) => cli,
         Err(e) if !e.use_stderr() => e.exit(),
         Err(e) => {
-            // One line, as for every other error (conventions.md section 6): clap's message and
+            // One line, as for every other error (docs/conventions.md section 6): clap's message and
             // its list of possible values, without the usage block.
             let text = e.render().to_string();
             let parts: Vec<&str> = text

@@ -1,4 +1,4 @@
-//! `prt relight` (conventions.md section 6): one relight of an asset on the CPU reference or
+//! `prt relight` (docs/conventions.md section 6): one relight of an asset on the CPU reference or
 //! the GPU, every probe's SH9 written as JSON.
 
 use std::path::PathBuf;

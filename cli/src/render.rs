@@ -1,4 +1,4 @@
-//! `prt render` (conventions.md section 6): options to a [`prt_render::job::RenderJob`].
+//! `prt render` (docs/conventions.md section 6): options to a [`prt_render::job::RenderJob`].
 
 use std::path::PathBuf;
 

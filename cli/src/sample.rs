@@ -1,4 +1,4 @@
-//! `prt sample` (conventions.md section 6): relights an asset once and returns, at given surface
+//! `prt sample` (docs/conventions.md section 6): relights an asset once and returns, at given surface
 //! points, what the engine-side `sample_irradiance` returns there (SH, irradiance, validity), on
 //! the CPU twin (`VolumeSampler`) or the real snippet on the GPU (`sample_points`).
 
@@ -101,7 +101,7 @@ fn sample_gpu(
     )?)
 }
 
-/// The output document of conventions.md section 6 (plus the backend and the bias used).
+/// The output document of docs/conventions.md section 6 (plus the backend and the bias used).
 fn samples_json(
     points: &[Point],
     samples: &[Sample],

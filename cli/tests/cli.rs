@@ -1,4 +1,4 @@
-//! The `prt` binary's command-line contract (conventions.md section 6): exit codes, one-line
+//! The `prt` binary's command-line contract (docs/conventions.md section 6): exit codes, one-line
 //! errors, no partial output, and `inspect --json`.
 
 use std::path::{Path, PathBuf};
@@ -164,7 +164,7 @@ fn bake_resolves_external_buffers_from_another_directory() {
     assert!(out.is_file());
 }
 
-/// `prt relight --backend gpu` writes the same JSON as `--backend cpu` (conventions.md section
+/// `prt relight --backend gpu` writes the same JSON as `--backend cpu` (docs/conventions.md section
 /// 6): same probes, positions and validity, SH within 1e-4 of each probe's SH0 (plus 1e-7 of the
 /// brightest probe's, for near-black probes).
 #[test]

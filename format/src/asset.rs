@@ -535,7 +535,7 @@ impl Factors {
 }
 
 /// Brick flag: the brick holds back-face hits of single-sided surfaces, which are black
-/// (conventions.md section 4); relighting skips it.
+/// (docs/conventions.md section 4); relighting skips it.
 pub const BRICK_BACKFACE: u32 = 1 << 3;
 /// Mask of the dominant normal axis in `Brick::flags`: 0..6 for +X, -X, +Y, -Y, +Z, -Z.
 pub const BRICK_AXIS_MASK: u32 = 0x7;

@@ -1,7 +1,7 @@
 //! The fixed ray direction set of a bake: the spherical Fibonacci lattice.
 //!
 //! Point i of N: `z_i = 1 - (2i+1)/N`, `phi_i = i * pi * (3 - sqrt 5)`,
-//! `w_i = (sqrt(1 - z^2) cos phi, sqrt(1 - z^2) sin phi, z)` (conventions.md section 2). Every
+//! `w_i = (sqrt(1 - z^2) cos phi, sqrt(1 - z^2) sin phi, z)` (docs/conventions.md section 2). Every
 //! point stands for the same solid angle 4pi/N, the set is stratified and deterministic, and it is
 //! the very lattice the independent reference (Mitsuba 3 oracle) uses, so a bake on it is directly
 //! comparable to the reference data ray by ray. Computed in f64 and rounded once, as the oracle

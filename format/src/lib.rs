@@ -16,7 +16,7 @@
 //!
 //! `c_k(probe) = sum over factors f of transfer_k(f) * L_{brick(f)}(offset(f)) + sky term`
 //!
-//! which is exactly the Monte Carlo projection of conventions.md section 2 when every ray hit its
+//! which is exactly the Monte Carlo projection of docs/conventions.md section 2 when every ray hit its
 //! own brick (merging off), and an approximation that shares relighting work between probes
 //! otherwise. Factors are stored in f32, f16 or (default) 8-bit form ([`TransferPrecision`]).
 //!

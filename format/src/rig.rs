@@ -1,4 +1,4 @@
-//! Light rigs: the lights and sky a probe volume is relit with (conventions.md section 3).
+//! Light rigs: the lights and sky a probe volume is relit with (docs/conventions.md section 3).
 //!
 //! One type serves the rig JSON (`--lights FILE`), the KHR_lights_punctual lights a bake keeps as
 //! the scene's default rig, and the runtime. Field names are those of KHR_lights_punctual plus

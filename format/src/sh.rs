@@ -1,6 +1,6 @@
 //! Real spherical harmonics up to L2 (9 coefficients), the one basis every part of prt uses.
 //!
-//! Basis and order as conventions.md section 2: no Condon-Shortley sign, evaluated on the world
+//! Basis and order as docs/conventions.md section 2: no Condon-Shortley sign, evaluated on the world
 //! direction's x, y, z as they are. Coefficients project **incident radiance** (no cosine, no
 //! 1/pi). Irradiance is reconstructed with the clamped-cosine convolution factors of
 //! Ramamoorthi & Hanrahan, "An Efficient Representation for Irradiance Environment Maps"
@@ -13,7 +13,7 @@ use std::f32::consts::PI;
 /// Number of coefficients of L2 SH.
 pub const SH_COUNT: usize = 9;
 
-/// One RGB triple per coefficient, index k as in conventions.md section 2.
+/// One RGB triple per coefficient, index k as in docs/conventions.md section 2.
 pub type ShRgb = [[f32; 3]; SH_COUNT];
 
 /// Normalisation constants of the basis functions.

@@ -1,5 +1,5 @@
 //! A summary of an asset: counts, grid, and the bytes each section takes. `prt inspect` prints
-//! it; `--json` gives the object of conventions.md section 6.
+//! it; `--json` gives the object of docs/conventions.md section 6.
 
 use serde::Serialize;
 

@@ -4,7 +4,7 @@
 //! shadow rays.
 //!
 //! Single-sided triangles come first and are drawn with back-face culling; double-sided ones
-//! follow and are drawn without it (glTF 2.0 spec 3.9.5, conventions.md section 4).
+//! follow and are drawn without it (glTF 2.0 spec 3.9.5, docs/conventions.md section 4).
 
 use glam::Vec3;
 use gltf::texture::WrappingMode;

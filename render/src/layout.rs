@@ -93,7 +93,7 @@ const _: () = assert!(std::mem::size_of::<CullStats>() == 16);
 pub struct Vertex {
     pub position: [f32; 3],
     pub material: u32,
-    /// The triangle's geometric normal (the bake's reference normal, conventions.md section 4).
+    /// The triangle's geometric normal (the bake's reference normal, docs/conventions.md section 4).
     pub normal: [f32; 3],
     pub _pad: u32,
     pub uv0: [f32; 2],

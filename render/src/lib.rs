@@ -15,7 +15,7 @@
 //! 3. **shading** ([`raster`]): the scene again, LessEqual against the pre-pass depth; each
 //!    pixel sums the directional lights (looped directly: they reach every tile) and its tile's
 //!    list (or every light with [`Culling::None`], the brute-force reference) with the runtime's
-//!    own light model (`light_sample`, conventions.md section 3), each light shadowed by an
+//!    own light model (`light_sample`, docs/conventions.md section 3), each light shadowed by an
 //!    any-hit ray through the asset's BVH, then adds `albedo / pi * sample_irradiance(p, n)`.
 //!
 //! **Shadows are rays, not shadow maps**: the asset already carries the BVH the GI's surfels are

@@ -1,4 +1,4 @@
-//! Direct irradiance from punctual lights (conventions.md section 3, KHR_lights_punctual), and
+//! Direct irradiance from punctual lights (docs/conventions.md section 3, KHR_lights_punctual), and
 //! the conservative per-brick culling tests that skip a light before any shadow ray is traced.
 //!
 //! Every formula here has a twin in `shaders/` that must compute the same numbers; the CPU
@@ -8,7 +8,7 @@ use glam::Vec3;
 use prt_format::{Brick, Light, LightKind};
 
 /// Floor of the squared distance in the inverse-square law, in m^2: only a guard against
-/// dividing by zero at the light itself. conventions.md section 3 has the seed's 1e-5 m^2 (a
+/// dividing by zero at the light itself. docs/conventions.md section 3 has the seed's 1e-5 m^2 (a
 /// 3 mm radius), which capped the light of every surface in a millimetre-sized scene (issue 8:
 /// 122% error at a scale of 0.001); 1e-16 m^2 keeps scenes down to 10 micrometres exact.
 pub const MIN_DISTANCE_SQ: f32 = 1e-16;

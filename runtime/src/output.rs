@@ -1,4 +1,4 @@
-//! The relight JSON of conventions.md section 6:
+//! The relight JSON of docs/conventions.md section 6:
 //! `{"probes": [{"index": i, "position": [x,y,z], "valid": true, "sh": [[r,g,b] x 9]}, ...]}`.
 
 use prt_format::sh::ShRgb;

@@ -2,7 +2,7 @@
 //!
 //! 1. **Direct light at surfels.** Per brick: cull each light by range, cone and facing
 //!    ([`PreparedLight::cull`]); for the lights left, every surfel gets the irradiance of
-//!    conventions.md section 3, with a shadow ray through the asset's BVH
+//!    docs/conventions.md section 3, with a shadow ray through the asset's BVH
 //!    ([`crate::visibility`]). Back-face bricks are black and skipped.
 //! 2. **Surfel radiance** `L = emission + albedo / pi * E`.
 //! 3. **Brick radiance**: the weighted mean of its surfels'.
@@ -12,7 +12,7 @@
 //!    volume from the previous iteration, sampled at the surfel with its normal through the
 //!    engine's lookup (`sample_irradiance`: normal bias, validity and visibility weights), and
 //!    steps 2-4 repeat. `bounces = 1` is the one-bounce contract of
-//!    conventions.md section 5, exactly when the bake did not merge surfels.
+//!    docs/conventions.md section 5, exactly when the bake did not merge surfels.
 
 use glam::Vec3;
 use prt_format::sh::{ShRgb, SH_COUNT};

@@ -1,4 +1,4 @@
-//! Loading light rigs (conventions.md section 3) and their skies.
+//! Loading light rigs (docs/conventions.md section 3) and their skies.
 
 use std::path::{Path, PathBuf};
 
@@ -66,7 +66,7 @@ pub fn load_rig(path: &Path) -> Result<Lighting, RigLoadError> {
 }
 
 /// Fields a KHR_lights_punctual light (glTF 2.0 spec, 5.x "extensions", "extras") may carry
-/// that a rig accepts without interpreting them (conventions.md section 3).
+/// that a rig accepts without interpreting them (docs/conventions.md section 3).
 const IGNORED_LIGHT_FIELDS: [&str; 3] = ["name", "extensions", "extras"];
 /// The fields a rig light is read from.
 const LIGHT_FIELDS: [&str; 8] = [

@@ -35,7 +35,7 @@ use prt_format::{Asset, Grid, Probe, DEPTH_MAP_SIDE, DEPTH_WORDS};
 /// What the engine-side snippet returns at one point.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Sample {
-    /// Interpolated SH of incident radiance (conventions.md section 2), zero where no probe
+    /// Interpolated SH of incident radiance (docs/conventions.md section 2), zero where no probe
     /// surrounds the point.
     pub sh: ShRgb,
     /// Irradiance E on a surface with the sample's normal (clamped at 0).

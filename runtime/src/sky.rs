@@ -1,5 +1,5 @@
 //! The sky seen by probe rays that escape: black, a constant radiance, or an equirectangular
-//! image (conventions.md section 3: `u = atan2(x, -z) / 2pi mod 1`, `v = acos(y) / pi`, +Y at
+//! image (docs/conventions.md section 3: `u = atan2(x, -z) / 2pi mod 1`, `v = acos(y) / pi`, +Y at
 //! the top row, bilinear lookup).
 
 use std::path::Path;

@@ -295,7 +295,7 @@ fn hostile_values_stay_finite() {
             "equirect sky",
             Lighting {
                 rig: LightRig::default(),
-                // 4x2 image: warm top row, cool bottom row (conventions.md section 3 mapping).
+                // 4x2 image: warm top row, cool bottom row (docs/conventions.md section 3 mapping).
                 sky: SkyModel::Equirect {
                     width: 4,
                     height: 2,
