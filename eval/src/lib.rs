@@ -39,6 +39,20 @@ pub fn probe_error(ours: &ShRgb, reference: &ShRgb, normals: &[[f32; 3]]) -> f64
     (diff2 / count).sqrt() / mean
 }
 
+/// Largest `|c_k - ref_k|` over coefficients and channels of one probe, divided by the
+/// reference's largest `|SH0|` channel: the data-equivalence criterion.
+pub fn coefficient_error(ours: &ShRgb, reference: &ShRgb) -> f64 {
+    let dc = reference[0].iter().fold(0.0f32, |m, v| m.max(v.abs()));
+    let mut worst = 0.0f64;
+    for k in 0..SH_COUNT {
+        for c in 0..3 {
+            let d = f64::from((ours[k][c] - reference[k][c]).abs()) / f64::from(dc.max(1e-30));
+            worst = worst.max(d);
+        }
+    }
+    worst
+}
+
 /// Compares probes matched by position (within `tolerance` metres); probes of `ours` that are
 /// invalid or have no reference are left out.
 pub fn compare(
@@ -60,13 +74,7 @@ pub fn compare(
             continue;
         };
         errors.push(probe_error(sh, r, &normals));
-        let dc = r[0].iter().fold(0.0f32, |m, v| m.max(v.abs()));
-        for k in 0..SH_COUNT {
-            for c in 0..3 {
-                let d = f64::from((sh[k][c] - r[k][c]).abs()) / f64::from(dc.max(1e-30));
-                max_coeff_rel = max_coeff_rel.max(d);
-            }
-        }
+        max_coeff_rel = max_coeff_rel.max(coefficient_error(sh, r));
     }
     if errors.is_empty() {
         return ErrorStats::default();
