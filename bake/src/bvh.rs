@@ -94,7 +94,7 @@ pub(crate) fn ploc(tris: &[Triangle], params: &BvhBuildParams, memory: Option<Pl
 
 /// What obvhs' PLOC builds a binary BVH in, its pages already written, so that the build does
 /// not stop at each first touch of a page. The development machine's kernel takes 2.6 us a
-/// page (`docs/bake_bench_sponza.md`), and PLOC touches its arrays from its serial passes:
+/// page (`docs/results/bake.md`), and PLOC touches its arrays from its serial passes:
 /// Sponza's 187k triangles fault in about 6,600 pages, some 17 ms. The bake makes it beside
 /// the load, whose single thread leaves the pool's other threads idle
 /// ([`crate::scene::load_bytes_declaring`]). Sponza at 1.9 m (dist, twelve alternating bakes

@@ -226,6 +226,61 @@ fn relight_json_is_the_same_on_cpu_and_gpu() {
     }
 }
 
+/// `prt relight --json` flags every dilated probe (docs/conventions.md section 6): the default
+/// Cornell bake has probes inside its walls that copy a neighbour's data; they are `"valid":
+/// true, "dilated": true`, measured probes `"dilated": false`, and the counts match `prt inspect`.
+#[test]
+fn relight_json_flags_dilated_probes() {
+    let dir = Scratch::new("relight_dilated");
+    let asset = dir.0.join("cornell.prt");
+    let json = dir.0.join("relit.json");
+    let rig = cornell_rig();
+    let run = |args: &[&std::ffi::OsStr]| {
+        let o = prt(args, None);
+        assert!(o.status.success(), "{}", text(&o.stderr));
+        o
+    };
+    run(&[
+        "bake".as_ref(),
+        cornell().as_os_str(),
+        "-o".as_ref(),
+        asset.as_os_str(),
+    ]);
+    let inspect = run(&["inspect".as_ref(), asset.as_os_str(), "--json".as_ref()]);
+    let summary: serde_json::Value = serde_json::from_slice(&inspect.stdout).unwrap();
+    run(&[
+        "relight".as_ref(),
+        asset.as_os_str(),
+        "--lights".as_ref(),
+        rig.as_os_str(),
+        "--json".as_ref(),
+        json.as_os_str(),
+    ]);
+    let doc: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    let probes = doc["probes"].as_array().unwrap();
+    let flag = |p: &serde_json::Value, key: &str| p[key].as_bool().expect(key);
+    let dilated = probes.iter().filter(|p| flag(p, "dilated")).count();
+    let measured = probes
+        .iter()
+        .filter(|p| flag(p, "valid") && !flag(p, "dilated"))
+        .count();
+    assert!(dilated > 0, "the Cornell bake has dilated probes");
+    assert!(
+        probes
+            .iter()
+            .all(|p| !flag(p, "dilated") || flag(p, "valid")),
+        "a dilated probe is valid"
+    );
+    assert_eq!(
+        dilated as u64,
+        summary["dilated_probe_count"].as_u64().unwrap()
+    );
+    assert_eq!(
+        measured as u64,
+        summary["valid_probe_count"].as_u64().unwrap()
+    );
+}
+
 /// Bakes the Cornell reference room (128 rays per probe, for speed) into `dir`.
 fn bake_cornell(dir: &Scratch) -> PathBuf {
     let asset = dir.0.join("cornell.prt");

@@ -12,7 +12,7 @@
 //!
 //! The checksum is verified before anything is decoded, so a flipped byte or a truncated file is
 //! reported as such instead of as a confusing decode error; decoding then checks every declared
-//! length against the bytes left before allocating ([`crate::sections`]), and the result is
+//! length against the bytes left before allocating (the `sections` module), and the result is
 //! validated ([`crate::validate`]).
 
 use std::io::Write;

@@ -1,5 +1,7 @@
-//! The relight JSON of docs/conventions.md section 6:
-//! `{"probes": [{"index": i, "position": [x,y,z], "valid": true, "sh": [[r,g,b] x 9]}, ...]}`.
+//! The relight JSON of docs/conventions.md section 6: `{"probes": [{"index": i, "position":
+//! [x,y,z], "valid": true, "dilated": false, "sh": [[r,g,b] x 9]}, ...]}`. `valid` is what the
+//! runtime gathers and samples; `dilated` marks the valid probes that carry a copy of their
+//! nearest measured neighbour's data, so that a tool can tell them from measured ones.
 
 use prt_format::sh::ShRgb;
 use prt_format::Asset;
@@ -21,6 +23,7 @@ pub fn relight_json(asset: &Asset, sh: &[ShRgb], backend: &str, stats: Value) ->
                 "index": i,
                 "position": p.position,
                 "valid": p.is_valid(),
+                "dilated": p.is_dilated(),
                 "sh": c,
             })
         })
