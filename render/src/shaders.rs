@@ -37,7 +37,7 @@ mod tests {
     /// `[(field, offset)]` of a Rust struct whose fields the WGSL twin names alike.
     macro_rules! fields {
         ($t:ty { $($f:ident),* $(,)? }) => {
-            vec![$((stringify!($f), offset_of!($t, $f))),*]
+            [$((stringify!($f), offset_of!($t, $f))),*]
         };
     }
 
