@@ -16,6 +16,7 @@
 // rounding, and by CULL_DEPTH_MARGIN of the tile's far depth against the depth buffer's
 // quantisation (the tile's bounds come from stored depths, shading from interpolated positions).
 
+// The renderer reads these declarations (render/src/bindings.rs) and binds each by its name.
 @group(0) @binding(0) var<uniform> frame: Frame;
 @group(0) @binding(1) var<storage, read> lights: array<Light>;
 @group(0) @binding(2) var depth_tex: texture_depth_2d;

@@ -10,6 +10,9 @@
 // pixel (its normal offset is in the volume uniform). The view mode picks which terms are
 // written; alpha holds the number of lights evaluated at the pixel (the benchmark's figure).
 
+// The renderer reads these declarations (render/src/bindings.rs) and binds each by its name;
+// group 1 (the BVH) is declared by the runtime's shadow-ray traversal and group 2 (shaders.rs
+// VOLUME_GROUP) by its sample_irradiance snippet.
 @group(0) @binding(0) var<uniform> frame: Frame;
 @group(0) @binding(1) var<storage, read> directional_lights: array<Light>;
 @group(0) @binding(2) var<storage, read> lights: array<Light>;

@@ -29,7 +29,7 @@ struct CullStats {
     pad: u32,
 }
 
-// Words of one tile's list: [count, index, index, ...].
+// Words of one tile's list: [count, index, index, ...] (twin of layout::tile_list_words).
 fn tile_stride() -> u32 {
     return frame.max_per_tile + 1u;
 }

@@ -1,5 +1,6 @@
 //! The view: a pinhole camera from `--eye/--target/--fov`, the glTF's first camera, or a framing
-//! of the whole scene; and its matrices (right-handed, wgpu's 0..1 depth).
+//! of the whole scene; and its matrices (world space of docs/conventions.md section 1:
+//! right-handed, +Y up; wgpu's 0..1 depth).
 
 use glam::{Mat4, Vec3};
 

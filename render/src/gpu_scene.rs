@@ -80,6 +80,69 @@ fn vertices(scene: &Scene, double_sided_override: bool) -> (Vec<Vertex>, u32) {
     (single, n)
 }
 
+/// Fails unless the scene has triangles, one attribute record per triangle (or none), and the
+/// asset a BVH the shadow-ray traversal can walk.
+fn check(scene: &Scene, asset: &Asset) -> Result<(Vec3, Vec3), RenderError> {
+    let bounds = scene.bounds().ok_or(RenderError::NoTriangles)?;
+    if scene.attributes.len() != scene.triangles.len() && !scene.attributes.is_empty() {
+        return Err(RenderError::Scene(format!(
+            "{} triangles but {} attribute records",
+            scene.triangles.len(),
+            scene.attributes.len()
+        )));
+    }
+    let needed = asset.geometry.stack_needed();
+    if needed > prt_runtime::visibility::MAX_STACK || asset.geometry.nodes.is_empty() {
+        return Err(RenderError::Scene(format!(
+            "the asset's BVH needs a traversal stack of {needed} entries (at most {}) and at least one node",
+            prt_runtime::visibility::MAX_STACK
+        )));
+    }
+    Ok(bounds)
+}
+
+/// Every image's place in the texel buffer, and the texels (RGBA8, one word each).
+fn image_texels(scene: &Scene) -> (Vec<ImageInfo>, Vec<u32>) {
+    let mut images = Vec::with_capacity(scene.images.len().max(1));
+    let mut texels: Vec<u32> = Vec::new();
+    for img in &scene.images {
+        images.push(ImageInfo {
+            offset: texels.len() as u32,
+            width: img.width,
+            height: img.height,
+            _pad: 0,
+        });
+        texels.extend(img.texels.iter().map(|t| u32::from_le_bytes(*t)));
+    }
+    (images, texels)
+}
+
+/// The scene's materials as the shading pass reads them.
+fn gpu_materials(scene: &Scene) -> Vec<GpuMaterial> {
+    let texture = |t: &Option<TextureRef>| {
+        t.as_ref()
+            .map_or((NO_IMAGE, 0), |t| (t.image as u32, sampler_bits(t)))
+    };
+    scene
+        .materials
+        .iter()
+        .map(|m| {
+            let (base_image, base_sampler) = texture(&m.base_texture);
+            let (emissive_image, emissive_sampler) = texture(&m.emissive_texture);
+            GpuMaterial {
+                base_color: m.base_color,
+                flags: u32::from(m.double_sided),
+                emissive: m.emissive,
+                base_image,
+                base_sampler,
+                emissive_image,
+                emissive_sampler,
+                _pad: 0,
+            }
+        })
+        .collect()
+}
+
 impl GpuScene {
     /// Uploads `scene` (loaded from the file `asset` was baked from) and the asset's BVH.
     pub fn new(
@@ -87,63 +150,18 @@ impl GpuScene {
         scene: &Scene,
         asset: &Asset,
     ) -> Result<GpuScene, RenderError> {
-        let bounds = scene.bounds().ok_or(RenderError::NoTriangles)?;
-        if scene.attributes.len() != scene.triangles.len() && !scene.attributes.is_empty() {
-            return Err(RenderError::Scene(format!(
-                "{} triangles but {} attribute records",
-                scene.triangles.len(),
-                scene.attributes.len()
-            )));
-        }
-        let needed = asset.geometry.stack_needed();
-        if needed > prt_runtime::visibility::MAX_STACK || asset.geometry.nodes.is_empty() {
-            return Err(RenderError::Scene(format!(
-                "the asset's BVH needs a traversal stack of {needed} entries (at most {}) and at least one node",
-                prt_runtime::visibility::MAX_STACK
-            )));
-        }
+        let bounds = check(scene, asset)?;
         let (verts, single) = vertices(scene, asset.header.settings.double_sided_override);
+        let (images, texels) = image_texels(scene);
+        let materials = gpu_materials(scene);
         let limits = device.limits();
-        let max_binding = limits.max_storage_buffer_binding_size;
-        let max_buffer = limits.max_buffer_size;
-
-        let mut images = Vec::with_capacity(scene.images.len().max(1));
-        let mut texels: Vec<u32> = Vec::new();
-        for img in &scene.images {
-            images.push(ImageInfo {
-                offset: texels.len() as u32,
-                width: img.width,
-                height: img.height,
-                _pad: 0,
-            });
-            texels.extend(img.texels.iter().map(|t| u32::from_le_bytes(*t)));
-        }
-        let materials: Vec<GpuMaterial> = scene
-            .materials
-            .iter()
-            .map(|m| {
-                let (base_image, base_sampler) = m
-                    .base_texture
-                    .as_ref()
-                    .map_or((NO_IMAGE, 0), |t| (t.image as u32, sampler_bits(t)));
-                let (emissive_image, emissive_sampler) = m
-                    .emissive_texture
-                    .as_ref()
-                    .map_or((NO_IMAGE, 0), |t| (t.image as u32, sampler_bits(t)));
-                GpuMaterial {
-                    base_color: m.base_color,
-                    flags: u32::from(m.double_sided),
-                    emissive: m.emissive,
-                    base_image,
-                    base_sampler,
-                    emissive_image,
-                    emissive_sampler,
-                    _pad: 0,
-                }
-            })
-            .collect();
-
-        let create = |label, bytes: &[u8], usage, limit| {
+        // The vertex buffer is bound as a vertex buffer, the rest as storage bindings.
+        let create = |label, bytes: &[u8], usage: wgpu::BufferUsages| {
+            let limit = if usage == wgpu::BufferUsages::VERTEX {
+                limits.max_buffer_size
+            } else {
+                limits.max_storage_buffer_binding_size
+            };
             prt_runtime::gpu::resources::buffer_with(device, label, bytes, usage, limit)
         };
         let storage = wgpu::BufferUsages::STORAGE;
@@ -152,7 +170,6 @@ impl GpuScene {
                 "prt-render vertices",
                 bytemuck::cast_slice(&verts),
                 wgpu::BufferUsages::VERTEX,
-                max_buffer,
             )?,
             single_sided_vertices: single,
             vertex_count: verts.len() as u32,
@@ -160,31 +177,18 @@ impl GpuScene {
                 "prt-render materials",
                 bytemuck::cast_slice(&materials),
                 storage,
-                max_binding,
             )?,
-            images: create(
-                "prt-render images",
-                bytemuck::cast_slice(&images),
-                storage,
-                max_binding,
-            )?,
-            texels: create(
-                "prt-render texels",
-                bytemuck::cast_slice(&texels),
-                storage,
-                max_binding,
-            )?,
+            images: create("prt-render images", bytemuck::cast_slice(&images), storage)?,
+            texels: create("prt-render texels", bytemuck::cast_slice(&texels), storage)?,
             bvh_nodes: create(
                 "prt-render bvh nodes",
                 bytemuck::cast_slice(&asset.geometry.nodes),
                 storage,
-                max_binding,
             )?,
             bvh_triangles: create(
                 "prt-render bvh triangles",
                 bytemuck::cast_slice(&asset.geometry.triangles),
                 storage,
-                max_binding,
             )?,
             bounds,
         })

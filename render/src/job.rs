@@ -9,7 +9,7 @@ use prt_runtime::gpu::{PrtRuntime, RuntimeSettings};
 use prt_runtime::Lighting;
 
 use crate::image::{self, Heatmap};
-use crate::{Camera, CullStats, RenderError, RenderSettings, Renderer, View};
+use crate::{Camera, CullStats, Frame, RenderError, RenderSettings, Renderer, View};
 
 /// The image a job writes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -103,27 +103,18 @@ pub fn check_source(
     Ok(())
 }
 
-/// Runs the job.
-pub fn run(
+/// The job's camera: its own, else the scene's first (`scene_camera`), else a framing of the
+/// scene's `bounds`; `--fov` applied; a bad one named after where it came from.
+fn choose_camera(
     job: &RenderJob,
-    lighting: &Lighting,
-    asset: &Asset,
-) -> Result<RenderReport, RenderError> {
-    let scene_bytes = prt_format::read_regular_file(&job.scene)
-        .map_err(|e| RenderError::Scene(format!("reading {}: {e}", job.scene.display())))?;
-    if !job.force {
-        check_source(&job.scene, &scene_bytes, &job.asset, asset)?;
-    }
-    for out in std::iter::once(&job.png).chain(&job.exr) {
-        check_output(out)?;
-    }
-    let scene = prt_bake::scene::load_bytes(&job.scene, &scene_bytes)
-        .map_err(|e| RenderError::Scene(e.to_string()))?;
-    let mut camera = match (&job.camera, scene.cameras.first()) {
+    scene_camera: Option<Camera>,
+    bounds: Option<(glam::Vec3, glam::Vec3)>,
+) -> Result<Camera, RenderError> {
+    let mut camera = match (&job.camera, scene_camera) {
         (Some(c), _) => *c,
-        (None, Some(c)) => Camera::from_gltf(c),
+        (None, Some(c)) => c,
         (None, None) => {
-            let (lo, hi) = scene.bounds().ok_or(RenderError::NoTriangles)?;
+            let (lo, hi) = bounds.ok_or(RenderError::NoTriangles)?;
             Camera::framing(lo, hi)
         }
     };
@@ -139,6 +130,110 @@ pub fn run(
         )),
         (_, e) => e,
     })?;
+    Ok(camera)
+}
+
+/// `f`'s result and its wall time in seconds.
+fn timed<T>(f: impl FnOnce() -> Result<T, RenderError>) -> Result<(T, f64), RenderError> {
+    let start = Instant::now();
+    let out = f()?;
+    Ok((out, start.elapsed().as_secs_f64()))
+}
+
+/// The GI volume relit and settled under `lighting`, when the job's output shows it.
+fn relight(
+    job: &RenderJob,
+    lighting: &Lighting,
+    asset: &Asset,
+    (device, queue): (&wgpu::Device, &wgpu::Queue),
+) -> Result<Option<PrtRuntime>, RenderError> {
+    if !job.output.needs_gi() {
+        return Ok(None);
+    }
+    let settings = job.runtime.with_room_for(lighting.rig.lights.len());
+    let mut rt = PrtRuntime::new(device, queue, asset, settings)?;
+    rt.settle(lighting)?;
+    rt.wait()?;
+    Ok(Some(rt))
+}
+
+/// Records and submits one frame and reads it back.
+fn draw(
+    renderer: &Renderer,
+    runtime: Option<&PrtRuntime>,
+    (device, queue): (&wgpu::Device, &wgpu::Queue),
+) -> Result<Frame, RenderError> {
+    let mut encoder = device.create_command_encoder(&Default::default());
+    let volume = runtime.map(|rt| renderer.volume_group(rt));
+    renderer.record(&mut encoder, volume.as_ref());
+    queue.submit([encoder.finish()]);
+    renderer.read_frame(device, queue)
+}
+
+/// Tone-maps `frame` (with the heat map on request) and writes the PNG and the EXR: both files
+/// or neither (the EXR first, removed again if the PNG fails).
+fn write_images(
+    job: &RenderJob,
+    renderer: &Renderer,
+    frame: &Frame,
+    (device, queue): (&wgpu::Device, &wgpu::Queue),
+) -> Result<(), RenderError> {
+    let mut pixels = image::tone_map(&frame.radiance, job.exposure_ev);
+    if job.output == Output::Heatmap {
+        let counts = renderer.read_tile_counts(device, queue)?;
+        pixels = Heatmap {
+            width: frame.width,
+            height: frame.height,
+            tile: job.settings.tile,
+            tiles_x: renderer.tiles().0,
+            counts: &counts,
+        }
+        .draw(&pixels);
+    }
+    if let Some(exr) = &job.exr {
+        image::write_exr(exr, frame.width, frame.height, &frame.radiance)?;
+    }
+    if let Err(e) = image::write_png(&job.png, frame.width, frame.height, &pixels) {
+        if let Some(exr) = &job.exr {
+            let _ = std::fs::remove_file(exr);
+        }
+        return Err(e);
+    }
+    Ok(())
+}
+
+/// Shaded pixels (those with geometry) and the mean lights evaluated at each.
+fn lights_per_pixel(frame: &Frame) -> (u64, f64) {
+    let shaded: Vec<&[f32; 4]> = frame
+        .radiance
+        .iter()
+        .zip(&frame.position)
+        .filter(|(_, p)| p[3] > 0.0)
+        .map(|(r, _)| r)
+        .collect();
+    let evaluated: f64 = shaded.iter().map(|r| f64::from(r[3])).sum();
+    (shaded.len() as u64, evaluated / shaded.len().max(1) as f64)
+}
+
+/// Runs the job: checks, the scene and camera, GI when the output needs it, one frame, the
+/// files.
+pub fn run(
+    job: &RenderJob,
+    lighting: &Lighting,
+    asset: &Asset,
+) -> Result<RenderReport, RenderError> {
+    let scene_bytes = prt_format::read_regular_file(&job.scene)
+        .map_err(|e| RenderError::Scene(format!("reading {}: {e}", job.scene.display())))?;
+    if !job.force {
+        check_source(&job.scene, &scene_bytes, &job.asset, asset)?;
+    }
+    for out in std::iter::once(&job.png).chain(&job.exr) {
+        check_output(out)?;
+    }
+    let scene = prt_bake::scene::load_bytes(&job.scene, &scene_bytes)
+        .map_err(|e| RenderError::Scene(e.to_string()))?;
+    let scene_camera = scene.cameras.first().map(Camera::from_gltf);
+    let camera = choose_camera(job, scene_camera, scene.bounds())?;
     let max_gi = prt_runtime::gpu::layout::MAX_LIGHTS;
     if job.output.needs_gi() && lighting.rig.lights.len() > max_gi {
         return Err(RenderError::GiLights {
@@ -150,63 +245,17 @@ pub fn run(
     let mut renderer = Renderer::new(&device, &scene, asset, job.settings)?;
     renderer.set_lights(&queue, &lighting.rig.lights)?;
     renderer.set_camera(&queue, &camera, job.output.view())?;
-
-    let start = Instant::now();
-    let runtime = if job.output.needs_gi() {
-        let settings = job.runtime.with_room_for(lighting.rig.lights.len());
-        let mut rt = PrtRuntime::new(&device, &queue, asset, settings)?;
-        rt.settle(lighting)?;
-        rt.wait()?;
-        Some(rt)
-    } else {
-        None
-    };
-    let gi_seconds = start.elapsed().as_secs_f64();
-
-    let start = Instant::now();
-    let mut encoder = device.create_command_encoder(&Default::default());
-    let volume = runtime.as_ref().map(|rt| renderer.volume_group(rt));
-    renderer.record(&mut encoder, volume.as_ref());
-    queue.submit([encoder.finish()]);
-    let frame = renderer.read_frame(&device, &queue)?;
-    let render_seconds = start.elapsed().as_secs_f64();
-
-    let mut pixels = image::tone_map(&frame.radiance, job.exposure_ev);
-    if job.output == Output::Heatmap {
-        let counts = renderer.read_tile_counts(&device, &queue)?;
-        pixels = Heatmap {
-            width: frame.width,
-            height: frame.height,
-            tile: job.settings.tile,
-            tiles_x: renderer.tiles().0,
-            counts: &counts,
-        }
-        .draw(&pixels);
-    }
-    // Both files or neither: the EXR first, removed again if the PNG fails.
-    if let Some(exr) = &job.exr {
-        image::write_exr(exr, frame.width, frame.height, &frame.radiance)?;
-    }
-    if let Err(e) = image::write_png(&job.png, frame.width, frame.height, &pixels) {
-        if let Some(exr) = &job.exr {
-            let _ = std::fs::remove_file(exr);
-        }
-        return Err(e);
-    }
-    let shaded: Vec<&[f32; 4]> = frame
-        .radiance
-        .iter()
-        .zip(&frame.position)
-        .filter(|(_, p)| p[3] > 0.0)
-        .map(|(r, _)| r)
-        .collect();
-    let evaluated: f64 = shaded.iter().map(|r| f64::from(r[3])).sum();
+    let gpu = (&device, &queue);
+    let (runtime, gi_seconds) = timed(|| relight(job, lighting, asset, gpu))?;
+    let (frame, render_seconds) = timed(|| draw(&renderer, runtime.as_ref(), gpu))?;
+    write_images(job, &renderer, &frame, gpu)?;
+    let (shaded_pixels, lights_per_pixel) = lights_per_pixel(&frame);
     Ok(RenderReport {
         adapter: format!("{} ({:?})", info.name, info.backend),
         camera,
         stats: frame.stats,
-        lights_per_pixel: evaluated / shaded.len().max(1) as f64,
-        shaded_pixels: shaded.len() as u64,
+        lights_per_pixel,
+        shaded_pixels,
         gi_seconds,
         render_seconds,
     })

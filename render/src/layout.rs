@@ -29,6 +29,12 @@ pub const SPOT_SPHERE_COS: f32 = std::f32::consts::FRAC_1_SQRT_2;
 pub const UNBOUNDED_RANGE: f32 = 1.0e30;
 /// Bit of a tile list's count word set when the tile had more lights than its list holds.
 pub const TILE_OVERFLOW: u32 = 1 << 31;
+/// Words of one tile's light list, `[count, index, index, ...]`: the Rust twin of
+/// `tile_stride()` in `shaders/render_types.wgsl`.
+pub fn tile_list_words(max_per_tile: u32) -> u32 {
+    max_per_tile + 1
+}
+
 /// `Material::base_image` / `emissive_image` of a material without that texture.
 pub const NO_IMAGE: u32 = u32::MAX;
 

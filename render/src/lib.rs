@@ -3,28 +3,46 @@
 //! The reference integration of prt's GI into an engine, and what `prt render` draws. It shades
 //! a glTF scene (loaded by the bake's own loader: same triangles, materials and textures) with
 //! direct light from many punctual lights plus indirect diffuse from the runtime's probe volume,
-//! recording into the caller's command encoder like `PrtRuntime::update`:
+//! recording into the caller's command encoder like `PrtRuntime::update`. One step per pass or
+//! dispatch, in this order:
 //!
 //! 1. **depth pre-pass** ([`raster`]): the scene's depth, nothing else.
-//! 2. **tiled light culling** ([`cull`], compute, one workgroup per square tile of
+//! 2. **tiled light culling** ([`cull`], one compute dispatch, one workgroup per square tile of
 //!    [`RenderSettings::tile`] pixels): each tile's min/max depth bounds a view-space box; the
 //!    point and spot lights whose range sphere touches it are listed in light order, at most
-//!    [`RenderSettings::max_lights_per_tile`], overflow counted in [`CullStats`]. Going past 2D
-//!    tiles (Harada et al. 2012; Olsson & Assarsson 2011), the depth bounds drop lights in front
-//!    of or behind everything the tile shows.
+//!    [`RenderSettings::max_lights_per_tile`], overflow counted in [`CullStats`].
 //! 3. **shading** ([`raster`]): the scene again, LessEqual against the pre-pass depth; each
 //!    pixel sums the directional lights (looped directly: they reach every tile) and its tile's
 //!    list (or every light with [`Culling::None`], the brute-force reference) with the runtime's
 //!    own light model (`light_sample`, docs/conventions.md section 3), each light shadowed by an
-//!    any-hit ray through the asset's BVH, then adds `albedo / pi * sample_irradiance(p, n)`.
+//!    any-hit ray through the asset's BVH, then adds `albedo / pi * sample_irradiance(p, n)`
+//!    (surfaces as docs/conventions.md section 4 defines them: flat normals, Lambertian albedo,
+//!    double-sided materials lit from both sides).
+//!
+//! **Why Forward+ tiles.** A rig may hold thousands of point and spot lights, each reaching a
+//! small part of the screen. Looping over every light at every pixel costs pixels x lights.
+//! Culling once per tile (Harada et al. 2012; Olsson & Assarsson 2011) costs tiles x lights and leaves each pixel
+//! only its tile's lights; the pre-pass depth lets the culling drop lights in front of or behind
+//! everything a tile shows (2.5D culling), and lets shading run once per visible pixel; unlike
+//! deferred shading, no G-buffer of material inputs is needed, only depth. Tiles
+//! list lights in rig order, and every culling test is conservative, so a tiled frame equals
+//! the brute-force one ([`Culling::None`]) exactly; tests check it.
 //!
 //! **Shadows are rays, not shadow maps**: the asset already carries the BVH the GI's surfels are
 //! shadowed with, so direct light and GI agree exactly on what blocks a light, with no resolution,
 //! bias or per-light map to manage for a thousand lights; `prt bench render` measures their cost.
 //!
+//! **Rust and WGSL share one source of truth for each fact**: binding numbers live only in the
+//! WGSL, read with naga and bound by name ([`bindings`]); constants are generated from
+//! [`layout`] into every stage's source ([`shaders`]); each GPU struct is a `Pod` Rust twin of a
+//! WGSL struct with a compile-time size assert, and unit tests check both against naga's layout
+//! without a GPU.
+//!
 //! The frame is read back as linear radiance ([`Frame`]); [`image`] tone-maps it (Khronos PBR
-//! Neutral), draws the tile heat map and writes PNG and EXR files.
+//! Neutral), draws the tile heat map and writes PNG and EXR files. [`job`] is `prt render` as a
+//! library call.
 
+pub mod bindings;
 pub mod camera;
 pub mod cull;
 pub mod gpu_scene;
@@ -130,6 +148,13 @@ pub enum RenderError {
     #[error("writing {path}: {message}")]
     Write {
         path: std::path::PathBuf,
+        message: String,
+    },
+    /// A stage's WGSL declares a binding the renderer cannot make or fill (a bug in the
+    /// renderer: unit tests check every shader).
+    #[error("{label}: {message}")]
+    Shader {
+        label: &'static str,
         message: String,
     },
     #[error(transparent)]

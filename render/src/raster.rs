@@ -1,9 +1,17 @@
-//! Forward+ stages 1 and 3 (`shaders/render_shade.wgsl`): the depth pre-pass, whose depth buffer
-//! the culling stage reads, and the shading pass, which re-draws the scene with a LessEqual test
-//! against that depth (no depth writes) so every visible pixel is shaded exactly once. Each has a
-//! culled pipeline for single-sided materials and an unculled one for double-sided materials.
+//! Forward+ stages 1 and 3 (`shaders/render_shade.wgsl`), one render pass each: the depth
+//! pre-pass, whose depth buffer the culling stage reads, and the shading pass, which re-draws the
+//! scene with a LessEqual test against that depth (no depth writes) so every visible pixel is
+//! shaded exactly once (both vertex stages compute `@invariant` clip positions, so the depths
+//! compare equal). Each has a culled pipeline for single-sided materials and an unculled one for
+//! double-sided materials (docs/conventions.md section 4): the scene's vertices come sorted that
+//! way, so each pass is two draws.
+//!
+//! The four pipelines share one set of bind group layouts, read from the shading WGSL
+//! ([`crate::bindings`]); the depth pre-pass's layout holds only the groups `vs_depth` uses.
 
+use crate::bindings::StageBindings;
 use crate::layout::Vertex;
+use crate::RenderError;
 
 /// Attachments the shading pass writes: radiance (+ lights evaluated in alpha), world position,
 /// shading normal. Full float so that tests and `--exr` read exact values.
@@ -47,13 +55,36 @@ pub struct PassPipelines {
     pub unculled: wgpu::RenderPipeline,
 }
 
+/// A pass's entry points in `render_shade.wgsl`; the depth pre-pass has no fragment stage.
+#[derive(Clone, Copy)]
+struct EntryPoints {
+    vertex: &'static str,
+    fragment: Option<&'static str>,
+}
+
+const DEPTH_PASS: EntryPoints = EntryPoints {
+    vertex: "vs_depth",
+    fragment: None,
+};
+const SHADE_PASS: EntryPoints = EntryPoints {
+    vertex: "vs_main",
+    fragment: Some("fs_main"),
+};
+
+impl EntryPoints {
+    fn names(self) -> Vec<&'static str> {
+        std::iter::once(self.vertex).chain(self.fragment).collect()
+    }
+}
+
 fn pipeline(
     device: &wgpu::Device,
     module: &wgpu::ShaderModule,
     layout: &wgpu::PipelineLayout,
-    depth_pass: bool,
+    pass: EntryPoints,
     cull: Option<wgpu::Face>,
 ) -> wgpu::RenderPipeline {
+    let depth_pass = pass.fragment.is_none();
     let targets: Vec<Option<wgpu::ColorTargetState>> = if depth_pass {
         Vec::new()
     } else {
@@ -68,13 +99,13 @@ fn pipeline(
         layout: Some(layout),
         vertex: wgpu::VertexState {
             module,
-            entry_point: Some(if depth_pass { "vs_depth" } else { "vs_main" }),
+            entry_point: Some(pass.vertex),
             compilation_options: Default::default(),
             buffers: &[Some(vertex_layout())],
         },
-        fragment: (!depth_pass).then(|| wgpu::FragmentState {
+        fragment: pass.fragment.map(|entry_point| wgpu::FragmentState {
             module,
-            entry_point: Some("fs_main"),
+            entry_point: Some(entry_point),
             compilation_options: Default::default(),
             targets: &targets,
         }),
@@ -101,18 +132,42 @@ fn pipeline(
     })
 }
 
-/// Both passes' pipelines.
-pub fn pipelines(
-    device: &wgpu::Device,
-    module: &wgpu::ShaderModule,
-    depth_layout: &wgpu::PipelineLayout,
-    shade_layout: &wgpu::PipelineLayout,
-) -> (PassPipelines, PassPipelines) {
-    let make = |layout, depth| PassPipelines {
-        culled: pipeline(device, module, layout, depth, Some(wgpu::Face::Back)),
-        unculled: pipeline(device, module, layout, depth, None),
-    };
-    (make(depth_layout, true), make(shade_layout, false))
+/// Both passes: their bindings (read from the shading WGSL, see [`crate::bindings`]) and
+/// pipelines.
+pub struct Raster {
+    pub bindings: StageBindings,
+    pub depth: PassPipelines,
+    pub shade: PassPipelines,
+    /// Bind groups the depth pre-pass sets (groups 0 to this, exclusive); the shading pass sets
+    /// every group.
+    pub depth_groups: usize,
+}
+
+impl Raster {
+    pub fn new(device: &wgpu::Device) -> Result<Raster, RenderError> {
+        let source = crate::shaders::shade_source();
+        let bindings = StageBindings::new(device, "prt-render shade", &source)?;
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("prt-render shade"),
+            source: wgpu::ShaderSource::Wgsl(source.into()),
+        });
+        let make = |pass: EntryPoints| {
+            let layout = bindings.pipeline_layout(device, &pass.names());
+            PassPipelines {
+                culled: pipeline(device, &module, &layout, pass, Some(wgpu::Face::Back)),
+                unculled: pipeline(device, &module, &layout, pass, None),
+            }
+        };
+        let depth_groups = bindings.groups_used_by(&DEPTH_PASS.names());
+        let depth = make(DEPTH_PASS);
+        let shade = make(SHADE_PASS);
+        Ok(Raster {
+            bindings,
+            depth,
+            shade,
+            depth_groups,
+        })
+    }
 }
 
 /// Draws the scene's two vertex ranges with the matching pipelines.

@@ -30,7 +30,20 @@ pub fn shade_source() -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use prt_runtime::gpu::shaders::validation::{assert_layouts, validate, Expected};
+    use crate::bindings::{self, Declared, Resource};
+    use prt_runtime::gpu::shaders::validation::validate;
+    use std::mem::{offset_of, size_of};
+
+    /// `[(field, offset)]` of a Rust struct whose fields the WGSL twin names alike.
+    macro_rules! fields {
+        ($t:ty { $($f:ident),* $(,)? }) => {
+            [$((stringify!($f), offset_of!($t, $f))),*]
+        };
+    }
+
+    fn reflect(src: &str) -> Vec<Declared> {
+        bindings::reflect("test", src).expect("reflects")
+    }
 
     /// Both stages parse and validate with naga (no GPU needed).
     #[test]
@@ -39,76 +52,240 @@ mod tests {
         validate(&shade_source(), "shade");
     }
 
+    /// Every binding of both stages is declared once and (outside the runtime's volume group) one
+    /// the renderer provides by name; every resource is bound somewhere.
+    #[test]
+    fn every_declared_binding_has_a_resource() {
+        let mut bound = Vec::new();
+        for (stage, src) in [("cull", cull_source()), ("shade", shade_source())] {
+            let declared = reflect(&src);
+            assert!(!declared.is_empty(), "{stage}");
+            let mut seen = std::collections::HashSet::new();
+            for d in &declared {
+                assert!(seen.insert((d.group, d.binding)), "{stage}: {d:?} twice");
+                if stage == "shade" && d.group == VOLUME_GROUP {
+                    assert!(d.name.starts_with("prt_"), "{stage}: {d:?}");
+                    continue;
+                }
+                let r = Resource::of(&d.name);
+                assert!(r.is_some(), "{stage}: `{}` has no resource", d.name);
+                bound.extend(r);
+            }
+        }
+        for r in [
+            Resource::Frame,
+            Resource::DirectionalLights,
+            Resource::Lights,
+            Resource::TileLists,
+            Resource::CullStats,
+            Resource::Depth,
+            Resource::Materials,
+            Resource::Images,
+            Resource::Texels,
+            Resource::BvhNodes,
+            Resource::BvhTriangles,
+        ] {
+            assert!(bound.contains(&r), "{r:?} is bound by no stage");
+        }
+    }
+
+    /// The volume group read from the snippet is the layout the runtime hands engines (whose
+    /// `volume_bind_group` fills it), the last group of the shading pass; the depth pre-pass
+    /// reads group 0 only.
+    #[test]
+    fn the_volume_group_is_the_runtimes() {
+        let declared = reflect(&shade_source());
+        let last = declared.iter().map(|d| d.group).max();
+        assert_eq!(last, Some(VOLUME_GROUP));
+        assert_eq!(
+            bindings::layout_entries(&declared, VOLUME_GROUP),
+            prt_runtime::gpu::PrtRuntime::volume_layout_entries(wgpu::ShaderStages::FRAGMENT)
+        );
+        for d in &declared {
+            let depth = d.used_by.iter().any(|e| e == "vs_depth");
+            assert_eq!(depth, d.name == "frame", "{d:?}");
+        }
+    }
+
+    /// The binding types naga's declarations imply.
+    #[test]
+    fn binding_types_follow_the_declarations() {
+        let src = "@group(0) @binding(0) var<uniform> u: vec4<f32>;\n\
+                   @group(0) @binding(1) var<storage, read> r: array<u32>;\n\
+                   @group(0) @binding(2) var<storage, read_write> w: array<u32>;\n\
+                   @group(1) @binding(0) var d: texture_depth_2d;\n\
+                   @group(1) @binding(1) var t: texture_3d<f32>;\n\
+                   @group(1) @binding(2) var s: sampler;\n\
+                   @compute @workgroup_size(1) fn main() {\n\
+                     w[0] = r[0] + u32(u.x + textureLoad(d, vec2<u32>(0u), 0)\n\
+                       + textureSampleLevel(t, s, vec3<f32>(0.0), 0.0).x);\n\
+                   }\n";
+        let buffer = |ty| wgpu::BindingType::Buffer {
+            ty,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        };
+        let types: Vec<_> = reflect(src).into_iter().map(|d| d.ty).collect();
+        assert_eq!(
+            types,
+            [
+                buffer(wgpu::BufferBindingType::Uniform),
+                buffer(wgpu::BufferBindingType::Storage { read_only: true }),
+                buffer(wgpu::BufferBindingType::Storage { read_only: false }),
+                wgpu::BindingType::Texture {
+                    sample_type: wgpu::TextureSampleType::Depth,
+                    view_dimension: wgpu::TextureViewDimension::D2,
+                    multisampled: false,
+                },
+                wgpu::BindingType::Texture {
+                    sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                    view_dimension: wgpu::TextureViewDimension::D3,
+                    multisampled: false,
+                },
+                wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+            ]
+        );
+    }
+
+    /// Asserts that WGSL struct `name` has `size` bytes and exactly the members `fields` at
+    /// those offsets, padding members (`pad*`) aside.
+    fn assert_struct(module: &naga::Module, name: &str, size: usize, fields: &[(&str, usize)]) {
+        let mut layouter = naga::proc::Layouter::default();
+        layouter.update(module.to_ctx()).expect("layout");
+        let (handle, ty) = module
+            .types
+            .iter()
+            .find(|(_, t)| t.name.as_deref() == Some(name))
+            .unwrap_or_else(|| panic!("WGSL struct {name} missing"));
+        assert_eq!(layouter[handle].size as usize, size, "size of {name}");
+        let naga::TypeInner::Struct { members, .. } = &ty.inner else {
+            panic!("{name} is not a struct");
+        };
+        let wgsl: Vec<(&str, usize)> = members
+            .iter()
+            .filter_map(|m| m.name.as_deref().map(|n| (n, m.offset as usize)))
+            .filter(|(n, _)| !n.starts_with("pad"))
+            .collect();
+        assert_eq!(wgsl, fields, "members of {name}");
+    }
+
     /// Every WGSL struct has the size and field offsets of its Rust twin.
     #[test]
     fn wgsl_structs_match_rust_layouts() {
-        use std::mem::{offset_of, size_of};
-        let expect: Expected = vec![
-            (
-                "Frame",
-                size_of::<layout::FrameUniform>(),
-                vec![
-                    ("view", offset_of!(layout::FrameUniform, view)),
-                    ("inv_proj", offset_of!(layout::FrameUniform, inv_proj)),
-                    ("eye", offset_of!(layout::FrameUniform, eye)),
-                    ("mode", offset_of!(layout::FrameUniform, mode)),
-                    ("width", offset_of!(layout::FrameUniform, width)),
-                    ("tile", offset_of!(layout::FrameUniform, tile)),
-                    ("tiles_x", offset_of!(layout::FrameUniform, tiles_x)),
-                    ("tiles_y", offset_of!(layout::FrameUniform, tiles_y)),
-                    (
-                        "max_per_tile",
-                        offset_of!(layout::FrameUniform, max_per_tile),
-                    ),
-                    ("other_count", offset_of!(layout::FrameUniform, other_count)),
-                    (
-                        "directional_count",
-                        offset_of!(layout::FrameUniform, directional_count),
-                    ),
-                    ("flags", offset_of!(layout::FrameUniform, flags)),
-                ],
-            ),
-            (
-                "CullStats",
-                size_of::<layout::CullStats>(),
-                vec![
-                    ("dropped", offset_of!(layout::CullStats, dropped)),
-                    ("listed", offset_of!(layout::CullStats, listed)),
-                ],
-            ),
-            (
-                "Material",
-                size_of::<layout::GpuMaterial>(),
-                vec![
-                    ("flags", offset_of!(layout::GpuMaterial, flags)),
-                    ("emissive", offset_of!(layout::GpuMaterial, emissive)),
-                    ("base_image", offset_of!(layout::GpuMaterial, base_image)),
-                    (
-                        "emissive_sampler",
-                        offset_of!(layout::GpuMaterial, emissive_sampler),
-                    ),
-                ],
-            ),
-            (
-                "ImageInfo",
-                size_of::<layout::ImageInfo>(),
-                vec![("height", offset_of!(layout::ImageInfo, height))],
-            ),
-        ];
-        assert_layouts(&shade_source(), expect);
-        // The vertex attributes' offsets as the pipeline declares them.
+        use layout::{CullStats, FrameUniform, GpuMaterial, ImageInfo};
+        let module = validate(&shade_source(), "shade");
+        assert_struct(
+            &module,
+            "Frame",
+            size_of::<FrameUniform>(),
+            &fields!(FrameUniform {
+                view_proj,
+                view,
+                inv_proj,
+                eye,
+                mode,
+                width,
+                height,
+                tile,
+                tiles_x,
+                tiles_y,
+                max_per_tile,
+                other_count,
+                directional_count,
+                flags,
+                ray_scale,
+            }),
+        );
+        assert_struct(
+            &module,
+            "CullStats",
+            size_of::<CullStats>(),
+            &fields!(CullStats {
+                overflow_tiles,
+                dropped,
+                listed
+            }),
+        );
+        assert_struct(
+            &module,
+            "Material",
+            size_of::<GpuMaterial>(),
+            &fields!(GpuMaterial {
+                base_color,
+                flags,
+                emissive,
+                base_image,
+                base_sampler,
+                emissive_image,
+                emissive_sampler,
+            }),
+        );
+        assert_struct(
+            &module,
+            "ImageInfo",
+            size_of::<ImageInfo>(),
+            &fields!(ImageInfo {
+                offset,
+                width,
+                height
+            }),
+        );
+    }
+
+    /// The vertex attributes the pipelines declare are `VertexIn`'s (location, format, name)
+    /// at the offsets of [`layout::Vertex`], and the shading pass writes [`crate::raster::TARGETS`]
+    /// attachments.
+    #[test]
+    fn vertex_attributes_and_targets_match_the_wgsl() {
+        let module = validate(&shade_source(), "shade");
+        let offsets = fields!(layout::Vertex {
+            position,
+            material,
+            normal,
+            uv0,
+            uv1,
+            color
+        });
+        let (_, vertex_in) = module
+            .types
+            .iter()
+            .find(|(_, t)| t.name.as_deref() == Some("VertexIn"))
+            .expect("VertexIn");
+        let naga::TypeInner::Struct { members, .. } = &vertex_in.inner else {
+            panic!("VertexIn is not a struct");
+        };
         let attrs = crate::raster::VERTEX_ATTRIBUTES;
-        assert_eq!(
-            attrs[0].offset as usize,
-            offset_of!(layout::Vertex, position)
-        );
-        assert_eq!(
-            attrs[1].offset as usize,
-            offset_of!(layout::Vertex, material)
-        );
-        assert_eq!(attrs[2].offset as usize, offset_of!(layout::Vertex, normal));
-        assert_eq!(attrs[3].offset as usize, offset_of!(layout::Vertex, uv0));
-        assert_eq!(attrs[4].offset as usize, offset_of!(layout::Vertex, uv1));
-        assert_eq!(attrs[5].offset as usize, offset_of!(layout::Vertex, color));
+        assert_eq!(members.len(), attrs.len());
+        for ((m, a), (field, offset)) in members.iter().zip(&attrs).zip(&offsets) {
+            assert_eq!(m.name.as_deref(), Some(*field));
+            let Some(naga::Binding::Location { location, .. }) = m.binding else {
+                panic!("{field} has no location");
+            };
+            assert_eq!(location, a.shader_location, "{field}");
+            assert_eq!(a.offset as usize, *offset, "{field}");
+            let format = match module.types[m.ty].inner {
+                naga::TypeInner::Scalar(s) => (s.kind, 1),
+                naga::TypeInner::Vector { size, scalar } => (scalar.kind, size as u32),
+                _ => panic!("{field}"),
+            };
+            let expected = match format {
+                (naga::ScalarKind::Float, 2) => wgpu::VertexFormat::Float32x2,
+                (naga::ScalarKind::Float, 3) => wgpu::VertexFormat::Float32x3,
+                (naga::ScalarKind::Float, 4) => wgpu::VertexFormat::Float32x4,
+                (naga::ScalarKind::Uint, 1) => wgpu::VertexFormat::Uint32,
+                _ => panic!("{field}: {format:?}"),
+            };
+            assert_eq!(a.format, expected, "{field}");
+        }
+        let fs = module
+            .entry_points
+            .iter()
+            .find(|e| e.name == "fs_main")
+            .expect("fs_main");
+        let out = fs.function.result.as_ref().expect("fs_main output").ty;
+        let naga::TypeInner::Struct { members, .. } = &module.types[out].inner else {
+            panic!("ShadeOut is not a struct");
+        };
+        assert_eq!(members.len(), crate::raster::TARGETS);
     }
 }

@@ -1,7 +1,7 @@
 //! Reading a rendered frame and the tile lists back to the CPU (tests, `prt render`, benchmarks).
 
 use super::{Frame, Renderer};
-use crate::layout::CullStats;
+use crate::layout::{tile_list_words, CullStats};
 use crate::raster::TARGETS;
 use crate::{Culling, RenderError};
 
@@ -54,7 +54,7 @@ impl Renderer {
         let stats_bytes = prt_runtime::gpu::read_buffer(
             device,
             queue,
-            &self.stats,
+            &self.buffers.stats,
             std::mem::size_of::<CullStats>() as u64,
         )?;
         let normal = planes.pop().unwrap_or_default();
@@ -82,11 +82,15 @@ impl Renderer {
         if self.settings.culling == Culling::None {
             return Ok(vec![self.light_counts.1; tiles]);
         }
-        let bytes =
-            prt_runtime::gpu::read_buffer(device, queue, &self.tile_lists, self.tile_lists.size())?;
+        let bytes = prt_runtime::gpu::read_buffer(
+            device,
+            queue,
+            &self.buffers.tile_lists,
+            self.buffers.tile_lists.size(),
+        )?;
         // The readback need not be 4-byte aligned: copy instead of casting.
         let words: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes);
-        let stride = self.settings.max_lights_per_tile as usize + 1;
+        let stride = tile_list_words(self.settings.max_lights_per_tile) as usize;
         Ok((0..tiles).map(|t| words[t * stride]).collect())
     }
 }
