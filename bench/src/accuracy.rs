@@ -49,7 +49,7 @@ pub struct AccuracyArgs {
     #[arg(long, value_delimiter = ',')]
     pub previous: Vec<PathBuf>,
     /// Directory for accuracy.md and accuracy.svg (docs/results for the published ones).
-    #[arg(long, default_value = ".")]
+    #[arg(long, value_name = "DIR", default_value = ".")]
     pub out: PathBuf,
 }
 

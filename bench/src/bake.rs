@@ -393,20 +393,7 @@ fn bake(scene: &Path, settings: &BakeSettings, runs: usize, prt: &Path) -> Resul
         .find(|(s, _)| *s == "trace")
         .map_or(0.0, |(_, d)| d.as_secs_f64());
     let mut md = String::new();
-    writeln!(md, "| figure | value |\n|---|---|")?;
-    writeln!(
-        md,
-        "| scene | {} ({} triangles) |",
-        scene.display(),
-        summary.triangle_count
-    )?;
-    writeln!(
-        md,
-        "| probes (valid) | {} ({}) |",
-        summary.probe_count, summary.valid_probe_count
-    )?;
-    writeln!(md, "| rays per probe | {} |", settings.rays)?;
-    writeln!(md, "| threads | {} |", rayon::current_num_threads())?;
+    head_rows(&mut md, scene, settings.rays, &summary)?;
     writeln!(md, "| peak memory of the bake (resident) | {peak} |")?;
     writeln!(
         md,
@@ -456,6 +443,30 @@ fn bake(scene: &Path, settings: &BakeSettings, runs: usize, prt: &Path) -> Resul
         ));
     }
     Ok(md)
+}
+
+/// The report's header and its rows of what was baked: the scene, its probes, rays and threads.
+fn head_rows(
+    md: &mut String,
+    scene: &Path,
+    rays: u32,
+    summary: &prt_format::Summary,
+) -> Result<()> {
+    writeln!(md, "| figure | value |\n|---|---|")?;
+    writeln!(
+        md,
+        "| scene | {} ({} triangles) |",
+        scene.display(),
+        summary.triangle_count
+    )?;
+    writeln!(
+        md,
+        "| probes (valid) | {} ({}) |",
+        summary.probe_count, summary.valid_probe_count
+    )?;
+    writeln!(md, "| rays per probe | {rays} |")?;
+    writeln!(md, "| threads | {} |", rayon::current_num_threads())?;
+    Ok(())
 }
 
 /// The report's rows of the baselines: bare obvhs and bare packet tracing of the bake's `rays`
