@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Regenerates the surface-irradiance references of `prt bench surface` (issue 11) with the
+# Regenerates the surface-irradiance references of `prt-bench surface` (issue 11) with the
 # independent Mitsuba 3 oracle (surface_oracle.py; not part of this repository: point
 # PRT_ORACLE_DIR at it, default ../shared/oracle beside the clone): points on visible
 # surfaces, the SH of incident radiance there and the exact hemispherical irradiance.

@@ -38,7 +38,7 @@ pub fn trace_scale(spacing: f32) -> f32 {
 }
 
 /// `triangles` as obvhs triangles in the tracing frame scaled by `scale` ([`trace_scale`]).
-pub fn traced_triangles(triangles: &[[Vec3; 3]], scale: f32) -> Vec<Triangle> {
+pub(crate) fn traced_triangles(triangles: &[[Vec3; 3]], scale: f32) -> Vec<Triangle> {
     triangles
         .par_iter()
         .map(|t| Triangle {
@@ -244,7 +244,7 @@ impl SceneBvh {
         }
     }
 
-    /// [`SceneBvh::closest_hit`] of up to [`PACKET`] rays from one origin, traced as a packet
+    /// [`SceneBvh::closest_hit`] of up to `PACKET` rays from one origin, traced as a packet
     /// (each ray gets the hit it gets alone).
     #[inline]
     pub fn closest_hits(

@@ -1,7 +1,7 @@
 //! An uncompressed 8-wide BVH traced by packets of rays that leave one point.
 //!
 //! Every probe shoots its lattice directions from one origin, in Morton order of the octahedral map
-//! ([`crate::trace::coherent_order`]), so consecutive rays span a narrow cone. Tracing [`PACKET`]
+//! (`crate::trace::coherent_order`), so consecutive rays span a narrow cone. Tracing `PACKET`
 //! of them together (ray packets: Wald, Slusallek, Benthin, Wagner, "Interactive Rendering with
 //! Coherent Ray Tracing", 2001) fetches each node once for the packet. Inside a node the work is
 //! per ray, SIMD across the node (as Embree's single-ray BVH8 traversal): each ray still in the
@@ -43,7 +43,7 @@ pub const LANES: usize = 8;
 /// one thread, least of 9 in one process, four alternating runs each, packets of 8, 16, 32 and
 /// 64: 305-333 ms, 266-298 ms, 252-264 ms (one outlier 335) and 295-312 ms. The hits are the
 /// same for any packet size.
-pub const PACKET: usize = 32;
+pub(crate) const PACKET: usize = 32;
 
 /// A set of a packet's rays.
 type RayMask = u32;
@@ -256,7 +256,7 @@ impl Bvh8 {
         Bvh8 { nodes, triangles }
     }
 
-    /// Closest hits within `tmax` of up to [`PACKET`] rays from `origin` along `dirs`: per ray,
+    /// Closest hits within `tmax` of up to `PACKET` rays from `origin` along `dirs`: per ray,
     /// the scene's triangle index and the distance in units of `dirs`' length.
     pub fn closest_hits(
         &self,

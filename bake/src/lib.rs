@@ -21,6 +21,7 @@
 // SH and colour maths index several parallel arrays with one index; range loops read best.
 #![allow(clippy::needless_range_loop)]
 
+pub mod bench;
 mod brick_index;
 pub mod bricks;
 pub mod bvh;

@@ -85,7 +85,7 @@ pub fn grid(min: Vec3, max: Vec3, spacing: f32, max_probes: u64) -> Result<Grid,
 }
 
 /// Probe positions in grid order (x fastest, then y, then z).
-pub fn positions(grid: &Grid) -> Vec<Vec3> {
+pub(crate) fn positions(grid: &Grid) -> Vec<Vec3> {
     let [nx, ny, nz] = grid.counts;
     let mut out = Vec::with_capacity(grid.probe_count() as usize);
     for k in 0..nz {

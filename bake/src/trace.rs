@@ -63,7 +63,7 @@ pub struct Tracer<'a> {
     pub directions: &'a [Vec3],
     /// The SH basis of each direction ([`prt_format::sh::basis`]), evaluated once for every probe.
     pub basis: Vec<[f32; SH_COUNT]>,
-    /// The order the lattice is traced in ([`coherent_order`]).
+    /// The order the lattice is traced in (`coherent_order`).
     pub order: &'a [u32],
     pub weight: f32,
     pub double_sided: bool,
@@ -237,7 +237,7 @@ impl Tracer<'_> {
 /// at 1.9 and 1.0 m); single-ray obvhs traversal ran at about the same speed in either order.
 /// The order changes float sums (sky transfer, surfel means) in their last bits, never which ray
 /// hits what.
-pub fn coherent_order(directions: &[Vec3]) -> Vec<u32> {
+pub(crate) fn coherent_order(directions: &[Vec3]) -> Vec<u32> {
     let morton = |d: Vec3| -> u32 {
         let [u, v] = prt_format::depth::oct_encode(d.to_array());
         let q = |x: f32| ((x * 0.5 + 0.5).clamp(0.0, 1.0) * 65535.0) as u32;

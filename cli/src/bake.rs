@@ -8,7 +8,10 @@ use clap::{Args, ValueEnum};
 use prt_bake::BakeSettings;
 use prt_format::TransferPrecision;
 
-use crate::{parse_bounds, peak_rss_kib, progress};
+use prt_cli::options::parse_bounds;
+use prt_cli::process::peak_rss_kib;
+
+use crate::progress;
 
 #[derive(Clone, Copy, ValueEnum)]
 enum Quality {
@@ -166,7 +169,7 @@ pub fn run(args: BakeArgs) -> Result<()> {
             kb as f64 / 1024.0
         );
     }
-    // `prt bench bake --runs` times a bake to this line: keep its first word.
+    // `prt-bench bake --runs` times a bake to this line: keep its first word.
     println!("wrote            {}", output.display());
     Ok(())
 }

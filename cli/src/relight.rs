@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use clap::Args;
 
-use crate::{ensure_not_input, lighting_of, Backend};
+use crate::common::{ensure_not_input, lighting_of, Backend};
 
 #[derive(Args)]
 pub struct RelightArgs {

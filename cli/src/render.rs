@@ -5,9 +5,12 @@ use std::path::PathBuf;
 use anyhow::{bail, Context, Result};
 use clap::ValueEnum;
 use glam::Vec3;
+use prt_cli::options::{camera_of, normal_bias, parse_size, parse_vec3};
 use prt_render::job::{Output, RenderJob};
-use prt_render::{Camera, Culling, RenderSettings};
+use prt_render::{Culling, RenderSettings};
 use prt_runtime::gpu::RuntimeSettings;
+
+use crate::common::{ensure_not_input, lighting_of};
 
 #[derive(Clone, Copy, ValueEnum)]
 pub enum ViewArg {
@@ -90,49 +93,11 @@ pub struct RenderArgs {
     force: bool,
 }
 
-/// Parses `X,Y,Z`.
-pub fn parse_vec3(s: &str) -> Result<Vec3, String> {
-    let v = crate::parse_numbers(s)?;
-    match v[..] {
-        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok(Vec3::new(x, y, z)),
-        [_, _, _] => Err("coordinates must be finite".into()),
-        _ => Err(format!("expected X,Y,Z, got {} numbers", v.len())),
-    }
-}
-
-/// The camera of `--eye`, `--target` and `--fov` (both or neither of the first two; `None`: the
-/// scene's own camera or framing).
-pub fn camera_of(
-    eye: Option<Vec3>,
-    target: Option<Vec3>,
-    fov: Option<f32>,
-) -> Result<Option<Camera>> {
-    Ok(match (eye, target) {
-        (Some(eye), Some(target)) => Some(Camera {
-            eye,
-            target,
-            up: Vec3::Y,
-            fov_degrees: fov.unwrap_or(prt_render::camera::DEFAULT_FOV),
-        }),
-        (None, None) => None,
-        _ => bail!("--eye and --target go together"),
-    })
-}
-
-/// Parses `WxH`.
-pub fn parse_size(s: &str) -> Result<(u32, u32), String> {
-    let (w, h) = s
-        .split_once(['x', 'X'])
-        .ok_or_else(|| format!("expected WxH, got {s:?}"))?;
-    let parse = |t: &str| t.trim().parse::<u32>().map_err(|e| format!("{t:?}: {e}"));
-    Ok((parse(w)?, parse(h)?))
-}
-
 pub fn run(args: RenderArgs) -> Result<()> {
     let camera = camera_of(args.eye, args.target, args.fov)?;
     let runtime = RuntimeSettings {
         visibility: !args.no_visibility,
-        normal_bias: crate::normal_bias(args.normal_bias)?,
+        normal_bias: normal_bias(args.normal_bias)?,
         bounces: prt_runtime::gpu::Bounces::Fixed(args.bounces),
         ..RuntimeSettings::default()
     };
@@ -172,11 +137,11 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let mut inputs = vec![job.scene.as_path(), job.asset.as_path()];
     inputs.extend(job.lights.as_deref());
     for out in std::iter::once(&job.png).chain(&job.exr) {
-        crate::ensure_not_input(out, &inputs)?;
+        ensure_not_input(out, &inputs)?;
     }
     let asset = prt_format::read_asset(&job.asset)
         .with_context(|| format!("loading {}", job.asset.display()))?;
-    let lighting = crate::lighting_of(job.lights.as_deref(), &asset)?;
+    let lighting = lighting_of(job.lights.as_deref(), &asset)?;
     let report = prt_render::job::run(&job, &lighting, &asset)?;
     eprintln!("adapter: {}", report.adapter);
     let c = report.camera;

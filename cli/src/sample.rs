@@ -10,7 +10,9 @@ use prt_runtime::gpu::{PrtRuntime, RuntimeSettings};
 use prt_runtime::{Sample, VolumeSampler};
 use serde_json::{json, Value};
 
-use crate::Backend;
+use prt_cli::options::normal_bias;
+
+use crate::common::{ensure_not_input, lighting_of, Backend};
 
 #[derive(clap::Args)]
 pub struct SampleArgs {
@@ -39,17 +41,17 @@ pub struct SampleArgs {
 type Point = ([f32; 3], [f32; 3]);
 
 pub fn run(args: SampleArgs) -> Result<()> {
-    let normal_bias = crate::normal_bias(args.normal_bias)?;
+    let normal_bias = normal_bias(args.normal_bias)?;
     let settings = RuntimeSettings {
         normal_bias,
         visibility: !args.no_visibility,
         ..RuntimeSettings::default()
     };
-    crate::ensure_not_input(&args.json, &[&args.asset, &args.lights, &args.points])?;
+    ensure_not_input(&args.json, &[&args.asset, &args.lights, &args.points])?;
     let points = read_points(&args.points)?;
     let asset = prt_format::read_asset(&args.asset)
         .with_context(|| format!("loading {}", args.asset.display()))?;
-    let lighting = crate::lighting_of(Some(&args.lights), &asset)?;
+    let lighting = lighting_of(Some(&args.lights), &asset)?;
     let start = std::time::Instant::now();
     let (samples, name) = match args.backend {
         Backend::Cpu => {

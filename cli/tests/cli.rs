@@ -809,31 +809,3 @@ fn row_memory_spills_to_tmpdir_or_says_why_not() {
     assert!(stderr.contains("TMPDIR"), "{stderr:?}");
     assert!(dir.entries().is_empty(), "left {:?}", dir.entries());
 }
-
-/// `prt bench bake --runs N` times N bakes, the later ones `prt bake` processes of their own
-/// timed to their "wrote" line and to their exit, and leaves no asset behind.
-#[test]
-fn bench_bake_times_bake_processes_and_cleans_up() {
-    let dir = Scratch::new("bench-bake");
-    let out = Command::new(env!("CARGO_BIN_EXE_prt"))
-        .args(["bench", "bake", "--runs", "3"])
-        .arg(fixture("scenes/room.glb"))
-        .env("TMPDIR", &dir.0)
-        .output()
-        .expect("run prt");
-    assert!(out.status.success(), "{}", text(&out.stderr));
-    let report = text(&out.stdout);
-    let row = report
-        .lines()
-        .find(|l| l.contains("3 runs in turn"))
-        .unwrap_or_else(|| panic!("no row of repeated runs in:\n{report}"));
-    assert!(!row.contains("failed"), "{row}");
-    // Three ratios, then the medians to the file written and [to exit].
-    let ratios = row.split(" | ").nth(1).unwrap_or_default();
-    assert_eq!(ratios.split("%, ").count(), 3, "{row}");
-    assert!(
-        row.contains("(median ") && row.contains("%]); bakes "),
-        "{row}"
-    );
-    assert_eq!(dir.entries(), Vec::<String>::new(), "left behind in TMPDIR");
-}

@@ -1,4 +1,4 @@
-//! `prt bench fuzz` (issue 8): a stable-toolchain mutation fuzzer for the two file formats prt
+//! `prt-bench fuzz` (issue 8): a stable-toolchain mutation fuzzer for the two file formats prt
 //! reads from strangers, glTF scenes and `.prt` assets, run for a fixed time by
 //! `scripts/stress.sh` (briefly in CI, for minutes on demand).
 //!
@@ -72,6 +72,7 @@ struct Tally {
     slowest: Duration,
 }
 
+/// `prt-bench fuzz`: fuzzes `--target` for `--seconds`; fails when an input panicked or was slow.
 pub fn run(args: FuzzArgs) -> Result<()> {
     let mut rng = Rng(args.seed.max(1).wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
     if let Some(out) = &args.out {

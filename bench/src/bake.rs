@@ -1,4 +1,4 @@
-//! `prt bench bake`: bake throughput against bare obvhs tracing of the same rays.
+//! `prt-bench bake`: bake throughput against bare obvhs tracing of the same rays.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -12,8 +12,64 @@ use obvhs::{
     rt_triangle::RtTriangle,
     BvhBuildParams,
 };
-use prt_bake::{BakeSettings, NoProgress};
+use prt_bake::{bench, BakeSettings, NoProgress};
+use prt_cli::options::parse_bounds;
 use rayon::prelude::*;
+
+use crate::results::Out;
+
+#[derive(clap::Args)]
+pub struct BakeArgs {
+    scene: PathBuf,
+    #[arg(long)]
+    spacing: Option<f32>,
+    #[arg(long, value_parser = parse_bounds, allow_hyphen_values = true)]
+    bounds: Option<[f32; 6]>,
+    #[arg(long, default_value_t = 512)]
+    rays: u32,
+    #[arg(long)]
+    double_sided: bool,
+    /// Bakes, each followed by bare obvhs tracing of its rays, in turn: the first run's
+    /// report in full, then a last row of every run's ratio and their median (one run's
+    /// swings by 10-20% on a shared machine); the bakes after the first are `prt bake`
+    /// processes of their own, timed to the asset written and, in a second median, to
+    /// their exit.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=100))]
+    runs: u32,
+    /// The `prt` binary whose `prt bake` processes --runs times [default: the `prt` beside this
+    /// executable, where `cargo build --release -p prt` puts it].
+    #[arg(long, value_name = "PATH")]
+    prt: Option<PathBuf>,
+    #[command(flatten)]
+    out: Out,
+}
+
+/// `prt-bench bake`: the report of [`bake`], printed and with `--out` written to `bake.md`.
+pub fn run(args: BakeArgs) -> Result<()> {
+    let settings = BakeSettings {
+        rays: args.rays,
+        spacing: args.spacing,
+        bounds: args.bounds,
+        double_sided: args.double_sided,
+        ..BakeSettings::default()
+    };
+    let runs = args.runs as usize;
+    let prt = match args.prt {
+        Some(path) => path,
+        None => std::env::current_exe()
+            .context("finding this executable, beside which `prt` is looked for")?
+            .with_file_name(format!("prt{}", std::env::consts::EXE_SUFFIX)),
+    };
+    // Checked before the first bake, not after it.
+    anyhow::ensure!(
+        runs == 1 || prt.is_file(),
+        "{}: no `prt` binary there, which --runs {runs} runs as `prt bake` processes; build it \
+         with `cargo build --release -p prt` or name one with --prt PATH",
+        prt.display()
+    );
+    let md = bake(&args.scene, &settings, runs, &prt)?;
+    args.out.report("bake", &md)
+}
 
 /// obvhs as its documentation shows it: a CWBVH from `build_cwbvh_from_tris` (PLOC, medium
 /// preset) and its closest-hit traversal over `RtTriangle`s in BVH order.
@@ -23,9 +79,9 @@ struct ObvhsTracer {
 }
 
 impl ObvhsTracer {
-    /// In the bake's tracing frame (`scale`, [`prt_bake::bvh::trace_scale`]).
+    /// In the bake's tracing frame (`scale`, [`bench::trace_scale`]).
     fn build(triangles: &[[Vec3; 3]], scale: f32) -> ObvhsTracer {
-        let tris = prt_bake::bvh::traced_triangles(triangles, scale);
+        let tris = bench::traced_triangles(triangles, scale);
         let cwbvh = build_cwbvh_from_tris(
             &tris,
             BvhBuildParams::medium_build(),
@@ -86,8 +142,8 @@ fn bare(scene: &Path, asset: &prt_format::Asset, rays: u32) -> Result<Bare> {
         ref probes,
         ref lattice,
     } = rays_of;
-    let grid = prt_bake::probes::positions(&asset.header.grid);
-    let coherent = prt_bake::trace::coherent_order(dirs);
+    let grid = bench::grid_points(&asset.header.grid);
+    let coherent = bench::coherent_order(dirs);
     let tracer = std::panic::catch_unwind(|| ObvhsTracer::build(&loaded.triangles, scale)).ok();
     let obvhs = tracer.as_ref().map(|o| {
         let run = [(probes, lattice), (probes, &coherent), (&grid, &coherent)];
@@ -95,12 +151,11 @@ fn bare(scene: &Path, asset: &prt_format::Asset, rays: u32) -> Result<Bare> {
     });
     // The bake's BVH: built with the preset the bake chose for these rays.
     let traced = probes.len() as u64 * u64::from(rays);
-    let (bvh, ()) =
-        prt_bake::bvh::SceneBvh::build_checked(&loaded.triangles, scale, traced, None, || ())?;
+    let bvh = bench::scene_bvh(&loaded.triangles, scale, traced)?;
     let packets = [&coherent, lattice].map(|order| {
         timed(probes, &|p| {
             order
-                .chunks(prt_bake::bvh8::PACKET)
+                .chunks(bench::PACKET)
                 .map(|packet| {
                     let d: Vec<Vec3> = packet.iter().map(|&i| dirs[i as usize]).collect();
                     let hits = bvh.closest_hits(p, &d, f32::INFINITY);
@@ -129,7 +184,7 @@ struct Rays {
 impl Rays {
     fn of(asset: &prt_format::Asset, rays: u32) -> Rays {
         Rays {
-            scale: prt_bake::bvh::trace_scale(asset.header.grid.spacing),
+            scale: bench::trace_scale(asset.header.grid.spacing),
             dirs: prt_format::directions::fibonacci_directions(rays)
                 .into_iter()
                 .map(Vec3::from)
@@ -169,6 +224,7 @@ fn timed(positions: &[Vec3], per_probe: &(dyn Fn(Vec3) -> usize + Sync)) -> (f64
 /// machine one run's ratio swings by 10-20%; pairs taken in turn see the same conditions. A
 /// run that fails ends the row with its error; the rest of the report stands.
 fn repeated(
+    prt: &Path,
     scene: &Path,
     settings: &BakeSettings,
     bare: &Bare,
@@ -188,7 +244,7 @@ fn repeated(
     let mut runs_s = vec![(first.0, first.0, first.1)];
     let mut failed = String::new();
     for run in 1..runs {
-        match bake_process(scene, settings) {
+        match bake_process(prt, scene, settings) {
             Ok(ProcessTimes { written, exit }) => {
                 let obvhs_s = rays.obvhs(o, &rays.probes, &rays.lattice).0;
                 runs_s.push((written, exit, obvhs_s));
@@ -252,9 +308,9 @@ struct ProcessTimes {
     exit: f64,
 }
 
-/// Runs `prt bake` with `settings` (this executable, the options the bench takes, the rest
-/// at their defaults), the asset written to a temporary file and removed, and times it.
-fn bake_process(scene: &Path, settings: &BakeSettings) -> Result<ProcessTimes> {
+/// Runs `prt bake` with `settings` (the `prt` binary at `exe`, the options the bench takes, the
+/// rest at their defaults), the asset written to a temporary file and removed, and times it.
+fn bake_process(exe: &Path, scene: &Path, settings: &BakeSettings) -> Result<ProcessTimes> {
     use std::io::{BufRead, Read};
     let out = output_path();
     let mut args: Vec<std::ffi::OsString> = vec!["bake".into(), scene.into(), "-o".into()];
@@ -270,9 +326,8 @@ fn bake_process(scene: &Path, settings: &BakeSettings) -> Result<ProcessTimes> {
     if settings.double_sided {
         args.push("--double-sided".into());
     }
-    let exe = std::env::current_exe().context("finding this executable to run `prt bake`")?;
     let start = Instant::now();
-    let mut child = std::process::Command::new(&exe)
+    let mut child = std::process::Command::new(exe)
         .args(&args)
         .stdin(std::process::Stdio::null())
         .stdout(std::process::Stdio::piped())
@@ -315,8 +370,9 @@ fn bake_process(scene: &Path, settings: &BakeSettings) -> Result<ProcessTimes> {
 }
 
 /// Bake throughput against bare obvhs tracing of the same rays, and asset size per probe.
-/// With `runs` above 1, more bakes and obvhs runs in turn after the first ([`repeated`]).
-pub fn bake(scene: &Path, settings: &BakeSettings, runs: usize) -> Result<String> {
+/// With `runs` above 1, more bakes (`prt bake` processes of the binary `prt`) and obvhs runs in
+/// turn after the first ([`repeated`]).
+fn bake(scene: &Path, settings: &BakeSettings, runs: usize, prt: &Path) -> Result<String> {
     // To a file, synced, as `prt bake` does: the issue's "process start to file written".
     let out = output_path();
     let (start, before) = (Instant::now(), usage());
@@ -325,7 +381,7 @@ pub fn bake(scene: &Path, settings: &BakeSettings, runs: usize) -> Result<String
     let cpu = cpu_since(before);
     std::fs::remove_file(&out).ok();
     let (asset, report) = baked?;
-    let peak = crate::peak_rss_kib().map_or("unknown".into(), |kb| {
+    let peak = prt_cli::process::peak_rss_kib().map_or("unknown".into(), |kb| {
         format!("{:.0} MiB", kb as f64 / 1024.0)
     });
     let bare = bare(scene, &asset, settings.rays)?;
@@ -337,20 +393,7 @@ pub fn bake(scene: &Path, settings: &BakeSettings, runs: usize) -> Result<String
         .find(|(s, _)| *s == "trace")
         .map_or(0.0, |(_, d)| d.as_secs_f64());
     let mut md = String::new();
-    writeln!(md, "| figure | value |\n|---|---|")?;
-    writeln!(
-        md,
-        "| scene | {} ({} triangles) |",
-        scene.display(),
-        summary.triangle_count
-    )?;
-    writeln!(
-        md,
-        "| probes (valid) | {} ({}) |",
-        summary.probe_count, summary.valid_probe_count
-    )?;
-    writeln!(md, "| rays per probe | {} |", settings.rays)?;
-    writeln!(md, "| threads | {} |", rayon::current_num_threads())?;
+    head_rows(&mut md, scene, settings.rays, &summary)?;
     writeln!(md, "| peak memory of the bake (resident) | {peak} |")?;
     writeln!(
         md,
@@ -390,9 +433,40 @@ pub fn bake(scene: &Path, settings: &BakeSettings, runs: usize) -> Result<String
     sizes(&mut md, &summary)?;
     if runs > 1 {
         let obvhs_s = bare.obvhs.map_or(f64::NAN, |[(s, _), ..]| s);
-        md.push_str(&repeated(scene, settings, &bare, runs, (bake_s, obvhs_s)));
+        md.push_str(&repeated(
+            prt,
+            scene,
+            settings,
+            &bare,
+            runs,
+            (bake_s, obvhs_s),
+        ));
     }
     Ok(md)
+}
+
+/// The report's header and its rows of what was baked: the scene, its probes, rays and threads.
+fn head_rows(
+    md: &mut String,
+    scene: &Path,
+    rays: u32,
+    summary: &prt_format::Summary,
+) -> Result<()> {
+    writeln!(md, "| figure | value |\n|---|---|")?;
+    writeln!(
+        md,
+        "| scene | {} ({} triangles) |",
+        scene.display(),
+        summary.triangle_count
+    )?;
+    writeln!(
+        md,
+        "| probes (valid) | {} ({}) |",
+        summary.probe_count, summary.valid_probe_count
+    )?;
+    writeln!(md, "| rays per probe | {rays} |")?;
+    writeln!(md, "| threads | {} |", rayon::current_num_threads())?;
+    Ok(())
 }
 
 /// The report's rows of the baselines: bare obvhs and bare packet tracing of the bake's `rays`
@@ -428,7 +502,7 @@ fn baseline_rows(md: &mut String, bare: &Bare, rays: f64, bake_s: f64) -> Result
     writeln!(
         md,
         "| bare packet tracing, the bake's BVH8 and order ({} rays a packet, {} hits) | {} |",
-        prt_bake::bvh8::PACKET,
+        bench::PACKET,
         packets.1,
         timed(packets)
     )?;

@@ -1,5 +1,5 @@
-//! `prt bench lights`: GPU update cost against light count (issue 9). Scattered point and spot
-//! lights (ranges 3-12% of the scene's diagonal, `bench_render::scattered_lights`) relight a
+//! `prt-bench lights`: GPU update cost against light count (issue 9). Scattered point and spot
+//! lights (ranges 3-12% of the scene's diagonal, `render::scattered_lights`) relight a
 //! baked scene: a full update (every light moved) and an update where one light moved, with
 //! the work counters that explain them. The goal is cost linear in the (light, brick) pairs
 //! that reach each other, not in all lights.
@@ -9,11 +9,11 @@ use std::time::Instant;
 
 use anyhow::Result;
 use glam::Vec3;
-use prt_bake::BakeSettings;
+use prt_bake::{BakeSettings, NoProgress};
 use prt_runtime::gpu::{headless_device, layout::Counters, wgpu, PrtRuntime, RuntimeSettings};
 use prt_runtime::{Lighting, SkyModel};
 
-use prt_bake::NoProgress;
+use crate::results::Out;
 
 #[derive(clap::Args)]
 pub struct LightsArgs {
@@ -32,6 +32,8 @@ pub struct LightsArgs {
     /// Timed updates per figure (the median is reported).
     #[arg(long, default_value_t = 5)]
     pub repeats: usize,
+    #[command(flatten)]
+    pub out: Out,
 }
 
 fn lighting(lights: Vec<prt_format::Light>) -> Lighting {
@@ -64,9 +66,9 @@ fn timed(
     Ok((times[times.len() / 2], runtime.read_counters()?))
 }
 
+/// `prt-bench lights`: the table of [`table`], printed and with `--out` written to `lights.md`.
 pub fn run(args: LightsArgs) -> Result<()> {
-    print!("{}", table(&args)?);
-    Ok(())
+    args.out.report("lights", &table(&args)?)
 }
 
 /// The light-count table for `args`, as markdown.
@@ -103,8 +105,37 @@ pub fn table(args: &LightsArgs) -> Result<String> {
     )?;
     writeln!(md, "| lights | full update (all moved) | reaching (light, brick) pairs | shadow rays | per 1k pairs | one light moved (the widest) | its bricks | rays traced | bricks relit | visibility pool |")?;
     writeln!(md, "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")?;
+    let bench = Bench {
+        device: &device,
+        queue: &queue,
+        asset: &asset,
+        repeats: args.repeats,
+        lo,
+        hi,
+    };
     for &count in &args.lights {
-        let base = crate::bench_render::scattered_lights(count, lo, hi);
+        md.push_str(&bench.row(count)?);
+    }
+    Ok(md)
+}
+
+/// What every row of [`table`] is measured with: the device, the baked scene, and the box the
+/// lights are scattered in.
+struct Bench<'a> {
+    device: &'a wgpu::Device,
+    queue: &'a wgpu::Queue,
+    asset: &'a prt_format::Asset,
+    repeats: usize,
+    lo: Vec3,
+    hi: Vec3,
+}
+
+impl Bench<'_> {
+    /// The row of `count` scattered lights: every light moved, then the one that reaches the
+    /// most bricks.
+    fn row(&self, count: usize) -> Result<String> {
+        let (lo, hi) = (self.lo, self.hi);
+        let base = crate::render::scattered_lights(count, lo, hi);
         let shifted = |k: usize, which: Option<usize>| {
             let mut l = base.clone();
             for (i, light) in l.iter_mut().enumerate() {
@@ -114,43 +145,25 @@ pub fn table(args: &LightsArgs) -> Result<String> {
             }
             lighting(l)
         };
+        let (device, queue) = (self.device, self.queue);
         let runtime_settings = RuntimeSettings::default().with_room_for(count);
-        let mut runtime = PrtRuntime::new(&device, &queue, &asset, runtime_settings)?;
+        let mut runtime = PrtRuntime::new(device, queue, self.asset, runtime_settings)?;
         // Every update moves every light (odd: shifted, even: back).
-        let (full, _) = timed(&device, &queue, &mut runtime, args.repeats, |i| {
+        let (full, _) = timed(device, queue, &mut runtime, self.repeats, |i| {
             shifted(i + 1, None)
         })?;
-        let prepared: Vec<_> = base
-            .iter()
-            .map(prt_runtime::lights::PreparedLight::new)
-            .collect();
-        let normals = prt_runtime::relight::brick_normal_bounds(&asset);
-        // Front-face bricks each light reaches (the CPU twin of the cull stage).
-        let reach: Vec<usize> = prepared
-            .iter()
-            .map(|l| {
-                asset
-                    .bricks
-                    .iter()
-                    .zip(&normals)
-                    .filter(|(b, nb)| {
-                        b.flags & prt_format::BRICK_BACKFACE == 0 && l.cull(b, nb).is_none()
-                    })
-                    .count()
-            })
-            .collect();
+        let reach = reach(self.asset, &base);
         let pairs: usize = reach.iter().sum();
-        let (_, all) = timed(&device, &queue, &mut runtime, 1, |_| shifted(0, None))?;
+        let (_, all) = timed(device, queue, &mut runtime, 1, |_| shifted(0, None))?;
         // The light that reaches the most bricks moves.
         let one = (0..count)
             .max_by_key(|&i| (reach[i], usize::MAX - i))
             .unwrap_or(0);
-        let (moved, c) = timed(&device, &queue, &mut runtime, args.repeats, |i| {
+        let (moved, c) = timed(device, queue, &mut runtime, self.repeats, |i| {
             shifted(i + 1, Some(one))
         })?;
-        writeln!(
-            md,
-            "| {count} | {:.1} ms | {pairs} | {} | {} | {:.1} ms | {} | {} | {} | {} words |",
+        Ok(format!(
+            "| {count} | {:.1} ms | {pairs} | {} | {} | {:.1} ms | {} | {} | {} | {} words |\n",
             full * 1e3,
             all.shadow_rays,
             if pairs == 0 {
@@ -163,7 +176,25 @@ pub fn table(args: &LightsArgs) -> Result<String> {
             c.shadow_rays,
             c.bricks_relit,
             all.visibility_words,
-        )?;
+        ))
     }
-    Ok(md)
+}
+
+/// The front-face bricks of `asset` each of `lights` reaches (the CPU twin of the cull stage).
+fn reach(asset: &prt_format::Asset, lights: &[prt_format::Light]) -> Vec<usize> {
+    let normals = prt_runtime::relight::brick_normal_bounds(asset);
+    lights
+        .iter()
+        .map(|light| {
+            let l = prt_runtime::lights::PreparedLight::new(light);
+            asset
+                .bricks
+                .iter()
+                .zip(&normals)
+                .filter(|(b, nb)| {
+                    b.flags & prt_format::BRICK_BACKFACE == 0 && l.cull(b, nb).is_none()
+                })
+                .count()
+        })
+        .collect()
 }

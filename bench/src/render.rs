@@ -1,29 +1,77 @@
-//! `prt bench render`: the Forward+ stage's cost and culling quality, brute force and tiled in
+//! `prt-bench render`: the Forward+ stage's cost and culling quality, brute force and tiled in
 //! the same run. For each light count, a deterministic rig of point and spot lights (a third of
 //! them spots) spread through the scene's bounds with ranges of 3-12% of its diagonal; frame
 //! time split into depth pre-pass, culling and shading (each stage submitted and waited for on
 //! its own, median of a few frames), and lights evaluated per shaded pixel.
 
 use std::fmt::Write as _;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Result;
 use glam::Vec3;
 use prt_bake::{BakeSettings, NoProgress};
+use prt_cli::options::{camera_of, parse_size, parse_vec3};
 use prt_format::{Light, LightKind};
 use prt_render::{Camera, Culling, RenderSettings, Renderer, View};
 use prt_runtime::gpu::{headless_device, wgpu, PrtRuntime, RuntimeSettings};
 
-/// What `prt bench render` runs.
-pub struct RenderBench<'a> {
-    pub scene: &'a Path,
-    pub bake: BakeSettings,
-    pub camera: Option<Camera>,
-    pub lights: Vec<usize>,
-    pub tiles: Vec<u32>,
-    pub size: (u32, u32),
-    pub frames: usize,
+use crate::results::Out;
+
+#[derive(clap::Args)]
+pub struct RenderArgs {
+    scene: PathBuf,
+    /// Light counts (point and spot lights scattered through the scene).
+    #[arg(long, value_delimiter = ',', default_value = "16,64,256,1024")]
+    lights: Vec<usize>,
+    /// Tile sizes of the tiled rows.
+    #[arg(long, value_delimiter = ',', default_value = "16,64")]
+    tiles: Vec<u32>,
+    #[arg(long, value_parser = parse_size, default_value = "1280x720")]
+    size: (u32, u32),
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    eye: Option<Vec3>,
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    target: Option<Vec3>,
+    #[arg(long, default_value_t = prt_render::camera::DEFAULT_FOV)]
+    fov: f32,
+    /// Bake with every material double-sided.
+    #[arg(long)]
+    double_sided: bool,
+    /// Frames per stage (the median is reported).
+    #[arg(long, default_value_t = 3)]
+    frames: usize,
+    #[command(flatten)]
+    out: Out,
+}
+
+/// `prt-bench render`: the report of [`render`], printed and with `--out` written to
+/// `render.md`.
+pub fn run(args: RenderArgs) -> Result<()> {
+    let bench = RenderBench {
+        scene: &args.scene,
+        bake: BakeSettings {
+            double_sided: args.double_sided,
+            ..BakeSettings::default()
+        },
+        camera: camera_of(args.eye, args.target, Some(args.fov))?,
+        lights: args.lights,
+        tiles: args.tiles,
+        size: args.size,
+        frames: args.frames.max(1),
+    };
+    args.out.report("render", &render(&bench)?)
+}
+
+/// What `prt-bench render` runs.
+struct RenderBench<'a> {
+    scene: &'a Path,
+    bake: BakeSettings,
+    camera: Option<Camera>,
+    lights: Vec<usize>,
+    tiles: Vec<u32>,
+    size: (u32, u32),
+    frames: usize,
 }
 
 /// A small deterministic generator (64-bit LCG, Knuth's MMIX constants): light rigs must be the
@@ -103,7 +151,7 @@ struct Row {
     overflow: u32,
 }
 
-pub fn render(b: &RenderBench) -> Result<String> {
+fn render(b: &RenderBench) -> Result<String> {
     let (asset, _) = prt_bake::bake(b.scene, &b.bake, &NoProgress)?;
     let scene = prt_bake::scene::load(b.scene)?;
     let (lo, hi) = scene

@@ -1,4 +1,4 @@
-//! `prt bench accuracy`: irradiance error against an independent renderer's probe SH (Mitsuba 3;
+//! `prt-bench accuracy`: irradiance error against an independent renderer's probe SH (Mitsuba 3;
 //! the Cornell room's is vendored in `fixtures/cornell/`) over rays per probe, brick cell size,
 //! factor precision and encoding, against bake time. Bake speed is what buys accuracy (factors
 //! fold rays away, so more rays cost bake time and, as far as they reach more bricks, factors):
@@ -31,7 +31,7 @@ pub struct AccuracyArgs {
     #[arg(long)]
     pub spacing: Option<f32>,
     /// Probe grid bounds MINX,MINY,MINZ,MAXX,MAXY,MAXZ [default: the scene's].
-    #[arg(long, value_parser = crate::parse_bounds, allow_hyphen_values = true)]
+    #[arg(long, value_parser = prt_cli::options::parse_bounds, allow_hyphen_values = true)]
     pub bounds: Option<[f32; 6]>,
     /// Rays per probe, comma-separated: every brick size and precision is baked with each.
     #[arg(
@@ -48,8 +48,8 @@ pub struct AccuracyArgs {
     /// least bake time over the files) is drawn and tabled beside the new one.
     #[arg(long, value_delimiter = ',')]
     pub previous: Vec<PathBuf>,
-    /// Directory for accuracy.md and accuracy.svg.
-    #[arg(long, default_value = ".")]
+    /// Directory for accuracy.md and accuracy.svg (docs/results for the published ones).
+    #[arg(long, value_name = "DIR", default_value = ".")]
     pub out: PathBuf,
 }
 
@@ -125,13 +125,9 @@ pub fn run(args: AccuracyArgs) -> Result<()> {
     md.push_str(&table(&rows)?);
     md.push_str(&fronts(&new, &previous)?);
     let svg = plot(&new, &previous, &caption);
-    std::fs::create_dir_all(&args.out)?;
-    let md_path = args.out.join("accuracy.md");
-    prt_format::io::write_bytes_atomic(&md_path, md.as_bytes())?;
-    prt_format::io::write_bytes_atomic(&args.out.join("accuracy.svg"), svg.as_bytes())?;
     println!("{md}");
-    println!("wrote {} and accuracy.svg", md_path.display());
-    Ok(())
+    crate::results::write(&args.out, "accuracy.md", md.as_bytes())?;
+    crate::results::write(&args.out, "accuracy.svg", svg.as_bytes())
 }
 
 /// Bakes every setting (`args.repeats` times, keeping the least time), relights it on the CPU
@@ -346,6 +342,16 @@ fn cells(line: &str) -> Vec<String> {
         .collect()
 }
 
+/// The columns of a previous sweep's table that [`parse_table`] reads, by their index.
+struct Columns {
+    rays: usize,
+    merge: usize,
+    precision: usize,
+    encoding: usize,
+    bake: usize,
+    error: usize,
+}
+
 /// The settings of the first table in `text` (columns found by their headers).
 fn parse_table(text: &str, path: &Path) -> Result<Vec<Point>> {
     let mut lines = text
@@ -365,70 +371,65 @@ fn parse_table(text: &str, path: &Path) -> Result<Vec<Point>> {
             .position(|h| h == name)
             .with_context(|| format!("{}: no column '{name}' in the header", at(header_line)))
     };
-    let [rays, merge, precision, encoding, bake, error] = [
-        "rays",
-        "brick cells",
-        "transfer",
-        "encoding",
-        "bake ms",
-        "mean err",
-    ]
-    .map(column);
-    let (rays, merge, precision, encoding, bake, error) =
-        (rays?, merge?, precision?, encoding?, bake?, error?);
+    let columns = Columns {
+        rays: column("rays")?,
+        merge: column("brick cells")?,
+        precision: column("transfer")?,
+        encoding: column("encoding")?,
+        bake: column("bake ms")?,
+        error: column("mean err")?,
+    };
     let separator = |c: &String| !c.is_empty() && c.trim_matches(':').chars().all(|x| x == '-');
     match lines.next() {
         Some((_, l)) if cells(l).iter().all(separator) => {}
         Some((n, l)) => bail!("{}: '{l}' is not the header's separator row", at(n)),
         None => bail!("{}: a header and no rows", at(header_line)),
     }
-    let mut points = Vec::new();
-    for (n, line) in lines {
-        let c = cells(line);
-        let get = |i: usize| {
-            c.get(i).map(String::as_str).with_context(|| {
-                let (have, want) = (c.len(), header.len());
-                format!(
-                    "{}: no cell for column '{}' ({have} cells, the header has {want})",
-                    at(n),
-                    header[i]
-                )
-            })
-        };
-        let bad = |i: usize, what: &str| {
-            anyhow::anyhow!(
-                "{}: column '{}' is '{}', not {what}",
-                at(n),
-                header[i],
-                c[i]
-            )
-        };
-        let number = |i: usize| -> Result<f64> {
-            match get(i)?.trim_end_matches('%').parse::<f64>() {
-                Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
-                _ => Err(bad(i, "a non-negative number")),
-            }
-        };
-        let ray_count = get(rays)?
-            .parse::<u32>()
-            .map_err(|_| bad(rays, "a ray count"))?;
-        points.push(Point {
-            setting: setting(
-                &ray_count.to_string(),
-                get(merge)?,
-                get(precision)?,
-                get(encoding)?,
-            ),
-            merge: get(merge)?.to_owned(),
-            flat: get(encoding)? == "sh9, flat brick",
-            bake_ms: number(bake)?,
-            error: number(error)?,
-        });
-    }
+    let points = lines
+        .map(|(n, line)| point_of(&cells(line), &header, &columns, &at(n)))
+        .collect::<Result<Vec<_>>>()?;
     if points.is_empty() {
         bail!("{}: a header and no rows", at(header_line));
     }
     Ok(points)
+}
+
+/// The setting in the cells `c` of a table row (`at` names its file and line).
+fn point_of(c: &[String], header: &[String], columns: &Columns, at: &str) -> Result<Point> {
+    let get = |i: usize| {
+        c.get(i).map(String::as_str).with_context(|| {
+            let (have, want) = (c.len(), header.len());
+            format!(
+                "{at}: no cell for column '{}' ({have} cells, the header has {want})",
+                header[i]
+            )
+        })
+    };
+    let bad = |i: usize, what: &str| {
+        anyhow::anyhow!("{at}: column '{}' is '{}', not {what}", header[i], c[i])
+    };
+    let number = |i: usize| -> Result<f64> {
+        match get(i)?.trim_end_matches('%').parse::<f64>() {
+            Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
+            _ => Err(bad(i, "a non-negative number")),
+        }
+    };
+    let ray_count = get(columns.rays)?
+        .parse::<u32>()
+        .map_err(|_| bad(columns.rays, "a ray count"))?;
+    let (merge, encoding) = (get(columns.merge)?, get(columns.encoding)?);
+    Ok(Point {
+        setting: setting(
+            &ray_count.to_string(),
+            merge,
+            get(columns.precision)?,
+            encoding,
+        ),
+        merge: merge.to_owned(),
+        flat: encoding == "sh9, flat brick",
+        bake_ms: number(columns.bake)?,
+        error: number(columns.error)?,
+    })
 }
 
 /// Probe SH with Hanning-window deringing applied (`prt_format::sh::hanning_window`, width 4).

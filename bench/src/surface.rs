@@ -1,4 +1,4 @@
-//! `prt bench surface` (issue 11): irradiance where a renderer shows it, at surface points,
+//! `prt-bench surface` (issue 11): irradiance where a renderer shows it, at surface points,
 //! against the independent oracle's surface references (`fixtures/surface/*_surface.json`, made by
 //! `scripts/surface_refs.sh` with the Mitsuba 3 oracle's `surface_oracle.py`, which is not part of
 //! this repository: the references are its output, committed as data).
@@ -31,6 +31,8 @@ use prt_runtime::gpu::RuntimeSettings;
 use prt_runtime::{Lighting, Sample};
 use serde_json::Value;
 
+use crate::results::Out;
+
 #[derive(clap::Args)]
 pub struct SurfaceArgs {
     /// Cases to run (comma-separated): cornell, two_rooms, thick_walls, sponza [default: all;
@@ -43,9 +45,8 @@ pub struct SurfaceArgs {
     /// Normal offset of the lookup in probe spacings [default: the runtime's, 0.2].
     #[arg(long)]
     normal_bias: Option<f32>,
-    /// Directory to write surface_bench.md into (e.g. docs).
-    #[arg(long)]
-    out: Option<PathBuf>,
+    #[command(flatten)]
+    out: Out,
 }
 
 /// A bundled case: paths relative to the repository root.
@@ -132,8 +133,10 @@ struct Row {
     sample_s: f64,
 }
 
+/// `prt-bench surface`: every picked case at its default spacing and half of it, the report
+/// printed and with `--out` written to `surface.md`.
 pub fn run(args: SurfaceArgs) -> Result<()> {
-    let bias = crate::normal_bias(args.normal_bias)?;
+    let bias = prt_cli::options::normal_bias(args.normal_bias)?;
     let picked = pick_cases(&args.cases)?;
     let mut rows = Vec::new();
     let mut oracle = Vec::new();
@@ -157,16 +160,7 @@ pub fn run(args: SurfaceArgs) -> Result<()> {
         rows.extend(default_rows);
         rows.extend(measure(case, &scene, &half, &lighting, &reference, bias)?);
     }
-    let md = markdown(&rows, &oracle, bias)?;
-    println!("{md}");
-    if let Some(out) = args.out {
-        std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
-        let path = out.join("surface_bench.md");
-        prt_format::io::write_bytes_atomic(&path, md.as_bytes())
-            .with_context(|| format!("writing {}", path.display()))?;
-        println!("wrote {}", path.display());
-    }
-    Ok(())
+    args.out.report("surface", &markdown(&rows, &oracle, bias)?)
 }
 
 /// The cases named on the command line, in table order (all without names).
