@@ -9,6 +9,7 @@ mod bench_gpu;
 mod bench_lights;
 mod bench_render;
 mod bench_surface;
+mod panics;
 mod progress;
 mod relight;
 mod render;
@@ -246,6 +247,7 @@ fn main() {
     }
     keep_freed_memory();
     signals::install();
+    panics::install();
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
         Err(e) if !e.use_stderr() => e.exit(),

@@ -1,11 +1,11 @@
 //! The [`Renderer`]: owns the uploaded scene, the three stages' pipelines, the light buffers, the
 //! tile lists and the frame's attachments, and records the stages into the caller's encoder.
 
-use prt_bake::scene::Scene;
 use prt_format::{Asset, LightKind};
 use prt_runtime::gpu::layout::{GpuLight, VolumeInfo};
 use prt_runtime::gpu::PrtRuntime;
 use prt_runtime::lights::PreparedLight;
+use prt_scene::Scene;
 use wgpu::util::DeviceExt;
 
 use crate::cull::Cull;

@@ -1,7 +1,16 @@
-//! Base-colour and emissive textures: decoded 8-bit RGBA, sampled with the glTF sampler's wrap
-//! modes and filter, sRGB-decoded to linear (glTF 2.0 spec, section 3.9.2 and 3.8.4).
+//! Base-colour and emissive textures: decoded to 8-bit RGBA with an allocation limit from their
+//! encoded size ([`decode_images`], instead of `gltf::import_images`, which decodes whatever
+//! dimensions a header claims, up to the image crate's 512 MiB default), sampled with the glTF
+//! sampler's wrap modes and filter, sRGB-decoded to linear (glTF 2.0 spec, section 3.9.2 and
+//! 3.8.4).
+
+use std::io::Cursor;
+use std::path::{Path, PathBuf};
 
 use gltf::texture::{MagFilter, WrappingMode};
+
+use crate::check::allocation_budget;
+use crate::error::SceneError;
 
 /// A decoded image as 8-bit RGBA (colour channels as stored: sRGB-encoded for colour textures).
 #[derive(Clone, Debug)]
@@ -140,4 +149,124 @@ pub fn sample(image: &Image, tex: &TextureRef, uv: [f32; 2], lut: &[f32; 256]) -
 /// Whether a sampler asks for nearest-texel magnification.
 pub fn is_nearest(filter: Option<MagFilter>) -> bool {
     matches!(filter, Some(MagFilter::Nearest))
+}
+
+/// Decodes the images materials sample to 8-bit RGBA (16-bit and float channels are converted
+/// by the image crate), with its allocation limit set to [`allocation_budget`] of the image's
+/// encoded size: a small file that claims a huge image is refused before it is decoded.
+pub(crate) fn decode_images(
+    path: &Path,
+    doc: &gltf::Document,
+    files: &[Option<PathBuf>],
+    buffers: &[gltf::buffer::Data],
+) -> Result<Vec<Image>, SceneError> {
+    // Only what the bake samples: base colour and emissive. Normal, occlusion and
+    // metallic-roughness maps are never decoded (they could only fail the bake).
+    let mut used = vec![false; doc.images().len()];
+    for m in doc.materials() {
+        let pbr = m.pbr_metallic_roughness();
+        let textures = [
+            pbr.base_color_texture().map(|t| t.texture()),
+            m.emissive_texture().map(|t| t.texture()),
+        ];
+        for t in textures.into_iter().flatten() {
+            if let Some(u) = used.get_mut(t.source().index()) {
+                *u = true;
+            }
+        }
+    }
+    doc.images()
+        .map(|img| {
+            if !used[img.index()] {
+                return Ok(Image {
+                    width: 1,
+                    height: 1,
+                    texels: vec![[255; 4]],
+                });
+            }
+            let uri = match img.source() {
+                gltf::image::Source::Uri { uri, .. } if !uri.starts_with("data:") => uri.to_owned(),
+                gltf::image::Source::Uri { .. } => "data URI".to_owned(),
+                gltf::image::Source::View { .. } => "buffer view".to_owned(),
+            };
+            let fail = |message: String| SceneError::Image {
+                path: path.to_owned(),
+                index: img.index(),
+                uri: uri.clone(),
+                message,
+            };
+            let file = files.get(img.index()).and_then(Option::as_deref);
+            let (bytes, mime) = encoded_image(&img, file, buffers).map_err(&fail)?;
+            decode(&bytes, mime.as_deref()).map_err(&fail)
+        })
+        .collect()
+}
+
+/// The encoded bytes of `img` and its MIME type, if stated: from its checked external `file`,
+/// its data URI or its buffer view.
+fn encoded_image(
+    img: &gltf::Image,
+    file: Option<&Path>,
+    buffers: &[gltf::buffer::Data],
+) -> Result<(Vec<u8>, Option<String>), String> {
+    match img.source() {
+        gltf::image::Source::Uri { uri, mime_type } => {
+            if let Some(file) = file {
+                let bytes = std::fs::read(file).map_err(|e| format!("{}: {e}", file.display()))?;
+                return Ok((bytes, mime_type.map(str::to_owned)));
+            }
+            let rest = uri
+                .strip_prefix("data:")
+                .ok_or("its file was not checked")?;
+            let (meta, payload) = rest.split_once(',').ok_or("a data URI without a comma")?;
+            let Some(mime) = meta.strip_suffix(";base64") else {
+                return Err("only base64 data URIs are read".into());
+            };
+            let bytes = base64::decode(payload).map_err(|e| format!("data URI: base64: {e}"))?;
+            let mime = Some(mime).filter(|m| !m.is_empty()).or(mime_type);
+            Ok((bytes, mime.map(str::to_owned)))
+        }
+        gltf::image::Source::View { view, mime_type } => {
+            let data = buffers
+                .get(view.buffer().index())
+                .ok_or("its buffer was not loaded")?;
+            let bytes = data
+                .0
+                .get(view.offset()..view.offset() + view.length())
+                .ok_or("its buffer view runs past the buffer")?;
+            Ok((bytes.to_vec(), Some(mime_type.to_owned())))
+        }
+    }
+}
+
+fn decode(bytes: &[u8], mime: Option<&str>) -> Result<Image, String> {
+    use image::ImageFormat;
+    let format = match mime {
+        Some("image/png") => ImageFormat::Png,
+        Some("image/jpeg") => ImageFormat::Jpeg,
+        _ => match image::guess_format(bytes) {
+            Ok(f @ (ImageFormat::Png | ImageFormat::Jpeg)) => f,
+            _ => return Err(format!("not a PNG or JPEG image (MIME type {mime:?})")),
+        },
+    };
+    let budget = allocation_budget(bytes.len() as u64);
+    let reader = image::ImageReader::with_format(Cursor::new(bytes), format);
+    let (w, h) = reader.into_dimensions().map_err(|e| e.to_string())?;
+    let decoded = u64::from(w) * u64::from(h) * 4;
+    if decoded > budget {
+        return Err(format!(
+            "{w} x {h} pixels would take {decoded} bytes decoded from {} encoded, more than {budget}",
+            bytes.len()
+        ));
+    }
+    let mut reader = image::ImageReader::with_format(Cursor::new(bytes), format);
+    let mut limits = image::Limits::default();
+    limits.max_alloc = Some(budget);
+    reader.limits(limits);
+    let rgba = reader.decode().map_err(|e| e.to_string())?.to_rgba8();
+    Ok(Image {
+        width: w,
+        height: h,
+        texels: rgba.pixels().map(|p| p.0).collect(),
+    })
 }
