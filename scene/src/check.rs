@@ -80,7 +80,7 @@ pub struct ExternalFiles {
 pub fn check_document(
     path: &Path,
     root: &json::Root,
-    folders: &Folders,
+    folders: &Folders<'_>,
     input_bytes: u64,
 ) -> Result<Findings, SceneError> {
     let e = |m: String| err(path, m);
@@ -120,7 +120,7 @@ pub fn check_document(
 fn check_files(
     path: &Path,
     root: &json::Root,
-    folders: &Folders,
+    folders: &Folders<'_>,
 ) -> Result<(ExternalFiles, u64), SceneError> {
     let mut files = ExternalFiles::default();
     let mut external_bytes = 0u64;

@@ -32,6 +32,4 @@ pub enum SceneError {
         primitive: usize,
         message: String,
     },
-    #[error("allowed folder {dir} (--allow-path): {error}")]
-    AllowedFolder { dir: PathBuf, error: std::io::Error },
 }

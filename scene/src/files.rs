@@ -16,43 +16,22 @@ pub struct Allowed {
     pub dirs: Vec<PathBuf>,
 }
 
-/// The canonical folders a scene's external files may lie in.
-pub(crate) struct Folders {
+/// The folders a scene's external files may lie in. They are made canonical only when a URI
+/// names a file: a scene without external files loads from bytes whatever its path.
+pub(crate) struct Folders<'a> {
     /// Where relative URIs are resolved from: the scene file's folder as given.
     base: PathBuf,
-    /// `base`, canonical.
-    scene: PathBuf,
-    /// [`Allowed::dirs`], canonical.
-    allowed: Vec<PathBuf>,
+    allowed: &'a Allowed,
 }
 
-impl Folders {
-    /// The folders of the scene file `path` and of `allowed`; fails when one does not resolve.
-    pub fn of(path: &Path, allowed: &Allowed) -> Result<Folders, SceneError> {
+impl<'a> Folders<'a> {
+    /// The folder of the scene file `path`, and `allowed`.
+    pub fn of(path: &Path, allowed: &'a Allowed) -> Folders<'a> {
         let base = match path.parent() {
             Some(p) if !p.as_os_str().is_empty() => p.to_owned(),
             _ => PathBuf::from("."),
         };
-        let scene = base.canonicalize().map_err(|error| SceneError::Io {
-            path: base.clone(),
-            error,
-        })?;
-        let allowed = allowed
-            .dirs
-            .iter()
-            .map(|dir| {
-                dir.canonicalize()
-                    .map_err(|error| SceneError::AllowedFolder {
-                        dir: dir.clone(),
-                        error,
-                    })
-            })
-            .collect::<Result<_, _>>()?;
-        Ok(Folders {
-            base,
-            scene,
-            allowed,
-        })
+        Folders { base, allowed }
     }
 
     /// The folder relative URIs are resolved from (the scene file's, as given).
@@ -62,7 +41,8 @@ impl Folders {
 
     /// The canonical regular file that the (not data) `uri` names, relative to the scene's
     /// folder or absolute, or why it is refused: a scheme, a missing file, a file outside the
-    /// allowed folders, or not a regular file (a device, a directory, a FIFO).
+    /// scene's folder and the allowed ones, or not a regular file (a device, a directory, a
+    /// FIFO).
     pub fn resolve(&self, uri: &str) -> Result<PathBuf, String> {
         let decoded = percent_decode(uri);
         // A colon is a scheme (`file:`, `http:`) or a drive letter.
@@ -75,13 +55,26 @@ impl Folders {
         let file = joined
             .canonicalize()
             .map_err(|e| format!("file {} not found ({e})", joined.display()))?;
-        let inside = |dir: &PathBuf| file.starts_with(dir);
-        if !inside(&self.scene) && !self.allowed.iter().any(inside) {
+        let canonical = |dir: &Path| {
+            dir.canonicalize()
+                .map_err(|e| format!("folder {}: {e}", dir.display()))
+        };
+        let scene = canonical(&self.base)?;
+        // Allowed folders that do not resolve are named in the refusal (a typo in a flag).
+        let mut unresolved = String::new();
+        let allowed = |dir: &PathBuf| match canonical(dir) {
+            Ok(dir) => file.starts_with(dir),
+            Err(e) => {
+                unresolved.push_str(&format!("; allowed {e}"));
+                false
+            }
+        };
+        if !file.starts_with(&scene) && !self.allowed.dirs.iter().any(allowed) {
             return Err(format!(
-                "{} lies outside the scene's folder {}{}; allow its folder with --allow-path DIR (prt_scene::Allowed)",
+                "{} lies outside the scene's folder {}{}; allow its folder with --allow-path DIR (prt_scene::Allowed){unresolved}",
                 file.display(),
-                self.scene.display(),
-                if self.allowed.is_empty() {
+                scene.display(),
+                if self.allowed.dirs.is_empty() {
                     ""
                 } else {
                     " and the allowed folders"

@@ -1,5 +1,5 @@
 //! Base-colour and emissive textures: decoded to 8-bit RGBA with an allocation limit from their
-//! encoded size ([`decode_images`], instead of `gltf::import_images`, which decodes whatever
+//! encoded size (`decode_images`, instead of `gltf::import_images`, which decodes whatever
 //! dimensions a header claims, up to the image crate's 512 MiB default), sampled with the glTF
 //! sampler's wrap modes and filter, sRGB-decoded to linear (glTF 2.0 spec, section 3.9.2 and
 //! 3.8.4).

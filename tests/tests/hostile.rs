@@ -338,14 +338,19 @@ fn files_outside_the_scene_folder_need_an_allowed_folder() {
         };
         bake_ok(&path, &settings);
     }
-    // Allowing another folder does not open this one.
+    // Allowing other folders does not open this one, and one that does not exist is named.
     let elsewhere = Allowed {
-        dirs: vec![fixture("")],
+        dirs: vec![fixture(""), dir.path().join("no_such_folder")],
     };
-    let e = prt_scene::load(&scenes.join("dotdot.gltf"), &elsewhere)
+    let msg = prt_scene::load(&scenes.join("dotdot.gltf"), &elsewhere)
         .map(|_| ())
-        .expect_err("refused");
-    assert!(e.to_string().contains("and the allowed folders"), "{e}");
+        .expect_err("refused")
+        .to_string();
+    assert!(msg.contains("and the allowed folders"), "{msg}");
+    assert!(
+        msg.contains("allowed folder ") && msg.contains("no_such_folder"),
+        "{msg}"
+    );
     // The fixture with a data URI buffer and image loads as before.
     prt_scene::load(&fixture("textured_quad.gltf"), &Allowed::default()).expect("data URIs");
 }
