@@ -97,7 +97,7 @@ pub(crate) fn ploc(tris: &[Triangle], params: &BvhBuildParams, memory: Option<Pl
 /// page (`docs/results/bake.md`), and PLOC touches its arrays from its serial passes:
 /// Sponza's 187k triangles fault in about 6,600 pages, some 17 ms. The bake makes it beside
 /// the load, whose single thread leaves the pool's other threads idle
-/// ([`crate::scene::load_bytes_declaring`]). Sponza at 1.9 m (dist, twelve alternating bakes
+/// (`prt_scene::read`). Sponza at 1.9 m (dist, twelve alternating bakes
 /// each, twice): the load stage's median 29.5 ms against 19-20.5 ms (it now ends when the
 /// memory is ready), the BVH stage's 80.5-86.5 ms against 105.5-106.5 ms, end to end 538-556 ms
 /// against 565-573 ms; the bricks stage ran 3-7 ms longer (glibc's allocator: with its mmap
@@ -214,7 +214,7 @@ impl SceneBvh {
             });
         }
         let build = || SceneBvh::build_beside(triangles, scale, rays, memory, beside);
-        crate::catch_quietly(build).map_err(|message| {
+        prt_scene::catch_panic(build).map_err(|message| {
             let extent = triangles
                 .iter()
                 .flatten()

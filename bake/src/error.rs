@@ -9,29 +9,9 @@ pub enum BakeError {
         path: PathBuf,
         error: std::io::Error,
     },
-    #[error("{path}: not a valid glTF 2.0 file: {message}")]
-    Gltf { path: PathBuf, message: String },
-    #[error("{path}: buffer {index} ({uri}): {message}")]
-    Buffer {
-        path: PathBuf,
-        index: usize,
-        uri: String,
-        message: String,
-    },
-    #[error("{path}: image {index} ({uri}): {message}")]
-    Image {
-        path: PathBuf,
-        index: usize,
-        uri: String,
-        message: String,
-    },
-    #[error("{path}: mesh {mesh} primitive {primitive}: {message}")]
-    Primitive {
-        path: PathBuf,
-        mesh: String,
-        primitive: usize,
-        message: String,
-    },
+    /// The scene file could not be loaded (the messages are prt-scene's).
+    #[error(transparent)]
+    Scene(#[from] prt_scene::SceneError),
     #[error("{path}: the scene has no triangles{} (give --bounds to bake an all-sky volume)", match degenerate { 0 => String::new(), n => format!(": all {n} were degenerate (zero area) and skipped") })]
     NoTriangles { path: PathBuf, degenerate: u64 },
     #[error("building the BVH failed ({message}); coordinates up to {extent:e} m, traced in units of {unit:e} m")]

@@ -2,7 +2,8 @@
 //!
 //! The pipeline, one module per stage:
 //!
-//! 1. [`scene`]: load the glTF (transforms, primitives, materials, textures, lights).
+//! 1. Load: `prt_scene` checks the glTF, then reads it (transforms, primitives, materials,
+//!    textures, lights) while the BVH build's memory is made ready beside it.
 //! 2. [`bvh`]: one PLOC build gives the 8-wide BVH the probes' ray packets are traced through
 //!    ([`bvh8`]) and the BVH2 the asset carries.
 //! 3. [`probes`]: a regular grid over the scene bounds or `bounds`.
@@ -32,14 +33,11 @@ pub mod diagnostics;
 pub mod dilate;
 pub mod error;
 pub mod factors;
-pub mod gltf_check;
 pub mod offset;
 mod pipeline;
 pub mod probes;
 pub mod row_store;
-pub mod scene;
 pub mod stream;
-pub mod texture;
 pub mod trace;
 
 use std::path::Path;
@@ -105,6 +103,9 @@ pub struct BakeSettings {
     /// the asset does not change ([`row_store`]). The rows are what grows with the probe count: 28 bytes a factor at u8,
     /// 52 at f16 and f32 (Sponza at 1.0 m: 143 MB; at 105k probes 1.0 GB).
     pub row_memory: usize,
+    /// Folders besides the scene file's own that its buffer and image URIs may reach
+    /// ([`prt_scene::Allowed`]; `prt bake --allow-path`). Not recorded in the asset.
+    pub allowed: prt_scene::Allowed,
 }
 
 impl Default for BakeSettings {
@@ -126,6 +127,7 @@ impl Default for BakeSettings {
             virtual_offset: false,
             threads: None,
             row_memory: 256 << 20,
+            allowed: prt_scene::Allowed::default(),
         }
     }
 }
@@ -285,39 +287,6 @@ pub(crate) fn split_runs<'a, T>(
 /// Most worker threads a bake starts.
 pub const MAX_THREADS: usize = 1024;
 
-/// Runs `f`, turning a panic inside a dependency (the gltf crate's readers, obvhs) into its
-/// message, for an error that names the input instead of a crash. The default report of a panic
-/// is suppressed while any such call runs: the panic hook is process-wide (a panic elsewhere in
-/// the process meanwhile still unwinds, unreported), so it is wrapped once and told by a count
-/// of the calls under way. No lock is held while `f` runs: `f` runs rayon jobs, and a worker
-/// waiting for them can steal another bake's call to this function; a lock held across `f`
-/// (the hook swapped under a mutex) deadlocked two bakes running at once in the test suite.
-pub(crate) fn catch_quietly<T>(
-    f: impl FnOnce() -> T + std::panic::UnwindSafe,
-) -> Result<T, String> {
-    use std::sync::atomic::{AtomicUsize, Ordering};
-    static QUIET: AtomicUsize = AtomicUsize::new(0);
-    static WRAP: std::sync::Once = std::sync::Once::new();
-    WRAP.call_once(|| {
-        let previous = std::panic::take_hook();
-        std::panic::set_hook(Box::new(move |info| {
-            if QUIET.load(Ordering::SeqCst) == 0 {
-                previous(info);
-            }
-        }));
-    });
-    QUIET.fetch_add(1, Ordering::SeqCst);
-    let result = std::panic::catch_unwind(f);
-    QUIET.fetch_sub(1, Ordering::SeqCst);
-    result.map_err(|payload| {
-        payload
-            .downcast_ref::<&str>()
-            .map(|s| s.to_string())
-            .or_else(|| payload.downcast_ref::<String>().cloned())
-            .unwrap_or_else(|| "unknown panic".into())
-    })
-}
-
 /// Bakes `scene_path` into a validated asset (not written).
 pub fn bake(
     scene_path: &Path,
@@ -392,25 +361,4 @@ pub fn bake_to_file(
         report.timings.push(("write", t.elapsed()));
         Ok((asset, report))
     })
-}
-
-#[cfg(test)]
-mod tests {
-    /// A call inside a call, on the same thread, as when a rayon worker waiting inside one
-    /// bake's BVH build steals another bake's: it finishes (a lock held across `f` hung here),
-    /// and a panic inside comes back as its message.
-    #[test]
-    fn catch_quietly_nests() {
-        let (send, receive) = std::sync::mpsc::channel();
-        std::thread::spawn(move || {
-            let inner = super::catch_quietly(|| {
-                super::catch_quietly(|| -> u32 { panic!("inner failure") })
-            });
-            send.send(inner).ok();
-        });
-        let got = receive
-            .recv_timeout(std::time::Duration::from_secs(30))
-            .expect("catch_quietly inside catch_quietly did not finish: deadlock");
-        assert_eq!(got, Ok(Err("inner failure".to_string())));
-    }
 }

@@ -12,9 +12,11 @@ use prt_format::{
     PROBE_DILATED, PROBE_OFFSET, PROBE_VALID, U8_MAX_BRICK,
 };
 
+use prt_scene::Scene;
+
 use crate::{
-    bricks, bvh, diagnostics, dilate, factors, offset, probes, scene, stream, texture, trace,
-    BakeError, BakeReport, BakeSettings, Progress, WINDING_WARNING,
+    bricks, bvh, diagnostics, dilate, factors, offset, probes, stream, trace, BakeError,
+    BakeReport, BakeSettings, Progress, WINDING_WARNING,
 };
 
 /// The bake's stages, in the current thread pool: the asset, not yet validated, and the report.
@@ -168,7 +170,7 @@ impl Lattice {
     /// The tracer of this lattice's rays through `bvh` over `scene`.
     fn tracer<'a>(
         &'a self,
-        scene: &'a scene::Scene,
+        scene: &'a Scene,
         bvh: &'a bvh::SceneBvh,
         double_sided: bool,
     ) -> trace::Tracer<'a> {
@@ -184,7 +186,7 @@ impl Lattice {
             order: &self.order,
             weight: self.weight,
             double_sided,
-            srgb: texture::srgb_to_linear_table(),
+            srgb: prt_scene::texture::srgb_to_linear_table(),
             shading: trace::triangle_shading(scene),
         }
     }
@@ -292,7 +294,7 @@ fn header(
 ) -> Header {
     Header {
         generator: format!("prt-bake {}", env!("CARGO_PKG_VERSION")),
-        source_name: scene::source_name(scene_path),
+        source_name: prt_scene::source_name(scene_path),
         source_hash: loaded.source_hash,
         ray_count: settings.rays,
         settings: settings_record(settings, grid.spacing, cell_size),
@@ -316,7 +318,7 @@ fn settings_record(settings: &BakeSettings, spacing: f32, cell_size: f32) -> Bak
 }
 
 /// The bake's counts for the asset's header: `traced` probes of `n` rays each over `scene`.
-fn stats(scene: &scene::Scene, traced: &[trace::ProbeRays], n: u32) -> BakeStats {
+fn stats(scene: &Scene, traced: &[trace::ProbeRays], n: u32) -> BakeStats {
     // Every ray hits a surface or the sky.
     let hits: u64 = traced.iter().map(|r| u64::from(n - r.sky_rays)).sum();
     BakeStats {
@@ -340,7 +342,7 @@ pub(crate) fn validate(asset: &Asset, scene_path: &Path) -> Result<(), BakeError
 
 /// What the load stage gives the bake.
 struct Loaded {
-    scene: scene::Scene,
+    scene: Scene,
     /// xxh3 of the scene file's bytes.
     source_hash: u64,
     /// The grid's bounds: the settings' or the scene's.
@@ -350,10 +352,10 @@ struct Loaded {
     winding_warning_at: usize,
 }
 
-/// The load stage: reads and parses the scene, warns about what it skipped, and picks the
-/// bounds, while the pool's idle threads make ready the memory of the BVH build
-/// ([`bvh::PlocMemory`]; `None` for a scene that declares no triangles); fails on an unreadable
-/// file or a scene with neither triangles nor bounds.
+/// The load stage: checks the scene, then reads it while the pool's idle threads make ready the
+/// memory of the BVH build for the triangles it declares ([`bvh::PlocMemory`]; `None` for a
+/// scene that declares none); warns about what it skipped and picks the bounds; fails on an
+/// unreadable or refused file or a scene with neither triangles nor bounds.
 fn load(
     scene_path: &Path,
     settings: &BakeSettings,
@@ -365,9 +367,14 @@ fn load(
             error,
         })?;
     let source_hash = xxhash_rust::xxh3::xxh3_64(&source_bytes);
-    let prepare = |triangles| (triangles > 0).then(|| bvh::PlocMemory::faulted(triangles));
-    let (scene, memory) = scene::load_bytes_declaring(scene_path, &source_bytes, prepare)?;
+    let checked = prt_scene::check(scene_path, &source_bytes, &settings.allowed)?;
     drop(source_bytes);
+    let triangles = checked.declared_triangles();
+    let (scene, memory) = rayon::join(
+        || prt_scene::read(checked),
+        || (triangles > 0).then(|| bvh::PlocMemory::faulted(triangles)),
+    );
+    let scene = scene?;
     report.warnings.extend(scene.warnings.iter().cloned());
     let winding_warning_at = report.warnings.len();
     if scene.degenerate_skipped > 0 {
@@ -431,7 +438,7 @@ fn validity(
     rays: &[trace::ProbeRays],
     settings: &BakeSettings,
     built: &Built,
-    scene: &scene::Scene,
+    scene: &Scene,
     report: &mut BakeReport,
 ) -> Vec<bool> {
     let valid: Vec<bool> = rays.iter().map(|r| !inside(settings, r)).collect();

@@ -3,12 +3,11 @@
 
 use glam::Vec3;
 use prt_format::sh::SH_COUNT;
+use prt_scene::{texture, Material, Scene};
 use rayon::prelude::*;
 
 use crate::bvh::{SceneBvh, TriangleHit};
 use crate::bvh8::PACKET;
-use crate::scene::{Material, Scene};
-use crate::texture;
 
 /// What one probe ray hit.
 #[derive(Clone, Copy, Debug)]

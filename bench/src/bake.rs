@@ -134,7 +134,7 @@ struct Bare {
 /// 1e-4 of the origin): other, cheaper rays than the bake's. Both are timed; the ratio to the
 /// grid points' rays is kept for comparison with earlier figures.
 fn bare(scene: &Path, asset: &prt_format::Asset, rays: u32) -> Result<Bare> {
-    let loaded = prt_bake::scene::load(scene)?;
+    let loaded = prt_scene::load(scene, &prt_scene::Allowed::default())?;
     let rays_of = Rays::of(asset, rays);
     let Rays {
         scale,

@@ -125,7 +125,8 @@ fn attempt(
         let _ = std::fs::write(c, input);
     }
     let start = Instant::now();
-    let outcome = std::panic::catch_unwind(f);
+    // A panic the libraries turn into an error stays quiet; one that escapes is reported.
+    let outcome = std::panic::catch_unwind(|| prt_cli::panics::quietly(f));
     let took = start.elapsed();
     if let Some(c) = &current {
         let _ = std::fs::remove_file(c);

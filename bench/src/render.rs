@@ -153,7 +153,7 @@ struct Row {
 
 fn render(b: &RenderBench) -> Result<String> {
     let (asset, _) = prt_bake::bake(b.scene, &b.bake, &NoProgress)?;
-    let scene = prt_bake::scene::load(b.scene)?;
+    let scene = prt_scene::load(b.scene, &b.bake.allowed)?;
     let (lo, hi) = scene
         .bounds()
         .ok_or_else(|| anyhow::anyhow!("{}: no triangles", b.scene.display()))?;
@@ -230,7 +230,7 @@ fn render(b: &RenderBench) -> Result<String> {
 fn sampling_cost(
     device: &wgpu::Device,
     queue: &wgpu::Queue,
-    scene: &prt_bake::scene::Scene,
+    scene: &prt_scene::Scene,
     asset: &prt_format::Asset,
     camera: &Camera,
     b: &RenderBench,

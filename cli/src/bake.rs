@@ -9,6 +9,7 @@ use prt_bake::BakeSettings;
 use prt_format::TransferPrecision;
 
 use prt_cli::options::parse_bounds;
+use prt_cli::panics;
 use prt_cli::process::peak_rss_kib;
 
 use crate::progress;
@@ -94,6 +95,10 @@ pub struct BakeArgs {
     /// in a temporary file in $TMPDIR (the asset is the same).
     #[arg(long, default_value_t = BakeSettings::default().row_memory >> 20)]
     row_memory: usize,
+    /// A folder besides the scene's own whose files its buffer and image URIs may name (a
+    /// shared texture folder); repeatable. Without it a URI resolving elsewhere is refused.
+    #[arg(long = "allow-path", value_name = "DIR")]
+    allow_path: Vec<PathBuf>,
 }
 
 /// Bakes as `args` say, prints the summary, and fails with the bake's error named by its scene.
@@ -117,6 +122,7 @@ pub fn run(args: BakeArgs) -> Result<()> {
         no_surface_offset,
         precision,
         row_memory,
+        allow_path,
     } = args;
     let preset = match quality {
         Quality::Fast | Quality::Default => BakeSettings::default(),
@@ -141,11 +147,13 @@ pub fn run(args: BakeArgs) -> Result<()> {
         },
         threads,
         row_memory: row_memory.saturating_mul(1 << 20),
+        allowed: prt_scene::Allowed { dirs: allow_path },
         ..preset
     };
     let progress = progress::Bar::new();
-    let (asset, report) = prt_bake::bake_to_file(&scene, &output, &settings, &progress)
-        .with_context(|| format!("baking {}", scene.display()))?;
+    let (asset, report) =
+        panics::quietly(|| prt_bake::bake_to_file(&scene, &output, &settings, &progress))
+            .with_context(|| format!("baking {}", scene.display()))?;
     for w in &report.warnings {
         eprintln!("warning: {w}");
     }

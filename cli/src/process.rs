@@ -58,6 +58,7 @@ pub fn main<C: Parser>(run: impl FnOnce(C) -> Result<()>) {
     }
     keep_freed_memory();
     crate::signals::install();
+    crate::panics::install();
     let cli = match C::try_parse() {
         Ok(cli) => cli,
         Err(e) if !e.use_stderr() => e.exit(),

@@ -91,6 +91,10 @@ pub struct RenderArgs {
     /// Render even if the asset was baked from another scene file.
     #[arg(long)]
     force: bool,
+    /// A folder besides the scene's own whose files its buffer and image URIs may name (a
+    /// shared texture folder); repeatable. Without it a URI resolving elsewhere is refused.
+    #[arg(long = "allow-path", value_name = "DIR")]
+    allow_path: Vec<PathBuf>,
 }
 
 pub fn run(args: RenderArgs) -> Result<()> {
@@ -130,6 +134,9 @@ pub fn run(args: RenderArgs) -> Result<()> {
         },
         runtime,
         force: args.force,
+        allowed: prt_scene::Allowed {
+            dirs: args.allow_path,
+        },
     };
     if !args.exposure.is_finite() {
         bail!("--exposure {}: expected a finite EV", args.exposure);
@@ -142,7 +149,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let asset = prt_format::read_asset(&job.asset)
         .with_context(|| format!("loading {}", job.asset.display()))?;
     let lighting = lighting_of(job.lights.as_deref(), &asset)?;
-    let report = prt_render::job::run(&job, &lighting, &asset)?;
+    let report = prt_cli::panics::quietly(|| prt_render::job::run(&job, &lighting, &asset))?;
     eprintln!("adapter: {}", report.adapter);
     let c = report.camera;
     println!(

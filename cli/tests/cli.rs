@@ -80,6 +80,46 @@ fn bake_of_broken_gltf_fails_cleanly() {
     assert!(dir.entries().is_empty(), "left {:?}", dir.entries());
 }
 
+/// `prt bake` of a scene whose buffer lies in a sibling folder (`../shared/quad.bin`) exits
+/// non-zero with one stderr line naming the buffer, its URI and `--allow-path`, and bakes with
+/// `--allow-path` naming that folder.
+#[test]
+fn bake_needs_allow_path_for_files_outside_the_scene_folder() {
+    let dir = Scratch::new("allow_path");
+    let (scenes, shared) = (dir.0.join("scenes"), dir.0.join("shared"));
+    std::fs::create_dir_all(&scenes).unwrap();
+    std::fs::create_dir_all(&shared).unwrap();
+    std::fs::copy(fixture("two_files/scene.bin"), shared.join("quad.bin")).unwrap();
+    let gltf = std::fs::read_to_string(fixture("two_files/scene.gltf")).unwrap();
+    let input = scenes.join("quad.gltf");
+    std::fs::write(
+        &input,
+        gltf.replace("\"scene.bin\"", "\"../shared/quad.bin\""),
+    )
+    .unwrap();
+    let out = dir.0.join("quad.prt");
+    let mut args: Vec<&std::ffi::OsStr> = vec![
+        "bake".as_ref(),
+        input.as_os_str(),
+        "-o".as_ref(),
+        out.as_os_str(),
+        "--rays".as_ref(),
+        "32".as_ref(),
+    ];
+    let o = prt(&args, None);
+    let stderr = text(&o.stderr);
+    assert!(!o.status.success(), "exit status {:?}", o.status);
+    assert_eq!(stderr.lines().count(), 1, "{stderr:?}");
+    for fragment in ["error:", "buffer 0 (../shared/quad.bin)", "--allow-path"] {
+        assert!(stderr.contains(fragment), "{fragment:?} not in {stderr:?}");
+    }
+    assert!(!out.exists());
+    args.extend(["--allow-path".as_ref(), shared.as_os_str()]);
+    let o = prt(&args, None);
+    assert!(o.status.success(), "bake failed: {}", text(&o.stderr));
+    assert!(out.exists());
+}
+
 /// `prt bake` then `prt inspect --json` gives the summary object other tools depend on, and it
 /// agrees with the file.
 #[test]

@@ -56,7 +56,7 @@ impl Camera {
     }
 
     /// The glTF camera placed by its node.
-    pub fn from_gltf(c: &prt_bake::scene::Camera) -> Camera {
+    pub fn from_gltf(c: &prt_scene::Camera) -> Camera {
         Camera {
             eye: c.eye,
             target: c.eye + c.forward,

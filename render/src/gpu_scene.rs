@@ -1,16 +1,15 @@
-//! The scene on the GPU: the bake's own loader output (same triangles, materials, textures) as a
-//! flat-shaded triangle list, materials and texels in storage buffers (so that the shading pass
-//! samples textures exactly as the bake's `texture::sample` does), and the asset's BVH for
-//! shadow rays.
+//! The scene on the GPU: the scene as the bake loads it (`prt_scene`: the same triangles,
+//! materials and textures) as a flat-shaded triangle list, materials and texels in storage
+//! buffers (so that the shading pass samples textures exactly as `prt_scene::texture::sample`
+//! does for the bake), and the asset's BVH for shadow rays.
 //!
 //! Single-sided triangles come first and are drawn with back-face culling; double-sided ones
 //! follow and are drawn without it (glTF 2.0 spec 3.9.5, docs/conventions.md section 4).
 
 use glam::Vec3;
 use gltf::texture::WrappingMode;
-use prt_bake::scene::{Scene, TriangleAttributes};
-use prt_bake::texture::TextureRef;
 use prt_format::Asset;
+use prt_scene::{Scene, TextureRef, TriangleAttributes};
 
 use crate::layout::*;
 use crate::RenderError;

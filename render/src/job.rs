@@ -59,6 +59,9 @@ pub struct RenderJob {
     pub runtime: RuntimeSettings,
     /// Render even if the asset was baked from another file.
     pub force: bool,
+    /// Folders besides the scene file's own that its buffer and image URIs may reach
+    /// ([`prt_scene::Allowed`]; `prt render --allow-path`).
+    pub allowed: prt_scene::Allowed,
 }
 
 /// What a job did.
@@ -230,7 +233,7 @@ pub fn run(
     for out in std::iter::once(&job.png).chain(&job.exr) {
         check_output(out)?;
     }
-    let scene = prt_bake::scene::load_bytes(&job.scene, &scene_bytes)
+    let scene = prt_scene::load_bytes(&job.scene, &scene_bytes, &job.allowed)
         .map_err(|e| RenderError::Scene(e.to_string()))?;
     let scene_camera = scene.cameras.first().map(Camera::from_gltf);
     let camera = choose_camera(job, scene_camera, scene.bounds())?;

@@ -1,10 +1,10 @@
 //! # prt-render: a tiled Forward+ renderer with prt's indirect diffuse
 //!
 //! The reference integration of prt's GI into an engine, and what `prt render` draws. It shades
-//! a glTF scene (loaded by the bake's own loader: same triangles, materials and textures) with
-//! direct light from many punctual lights plus indirect diffuse from the runtime's probe volume,
-//! recording into the caller's command encoder like `PrtRuntime::update`. One step per pass or
-//! dispatch, in this order:
+//! a glTF scene (loaded by `prt_scene`, as the bake loads it: same triangles, materials and
+//! textures) with direct light from many punctual lights plus indirect diffuse from the
+//! runtime's probe volume, recording into the caller's command encoder like
+//! `PrtRuntime::update`:
 //!
 //! 1. **depth pre-pass** ([`raster`]): the scene's depth, nothing else.
 //! 2. **tiled light culling** ([`cull`], one compute dispatch, one workgroup per square tile of

@@ -9,11 +9,11 @@
 //! ([`Renderer::volume_group`]), made once per runtime; frames without GI bind a stand-in volume
 //! whose probes are all invalid, so indirect light is zero with the same pipelines.
 
-use prt_bake::scene::Scene;
 use prt_format::{Asset, LightKind};
 use prt_runtime::gpu::layout::GpuLight;
 use prt_runtime::gpu::PrtRuntime;
 use prt_runtime::lights::PreparedLight;
+use prt_scene::Scene;
 
 use crate::bindings::Resource;
 use crate::cull::Cull;

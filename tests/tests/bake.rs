@@ -6,9 +6,10 @@
 use std::f32::consts::PI;
 use std::path::{Path, PathBuf};
 
-use prt_bake::{scene, BakeError, BakeSettings, NoProgress};
+use prt_bake::{BakeError, BakeSettings, NoProgress};
 use prt_format::sh::Y00;
 use prt_format::{Asset, LightKind, TransferPrecision, BRICK_BACKFACE};
+use prt_scene::{Allowed, Scene, SceneError};
 use prt_tests::{bake_err, bake_ok, cornell, fixture, point_bounds, rays, ScratchDir};
 
 // ---------------------------------------------------------------------------------------------
@@ -23,6 +24,11 @@ fn files_with_ext(dir: &Path, ext: &str) -> Vec<PathBuf> {
         .collect();
     out.sort();
     out
+}
+
+/// Loads the scene file `path`, its external files from its own folder only.
+fn load(path: &Path) -> Result<Scene, SceneError> {
+    prt_scene::load(path, &Allowed::default())
 }
 
 fn name_of(p: &Path) -> String {
@@ -517,7 +523,7 @@ fn same_vertices(t: &[glam::Vec3; 3], v: [[f32; 3]; 3]) -> bool {
 /// flipped so its front face is +X; 4 points/lines primitives skipped with warnings.
 #[test]
 fn nested_transforms_compose_and_mirror() {
-    let scene = scene::load(&fixture("nested_transforms.gltf")).expect("load");
+    let scene = load(&fixture("nested_transforms.gltf")).expect("load");
     assert_eq!(scene.triangles.len(), 2, "{:?}", scene.triangles);
     let plain = scene
         .triangles
@@ -562,7 +568,7 @@ fn nested_transforms_compose_and_mirror() {
 /// with the README's total area, and the default (white) material.
 #[test]
 fn strips_and_fans_triangulate() {
-    let scene = scene::load(&fixture("strips_fans.gltf")).expect("load");
+    let scene = load(&fixture("strips_fans.gltf")).expect("load");
     assert_eq!(scene.triangles.len(), 7);
     let mut area = 0.0;
     for t in &scene.triangles {
@@ -599,7 +605,9 @@ fn declared_triangles_are_what_the_loader_reads() {
     for case in cases {
         let path = fixture(case);
         let bytes = std::fs::read(&path).expect("read");
-        let (scene, declared) = scene::load_bytes_declaring(&path, &bytes, |n| n).expect("load");
+        let checked = prt_scene::check(&path, &bytes, &Allowed::default()).expect("check");
+        let declared = checked.declared_triangles();
+        let scene = prt_scene::read(checked).expect("read");
         let read = scene.triangles.len() as u64 + scene.degenerate_skipped;
         assert_eq!(declared as u64, read, "{case}");
     }
@@ -609,7 +617,7 @@ fn declared_triangles_are_what_the_loader_reads() {
 /// directions (node -Z, rotated to -Y), colours, intensities, range and cone angles.
 #[test]
 fn gltf_lights_are_read() {
-    let scene = scene::load(&fixture("lights.gltf")).expect("load");
+    let scene = load(&fixture("lights.gltf")).expect("load");
     assert_eq!(scene.lights.len(), 3, "{:?}", scene.lights);
     let of = |kind| {
         let found: Vec<_> = scene.lights.iter().filter(|l| l.kind == kind).collect();
@@ -652,10 +660,10 @@ fn external_buffer_resolves_relative_to_the_gltf() {
         .expect("fixture");
     let old = std::env::current_dir().expect("cwd");
     std::env::set_current_dir(fixture("")).expect("cd fixtures");
-    let relative = scene::load(Path::new("two_files/scene.gltf"));
+    let relative = load(Path::new("two_files/scene.gltf"));
     let scratch = ScratchDir::new("external_buffer");
     std::env::set_current_dir(scratch.path()).expect("cd scratch");
-    let from_elsewhere = scene::load(&absolute);
+    let from_elsewhere = load(&absolute);
     std::env::set_current_dir(old).expect("cd back");
     for (what, loaded) in [("relative", relative), ("absolute", from_elsewhere)] {
         let scene = loaded.unwrap_or_else(|e| panic!("{what}: {e}"));
@@ -696,7 +704,9 @@ fn bad_fixtures_fail_with_clear_errors() {
             // Formats the gltf crate's readers would panic on: refused before reading.
             "color_vec2.gltf" => msg.contains("Colors(0)") && msg.contains("Vec2"),
             "texcoord_byte.gltf" => msg.contains("TexCoords(0)") && msg.contains("I8"),
-            "broken_json.gltf" | "not_gltf.gltf" => matches!(e, BakeError::Gltf { .. }),
+            "broken_json.gltf" | "not_gltf.gltf" => {
+                matches!(e, BakeError::Scene(SceneError::Gltf { .. }))
+            }
             _ => true,
         };
         assert!(

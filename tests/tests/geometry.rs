@@ -21,7 +21,7 @@ const ORIGINS: [[f32; 3]; 4] = [
 /// escaping rays: a leak through a shared edge would let sky into a closed room.
 #[test]
 fn rays_through_edges_and_vertices_of_a_closed_box_never_escape() {
-    let scene = prt_bake::scene::load(&fixture("closed_box_inward.gltf")).unwrap();
+    let scene = prt_scene::load(&fixture("closed_box_inward.gltf"), &Default::default()).unwrap();
     let tris = &scene.triangles;
     let mut targets: Vec<Vec3> = Vec::new();
     for t in tris {

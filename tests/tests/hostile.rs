@@ -1,14 +1,16 @@
 //! Hostile input (issue 8, "Hostile files" and "Outputs and processes"): one test per case of
 //! `fixtures/hostile/` (made by `fixtures/make_hostile.py`) and per crafted asset. Each ends as
 //! one clear error naming the file, the item and the value: no panic, no allocation far beyond
-//! what the file's size implies, no hang, no file read through an absolute path or a URI scheme.
+//! what the file's size implies, no hang, no file read through a URI scheme or outside the
+//! scene's folder (`..`, absolute paths, symlinks) unless that folder is allowed.
 
 use std::path::Path;
 
 use prt_bake::BakeSettings;
 use prt_format::{decode, encode, Asset, FormatError};
 use prt_runtime::{load_rig, CpuRelighter};
-use prt_tests::{bake_ok, cornell, fixture, rays};
+use prt_scene::Allowed;
+use prt_tests::{bake_ok, cornell, fixture, rays, ScratchDir};
 
 /// Bakes `fixtures/hostile/<name>` and returns the error's message (one line, naming the file).
 fn bake_message(name: &str) -> String {
@@ -69,7 +71,8 @@ refused! {
     matrix_with_trs: "matrix_and_trs.gltf" => ["node 0", "matrix"];
     version_1: "version_1.gltf" => ["\"1.0\""];
     buffer_shorter_than_byte_length: "buffer_shorter.gltf" => ["buffer 0", "1156"];
-    absolute_buffer_uri: "absolute_uri.gltf" => ["buffer 0", "/etc/passwd", "absolute"];
+    absolute_buffer_uri: "absolute_uri.gltf" => ["buffer 0", "/etc/passwd", "outside the scene's folder", "--allow-path"];
+    parent_buffer_uri: "parent_uri.gltf" => ["buffer 0", "../etc/passwd", "outside the scene's folder", "--allow-path"];
     file_scheme_buffer_uri: "file_uri.gltf" => ["buffer 0", "file:///etc/passwd"];
     non_finite_emission_names_the_material: "non_finite_emission.gltf" => ["material 0", "emissiveFactor"];
 }
@@ -283,4 +286,71 @@ fn decode_errors_name_the_section() {
         msg.contains("section lights") && msg.contains("too early"),
         "{msg}"
     );
+}
+
+/// Buffer URIs that resolve outside the scene file's folder (issue 30 item 7): through `..`, as
+/// an absolute path, and through a symlink in the folder that leads out of it. Each is refused
+/// by default, naming the file, the buffer, the URI and the flag that allows it, and read once
+/// its folder is allowed (also by the bake, through `BakeSettings::allowed`); a data URI needs
+/// nothing.
+#[test]
+fn files_outside_the_scene_folder_need_an_allowed_folder() {
+    let dir = ScratchDir::new("outside_the_folder");
+    let (scenes, shared) = (dir.path().join("scenes"), dir.path().join("shared"));
+    std::fs::create_dir_all(&scenes).unwrap();
+    std::fs::create_dir_all(&shared).unwrap();
+    std::fs::copy(fixture("two_files/scene.bin"), shared.join("quad.bin")).unwrap();
+    std::os::unix::fs::symlink(shared.join("quad.bin"), scenes.join("link.bin")).unwrap();
+    let gltf = std::fs::read_to_string(fixture("two_files/scene.gltf")).unwrap();
+    assert!(gltf.contains("\"uri\": \"scene.bin\""));
+    let absolute = shared.join("quad.bin").display().to_string();
+    let allowed = Allowed {
+        dirs: vec![shared.clone()],
+    };
+    for (case, uri) in [
+        ("dotdot", "../shared/quad.bin"),
+        ("absolute", absolute.as_str()),
+        ("symlink", "link.bin"),
+    ] {
+        let path = scenes.join(format!("{case}.gltf"));
+        let text = gltf.replace("\"uri\": \"scene.bin\"", &format!("\"uri\": {uri:?}"));
+        std::fs::write(&path, text).unwrap();
+        let msg = prt_scene::load(&path, &Allowed::default())
+            .map(|_| ())
+            .expect_err(case)
+            .to_string();
+        for fragment in [
+            &format!("{case}.gltf: buffer 0 ({uri})"),
+            "outside the scene's folder",
+            "--allow-path",
+        ] {
+            assert!(msg.contains(fragment), "{case}: {msg:?} lacks {fragment:?}");
+        }
+        let scene = prt_scene::load(&path, &allowed).unwrap_or_else(|e| panic!("{case}: {e}"));
+        assert_eq!(scene.triangles.len(), 2, "{case}");
+        let e = prt_bake::bake(&path, &rays(32), &prt_bake::NoProgress)
+            .map(|_| ())
+            .expect_err(case);
+        assert_eq!(e.to_string(), msg, "{case}");
+        let settings = BakeSettings {
+            allowed: allowed.clone(),
+            ..rays(32)
+        };
+        bake_ok(&path, &settings);
+    }
+    // Allowing other folders does not open this one, and one that does not exist is named.
+    let elsewhere = Allowed {
+        dirs: vec![fixture(""), dir.path().join("no_such_folder")],
+    };
+    let msg = prt_scene::load(&scenes.join("dotdot.gltf"), &elsewhere)
+        .map(|_| ())
+        .expect_err("refused")
+        .to_string();
+    assert!(msg.contains("and the allowed folders"), "{msg}");
+    assert!(
+        msg.contains("allowed folder ") && msg.contains("no_such_folder"),
+        "{msg}"
+    );
+    // The fixture with a data URI buffer and image loads as before.
+    prt_scene::load(&fixture("textured_quad.gltf"), &Allowed::default()).expect("data URIs");
 }

@@ -47,13 +47,13 @@ fn settings(tile: u32, culling: Culling, shadows: bool) -> RenderSettings {
 struct Setup {
     device: wgpu::Device,
     queue: wgpu::Queue,
-    scene: prt_bake::scene::Scene,
+    scene: prt_scene::Scene,
     asset: Asset,
 }
 
 fn setup() -> Setup {
     let (device, queue) = gpu_device();
-    let scene = prt_bake::scene::load(&cornell_scene()).unwrap();
+    let scene = prt_scene::load(&cornell_scene(), &Default::default()).unwrap();
     let asset = bake_ok(&cornell_scene(), &BakeSettings::default());
     Setup {
         device,
@@ -278,6 +278,7 @@ fn golden_job(
         settings: settings(16, Culling::Tiled, true),
         runtime: RuntimeSettings::default(),
         force: false,
+        allowed: Default::default(),
     }
 }
 

@@ -1,4 +1,5 @@
-//! Loading a glTF 2.0 scene into flat world-space triangles with their materials and lights.
+//! Reading a checked glTF 2.0 document into flat world-space triangles with their materials and
+//! lights ([`crate::read`]).
 //!
 //! - The default scene (else the first; else every root node) with nested node transforms (TRS or
 //!   matrix). A transform with a negative determinant flips triangle winding, so front faces stay
@@ -10,9 +11,9 @@
 //!   material gets the glTF default (white, single-sided, no emission).
 //! - KHR_lights_punctual lights, placed by their nodes (light looks along the node's -Z).
 //!
-//! Bad input (unreadable or missing buffers, accessors past their views, indices past the
-//! vertices, non-finite positions) is a [`BakeError`] naming the file, item and value; degenerate
-//! (zero-area) triangles are skipped and counted.
+//! Bad input the document checks cannot see (buffers that changed since, indices past the
+//! vertices, non-finite positions) is a [`SceneError`] naming the file, item and value;
+//! degenerate (zero-area) triangles are skipped and counted.
 
 use std::borrow::Cow;
 use std::path::Path;
@@ -22,90 +23,11 @@ use gltf::mesh::Mode;
 use prt_format::{Light, LightKind};
 use rayon::prelude::*;
 
-use crate::error::BakeError;
-use crate::gltf_check;
-use crate::texture::{is_nearest, Image, TextureRef};
-
-/// Surface description used at ray hits (docs/conventions.md section 4).
-#[derive(Clone, Debug)]
-pub struct Material {
-    pub base_color: [f32; 3],
-    pub base_texture: Option<TextureRef>,
-    pub emissive: [f32; 3],
-    pub emissive_texture: Option<TextureRef>,
-    pub double_sided: bool,
-}
-
-impl Default for Material {
-    /// The glTF default material: white, single-sided, not emissive.
-    fn default() -> Self {
-        Material {
-            base_color: [1.0; 3],
-            base_texture: None,
-            emissive: [0.0; 3],
-            emissive_texture: None,
-            double_sided: false,
-        }
-    }
-}
-
-/// Per-vertex attributes of one triangle that shading needs.
-#[derive(Clone, Copy, Debug)]
-pub struct TriangleAttributes {
-    pub uv: [[Vec2; 3]; 2],
-    pub color: [Vec4; 3],
-}
-
-impl TriangleAttributes {
-    /// A triangle without COLOR_0 or texture coordinates.
-    const WHITE: TriangleAttributes = TriangleAttributes {
-        uv: [[Vec2::ZERO; 3]; 2],
-        color: [Vec4::ONE; 3],
-    };
-}
-
-/// A loaded scene: world-space triangles (front face counter-clockwise), their materials and
-/// attributes, the images they sample and the scene's lights.
-#[derive(Debug, Default)]
-pub struct Scene {
-    pub triangles: Vec<[Vec3; 3]>,
-    pub materials_of_triangles: Vec<u32>,
-    /// Per triangle, or empty when no triangle's shading reads them (no COLOR_0 and no
-    /// textured material: Sponza's 187k triangles would write 18 MB for nothing).
-    pub attributes: Vec<TriangleAttributes>,
-    pub materials: Vec<Material>,
-    pub images: Vec<Image>,
-    pub lights: Vec<Light>,
-    pub degenerate_skipped: u64,
-    pub warnings: Vec<String>,
-    /// Some primitive has COLOR_0 (else per-hit attributes matter only for textured materials).
-    pub has_vertex_colors: bool,
-    /// Perspective cameras of the scene's nodes, in node visiting order (renderers default to
-    /// the first).
-    pub cameras: Vec<Camera>,
-}
-
-/// A perspective camera placed by its node (glTF 2.0 spec 3.10: it looks along the node's -Z
-/// with +Y up).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Camera {
-    pub eye: Vec3,
-    /// Unit viewing direction.
-    pub forward: Vec3,
-    /// Unit up direction.
-    pub up: Vec3,
-    /// Vertical field of view, radians.
-    pub yfov: f32,
-}
-
-impl Scene {
-    /// Axis-aligned bounds of all triangles, `None` when there are none.
-    pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
-        let mut it = self.triangles.iter().flatten();
-        let first = *it.next()?;
-        Some(it.fold((first, first), |(lo, hi), &v| (lo.min(v), hi.max(v))))
-    }
-}
+use crate::check::{self, Findings};
+use crate::error::SceneError;
+use crate::files;
+use crate::scene::{Camera, Material, Scene, TriangleAttributes};
+use crate::texture::{self, is_nearest, TextureRef};
 
 struct Loader<'a> {
     path: &'a Path,
@@ -113,80 +35,6 @@ struct Loader<'a> {
     scene: Scene,
     /// Index of the default material in `scene.materials`.
     default_material: u32,
-}
-
-/// Loads `path` (.gltf with embedded or external buffers, or .glb). A panic inside the gltf
-/// crate on input this loader does not check ends as a [`BakeError::Gltf`] naming the file, not
-/// as a crash (the panic message is kept, the default report of it suppressed meanwhile).
-pub fn load(path: &Path) -> Result<Scene, BakeError> {
-    let bytes = prt_format::read_regular_file(path).map_err(|error| BakeError::Io {
-        path: path.to_owned(),
-        error,
-    })?;
-    load_bytes(path, &bytes)
-}
-
-/// [`load`] of the file's bytes, already read (`path` resolves external buffers and images and
-/// names the file in errors): callers that also hash the file read it once.
-pub fn load_bytes(path: &Path, bytes: &[u8]) -> Result<Scene, BakeError> {
-    load_bytes_declaring(path, bytes, |_| ()).map(|(scene, _)| scene)
-}
-
-/// [`load_bytes`], running `declared` beside the rest of the load (on the current rayon pool)
-/// as soon as the document is checked, with the triangles its node graph instances (counted by
-/// [`gltf_check::check_document`]) but at most a third of the bytes the file and its external
-/// buffers hold, and returning what it returns beside the scene. The bake makes ready there the
-/// memory its BVH build will need ([`crate::bvh::PlocMemory`]). The cap keeps a small file that
-/// declares buffers it does not hold from costing that memory before its load fails; for
-/// instanced meshes, and strips and fans of 8-bit indices (about a byte a triangle), it
-/// undercounts. A panic of `declared` is reported as one of the glTF reader.
-pub fn load_bytes_declaring<R: Send>(
-    path: &Path,
-    bytes: &[u8],
-    declared: impl FnOnce(usize) -> R + Send + std::panic::UnwindSafe,
-) -> Result<(Scene, R), BakeError> {
-    crate::catch_quietly(|| load_checked(path, bytes, declared)).unwrap_or_else(|message| {
-        Err(BakeError::Gltf {
-            path: path.to_owned(),
-            message: format!("the glTF reader failed on this file ({message})"),
-        })
-    })
-}
-
-fn load_checked<R: Send>(
-    path: &Path,
-    bytes: &[u8],
-    declared: impl FnOnce(usize) -> R + Send,
-) -> Result<(Scene, R), BakeError> {
-    let gltf_err = |message: String| BakeError::Gltf {
-        path: path.to_owned(),
-        message,
-    };
-    // Parsed without the crate's validation first: it indexes some references unchecked (an
-    // attribute's accessor), so prt's own checks run before it.
-    let gltf =
-        gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| gltf_err(e.to_string()))?;
-    let base = path.parent().unwrap_or(Path::new("."));
-    let json = gltf.document.as_json();
-    let declared_bytes = json
-        .buffers
-        .iter()
-        .fold(0u64, |a, b| a.saturating_add(b.byte_length.0));
-    let checked = gltf_check::check_document(
-        path,
-        json,
-        base,
-        declared_bytes.saturating_add(bytes.len() as u64),
-    )?;
-    let doc = gltf::Document::from_json(gltf.document.into_json())
-        .map_err(|e| gltf_err(e.to_string()))?;
-    let held = (bytes.len() as u64).saturating_add(checked.external_bytes) / 3;
-    let triangles = checked.triangles.min(held);
-    let (scene, ready) = rayon::join(
-        || read_scene(path, base, &doc, gltf.blob, checked.warnings),
-        || declared(usize::try_from(triangles).unwrap_or(usize::MAX)),
-    );
-    Ok((scene?, ready))
 }
 
 /// The nodes the scene is read from: the default scene's roots (or the first scene's), or
@@ -206,20 +54,21 @@ fn root_nodes(doc: &gltf::Document) -> Vec<gltf::Node<'_>> {
     }
 }
 
-/// The scene of the checked document `doc` (its binary chunk `blob`; external files relative to
-/// `base`), with the document's `warnings`.
-fn read_scene(
+/// The scene of the checked document `doc` (its binary chunk `blob`; data and external files
+/// as `findings` found them; relative paths resolved against `base`), with the document's
+/// warnings.
+pub(crate) fn read_scene(
     path: &Path,
     base: &Path,
     doc: &gltf::Document,
     blob: Option<Vec<u8>>,
-    mut warnings: Vec<String>,
-) -> Result<Scene, BakeError> {
+    findings: Findings,
+) -> Result<Scene, SceneError> {
     let json = doc.as_json();
-    let buffers = gltf::import_buffers(doc, Some(base), blob)
-        .map_err(|e| buffer_error(path, base, doc, e))?;
-    gltf_check::check_sparse(path, json, &buffers)?;
-    let images = gltf_check::decode_images(path, base, doc, &buffers)?;
+    let buffers = read_buffers(path, base, doc, blob, &findings.files.buffers)?;
+    check::check_sparse(path, json, &buffers)?;
+    let images = texture::decode_images(path, doc, &findings.files.images, &buffers)?;
+    let mut warnings = findings.warnings;
 
     let mut materials: Vec<Material> = doc.materials().map(|m| material(&m)).collect();
     for (i, m) in materials.iter().enumerate() {
@@ -251,23 +100,41 @@ fn read_scene(
     Ok(loader.scene)
 }
 
-fn buffer_error(path: &Path, base: &Path, doc: &gltf::Document, e: gltf::Error) -> BakeError {
-    for b in doc.buffers() {
-        if let gltf::buffer::Source::Uri(uri) = b.source() {
-            if !uri.starts_with("data:") && !base.join(uri).exists() {
-                return BakeError::Buffer {
-                    path: path.to_owned(),
-                    index: b.index(),
-                    uri: uri.to_owned(),
-                    message: format!("file {} not found", base.join(uri).display()),
-                };
-            }
-        }
-    }
-    BakeError::Gltf {
-        path: path.to_owned(),
-        message: format!("buffers: {e}"),
-    }
+/// The document's buffers: external ones from the checked `files` ([`files::read_buffer`]),
+/// data URIs and the binary chunk `blob` as the gltf crate's importer reads them.
+fn read_buffers(
+    path: &Path,
+    base: &Path,
+    doc: &gltf::Document,
+    mut blob: Option<Vec<u8>>,
+    files: &[Option<std::path::PathBuf>],
+) -> Result<Vec<gltf::buffer::Data>, SceneError> {
+    doc.buffers()
+        .map(
+            |b| match (b.source(), files.get(b.index()).and_then(Option::as_ref)) {
+                (gltf::buffer::Source::Uri(uri), Some(file)) => {
+                    files::read_buffer(path, b.index(), uri, file, b.length())
+                }
+                (source, _) => {
+                    let gltf_err = |e: gltf::Error| SceneError::Gltf {
+                        path: path.to_owned(),
+                        message: format!("buffers: {e}"),
+                    };
+                    let data =
+                        gltf::buffer::Data::from_source_and_blob(source, Some(base), &mut blob)
+                            .map_err(gltf_err)?;
+                    if data.len() < b.length() {
+                        return Err(gltf_err(gltf::Error::BufferLength {
+                            buffer: b.index(),
+                            expected: b.length(),
+                            actual: data.len(),
+                        }));
+                    }
+                    Ok(data)
+                }
+            },
+        )
+        .collect()
 }
 
 fn texture_ref(tex: gltf::Texture, tex_coord: u32) -> TextureRef {
@@ -358,9 +225,9 @@ fn local_transform(node: &gltf::Node) -> Mat4 {
 }
 
 impl Loader<'_> {
-    fn visit(&mut self, node: &gltf::Node, parent: Mat4, depth: u32) -> Result<(), BakeError> {
+    fn visit(&mut self, node: &gltf::Node, parent: Mat4, depth: u32) -> Result<(), SceneError> {
         if depth > 256 {
-            return Err(BakeError::Gltf {
+            return Err(SceneError::Gltf {
                 path: self.path.to_owned(),
                 message: format!("node {} is nested more than 256 deep", node.index()),
             });
@@ -426,7 +293,7 @@ impl Loader<'_> {
         }
     }
 
-    fn mesh(&mut self, mesh: &gltf::Mesh, world: Mat4) -> Result<(), BakeError> {
+    fn mesh(&mut self, mesh: &gltf::Mesh, world: Mat4) -> Result<(), SceneError> {
         let mesh_name = match mesh.name() {
             Some(n) => format!("{} ({n:?})", mesh.index()),
             None => mesh.index().to_string(),
@@ -444,7 +311,7 @@ impl Loader<'_> {
                 continue;
             }
             self.primitive(&prim, world)
-                .map_err(|message| BakeError::Primitive {
+                .map_err(|message| SceneError::Primitive {
                     path: self.path.to_owned(),
                     mesh: mesh_name.clone(),
                     primitive: prim.index(),
@@ -731,13 +598,6 @@ fn triangulate(mode: Mode, ix: &[u32]) -> Cow<'_, [[u32; 3]]> {
     }
 }
 
-/// The scene file's name without directories, for the asset header.
-pub fn source_name(path: &Path) -> String {
-    path.file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -815,7 +675,13 @@ mod tests {
     #[test]
     fn attributes_are_kept_for_every_triangle_or_none() {
         let path = Path::new("two_primitives.gltf");
-        let load = |colored, degenerate| load_bytes(path, &two_primitives(colored, degenerate));
+        let load = |colored, degenerate| {
+            crate::load_bytes(
+                path,
+                &two_primitives(colored, degenerate),
+                &crate::Allowed::default(),
+            )
+        };
         let plain = load(None, false).unwrap();
         assert_eq!(plain.triangles.len(), 2);
         assert!(plain.attributes.is_empty() && !plain.has_vertex_colors);

@@ -5,8 +5,9 @@
 //! 3.7 "Geometry", 3.5 "Nodes"), so that a hostile or broken file ends as one clear error:
 //!
 //! - `asset.version` must be 2.x;
-//! - buffer and image URIs are data URIs or relative paths to regular files (no absolute paths,
-//!   no schemes, no devices), and a buffer file holds at least its `byteLength`;
+//! - buffer and image URIs are data URIs or paths to regular files (no schemes, no devices) in
+//!   the scene's folder or an allowed one ([`crate::files`]), and a buffer file holds at least
+//!   its `byteLength`;
 //! - buffer views lie inside their buffers with a legal `byteStride`;
 //! - accessors lie inside their buffer views (`byteStride` at least the element size), those
 //!   without a view (zeros plus sparse values) stay within [`allocation_budget`] of the input's
@@ -17,17 +18,15 @@
 //!   produces at most [`MAX_TRIANGLES`] triangles;
 //! - materials have finite factors in f32.
 //!
-//! Images are decoded here too ([`decode_images`]), with the image crate's allocation limit set
-//! from the encoded size, instead of by `gltf::import_images` (which decodes whatever dimensions
-//! a header claims, up to the image crate's 512 MiB default).
+//! Images are decoded later, with an allocation limit from their encoded size
+//! ([`crate::texture::decode_images`]).
 
-use std::io::Cursor;
 use std::path::{Path, PathBuf};
 
 use gltf::json;
 
-use crate::error::BakeError;
-use crate::texture::Image;
+use crate::error::SceneError;
+use crate::files::Folders;
 
 /// Most triangles a scene may instance: about 4.5 GB of loaded triangles and attributes.
 pub const MAX_TRIANGLES: u64 = 1 << 25;
@@ -49,53 +48,15 @@ pub fn allocation_budget(input_bytes: u64) -> u64 {
         .max(MIN_BUDGET)
 }
 
-fn err(path: &Path, message: String) -> BakeError {
-    BakeError::Gltf {
+fn err(path: &Path, message: String) -> SceneError {
+    SceneError::Gltf {
         path: path.to_owned(),
         message,
     }
 }
 
-/// A relative path (resolved against `base`; `..` allowed, as shared texture folders need it) to a
-/// regular file, or why `uri` is refused.
-pub fn external_file(base: &Path, uri: &str) -> Result<PathBuf, String> {
-    let decoded = percent_decode(uri);
-    // A colon is a scheme (`file:`, `http:`) or a drive letter; a leading slash is absolute.
-    if decoded.starts_with(['/', '\\']) || decoded.contains(':') {
-        return Err(format!(
-            "URI {uri:?} is absolute or has a scheme; only data URIs and relative paths are read"
-        ));
-    }
-    let file = base.join(&decoded);
-    match std::fs::metadata(&file) {
-        Ok(m) if m.is_file() => Ok(file),
-        Ok(_) => Err(format!("{} is not a regular file", file.display())),
-        Err(e) => Err(format!("file {} not found ({e})", file.display())),
-    }
-}
-
-/// `%XX` escapes decoded (glTF URIs are RFC 3986 references); invalid escapes stay as they are.
-fn percent_decode(uri: &str) -> String {
-    let b = uri.as_bytes();
-    let mut out = Vec::with_capacity(b.len());
-    let mut i = 0;
-    while i < b.len() {
-        let hex = |c: u8| (c as char).to_digit(16);
-        if b[i] == b'%' && i + 2 < b.len() {
-            if let (Some(h), Some(l)) = (hex(b[i + 1]), hex(b[i + 2])) {
-                out.push((h * 16 + l) as u8);
-                i += 3;
-                continue;
-            }
-        }
-        out.push(b[i]);
-        i += 1;
-    }
-    String::from_utf8_lossy(&out).into_owned()
-}
-
 /// What [`check_document`] found in a document it accepts.
-pub struct Checked {
+pub struct Findings {
     /// What the loader will skip or not implement.
     pub warnings: Vec<String>,
     /// The triangles the node graph instances (each instance's, degenerate ones included).
@@ -103,15 +64,25 @@ pub struct Checked {
     /// The bytes its external buffer files hold (their `byteLength`s, which the files were
     /// found to hold).
     pub external_bytes: u64,
+    /// The external files the loader reads, found where they may be ([`Folders::resolve`]).
+    pub files: ExternalFiles,
 }
 
-/// Checks the document before its buffers are read.
+/// Per buffer and per image, the canonical file its URI names (`None`: a data URI, the GLB
+/// binary chunk or a buffer view): what the loader reads, not the URI again.
+#[derive(Default)]
+pub struct ExternalFiles {
+    pub buffers: Vec<Option<PathBuf>>,
+    pub images: Vec<Option<PathBuf>>,
+}
+
+/// Checks the document before its buffers are read, its external files against `folders`.
 pub fn check_document(
     path: &Path,
     root: &json::Root,
-    base: &Path,
+    folders: &Folders<'_>,
     input_bytes: u64,
-) -> Result<Checked, BakeError> {
+) -> Result<Findings, SceneError> {
     let e = |m: String| err(path, m);
     if !root.asset.version.starts_with("2.") {
         return Err(e(format!(
@@ -119,7 +90,7 @@ pub fn check_document(
             root.asset.version
         )));
     }
-    let external_bytes = check_buffers(path, root, base)?;
+    let (files, external_bytes) = check_files(path, root, folders)?;
     check_views(path, root)?;
     check_accessors(path, root, allocation_budget(input_bytes))?;
     let mut warnings = Vec::new();
@@ -136,65 +107,68 @@ pub fn check_document(
                 .to_owned(),
         );
     }
-    Ok(Checked {
+    Ok(Findings {
         warnings,
         triangles,
         external_bytes,
+        files,
     })
 }
 
-/// Checks that external buffer and image files exist and that buffer files hold their
-/// `byteLength`; returns the bytes those buffers declare.
-fn check_buffers(path: &Path, root: &json::Root, base: &Path) -> Result<u64, BakeError> {
+/// Finds the external buffer and image files where they may be and checks that buffer files
+/// hold their `byteLength`; returns the files and the bytes those buffers declare.
+fn check_files(
+    path: &Path,
+    root: &json::Root,
+    folders: &Folders<'_>,
+) -> Result<(ExternalFiles, u64), SceneError> {
+    let mut files = ExternalFiles::default();
     let mut external_bytes = 0u64;
     for (i, b) in root.buffers.iter().enumerate() {
-        let Some(uri) = &b.uri else { continue };
-        if uri.starts_with("data:") {
+        let uri = b.uri.as_ref().filter(|u| !u.starts_with("data:"));
+        let Some(uri) = uri else {
+            files.buffers.push(None);
             continue;
-        }
-        let file = external_file(base, uri).map_err(|message| BakeError::Buffer {
+        };
+        let fail = |message| SceneError::Buffer {
             path: path.to_owned(),
             index: i,
             uri: uri.clone(),
             message,
-        })?;
+        };
+        let file = folders.resolve(uri).map_err(fail)?;
         let len = std::fs::metadata(&file).map(|m| m.len()).unwrap_or(0);
         let want = b.byte_length.0;
         if len < want {
-            return Err(BakeError::Buffer {
-                path: path.to_owned(),
-                index: i,
-                uri: uri.clone(),
-                message: format!("the file has {len} bytes, byteLength says {want}"),
-            });
+            return Err(fail(format!(
+                "the file has {len} bytes, byteLength says {want}"
+            )));
         }
         external_bytes = external_bytes.saturating_add(want);
+        files.buffers.push(Some(file));
     }
     for (i, img) in root.images.iter().enumerate() {
-        match (&img.uri, img.buffer_view) {
+        let fail = |uri: &str, message| SceneError::Image {
+            path: path.to_owned(),
+            index: i,
+            uri: uri.to_owned(),
+            message,
+        };
+        files.images.push(match (&img.uri, img.buffer_view) {
             (Some(uri), _) if !uri.starts_with("data:") => {
-                external_file(base, uri).map_err(|message| BakeError::Image {
-                    path: path.to_owned(),
-                    index: i,
-                    uri: uri.clone(),
-                    message,
-                })?;
+                Some(folders.resolve(uri).map_err(|m| fail(uri, m))?)
             }
             (None, Some(_)) if img.mime_type.is_none() => {
-                return Err(BakeError::Image {
-                    path: path.to_owned(),
-                    index: i,
-                    uri: "buffer view".into(),
-                    message: "an image in a buffer view must have a mimeType".into(),
-                })
+                let message = "an image in a buffer view must have a mimeType".into();
+                return Err(fail("buffer view", message));
             }
-            _ => {}
-        }
+            _ => None,
+        });
     }
-    Ok(external_bytes)
+    Ok((files, external_bytes))
 }
 
-fn check_views(path: &Path, root: &json::Root) -> Result<(), BakeError> {
+fn check_views(path: &Path, root: &json::Root) -> Result<(), SceneError> {
     for (i, v) in root.buffer_views.iter().enumerate() {
         let Some(buffer) = root.buffers.get(v.buffer.value()) else {
             return Err(err(
@@ -243,7 +217,7 @@ fn element_size(a: &json::Accessor) -> u64 {
     comps * size
 }
 
-fn check_accessors(path: &Path, root: &json::Root, budget: u64) -> Result<(), BakeError> {
+fn check_accessors(path: &Path, root: &json::Root, budget: u64) -> Result<(), SceneError> {
     for (i, a) in root.accessors.iter().enumerate() {
         let e = |m: String| err(path, format!("accessor {i}: {m}"));
         let elem = element_size(a);
@@ -253,83 +227,102 @@ fn check_accessors(path: &Path, root: &json::Root, budget: u64) -> Result<(), Ba
         if count == 0 {
             return Err(e("count 0 (glTF 2.0: at least 1)".into()));
         }
-        match a.buffer_view {
-            Some(view) => {
-                let Some(v) = root.buffer_views.get(view.value()) else {
-                    return Err(e(format!("bufferView {} does not exist", view.value())));
-                };
-                let stride = v.byte_stride.map_or(elem, |s| s.0 as u64);
-                if stride < elem {
-                    return Err(e(format!(
-                        "bufferView {} has byteStride {stride}, less than the {elem}-byte elements",
-                        view.value()
-                    )));
-                }
-                let offset = a.byte_offset.map_or(0, |o| o.0);
-                let need = offset
-                    .saturating_add(stride.saturating_mul(count - 1))
-                    .saturating_add(elem);
-                if need > v.byte_length.0 {
-                    return Err(e(format!(
-                        "{count} elements of {elem} bytes (stride {stride}, offset {offset}) need {need} bytes; bufferView {} has {}",
-                        view.value(),
-                        v.byte_length.0
-                    )));
-                }
-            }
-            None => {
-                let bytes = count.saturating_mul(elem);
-                if bytes > budget {
-                    return Err(e(format!(
-                        "{count} elements without a bufferView would take {bytes} bytes, more than {budget} for a file this size"
-                    )));
-                }
-            }
-        }
+        check_elements(root, a, elem, budget).map_err(e)?;
         if let Some(s) = &a.sparse {
-            if s.count.0 > count {
-                return Err(e(format!(
-                    "sparse count {} exceeds count {count}",
-                    s.count.0
-                )));
-            }
-            let Some(json::accessor::IndexComponentType(ty)) = valid(&s.indices.component_type)
-            else {
-                return Err(e("sparse indices have an invalid component type".into()));
-            };
-            if !matches!(
-                ty,
-                json::accessor::ComponentType::U8
-                    | json::accessor::ComponentType::U16
-                    | json::accessor::ComponentType::U32
-            ) {
-                return Err(e(format!(
-                    "sparse indices are {ty:?}; glTF 2.0 allows unsigned"
-                )));
-            }
-            for (what, view, size) in [
-                ("indices", s.indices.buffer_view, ty.size() as u64),
-                ("values", s.values.buffer_view, elem),
-            ] {
-                let Some(v) = root.buffer_views.get(view.value()) else {
-                    return Err(e(format!(
-                        "sparse {what} bufferView {} does not exist",
-                        view.value()
-                    )));
-                };
-                let offset = match what {
-                    "indices" => s.indices.byte_offset.0,
-                    _ => s.values.byte_offset.0,
-                };
-                let need = offset.saturating_add(size.saturating_mul(s.count.0));
-                if need > v.byte_length.0 {
-                    return Err(e(format!(
-                        "sparse {what} need {need} bytes; bufferView {} has {}",
-                        view.value(),
-                        v.byte_length.0
-                    )));
-                }
-            }
+            check_sparse_ranges(root, s, count, elem).map_err(e)?;
+        }
+    }
+    Ok(())
+}
+
+/// An accessor's `count` elements of `elem` bytes lie inside its buffer view (at a stride of at
+/// least `elem`), or without a view take at most `budget` bytes.
+fn check_elements(
+    root: &json::Root,
+    a: &json::Accessor,
+    elem: u64,
+    budget: u64,
+) -> Result<(), String> {
+    let count = a.count.0;
+    let Some(view) = a.buffer_view else {
+        let bytes = count.saturating_mul(elem);
+        if bytes > budget {
+            return Err(format!(
+                "{count} elements without a bufferView would take {bytes} bytes, more than {budget} for a file this size"
+            ));
+        }
+        return Ok(());
+    };
+    let Some(v) = root.buffer_views.get(view.value()) else {
+        return Err(format!("bufferView {} does not exist", view.value()));
+    };
+    let stride = v.byte_stride.map_or(elem, |s| s.0 as u64);
+    if stride < elem {
+        return Err(format!(
+            "bufferView {} has byteStride {stride}, less than the {elem}-byte elements",
+            view.value()
+        ));
+    }
+    let offset = a.byte_offset.map_or(0, |o| o.0);
+    let need = offset
+        .saturating_add(stride.saturating_mul(count - 1))
+        .saturating_add(elem);
+    if need > v.byte_length.0 {
+        return Err(format!(
+            "{count} elements of {elem} bytes (stride {stride}, offset {offset}) need {need} bytes; bufferView {} has {}",
+            view.value(),
+            v.byte_length.0
+        ));
+    }
+    Ok(())
+}
+
+/// A sparse accessor's (of `count` elements of `elem` bytes) substitutions: at most `count`,
+/// unsigned indices, indices and values inside their buffer views.
+fn check_sparse_ranges(
+    root: &json::Root,
+    s: &json::accessor::sparse::Sparse,
+    count: u64,
+    elem: u64,
+) -> Result<(), String> {
+    if s.count.0 > count {
+        return Err(format!("sparse count {} exceeds count {count}", s.count.0));
+    }
+    let Some(json::accessor::IndexComponentType(ty)) = valid(&s.indices.component_type) else {
+        return Err("sparse indices have an invalid component type".into());
+    };
+    if !matches!(
+        ty,
+        json::accessor::ComponentType::U8
+            | json::accessor::ComponentType::U16
+            | json::accessor::ComponentType::U32
+    ) {
+        return Err(format!(
+            "sparse indices are {ty:?}; glTF 2.0 allows unsigned"
+        ));
+    }
+    for (what, view, size, offset) in [
+        (
+            "indices",
+            s.indices.buffer_view,
+            ty.size() as u64,
+            s.indices.byte_offset.0,
+        ),
+        ("values", s.values.buffer_view, elem, s.values.byte_offset.0),
+    ] {
+        let Some(v) = root.buffer_views.get(view.value()) else {
+            return Err(format!(
+                "sparse {what} bufferView {} does not exist",
+                view.value()
+            ));
+        };
+        let need = offset.saturating_add(size.saturating_mul(s.count.0));
+        if need > v.byte_length.0 {
+            return Err(format!(
+                "sparse {what} need {need} bytes; bufferView {} has {}",
+                view.value(),
+                v.byte_length.0
+            ));
         }
     }
     Ok(())
@@ -339,11 +332,11 @@ fn check_meshes(
     path: &Path,
     root: &json::Root,
     warnings: &mut Vec<String>,
-) -> Result<(), BakeError> {
+) -> Result<(), SceneError> {
     let accessors = root.accessors.len();
     for (m, mesh) in root.meshes.iter().enumerate() {
         for (p, prim) in mesh.primitives.iter().enumerate() {
-            let e = |message: String| BakeError::Primitive {
+            let e = |message: String| SceneError::Primitive {
                 path: path.to_owned(),
                 mesh: m.to_string(),
                 primitive: p,
@@ -419,7 +412,7 @@ fn mesh_triangles(root: &json::Root, mesh: &json::Mesh) -> u64 {
 }
 
 /// Checks the node graph; returns the triangles it instances.
-fn check_nodes(path: &Path, root: &json::Root) -> Result<u64, BakeError> {
+fn check_nodes(path: &Path, root: &json::Root) -> Result<u64, SceneError> {
     let n = root.nodes.len();
     for (i, node) in root.nodes.iter().enumerate() {
         let trs = node.translation.is_some() || node.rotation.is_some() || node.scale.is_some();
@@ -442,6 +435,23 @@ fn check_nodes(path: &Path, root: &json::Root) -> Result<u64, BakeError> {
             ));
         }
     }
+    let (visits, triangles) = instanced(root);
+    if triangles > MAX_TRIANGLES || visits > MAX_NODE_VISITS {
+        return Err(err(
+            path,
+            format!(
+                "the node graph instances {visits} nodes and {triangles} triangles (nodes shared by several parents), more than {MAX_NODE_VISITS} nodes or {MAX_TRIANGLES} triangles"
+            ),
+        ));
+    }
+    Ok(triangles)
+}
+
+/// The node visits and triangles the scene's node graph instances: the default scene's roots
+/// (else the first scene's; without scenes every node that is no other's child), as the loader
+/// visits them.
+fn instanced(root: &json::Root) -> (u64, u64) {
+    let n = root.nodes.len();
     // Node visits and triangles per node subtree (memoised; a cycle counts as 0 here and is
     // refused by the loader's depth limit): instancing (nodes shared by several parents)
     // multiplies both, and visiting 2^40 empty nodes hangs as surely as 2^40 triangles.
@@ -493,22 +503,13 @@ fn check_nodes(path: &Path, root: &json::Root) -> Result<u64, BakeError> {
             (0..n).filter(|&i| !is_child[i]).collect()
         }
     };
-    let (visits, triangles) = roots.iter().fold((0u64, 0u64), |acc, &r| {
+    roots.iter().fold((0u64, 0u64), |acc, &r| {
         let (v, t) = count(root, r, &mut memo, 0);
         (acc.0.saturating_add(v), acc.1.saturating_add(t))
-    });
-    if triangles > MAX_TRIANGLES || visits > MAX_NODE_VISITS {
-        return Err(err(
-            path,
-            format!(
-                "the node graph instances {visits} nodes and {triangles} triangles (nodes shared by several parents), more than {MAX_NODE_VISITS} nodes or {MAX_TRIANGLES} triangles"
-            ),
-        ));
-    }
-    Ok(triangles)
+    })
 }
 
-fn check_materials(path: &Path, root: &json::Root) -> Result<(), BakeError> {
+fn check_materials(path: &Path, root: &json::Root) -> Result<(), SceneError> {
     for (i, m) in root.materials.iter().enumerate() {
         let name = m
             .name
@@ -538,7 +539,7 @@ pub fn check_sparse(
     path: &Path,
     root: &json::Root,
     buffers: &[gltf::buffer::Data],
-) -> Result<(), BakeError> {
+) -> Result<(), SceneError> {
     for (i, a) in root.accessors.iter().enumerate() {
         let Some(s) = &a.sparse else { continue };
         let v = &root.buffer_views[s.indices.buffer_view.value()];
@@ -571,122 +572,4 @@ pub fn check_sparse(
         }
     }
     Ok(())
-}
-
-/// Decodes the images materials sample to 8-bit RGBA (16-bit and float channels are converted
-/// by the image crate), with its allocation limit set to [`allocation_budget`] of the image's
-/// encoded size: a small file that claims a huge image is refused before it is decoded.
-pub fn decode_images(
-    path: &Path,
-    base: &Path,
-    doc: &gltf::Document,
-    buffers: &[gltf::buffer::Data],
-) -> Result<Vec<Image>, BakeError> {
-    // Only what the bake samples: base colour and emissive. Normal, occlusion and
-    // metallic-roughness maps are never decoded (they could only fail the bake).
-    let mut used = vec![false; doc.images().len()];
-    for m in doc.materials() {
-        let pbr = m.pbr_metallic_roughness();
-        let textures = [
-            pbr.base_color_texture().map(|t| t.texture()),
-            m.emissive_texture().map(|t| t.texture()),
-        ];
-        for t in textures.into_iter().flatten() {
-            if let Some(u) = used.get_mut(t.source().index()) {
-                *u = true;
-            }
-        }
-    }
-    doc.images()
-        .map(|img| {
-            if !used[img.index()] {
-                return Ok(Image {
-                    width: 1,
-                    height: 1,
-                    texels: vec![[255; 4]],
-                });
-            }
-            let uri = match img.source() {
-                gltf::image::Source::Uri { uri, .. } if !uri.starts_with("data:") => uri.to_owned(),
-                gltf::image::Source::Uri { .. } => "data URI".to_owned(),
-                gltf::image::Source::View { .. } => "buffer view".to_owned(),
-            };
-            let fail = |message: String| BakeError::Image {
-                path: path.to_owned(),
-                index: img.index(),
-                uri: uri.clone(),
-                message,
-            };
-            let (bytes, mime) = encoded_image(base, &img, buffers).map_err(&fail)?;
-            decode(&bytes, mime.as_deref()).map_err(&fail)
-        })
-        .collect()
-}
-
-/// The encoded bytes of `img` and its MIME type, if stated.
-fn encoded_image(
-    base: &Path,
-    img: &gltf::Image,
-    buffers: &[gltf::buffer::Data],
-) -> Result<(Vec<u8>, Option<String>), String> {
-    match img.source() {
-        gltf::image::Source::Uri { uri, mime_type } => {
-            if let Some(rest) = uri.strip_prefix("data:") {
-                let (meta, payload) = rest.split_once(',').ok_or("a data URI without a comma")?;
-                let Some(mime) = meta.strip_suffix(";base64") else {
-                    return Err("only base64 data URIs are read".into());
-                };
-                let bytes =
-                    base64::decode(payload).map_err(|e| format!("data URI: base64: {e}"))?;
-                let mime = Some(mime).filter(|m| !m.is_empty()).or(mime_type);
-                Ok((bytes, mime.map(str::to_owned)))
-            } else {
-                let file = external_file(base, uri)?;
-                let bytes = std::fs::read(&file).map_err(|e| format!("{}: {e}", file.display()))?;
-                Ok((bytes, mime_type.map(str::to_owned)))
-            }
-        }
-        gltf::image::Source::View { view, mime_type } => {
-            let data = buffers
-                .get(view.buffer().index())
-                .ok_or("its buffer was not loaded")?;
-            let bytes = data
-                .0
-                .get(view.offset()..view.offset() + view.length())
-                .ok_or("its buffer view runs past the buffer")?;
-            Ok((bytes.to_vec(), Some(mime_type.to_owned())))
-        }
-    }
-}
-
-fn decode(bytes: &[u8], mime: Option<&str>) -> Result<Image, String> {
-    use image::ImageFormat;
-    let format = match mime {
-        Some("image/png") => ImageFormat::Png,
-        Some("image/jpeg") => ImageFormat::Jpeg,
-        _ => match image::guess_format(bytes) {
-            Ok(f @ (ImageFormat::Png | ImageFormat::Jpeg)) => f,
-            _ => return Err(format!("not a PNG or JPEG image (MIME type {mime:?})")),
-        },
-    };
-    let budget = allocation_budget(bytes.len() as u64);
-    let reader = image::ImageReader::with_format(Cursor::new(bytes), format);
-    let (w, h) = reader.into_dimensions().map_err(|e| e.to_string())?;
-    let decoded = u64::from(w) * u64::from(h) * 4;
-    if decoded > budget {
-        return Err(format!(
-            "{w} x {h} pixels would take {decoded} bytes decoded from {} encoded, more than {budget}",
-            bytes.len()
-        ));
-    }
-    let mut reader = image::ImageReader::with_format(Cursor::new(bytes), format);
-    let mut limits = image::Limits::default();
-    limits.max_alloc = Some(budget);
-    reader.limits(limits);
-    let rgba = reader.decode().map_err(|e| e.to_string())?.to_rgba8();
-    Ok(Image {
-        width: w,
-        height: h,
-        texels: rgba.pixels().map(|p| p.0).collect(),
-    })
 }
