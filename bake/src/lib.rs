@@ -3,16 +3,16 @@
 //! The pipeline, one module per stage:
 //!
 //! 1. [`scene`]: load the glTF (transforms, primitives, materials, textures, lights).
-//! 2. [`bvh`]: one PLOC build gives the 8-wide BVH the probes' ray packets are traced through
-//!    ([`bvh8`]) and the BVH2 the asset carries.
+//! 2. [`accel`]: one PLOC build gives the 8-wide BVH the probes' ray packets are traced through
+//!    ([`accel::bvh8`]) and the BVH2 the asset carries.
 //! 3. [`probes`]: a regular grid over the scene bounds or `bounds`.
 //! 4. [`trace`]: each probe shoots the N directions of the spherical Fibonacci lattice; hits
 //!    become surfel samples (position, normal, albedo, emission, back-face flag), misses set bits
 //!    of the probe's sky mask. Probes whose rays mostly hit back faces are inside geometry and
 //!    marked invalid.
-//! 5. [`bricks`]: hits are folded into normal-keyed bricks and merged into surfels as they
+//! 5. [`merge`]: hits are folded into normal-keyed bricks and merged into surfels as they
 //!    arrive, block by block of probes ([`stream`]), never all held at once.
-//! 6. [`factors`]: per probe, (brick, ray count, SH9 transfer) rows from its own rays.
+//! 6. [`tables`]: per probe, (brick, ray count, SH9 transfer) rows from its own rays.
 //! 7. The asset is assembled, validated and written atomically (`prt_format::io`).
 //!
 //! Every stage orders its output by probe, ray, key or index, never by thread timing: the same
@@ -21,23 +21,20 @@
 // SH and colour maths index several parallel arrays with one index; range loops read best.
 #![allow(clippy::needless_range_loop)]
 
-mod brick_index;
-pub mod bricks;
-pub mod bvh;
-pub mod bvh8;
-mod chunked;
+pub mod accel;
 pub mod depth;
 pub mod diagnostics;
 pub mod dilate;
 pub mod error;
-pub mod factors;
 pub mod gltf_check;
+mod memory;
+pub mod merge;
 pub mod offset;
 mod pipeline;
 pub mod probes;
-pub mod row_store;
 pub mod scene;
 pub mod stream;
+pub mod tables;
 pub mod texture;
 pub mod trace;
 
@@ -101,7 +98,7 @@ pub struct BakeSettings {
     /// Bytes of factor rows held in memory between the trace and the table encoding (whole
     /// chunks of 64 KiB to 64 MiB, at least one, and two more while rows are written); past
     /// it the oldest rows wait in a temporary file in [`std::env::temp_dir`] (`TMPDIR`), and
-    /// the asset does not change ([`row_store`]). The rows are what grows with the probe count: 28 bytes a factor at u8,
+    /// the asset does not change ([`tables::row_store`]). The rows are what grows with the probe count: 28 bytes a factor at u8,
     /// 52 at f16 and f32 (Sponza at 1.0 m: 143 MB; at 105k probes 1.0 GB).
     pub row_memory: usize,
 }

@@ -12,9 +12,12 @@ use prt_format::{
     PROBE_DILATED, PROBE_OFFSET, PROBE_VALID, U8_MAX_BRICK,
 };
 
+use crate::accel::bvh;
+use crate::merge::fold as bricks;
+use crate::tables::factors;
 use crate::{
-    bricks, bvh, diagnostics, dilate, factors, offset, probes, scene, stream, texture, trace,
-    BakeError, BakeReport, BakeSettings, Progress, WINDING_WARNING,
+    diagnostics, dilate, offset, probes, scene, stream, texture, trace, BakeError, BakeReport,
+    BakeSettings, Progress, WINDING_WARNING,
 };
 
 /// The bake's stages, in the current thread pool: the asset, not yet validated, and the report.

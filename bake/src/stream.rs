@@ -15,9 +15,9 @@ use glam::Vec3;
 use prt_format::{TransferPrecision, DEPTH_WORDS};
 use rayon::prelude::*;
 
-use crate::bricks::BrickFolder;
 use crate::depth::DepthFilter;
-use crate::factors::{self, RowTable, Rows};
+use crate::merge::fold::BrickFolder;
+use crate::tables::factors::{self, RowTable, Rows};
 use crate::trace::{ProbeRays, Tracer};
 use crate::{BakeError, Progress};
 
@@ -73,7 +73,7 @@ pub struct Keep<'a> {
     /// How factor rows are kept ([`factors::ProbeRows`]).
     pub precision: TransferPrecision,
     /// Bytes of factor rows held in memory; the rest wait in a temporary file
-    /// ([`crate::row_store`]).
+    /// ([`crate::tables::row_store`]).
     pub row_memory: usize,
     /// Whether a probe's factor rows are kept: an invalid probe's table is never encoded (a
     /// dilated probe carries its valid source's), so its rows are not even made.

@@ -5,8 +5,8 @@ use glam::Vec3;
 use prt_format::sh::SH_COUNT;
 use rayon::prelude::*;
 
-use crate::bvh::{SceneBvh, TriangleHit};
-use crate::bvh8::PACKET;
+use crate::accel::bvh::{SceneBvh, TriangleHit};
+use crate::accel::bvh8::PACKET;
 use crate::scene::{Material, Scene};
 use crate::texture;
 
@@ -232,7 +232,7 @@ impl Tracer<'_> {
 /// The lattice's directions in Morton order of their octahedral map: consecutive rays leave a
 /// probe in nearby directions and mostly land in the same bricks (the lattice's own order turns
 /// by the golden angle, 137.5 degrees, from one ray to the next). Rays are traced, eight
-/// consecutive ones to a packet ([`crate::bvh8`]), and their hits merged in this order. Packets
+/// consecutive ones to a packet ([`crate::accel::bvh8`]), and their hits merged in this order. Packets
 /// of rays consecutive in the lattice's own order traced 11-22% slower (`prt bench bake`, Sponza
 /// at 1.9 and 1.0 m); single-ray obvhs traversal ran at about the same speed in either order.
 /// The order changes float sums (sky transfer, surfel means) in their last bits, never which ray

@@ -23,9 +23,9 @@ struct ObvhsTracer {
 }
 
 impl ObvhsTracer {
-    /// In the bake's tracing frame (`scale`, [`prt_bake::bvh::trace_scale`]).
+    /// In the bake's tracing frame (`scale`, [`prt_bake::accel::bvh::trace_scale`]).
     fn build(triangles: &[[Vec3; 3]], scale: f32) -> ObvhsTracer {
-        let tris = prt_bake::bvh::traced_triangles(triangles, scale);
+        let tris = prt_bake::accel::bvh::traced_triangles(triangles, scale);
         let cwbvh = build_cwbvh_from_tris(
             &tris,
             BvhBuildParams::medium_build(),
@@ -95,12 +95,17 @@ fn bare(scene: &Path, asset: &prt_format::Asset, rays: u32) -> Result<Bare> {
     });
     // The bake's BVH: built with the preset the bake chose for these rays.
     let traced = probes.len() as u64 * u64::from(rays);
-    let (bvh, ()) =
-        prt_bake::bvh::SceneBvh::build_checked(&loaded.triangles, scale, traced, None, || ())?;
+    let (bvh, ()) = prt_bake::accel::bvh::SceneBvh::build_checked(
+        &loaded.triangles,
+        scale,
+        traced,
+        None,
+        || (),
+    )?;
     let packets = [&coherent, lattice].map(|order| {
         timed(probes, &|p| {
             order
-                .chunks(prt_bake::bvh8::PACKET)
+                .chunks(prt_bake::accel::bvh8::PACKET)
                 .map(|packet| {
                     let d: Vec<Vec3> = packet.iter().map(|&i| dirs[i as usize]).collect();
                     let hits = bvh.closest_hits(p, &d, f32::INFINITY);
@@ -129,7 +134,7 @@ struct Rays {
 impl Rays {
     fn of(asset: &prt_format::Asset, rays: u32) -> Rays {
         Rays {
-            scale: prt_bake::bvh::trace_scale(asset.header.grid.spacing),
+            scale: prt_bake::accel::bvh::trace_scale(asset.header.grid.spacing),
             dirs: prt_format::directions::fibonacci_directions(rays)
                 .into_iter()
                 .map(Vec3::from)
@@ -428,7 +433,7 @@ fn baseline_rows(md: &mut String, bare: &Bare, rays: f64, bake_s: f64) -> Result
     writeln!(
         md,
         "| bare packet tracing, the bake's BVH8 and order ({} rays a packet, {} hits) | {} |",
-        prt_bake::bvh8::PACKET,
+        prt_bake::accel::bvh8::PACKET,
         packets.1,
         timed(packets)
     )?;

@@ -20,8 +20,8 @@ use glam::{DMat3, DVec3, Vec3};
 use prt_format::{Brick, Surfel, BRICK_BACKFACE};
 use rayon::prelude::*;
 
-use crate::brick_index::{BrickIndex, MAX_BRICKS};
-use crate::chunked::Chunked;
+use crate::merge::index::{BrickIndex, MAX_BRICKS};
+use crate::memory::chunked::Chunked;
 use crate::trace::Hit;
 use crate::BakeError;
 

@@ -17,11 +17,11 @@ use prt_format::{
 use bytemuck::Pod;
 use rayon::prelude::*;
 
-use crate::row_store::RowStore;
+use crate::tables::row_store::RowStore;
 use crate::trace::Hit;
 use crate::BakeError;
 
-/// Factor rows of one probe while bricks are provisional ([`crate::bricks::BrickFolder`]):
+/// Factor rows of one probe while bricks are provisional ([`crate::merge::fold::BrickFolder`]):
 /// one per provisional brick its rays hit, each row's sums taken ray by ray in lattice order,
 /// kept in the form `precision` keeps them ([`ProbeRows`]); rows in the order of their first
 /// rays (encoding sorts them by final brick).
@@ -420,7 +420,7 @@ fn place_tables<R: Pod + Sync + Send, T: bytemuck::Zeroable + Copy + Send + Sync
 fn prefetch_placed(bricks: impl Iterator<Item = usize>, placed: &[Placed]) {
     for b in bricks {
         if let Some(p) = placed.get(b) {
-            crate::bricks::prefetch(p);
+            crate::merge::fold::prefetch(p);
         }
     }
 }

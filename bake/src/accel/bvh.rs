@@ -3,7 +3,7 @@
 //! Construction", 2018, with parallel reinsertion):
 //!
 //! - an uncompressed 8-wide BVH that the bake traces its probe rays with, a packet of rays
-//!   from one probe at a time ([`crate::bvh8`]);
+//!   from one probe at a time ([`crate::accel::bvh8`]);
 //! - the binary BVH it was made from, flattened with children after parents and triangles in
 //!   leaf order, which the asset carries so that the runtime (CPU reference and WGSL alike) can
 //!   trace shadow rays with a plain stack traversal.
@@ -21,12 +21,12 @@ use obvhs::{
 use prt_format::{BvhNode, Geometry};
 use rayon::prelude::*;
 
-use crate::bvh8::{Bvh8, PACKET};
+use crate::accel::bvh8::{Bvh8, PACKET};
 
 /// The power of two nearest `1 / spacing`: the bake traces in a frame where the probe spacing is
 /// about one unit. The triangle test's normal and `ng . (v0 - origin)` grow with the square and
 /// the cube of the coordinates (a quad scaled by 1e19 overflows f32 in metres), and obvhs 0.4's
-/// traversal, which the bake used before [`crate::bvh8`], clamped box entry distances to an
+/// traversal, which the bake used before [`crate::accel::bvh8`], clamped box entry distances to an
 /// absolute 1e-4. Scaled by a power of two, every float operation of the build and traversal is
 /// the same at any scene scale short of overflow, so results do not depend on the scale
 /// (tests/tests/scale.rs).
@@ -196,7 +196,7 @@ impl SceneBvh {
 
     /// [`SceneBvh::build_beside`], with a panic inside obvhs ended as an error naming the
     /// scene's extent in metres (0.4's CWBVH conversion, which the bake used before
-    /// [`crate::bvh8`], indexed out of bounds on boxes near f32's range, e.g. a quad scaled by
+    /// [`crate::accel::bvh8`], indexed out of bounds on boxes near f32's range, e.g. a quad scaled by
     /// 1e19; `tests/tests/hostile.rs`). A panic of `beside` is reported the same way.
     pub fn build_checked<R: Send>(
         triangles: &[[Vec3; 3]],
@@ -385,7 +385,7 @@ fn prefetch_lines(bytes: &[u8]) {
     debug_assert!(bytes.len() <= 128);
     for at in [0, 64, bytes.len().saturating_sub(1)] {
         if let Some(b) = bytes.get(at) {
-            crate::bricks::prefetch(b);
+            crate::merge::fold::prefetch(b);
         }
     }
 }

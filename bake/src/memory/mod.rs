@@ -1,0 +1,3 @@
+//! Memory plumbing shared by the stages.
+
+pub(crate) mod chunked;
