@@ -5,6 +5,9 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
+/// Fraction of shared edges with inconsistent winding above which the bake warns.
+pub(crate) const WINDING_WARNING: f64 = 0.01;
+
 /// Shared edges of a mesh, and how many of them both of their triangles walk the same way.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Winding {

@@ -17,7 +17,7 @@ use crate::merge::fold as bricks;
 use crate::tables::factors;
 use crate::{
     diagnostics, dilate, offset, probes, scene, stream, texture, trace, BakeError, BakeReport,
-    BakeSettings, Progress, WINDING_WARNING,
+    BakeSettings, Progress,
 };
 
 /// The bake's stages, in the current thread pool: the asset, not yet validated, and the report.
@@ -133,7 +133,7 @@ fn bvh_stage(
             (!settings.double_sided).then(|| diagnostics::winding(&scene.triangles))
         })?;
     let winding_hint = match &winding {
-        Some(w) if w.inconsistent_fraction() > WINDING_WARNING => {
+        Some(w) if w.inconsistent_fraction() > diagnostics::WINDING_WARNING => {
             let warning = diagnostics::winding_warning(w);
             report.warnings.insert(loaded.winding_warning_at, warning);
             true
