@@ -79,23 +79,6 @@ pub struct BakeReport {
     pub rows_spilled: u64,
 }
 
-/// `items` cut into consecutive runs of `lens` items (summing to at most `items.len()`), each
-/// with the index of its first item: a table filled run by run in parallel.
-pub(crate) fn split_runs<'a, T>(
-    mut items: &'a mut [T],
-    lens: &[usize],
-) -> Vec<(usize, &'a mut [T])> {
-    let mut runs = Vec::with_capacity(lens.len());
-    let mut start = 0;
-    for &len in lens {
-        let (run, rest) = std::mem::take(&mut items).split_at_mut(len);
-        runs.push((start, run));
-        items = rest;
-        start += len;
-    }
-    runs
-}
-
 /// Runs `f`, turning a panic inside a dependency (the gltf crate's readers, obvhs) into its
 /// message, for an error that names the input instead of a crash. The default report of a panic
 /// is suppressed while any such call runs: the panic hook is process-wide (a panic elsewhere in

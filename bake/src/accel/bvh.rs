@@ -22,6 +22,7 @@ use prt_format::{BvhNode, Geometry};
 use rayon::prelude::*;
 
 use crate::accel::bvh8::{Bvh8, PACKET};
+use crate::memory::{prefetch_lines, written};
 
 /// The power of two nearest `1 / spacing`: the bake traces in a frame where the probe spacing is
 /// about one unit. The triangle test's normal and `ng . (v0 - origin)` grow with the square and
@@ -112,11 +113,6 @@ impl PlocMemory {
     /// Morton codes (two 64-bit codes a slot with obvhs' `SortPrecision::U64`, which both build
     /// presets the bake uses take), and the nodes.
     pub fn faulted(n: usize) -> PlocMemory {
-        fn written<T: Copy>(len: usize, value: T) -> Vec<T> {
-            let mut v = Vec::with_capacity(len);
-            v.resize(len, value);
-            v
-        }
         let node = Bvh2Node::default();
         let mut builder = PlocBuilder::new();
         builder.current_nodes = written(n, node);
@@ -377,16 +373,6 @@ pub(crate) fn prefetch_children(bvh2: &Bvh2, i: usize) {
     let first = bvh2.nodes[i].first_index as usize;
     if let Some(pair) = bvh2.nodes.get(first..first + 2) {
         prefetch_lines(bytemuck::cast_slice(pair));
-    }
-}
-
-/// Asks for every cache line of `bytes` (at most 128 of them: its first, 64th and last bytes).
-fn prefetch_lines(bytes: &[u8]) {
-    debug_assert!(bytes.len() <= 128);
-    for at in [0, 64, bytes.len().saturating_sub(1)] {
-        if let Some(b) = bytes.get(at) {
-            crate::merge::fold::prefetch(b);
-        }
     }
 }
 

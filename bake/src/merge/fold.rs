@@ -22,6 +22,7 @@ use rayon::prelude::*;
 
 use crate::merge::index::{BrickIndex, MAX_BRICKS};
 use crate::memory::chunked::Chunked;
+use crate::memory::{prefetch, split_runs};
 use crate::trace::Hit;
 use crate::BakeError;
 
@@ -341,7 +342,7 @@ impl BrickFolder {
         // Zeroed by the allocator, not filled here: the pages are first touched by the parallel
         // writes below (a serial fill took 1.3% of a 1.9 m Sponza bake, one thread).
         let mut surfels: Vec<Surfel> = bytemuck::zeroed_vec(counts.iter().sum());
-        let runs = crate::split_runs(&mut surfels, &counts);
+        let runs = split_runs(&mut surfels, &counts);
         let bricks: Vec<Brick> = order
             .par_iter()
             .zip(runs)
@@ -362,26 +363,6 @@ impl BrickFolder {
             .collect();
         (Bricked { bricks, surfels }, remap)
     }
-}
-
-/// Asks for the cache line holding `item` without waiting for it (`prefetcht0`).
-#[cfg(all(target_arch = "x86_64", target_feature = "sse"))]
-#[inline(always)]
-pub(crate) fn prefetch<T>(item: &T) {
-    use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-    let p: *const T = item;
-    // SAFETY: SSE is part of the x86-64 baseline, and a prefetch reads nothing and never faults.
-    unsafe { _mm_prefetch::<_MM_HINT_T0>(p.cast()) };
-}
-
-/// Loads the cache line holding `item` (its first byte, which the compiler may not drop):
-/// where there is no prefetch instruction, independent loads still overlap their misses.
-#[cfg(not(all(target_arch = "x86_64", target_feature = "sse")))]
-#[inline(always)]
-pub(crate) fn prefetch<T>(item: &T) {
-    let p: *const T = item;
-    // SAFETY: `p` comes from a reference, so its first byte is valid to read.
-    std::hint::black_box(unsafe { std::ptr::read_volatile(p.cast::<u8>()) });
 }
 
 /// `v.floor() as i32` (saturating, NaN to 0) by truncation: the baseline x86-64 target has no

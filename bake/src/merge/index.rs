@@ -5,7 +5,7 @@
 //! 6.5 M hits at Sponza's 1.0 m spacing) in a table far larger than the caches.
 //! A lookup in foldhash's `HashMap` read a line of control bytes, then the line of the entry:
 //! two dependent cache misses. Here the fold hashes every run of a probe first and asks for
-//! their slots' lines together ([`BrickIndex::home`], [`crate::merge::fold::prefetch`]), then looks
+//! their slots' lines together ([`BrickIndex::home`], [`crate::memory::prefetch`]), then looks
 //! them up in order ([`BrickIndex::find`]). Hashing the key through foldhash's `Hasher` (the
 //! cell as a slice, length first, then the flags) cost more than the lookups: the fold's key
 //! and lookup part took 547 ms with the `HashMap`, 545 ms with this table and that hash, 470 ms
@@ -88,7 +88,7 @@ impl BrickIndex {
     #[inline]
     pub fn home(&self, key: &Key) -> usize {
         let i = self.hash([key.0, key.1, key.2], key.3) & (self.slots.len() - 1);
-        crate::merge::fold::prefetch(&self.slots[i]);
+        crate::memory::prefetch(&self.slots[i]);
         i
     }
 

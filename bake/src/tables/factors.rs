@@ -381,7 +381,7 @@ fn place_tables<R: Pod + Sync + Send, T: bytemuck::Zeroable + Copy + Send + Sync
         "a row entry per probe"
     );
     let mut out: Vec<T> = bytemuck::zeroed_vec(carried.lens.iter().sum());
-    let places = crate::split_runs(&mut out, carried.lens);
+    let places = crate::memory::split_runs(&mut out, carried.lens);
     let starts: Vec<usize> = places.iter().map(|&(start, _)| start).collect();
     let mut places = places.into_iter();
     rows.drain(|first, runs, chunk| {
@@ -420,7 +420,7 @@ fn place_tables<R: Pod + Sync + Send, T: bytemuck::Zeroable + Copy + Send + Sync
 fn prefetch_placed(bricks: impl Iterator<Item = usize>, placed: &[Placed]) {
     for b in bricks {
         if let Some(p) = placed.get(b) {
-            crate::merge::fold::prefetch(p);
+            crate::memory::prefetch(p);
         }
     }
 }
