@@ -6,10 +6,7 @@
 //!   from one probe at a time ([`crate::accel::bvh8`]);
 //! - the binary BVH it was made from, flattened with children after parents and triangles in
 //!   leaf order, which the asset carries so that the runtime (CPU reference and WGSL alike) can
-//!   trace shadow rays with a plain stack traversal.
-
-use crate::error::BakeError;
-use std::collections::VecDeque;
+//!   trace shadow rays with a plain stack traversal ([`crate::accel::asset`]).
 
 use glam::Vec3;
 use obvhs::{
@@ -18,11 +15,14 @@ use obvhs::{
     triangle::Triangle,
     BvhBuildParams,
 };
-use prt_format::{BvhNode, Geometry};
+use prt_format::Geometry;
 use rayon::prelude::*;
 
+use crate::accel::asset::flatten;
 use crate::accel::bvh8::{Bvh8, PACKET};
-use crate::memory::{prefetch_lines, written};
+use crate::accel::leaf_order::LeafOrder;
+use crate::error::BakeError;
+use crate::memory::written;
 
 /// The power of two nearest `1 / spacing`: the bake traces in a frame where the probe spacing is
 /// about one unit. The triangle test's normal and `ng . (v0 - origin)` grow with the square and
@@ -281,143 +281,5 @@ impl Near<'_> {
             .bvh8
             .closest_hit_among(&self.leaves, origin * scale, dir, tmax * scale);
         bvh.unscaled(hit)
-    }
-}
-
-/// Most triangles in a leaf of the asset's BVH: subtrees of at most this many become one leaf.
-/// PLOC leaves hold one triangle each, so without collapsing the node array was larger than the
-/// triangles (Sponza: 12.0 MB of nodes for 9.0 MB of triangles). With 4: 4.4 MB of nodes, and
-/// the CPU relight of Sponza's default bake with 32 lights took 0.25 s either way (measured with
-/// `prt relight`, README "Bake throughput").
-pub const LEAF_TRIANGLES: u32 = 4;
-
-/// The binary BVH's triangles in leaf order, left subtree before right, from one walk over it:
-/// every subtree's triangles are then a run of them ([`LeafOrder::under`]), so the two
-/// collapses read a leaf's triangles from one run instead of walking its subtree again. The
-/// reinsertion optimiser leaves no order between parents and children in the node array, so
-/// a walk over it is about a cache miss a node. Counting each subtree's triangles in one walk
-/// and then walking every leaf's subtree again in both collapses, Sponza's BVH stage at 1.9 m
-/// took 0.154-0.201 s on one thread against 0.141-0.188 s now (eight alternating bakes each,
-/// release build; on two threads the collapse shares the time with the winding check of a
-/// single-sided bake, and the stage took about as long either way).
-pub(crate) struct LeafOrder {
-    /// Per node reachable from the root: the triangles under it.
-    pub below: Vec<u32>,
-    /// Per node reachable from the root: where its run starts in `triangles`.
-    first: Vec<u32>,
-    /// Triangle indices (the scene's), leaf after leaf.
-    triangles: Vec<u32>,
-}
-
-impl LeafOrder {
-    pub(crate) fn of(bvh2: &Bvh2) -> LeafOrder {
-        let mut order = LeafOrder {
-            below: vec![0; bvh2.nodes.len()],
-            first: vec![0; bvh2.nodes.len()],
-            triangles: Vec::with_capacity(bvh2.primitive_indices.len()),
-        };
-        let mut stack = vec![(0usize, false)];
-        while let Some((i, children_done)) = stack.pop() {
-            let n = &bvh2.nodes[i];
-            if children_done {
-                let l = n.first_index as usize;
-                order.below[i] = order.below[l].saturating_add(order.below[l + 1]);
-            } else if n.is_leaf() {
-                order.first[i] = order.triangles.len() as u32;
-                order.below[i] = n.prim_count;
-                let prims = n.first_index as usize..(n.first_index + n.prim_count) as usize;
-                order
-                    .triangles
-                    .extend_from_slice(&bvh2.primitive_indices[prims]);
-            } else {
-                order.first[i] = order.triangles.len() as u32;
-                // The grandchildren asked for now: the walk reaches the left ones next and the
-                // right ones later, and each read of a node waits for the one before.
-                let l = n.first_index as usize;
-                for c in [l, l + 1] {
-                    if !bvh2.nodes[c].is_leaf() {
-                        prefetch_children(bvh2, c);
-                    }
-                }
-                stack.push((i, true));
-                // Right pushed first, so the left subtree's triangles come first.
-                stack.push((l + 1, false));
-                stack.push((l, false));
-            }
-        }
-        order
-    }
-
-    /// The triangles under `node`, in leaf order.
-    pub(crate) fn under(&self, node: usize) -> &[u32] {
-        let first = self.first[node] as usize;
-        &self.triangles[first..first + self.below[node] as usize]
-    }
-}
-
-/// How far ahead in its queue [`flatten`] asks for the node it will read: the queue of a
-/// breadth-first walk says which nodes come next, so their cache misses can overlap.
-const PREFETCH_AHEAD: usize = 8;
-
-/// Asks for inner node `i`'s two children: every cache line of the pair (64 bytes from a 16-byte
-/// boundary with obvhs' `small_bvh2_node`: one or two lines, so its first and last bytes; 96 bytes
-/// without it, hence also the 64th). The reinsertion optimiser leaves the node array in no order a
-/// walk could stream, so each walk over the binary tree ([`LeafOrder::of`], [`flatten`], the wide
-/// BVH's collapse) waited for a miss a node. With the children of the nodes in sight asked for
-/// ahead, Sponza's collapse (all three, with the winding check of a single-sided bake beside them,
-/// 2 threads) took 31.9-35.9 ms against 36.4-39.7 ms asking for each child's first line only (least
-/// of 15 builds in one process, three alternating runs each); asking for every line, the collapse
-/// alone took 39.9-49.6 ms against 46.2-53.7 ms for the first lines (least of 20, four alternating
-/// runs, a slower sitting).
-pub(crate) fn prefetch_children(bvh2: &Bvh2, i: usize) {
-    let first = bvh2.nodes[i].first_index as usize;
-    if let Some(pair) = bvh2.nodes.get(first..first + 2) {
-        prefetch_lines(bytemuck::cast_slice(pair));
-    }
-}
-
-/// Renumbers the BVH2 breadth first (children pairs consecutive and after their parent),
-/// collapses subtrees of at most [`LEAF_TRIANGLES`] triangles into one leaf, and lays the
-/// triangles out in leaf order, back in world units (boxes times `unscale`, exact for a power of
-/// two).
-fn flatten(bvh2: &Bvh2, order: &LeafOrder, triangles: &[[Vec3; 3]], unscale: f32) -> Geometry {
-    let mut nodes: Vec<BvhNode> = Vec::with_capacity(bvh2.nodes.len());
-    let mut tris = Vec::with_capacity(triangles.len());
-    let mut queue = VecDeque::from([0usize]);
-    while let Some(src) = queue.pop_front() {
-        if let Some(&ahead) = queue.get(PREFETCH_AHEAD) {
-            prefetch_lines(bytemuck::bytes_of(&bvh2.nodes[ahead]));
-        }
-        let n = &bvh2.nodes[src];
-        let aabb = n.aabb();
-        let mut out = BvhNode {
-            min: (aabb.min * unscale).to_array(),
-            max: (aabb.max * unscale).to_array(),
-            count: 0,
-            first: 0,
-        };
-        if n.is_leaf() || order.below[src] <= LEAF_TRIANGLES {
-            out.first = tris.len() as u32;
-            tris.extend(order.under(src).iter().map(|&p| {
-                let t = triangles[p as usize];
-                prt_format::Triangle {
-                    v0: t[0].to_array(),
-                    v1: t[1].to_array(),
-                    v2: t[2].to_array(),
-                    ..Default::default()
-                }
-            }));
-            out.count = tris.len() as u32 - out.first;
-        } else {
-            // Children land at the next two free slots, in queue order.
-            out.first = (nodes.len() + queue.len() + 1) as u32;
-            queue.push_back(n.first_index as usize);
-            queue.push_back(n.first_index as usize + 1);
-        }
-        nodes.push(out);
-    }
-    Geometry {
-        nodes,
-        triangles: tris,
     }
 }

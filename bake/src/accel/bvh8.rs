@@ -30,7 +30,7 @@ use glam::{BVec4A, Vec3, Vec4};
 use obvhs::{bvh2::Bvh2, triangle::Triangle};
 use rayon::prelude::*;
 
-use crate::accel::bvh::LeafOrder;
+use crate::accel::leaf_order::{prefetch_children, LeafOrder};
 
 /// Children in a node.
 pub const LANES: usize = 8;
@@ -528,10 +528,10 @@ fn open(bvh2: &Bvh2, below: &[u32], node: usize) -> ([usize; LANES], usize) {
     // area is at least its own: ties go to the first, and a kid whose area is NaN (a box with
     // an infinite side and a zero one) is opened too, so that every inner node is opened and
     // the collapse ends. An inner kid is opened here or becomes a node of the walk: its children
-    // are asked for as soon as it is seen ([`crate::accel::bvh::prefetch_children`]).
+    // are asked for as soon as it is seen ([`prefetch_children`]).
     let area = |i: usize| {
         inner(bvh2, below, i).then(|| {
-            crate::accel::bvh::prefetch_children(bvh2, i);
+            prefetch_children(bvh2, i);
             bvh2.nodes[i].aabb().half_area()
         })
     };
