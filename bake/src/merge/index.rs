@@ -19,7 +19,7 @@
 
 use std::hash::BuildHasher;
 
-use crate::merge::fold::Key;
+use crate::merge::key::Key;
 
 /// Bricks the index can number: the brick shares its slot's last word with the key's flags
 /// (4 bits).
