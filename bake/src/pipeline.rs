@@ -13,7 +13,7 @@ use prt_format::{
 };
 
 use crate::accel::bvh;
-use crate::merge::fold as bricks;
+use crate::merge::fold;
 use crate::tables::factors;
 use crate::{
     diagnostics, dilate, offset, probes, scene, stream, texture, trace, BakeError, BakeReport,
@@ -262,8 +262,8 @@ fn trace_stage(
         bounds: loaded.bounds,
         spacing: grid.spacing,
     };
-    // Half a cell off the origin: see `bricks::BrickFolder::new`.
-    let folder = bricks::BrickFolder::new(
+    // Half a cell off the origin: see `fold::BrickFolder::new`.
+    let folder = fold::BrickFolder::new(
         cell_size,
         settings.merge_normal_cos,
         Vec3::splat(-0.5 * cell_size),
@@ -407,12 +407,12 @@ fn load(
 /// tables the probes carry into the asset's table ([`factors::encode_tables`]), freeing the
 /// rows as it goes; fails when u8 factors cannot address the bricks.
 fn bricks_and_tables(
-    folder: bricks::BrickFolder,
+    folder: fold::BrickFolder,
     tables: factors::Rows,
     carried: factors::Carried,
     settings: &BakeSettings,
     cell_size: f32,
-) -> Result<(bricks::Bricked, Factors), BakeError> {
+) -> Result<(fold::Bricked, Factors), BakeError> {
     let (bricked, remap) = folder.finish();
     let u8_rows = settings.transfer_precision == TransferPrecision::U8;
     if u8_rows && bricked.bricks.len() > U8_MAX_BRICK as usize + 1 {
