@@ -127,7 +127,7 @@ fn bvh_stage(
     let scale = bvh::trace_scale(grid.spacing);
     // Baked double-sided, the winding changes no hit's shading and needs no hint: it is then
     // counted only for the rare warning that names it (most probes inside geometry), not on
-    // every bake (Sponza, 562k edges: about 24 ms of CPU time beside the BVH's collapse).
+    // every bake.
     let (bvh, winding) =
         bvh::SceneBvh::build_checked(&scene.triangles, scale, rays, memory, || {
             (!settings.double_sided).then(|| diagnostics::winding(&scene.triangles))

@@ -54,8 +54,8 @@ pub struct BakeSettings {
     /// Bytes of factor rows held in memory between the trace and the table encoding (whole
     /// chunks of 64 KiB to 64 MiB, at least one, and two more while rows are written); past
     /// it the oldest rows wait in a temporary file in [`std::env::temp_dir`] (`TMPDIR`), and
-    /// the asset does not change ([`crate::tables::row_store`]). The rows are what grows with the probe count: 28 bytes a factor at u8,
-    /// 52 at f16 and f32 (Sponza at 1.0 m: 143 MB; at 105k probes 1.0 GB).
+    /// the asset does not change ([`crate::tables::row_store`]). The rows are what grows with
+    /// the probe count: 28 bytes a factor at u8, 52 at f16 and f32.
     pub row_memory: usize,
 }
 

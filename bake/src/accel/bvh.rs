@@ -51,12 +51,9 @@ pub fn traced_triangles(triangles: &[[Vec3; 3]], scale: f32) -> Vec<Triangle> {
 }
 
 /// Rays per triangle below which [`build_params`] takes obvhs' `fast_build` preset. Against
-/// `medium_build` (a wider PLOC search, more reinsertion), Sponza's 187k triangles, 2 threads,
-/// least of 5-10 alternating bakes: at 1.9 m spacing (8 rays a triangle) the BVH stage took
-/// 0.092 s against 0.108 s and the trace stage 0.354 s against 0.357 s; at 1.4 m (19) 0.088
-/// against 0.122 s and 0.872 against 0.855 s; at 1.0 m (46) 0.085 against 0.106 s and 2.104
-/// against 2.052 s. The build saves about 20-30 ms; the trace loses about 2%, which passes that
-/// at about 25 rays a triangle.
+/// `medium_build` (a wider PLOC search, more reinsertion) it builds faster and gives a tree
+/// that traces about 2% slower: the cheaper build pays until the rays are many enough for that
+/// 2% to pass what it saves, at about 25 rays a triangle.
 pub const FAST_BUILD_RAYS_PER_TRIANGLE: u64 = 24;
 
 /// obvhs' build preset for tracing `rays` rays through `triangles` triangles: the cheaper
@@ -94,15 +91,9 @@ pub(crate) fn ploc(tris: &[Triangle], params: &BvhBuildParams, memory: Option<Pl
 }
 
 /// What obvhs' PLOC builds a binary BVH in, its pages already written, so that the build does
-/// not stop at each first touch of a page. The development machine's kernel takes 2.6 us a
-/// page (`docs/bake_bench_sponza.md`), and PLOC touches its arrays from its serial passes:
-/// Sponza's 187k triangles fault in about 6,600 pages, some 17 ms. The bake makes it beside
-/// the load, whose single thread leaves the pool's other threads idle
-/// ([`crate::scene::load_bytes_declaring`]). Sponza at 1.9 m (dist, twelve alternating bakes
-/// each, twice): the load stage's median 29.5 ms against 19-20.5 ms (it now ends when the
-/// memory is ready), the BVH stage's 80.5-86.5 ms against 105.5-106.5 ms, end to end 538-556 ms
-/// against 565-573 ms; the bricks stage ran 3-7 ms longer (glibc's allocator: with its mmap
-/// threshold fixed, 4 ms) and the peak was 7 MiB higher (168 MiB).
+/// not stop at each first touch of a page: PLOC touches its arrays from its serial passes, where
+/// a page fault holds up every thread. The bake makes it beside the load, whose single thread
+/// leaves the pool's other threads idle ([`crate::scene::load_bytes_declaring`]).
 pub struct PlocMemory {
     builder: PlocBuilder,
     bvh2: Bvh2,
@@ -153,11 +144,9 @@ impl SceneBvh {
     /// `memory` when given, running `beside` on the pool while the binary BVH is collapsed into
     /// the two the bake uses. PLOC and reinsertion take every thread; the collapse (the
     /// triangles put in leaf order by one walk, [`LeafOrder`], then the two trees walked out of
-    /// it side by side) is serial work that leaves room on the pool.
-    /// A single-sided bake runs its winding check there: beside the PLOC build instead, the BVH
-    /// stage took 0.113 s against 0.106 s (Sponza at 1.9 m with `medium_build`, 2 threads,
-    /// least of 8 alternating bakes); with `fast_build`, least of 20 builds in one process,
-    /// 65.6-70.8 ms against 54.7-57.8 ms.
+    /// it side by side) is serial work that leaves room on the pool. A single-sided bake runs
+    /// its winding check there: beside the PLOC build, which takes every thread, it only
+    /// lengthens the stage.
     pub fn build_beside<R: Send>(
         triangles: &[[Vec3; 3]],
         scale: f32,

@@ -9,11 +9,7 @@ use crate::memory::prefetch_lines;
 /// every subtree's triangles are then a run of them ([`LeafOrder::under`]), so the two
 /// collapses read a leaf's triangles from one run instead of walking its subtree again. The
 /// reinsertion optimiser leaves no order between parents and children in the node array, so
-/// a walk over it is about a cache miss a node. Counting each subtree's triangles in one walk
-/// and then walking every leaf's subtree again in both collapses, Sponza's BVH stage at 1.9 m
-/// took 0.154-0.201 s on one thread against 0.141-0.188 s now (eight alternating bakes each,
-/// release build; on two threads the collapse shares the time with the winding check of a
-/// single-sided bake, and the stage took about as long either way).
+/// a walk over it is about a cache miss a node, and one walk is cheaper than three.
 pub(crate) struct LeafOrder {
     /// Per node reachable from the root: the triangles under it.
     pub below: Vec<u32>,
@@ -72,13 +68,10 @@ impl LeafOrder {
 /// Asks for inner node `i`'s two children: every cache line of the pair (64 bytes from a 16-byte
 /// boundary with obvhs' `small_bvh2_node`: one or two lines, so its first and last bytes; 96 bytes
 /// without it, hence also the 64th). The reinsertion optimiser leaves the node array in no order a
-/// walk could stream, so each walk over the binary tree ([`LeafOrder::of`], [`crate::accel::asset::flatten`], the wide
-/// BVH's collapse) waited for a miss a node. With the children of the nodes in sight asked for
-/// ahead, Sponza's collapse (all three, with the winding check of a single-sided bake beside them,
-/// 2 threads) took 31.9-35.9 ms against 36.4-39.7 ms asking for each child's first line only (least
-/// of 15 builds in one process, three alternating runs each); asking for every line, the collapse
-/// alone took 39.9-49.6 ms against 46.2-53.7 ms for the first lines (least of 20, four alternating
-/// runs, a slower sitting).
+/// walk could stream, so each walk over the binary tree ([`LeafOrder::of`],
+/// [`crate::accel::asset::flatten`], the wide BVH's collapse) would wait for a miss a node; the
+/// children of the nodes in sight, asked for ahead, arrive while the walk works. Every line, not
+/// only a child's first: a pair that straddles two lines otherwise still waits for the second.
 pub(crate) fn prefetch_children(bvh2: &Bvh2, i: usize) {
     let first = bvh2.nodes[i].first_index as usize;
     if let Some(pair) = bvh2.nodes.get(first..first + 2) {

@@ -43,10 +43,8 @@ pub struct Bricked {
 /// on the thread count (`tests::blocking_does_not_change_the_result`).
 ///
 /// A brick is found by hashing its key ([`BrickIndex`], seeded per process), then its cell's
-/// surfels through a list per cell. Sponza at 1.0 m, 6.2 M hits, 2 threads: the sort-based
-/// merge this replaces (every hit's key sorted, then grouped) took 1.65-2.45 s and held every
-/// hit, its key and its rank at once; scanning a brick's surfels for the hit's cell instead of
-/// one list per cell took 17% of the bake's CPU time.
+/// surfels through a list per cell: no sort of every hit's key (which held every hit, its key
+/// and its rank at once), and no scan of a brick's surfels for the hit's cell.
 pub struct BrickFolder {
     anchor: Vec3,
     cell_size: f32,
@@ -82,11 +80,10 @@ impl BrickFolder {
     /// `cell_size == 0` switches merging off (one brick per hit, in hit order). The cell lattice
     /// starts at `anchor`: the bake puts it half a cell off the world origin, so that walls at
     /// round coordinates (whole numbers of cells from the origin) lie in the middle of cells.
-    /// Anchored at the origin itself, such walls lay exactly on cell boundaries, and float
-    /// rounding split their hits between two cells at random: more bricks and surfels, and
-    /// different ones at every scene scale (Cornell scaled by 10: 6,234 bricks against 5,976,
-    /// SH 1.9% of SH0 apart; now 7e-6). Anchoring at the bounds' corner instead measured worse
-    /// on the two-room fixture (14.9% mean surface error against 8.7%).
+    /// Anchored at the origin itself, such walls lie exactly on cell boundaries, and float
+    /// rounding splits their hits between two cells at random: more bricks and surfels, and
+    /// different ones at every scene scale. Anchoring at the bounds' corner instead gave a
+    /// larger surface error on the two-room fixture.
     pub fn new(cell_size: f32, merge_normal_cos: f32, anchor: Vec3) -> Self {
         BrickFolder {
             anchor,
@@ -112,12 +109,10 @@ impl BrickFolder {
     /// The hits are taken in their order, a brick looked up once for each run of consecutive
     /// hits in it (the coherent ray order makes runs common), all the runs' lookups together so
     /// that their cache misses overlap; then the cells' heads and first surfels are loaded for
-    /// every hit before any is merged ([`BrickFolder::touch`]). Merged hit by hit, each waiting
-    /// for its misses, the fold took 3.0 s on Sponza at 1.0 m; with the hits sorted by brick,
-    /// so that each brick was found once per probe, 1.5 s. With the loads taken together, the
-    /// sort cost more than it saved: the bake took 4.44-4.62 s of CPU time without it against
-    /// 4.59-4.80 s (one thread, five alternating bakes each). A brick's surfels depend only on
-    /// the order of its own hits, which every one of these orders keeps.
+    /// every hit before any is merged ([`BrickFolder::touch`]), instead of each hit waiting for
+    /// its own misses. With the loads taken together, sorting the hits by brick first costs
+    /// more than it saves. A brick's surfels depend only on the order of its own hits, which
+    /// every one of these orders keeps.
     pub fn fold(&mut self, hits: &[Hit], brick_of_hit: &mut Vec<u32>) -> Result<(), BakeError> {
         let room = |limit: u32| limit as usize - hits.len().min(limit as usize);
         let unmerged = self.cell_size == 0.0;
@@ -198,11 +193,10 @@ impl BrickFolder {
 
     /// Loads the cells' heads, then their first surfels, for every hit before any is merged.
     /// The loads do not depend on each other, so the CPU overlaps their cache misses; merging
-    /// hit by hit, each hit waited for two misses in turn (its cell's head, then the surfel it
-    /// points to: 83% of the fold's time on Sponza at 1.0 m). Merging then finds them in cache.
-    /// On x86-64 as prefetches, which the CPU does not wait for, where a load it must finish
-    /// before the next instructions retire (Sponza at 1.0 m, one thread, least of four
-    /// alternating bakes: the trace stage took 3.895 s against 3.975 s with loads).
+    /// hit by hit, each hit would wait for two misses in turn (its cell's head, then the surfel
+    /// it points to), most of the fold's time. Merging then finds them in cache. On x86-64 as
+    /// prefetches, which the CPU does not wait for, where a load it must finish before the next
+    /// instructions retire.
     fn touch(&self, slots: &[(u32, u8, u32)]) {
         for &(b, cell, _) in slots {
             prefetch(&self.heads[b as usize][usize::from(cell)]);
@@ -255,9 +249,7 @@ impl BrickFolder {
     /// Asks for what [`BrickFolder::finish`] reads next: the first surfel of each of brick `b`'s
     /// cells, and the cell heads of the brick after it, `next`. Bricks are finished in key
     /// order, their surfels were made in arrival order, so each is a cache miss; the loads do
-    /// not depend on each other, but the walk of the cells waited for each in turn. Sponza at
-    /// 1.0 m (1.47 M surfels, 2 threads, release build, four alternating bakes, the noisiest
-    /// left out): the surfels took 103-114 ms to write against 133-146 ms.
+    /// not depend on each other, but the walk of the cells would wait for each in turn.
     fn prefetch_brick(&self, b: u32, next: Option<u32>) {
         if self.cell_size == 0.0 {
             return;
@@ -294,10 +286,9 @@ impl BrickFolder {
     /// final number of every provisional brick.
     pub fn finish(self) -> (Bricked, Vec<u32>) {
         let unmerged = self.cell_size == 0.0;
-        // Keys sorted beside their bricks, not bricks through their keys: each comparison read
-        // two keys scattered over the table (Sponza at 1.0 m, 134k bricks, release build: the
-        // bricks stage took 0.250-0.290 s against 0.245-0.310 s, medians about 0.27 s against
-        // 0.30 s, eight alternating bakes). Keys are distinct, so any sort gives one order.
+        // Keys sorted beside their bricks, not bricks through their keys, where each comparison
+        // reads two keys scattered over the table. Keys are distinct, so any sort gives one
+        // order.
         let order: Vec<u32> = match unmerged {
             true => (0..self.keys.len() as u32).collect(),
             false => {
@@ -311,8 +302,7 @@ impl BrickFolder {
             remap[b as usize] = final_index as u32;
         }
         // Each brick's surfels written in parallel straight into their run of the one surfel
-        // array (at 105k Sponza probes, building a vector per brick and joining them held 434 MB
-        // twice at the bake's peak).
+        // array: a vector per brick, joined, would hold every surfel twice at the bake's peak.
         let counts: Vec<usize> = order
             .iter()
             .map(|&b| match unmerged {
@@ -321,7 +311,7 @@ impl BrickFolder {
             })
             .collect();
         // Zeroed by the allocator, not filled here: the pages are first touched by the parallel
-        // writes below (a serial fill took 1.3% of a 1.9 m Sponza bake, one thread).
+        // writes below, not by a serial fill.
         let mut surfels: Vec<Surfel> = bytemuck::zeroed_vec(counts.iter().sum());
         let runs = split_runs(&mut surfels, &counts);
         let bricks: Vec<Brick> = order
@@ -392,9 +382,8 @@ fn brick_of(surfels: &mut [Surfel], flags: u32, first_surfel: u32) -> Brick {
 
 /// Running sums of one surfel being merged, in one cache line: merging a hit reads the
 /// cluster's direction and adds to its sums. The cell's list link is kept beside it
-/// ([`BrickFolder`]'s `next`) and the back-face flag is its brick's; with both inside, a
-/// cluster took 72 bytes and most straddled two lines (Sponza at 1.0 m: 5.30 s of CPU time
-/// against 5.19 s, the least of four alternating bakes each).
+/// ([`BrickFolder`]'s `next`) and the back-face flag is its brick's: with both inside, a
+/// cluster takes 72 bytes and most straddle two lines.
 #[repr(C, align(64))]
 struct Cluster {
     count: f32,

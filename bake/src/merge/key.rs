@@ -28,8 +28,7 @@ pub(crate) fn flags_of(h: &Hit) -> u32 {
 }
 
 /// `v.floor() as i32` (saturating, NaN to 0) by truncation: the baseline x86-64 target has no
-/// SSE4.1 `roundps`, so `floor` is a call to a software routine, and the fold takes six per
-/// hit (8% of its time on Sponza at 1.0 m, one thread).
+/// SSE4.1 `roundps`, so `floor` is a call to a software routine, and the fold takes six a hit.
 #[inline]
 pub(crate) fn floor_i32(v: f32) -> i32 {
     let t = v as i32;
