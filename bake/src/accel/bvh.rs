@@ -143,7 +143,7 @@ impl SceneBvh {
     /// [`SceneBvh::build`] for tracing about `rays` rays ([`build_params`]), PLOC working in
     /// `memory` when given, running `beside` on the pool while the binary BVH is collapsed into
     /// the two the bake uses. PLOC and reinsertion take every thread; the collapse (the
-    /// triangles put in leaf order by one walk, [`LeafOrder`], then the two trees walked out of
+    /// triangles put in leaf order by one walk, `LeafOrder`, then the two trees walked out of
     /// it side by side) is serial work that leaves room on the pool. A single-sided bake runs
     /// its winding check there: beside the PLOC build, which takes every thread, it only
     /// lengthens the stage.

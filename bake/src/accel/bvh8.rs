@@ -45,7 +45,7 @@ pub const PACKET: usize = 32;
 type RayMask = u32;
 const _: () = assert!(PACKET <= RayMask::BITS as usize);
 
-/// Triangles in a leaf: one SSE vector of them ([`Tri4`]).
+/// Triangles in a leaf: one SSE vector of them (`Tri4`).
 pub const TRI_LANES: usize = 4;
 
 type Lanes = [f32; LANES];
@@ -327,7 +327,7 @@ impl Bvh8 {
         &self.triangles[first..first + usize::from(count)]
     }
 
-    /// The leaves (first [`Tri4`], count) whose boxes overlap the box `lo..=hi`: every
+    /// The leaves (first `Tri4`, count) whose boxes overlap the box `lo..=hi`: every
     /// triangle a ray inside that box can hit there.
     pub fn leaves_in(&self, lo: Vec3, hi: Vec3) -> Vec<(u32, u8)> {
         let mut leaves = Vec::new();

@@ -42,7 +42,7 @@ pub struct Bricked {
 /// so the result depends only on the hits and their order, never on how they were blocked or
 /// on the thread count (`tests::blocking_does_not_change_the_result`).
 ///
-/// A brick is found by hashing its key ([`BrickIndex`], seeded per process), then its cell's
+/// A brick is found by hashing its key (`BrickIndex`, seeded per process), then its cell's
 /// surfels through a list per cell: no sort of every hit's key (which held every hit, its key
 /// and its rank at once), and no scan of a brick's surfels for the hit's cell.
 pub struct BrickFolder {
@@ -103,13 +103,13 @@ impl BrickFolder {
 
     /// Folds the next `hits` (one probe's) in and appends the provisional brick of each to
     /// `brick_of_hit`. Fails, before any change, when the surfels would pass 2^32 - 1 or the
-    /// bricks what the index numbers ([`MAX_BRICKS`] merged, 2^32 - 1 unmerged; every hit adds
+    /// bricks what the index numbers (`MAX_BRICKS` merged, 2^32 - 1 unmerged; every hit adds
     /// at most one of each).
     ///
     /// The hits are taken in their order, a brick looked up once for each run of consecutive
     /// hits in it (the coherent ray order makes runs common), all the runs' lookups together so
     /// that their cache misses overlap; then the cells' heads and first surfels are loaded for
-    /// every hit before any is merged ([`BrickFolder::touch`]), instead of each hit waiting for
+    /// every hit before any is merged (`BrickFolder::touch`), instead of each hit waiting for
     /// its own misses. With the loads taken together, sorting the hits by brick first costs
     /// more than it saves. A brick's surfels depend only on the order of its own hits, which
     /// every one of these orders keeps.

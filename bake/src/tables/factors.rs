@@ -101,7 +101,7 @@ impl RowTable {
 
 /// One probe's factor rows while bricks are provisional, as close to their final form as that
 /// allows: f32 sums for f32 and f16 tables (the last field the sum of the rays' hit points until
-/// [`finish`] turns it into the offset); for u8 tables, the transfer already encoded (rows of
+/// `finish` turns it into the offset); for u8 tables, the transfer already encoded (rows of
 /// more than 255 rays split) beside the rays' mean hit point, 28 bytes a row against 52: the
 /// rows are the largest thing the bake holds.
 pub enum ProbeRows {
@@ -113,7 +113,7 @@ pub enum ProbeRows {
 /// brick waits in the factor's own brick field, which [`FactorU8::place`] overwrites (a row
 /// beside it took 32 bytes; the rows are the bake's largest working set). A provisional brick
 /// past [`U8_MAX_BRICK`] loses its high bits here, but such a bake is refused before
-/// [`encode_u8`] reads them (`pipeline::bricks_and_tables`; provisional and final bricks are as
+/// `encode_u8` reads them (`pipeline::bricks_and_tables`; provisional and final bricks are as
 /// many).
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 #[repr(C)]
