@@ -12,19 +12,19 @@ use glam::Vec3;
 use obvhs::triangle::Triangle;
 use prt_format::Grid;
 
-use crate::bvh::SceneBvh;
+use crate::accel::bvh::SceneBvh;
 use crate::error::BakeError;
 
-pub use crate::bvh::trace_scale;
+pub use crate::accel::bvh::trace_scale;
 
 /// Rays from one probe traced together as a packet ([`SceneBvh::closest_hits`] takes at most
 /// this many).
-pub const PACKET: usize = crate::bvh8::PACKET;
+pub const PACKET: usize = crate::accel::bvh8::PACKET;
 
 /// `triangles` as obvhs triangles in the tracing frame scaled by `scale` ([`trace_scale`]): what
 /// the bake builds its BVH over, so a baseline built from them traces the bake's rays.
 pub fn traced_triangles(triangles: &[[Vec3; 3]], scale: f32) -> Vec<Triangle> {
-    crate::bvh::traced_triangles(triangles, scale)
+    crate::accel::bvh::traced_triangles(triangles, scale)
 }
 
 /// The bake's BVH over `triangles` in the frame of `scale`, built with the preset the bake picks

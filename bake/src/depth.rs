@@ -27,11 +27,10 @@ const _: () = assert!(DEPTH_TEXELS.is_multiple_of(GROUP));
 
 /// Per texel, the lattice rays that feed it and their filter weights, padded with weight-0
 /// feeds to the same count for every texel (adding `0 * d` to a sum leaves it as it is, bit for
-/// bit: every distance is finite), laid out group by group, feed by feed, texel by texel.
-/// Sponza at 1.0 m: 0.31 s of CPU time for one vector of feeds per texel, one texel at a time,
-/// 0.26 s now. The padding and the f64 weights cost memory that grows with the ray count: 12
-/// bytes a feed, about 34 feeds a texel per 512 rays (0.1 MB at 512 rays, about 216 MB at the
-/// 2^20-ray limit, against 144 MB before).
+/// bit: every distance is finite), laid out group by group, feed by feed, texel by texel, so
+/// that groups of texels are filtered side by side in SIMD lanes. The padding and the f64
+/// weights cost memory that grows with the ray count: 12 bytes a feed, about 34 feeds a texel
+/// per 512 rays.
 pub struct DepthFilter {
     /// Feeds per texel, padding included.
     feeds: usize,
@@ -102,9 +101,7 @@ impl DepthFilter {
 
     /// [`DepthFilter::map`] compiled for AVX: a group's four f64 sums in one vector instead of
     /// two SSE2 ones. The same bits (the same IEEE operations lane for lane; Rust never fuses a
-    /// multiply and an add). Sponza at 1.0 m, the maps' CPU time summed over the bake: 160-168
-    /// ms against 198-223 ms for the SSE2 copy (three alternating bakes; AVX2, whose gathers
-    /// could load the distances, 165-191 ms).
+    /// multiply and an add). AVX2's gathers, which could load the distances, gained nothing more.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx")]
     fn map_avx(

@@ -5,6 +5,9 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
+/// Fraction of shared edges with inconsistent winding above which the bake warns.
+pub(crate) const WINDING_WARNING: f64 = 0.01;
+
 /// Shared edges of a mesh, and how many of them both of their triangles walk the same way.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Winding {
@@ -82,12 +85,11 @@ pub fn inside_warning(
 ///
 /// Each directed edge becomes one `u64`: a 63-bit hash of its two vertices' position bits
 /// (smaller vertex hash first, so both directions agree) above one bit for the direction.
-/// Grouping equal integers (`group_equal`) puts an edge's uses side by side. Sponza's 187k
-/// triangles, one thread: 0.16-0.21 s counting directed edges in a hash map, about 0.09 s
-/// sorting corners (to number vertices) and then edge pairs, 0.023 s now (`prt bake --spacing
-/// 1.9 --threads 1`). Two distinct vertices or edges share a hash with probability about
-/// n^2 / 2^64 (2e-8 for Sponza's 562k edges), which at worst miscounts an edge of a diagnostic
-/// percentage; the hashes are seeded with a constant, so the count is the same on every run.
+/// Grouping equal integers (`group_equal`) puts an edge's uses side by side, several times
+/// faster than a hash map of directed edges or numbering vertices by sorting corners. Two
+/// distinct vertices or edges share a hash with probability about n^2 / 2^64 (2e-8 for
+/// Sponza's 562k edges), which at worst miscounts an edge of a diagnostic percentage; the
+/// hashes are seeded with a constant, so the count is the same on every run.
 pub fn winding(triangles: &[[Vec3; 3]]) -> Winding {
     let edges: Vec<[u64; 3]> = triangles
         .par_iter()
@@ -139,8 +141,8 @@ fn mix(mut h: u64) -> u64 {
 const SELF_EDGE: u64 = u64::MAX;
 
 /// `keys` (uniform hashes) sorted: one pass to count buckets of their top bits (four to eight
-/// keys a bucket), one to scatter them, then a sort of each small bucket. Sponza's 562k edges,
-/// one thread: 23 ms in one `sort_unstable`, 11 ms so.
+/// keys a bucket), one to scatter them, then a sort of each small bucket, which stays in cache
+/// where one sort of every key does not.
 fn group_equal(keys: &[u64]) -> Vec<u64> {
     let bits = (keys.len() / 4).max(2).ilog2().min(24);
     let bucket = |k: u64| (k >> (64 - bits)) as usize;

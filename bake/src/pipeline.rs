@@ -14,9 +14,12 @@ use prt_format::{
 
 use prt_scene::Scene;
 
+use crate::accel::bvh;
+use crate::merge::fold;
+use crate::tables::factors;
 use crate::{
-    bricks, bvh, diagnostics, dilate, factors, offset, probes, stream, trace, BakeError,
-    BakeReport, BakeSettings, Progress, WINDING_WARNING,
+    diagnostics, dilate, offset, probes, stream, trace, BakeError, BakeReport, BakeSettings,
+    Progress,
 };
 
 /// The bake's stages, in the current thread pool: the asset, not yet validated, and the report.
@@ -126,13 +129,13 @@ fn bvh_stage(
     let scale = bvh::trace_scale(grid.spacing);
     // Baked double-sided, the winding changes no hit's shading and needs no hint: it is then
     // counted only for the rare warning that names it (most probes inside geometry), not on
-    // every bake (Sponza, 562k edges: about 24 ms of CPU time beside the BVH's collapse).
+    // every bake.
     let (bvh, winding) =
         bvh::SceneBvh::build_checked(&scene.triangles, scale, rays, memory, || {
             (!settings.double_sided).then(|| diagnostics::winding(&scene.triangles))
         })?;
     let winding_hint = match &winding {
-        Some(w) if w.inconsistent_fraction() > WINDING_WARNING => {
+        Some(w) if w.inconsistent_fraction() > diagnostics::WINDING_WARNING => {
             let warning = diagnostics::winding_warning(w);
             report.warnings.insert(loaded.winding_warning_at, warning);
             true
@@ -261,8 +264,8 @@ fn trace_stage(
         bounds: loaded.bounds,
         spacing: grid.spacing,
     };
-    // Half a cell off the origin: see `bricks::BrickFolder::new`.
-    let folder = bricks::BrickFolder::new(
+    // Half a cell off the origin: see `fold::BrickFolder::new`.
+    let folder = fold::BrickFolder::new(
         cell_size,
         settings.merge_normal_cos,
         Vec3::splat(-0.5 * cell_size),
@@ -411,12 +414,12 @@ fn load(
 /// tables the probes carry into the asset's table ([`factors::encode_tables`]), freeing the
 /// rows as it goes; fails when u8 factors cannot address the bricks.
 fn bricks_and_tables(
-    folder: bricks::BrickFolder,
+    folder: fold::BrickFolder,
     tables: factors::Rows,
     carried: factors::Carried,
     settings: &BakeSettings,
     cell_size: f32,
-) -> Result<(bricks::Bricked, Factors), BakeError> {
+) -> Result<(fold::Bricked, Factors), BakeError> {
     let (bricked, remap) = folder.finish();
     let u8_rows = settings.transfer_precision == TransferPrecision::U8;
     if u8_rows && bricked.bricks.len() > U8_MAX_BRICK as usize + 1 {

@@ -1,7 +1,7 @@
 //! Tracing and merging streamed in probe blocks: each block of probes is traced in parallel
 //! while the block before it is folded into bricks ([`BrickFolder`]), so that the bake holds at
-//! most two blocks of ray hits, never all of them (Sponza at 0.55 m, 94,202 probes: 7.4 GiB
-//! peak before, when every hit was kept for one global sort).
+//! most two blocks of ray hits, never all of them: the hits grow with probes times rays, past
+//! any machine's memory on large grids.
 //!
 //! What a probe keeps once its block is folded is what the asset needs from it: its sky mask,
 //! sky transfer and ray counts, its visibility map, and its factor rows (keyed by provisional
@@ -15,18 +15,15 @@ use glam::Vec3;
 use prt_format::{TransferPrecision, DEPTH_WORDS};
 use rayon::prelude::*;
 
-use crate::bricks::BrickFolder;
 use crate::depth::DepthFilter;
-use crate::factors::{self, RowTable, Rows};
+use crate::merge::fold::BrickFolder;
+use crate::tables::factors::{self, RowTable, Rows};
 use crate::trace::{ProbeRays, Tracer};
 use crate::{BakeError, Progress};
 
 /// Probes traced per block: enough parallel work per block for many cores, few enough hits
 /// (about 5 MB at 512 rays) that a block's merge stays in cache, and enough blocks that the
-/// last one's merge, which runs alone, is short. Sponza at 1.9 m (3,024 probes, 2 threads, when
-/// the bake traced with obvhs):
-/// trace-and-merge 0.77-0.89 s in blocks of 256 against 0.88-0.94 s in blocks of 1,024; peak
-/// memory at 1.0 m 832 MiB against 1,076 MiB.
+/// last one's merge, which runs alone, is short.
 pub const BLOCK_PROBES: usize = 256;
 
 /// Probes in the smallest block: the blocks taper towards the end ([`block_len`]).
@@ -34,13 +31,10 @@ pub const TAIL_PROBES: usize = 32;
 
 /// The length of the block that starts with `remaining` probes left: [`BLOCK_PROBES`], then
 /// halves over the last ones down to [`TAIL_PROBES`]. The last block's fold has no tracing
-/// beside it to overlap, so a short last block leaves less of the pool idle (Sponza at 1.9 m,
-/// 2 threads: a last block of 256 probes took about 9 ms to fold with the other thread idle).
-/// On 2 threads each block's fold (on one thread, about a third of its tracing time there)
-/// still fits beside the tracing of the next, half as long; on many, the fold of a block may
-/// outlast it. The blocks depend only on the probe count, so the result does not depend on
-/// the threads. The gain is a few milliseconds, within this machine's noise in end-to-end
-/// times.
+/// beside it to overlap, so a short last block leaves less of the pool idle. On 2 threads a
+/// block's fold (on one thread, about a third of its tracing time there) still fits beside the
+/// tracing of the next, half as long; on many, the fold of a block may outlast it. The blocks
+/// depend only on the probe count, so the result does not depend on the threads.
 pub fn block_len(remaining: usize) -> usize {
     (remaining / 2)
         .clamp(TAIL_PROBES, BLOCK_PROBES)
@@ -73,7 +67,7 @@ pub struct Keep<'a> {
     /// How factor rows are kept ([`factors::ProbeRows`]).
     pub precision: TransferPrecision,
     /// Bytes of factor rows held in memory; the rest wait in a temporary file
-    /// ([`crate::row_store`]).
+    /// ([`crate::tables::row_store`]).
     pub row_memory: usize,
     /// Whether a probe's factor rows are kept: an invalid probe's table is never encoded (a
     /// dilated probe carries its valid source's), so its rows are not even made.

@@ -6,8 +6,8 @@ use prt_format::sh::SH_COUNT;
 use prt_scene::{texture, Material, Scene};
 use rayon::prelude::*;
 
-use crate::bvh::{SceneBvh, TriangleHit};
-use crate::bvh8::PACKET;
+use crate::accel::bvh::{SceneBvh, TriangleHit};
+use crate::accel::bvh8::PACKET;
 
 /// What one probe ray hit.
 #[derive(Clone, Copy, Debug)]
@@ -71,9 +71,8 @@ pub struct Tracer<'a> {
     pub shading: Vec<TriangleShading>,
 }
 
-/// What shading a hit reads of its triangle, side by side in 16 bytes: the normal and the
-/// material index came from two tables, two cache misses a hit (their loads took 40% of the
-/// tracing loop's own time at Sponza's 1.0 m, `perf annotate`).
+/// What shading a hit reads of its triangle, side by side in 16 bytes: one cache miss a hit,
+/// where two tables (normals, material indices) cost two.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(16))]
 pub struct TriangleShading {
@@ -86,8 +85,7 @@ pub struct TriangleShading {
 /// The unit geometric normal of every triangle (zero for a degenerate one) beside its
 /// material, computed once for all hits, the same bits as at each hit: shading read the
 /// triangle's corners (36 bytes, most of them a cache miss) and took a cross product and a
-/// square root at every hit. Sponza at 1.0 m, one thread, least of five alternating bakes:
-/// trace stage 4.117 s then, 3.833 s with the normals computed once.
+/// square root at every hit.
 pub fn triangle_shading(scene: &Scene) -> Vec<TriangleShading> {
     debug_assert_eq!(scene.triangles.len(), scene.materials_of_triangles.len());
     scene
@@ -230,12 +228,11 @@ impl Tracer<'_> {
 
 /// The lattice's directions in Morton order of their octahedral map: consecutive rays leave a
 /// probe in nearby directions and mostly land in the same bricks (the lattice's own order turns
-/// by the golden angle, 137.5 degrees, from one ray to the next). Rays are traced, eight
-/// consecutive ones to a packet ([`crate::bvh8`]), and their hits merged in this order. Packets
-/// of rays consecutive in the lattice's own order traced 11-22% slower (`prt bench bake`, Sponza
-/// at 1.9 and 1.0 m); single-ray obvhs traversal ran at about the same speed in either order.
-/// The order changes float sums (sky transfer, surfel means) in their last bits, never which ray
-/// hits what.
+/// by the golden angle, 137.5 degrees, from one ray to the next). Rays are traced in this
+/// order, [`PACKET`] consecutive ones to a packet ([`crate::accel::bvh8`]), whose cone it keeps
+/// narrow, and their hits merged in it, so that runs of hits fall in one brick. The order
+/// changes float sums (sky transfer, surfel means) in their last bits, never which ray hits
+/// what.
 pub(crate) fn coherent_order(directions: &[Vec3]) -> Vec<u32> {
     let morton = |d: Vec3| -> u32 {
         let [u, v] = prt_format::depth::oct_encode(d.to_array());

@@ -3,7 +3,7 @@
 //! deterministic assets.
 
 use glam::Vec3;
-use prt_bake::bvh::SceneBvh;
+use prt_bake::accel::bvh::SceneBvh;
 use prt_bake::BakeSettings;
 use prt_tests::{bake_ok, fixture, rays};
 

@@ -7,8 +7,8 @@
 //! per ray, SIMD across the node (as Embree's single-ray BVH8 traversal): each ray still in the
 //! packet tests the eight child boxes in one AVX vector (two SSE vectors where the CPU lacks AVX,
 //! [`Bvh8::closest_hits`] choosing at run time), and each leaf's four triangles, stored structure
-//! of arrays, in one SSE vector. Rays that left the packet cost nothing: at Sponza's probes (1.9 m)
-//! a packet arrives at an inner node with 6.6 of its 32 rays on average, and at a leaf with 2.5.
+//! of arrays, in one SSE vector. Rays that left the packet cost nothing, which matters: a packet
+//! reaches most nodes, and most leaves, with only a few of its rays.
 //! The shared origin makes `box - origin`, `v0 - origin` and `ng . (v0 - origin)` one value per
 //! node or leaf, not one per ray. Boxes are plain f32, not obvhs' compressed nodes, which trade
 //! decode work per ray for memory.
@@ -30,18 +30,14 @@ use glam::{BVec4A, Vec3, Vec4};
 use obvhs::{bvh2::Bvh2, triangle::Triangle};
 use rayon::prelude::*;
 
-use crate::bvh::LeafOrder;
+use crate::accel::leaf_order::{prefetch_children, LeafOrder};
 
 /// Children in a node.
 pub const LANES: usize = 8;
 
 /// Rays in a packet. The tracing is bound by the latency of fetching nodes and leaves, so the
 /// more rays share a fetch the better, until the packet's cone grows wide enough to visit many
-/// nodes that few of its rays need. Sponza at 1.9 m (3,024 probes, 512 rays each), packets of
-/// 8, 16 and 32: inner-node visits 2.86 M, 2.13 M, 1.66 M (3.7, 5.0 and 6.6 rays a visit;
-/// ray-box tests 10.5 M, 10.7 M, 10.9 M), leaf visits 1.73 M, 1.51 M, 1.34 M (64 not counted);
-/// one thread, least of 9 in one process, four alternating runs each, packets of 8, 16, 32 and
-/// 64: 305-333 ms, 266-298 ms, 252-264 ms (one outlier 335) and 295-312 ms. The hits are the
+/// nodes that few of its rays need: 32 traced fastest of 8, 16, 32 and 64. The hits are the
 /// same for any packet size.
 pub(crate) const PACKET: usize = 32;
 
@@ -49,7 +45,7 @@ pub(crate) const PACKET: usize = 32;
 type RayMask = u32;
 const _: () = assert!(PACKET <= RayMask::BITS as usize);
 
-/// Triangles in a leaf: one SSE vector of them ([`Tri4`]).
+/// Triangles in a leaf: one SSE vector of them (`Tri4`).
 pub const TRI_LANES: usize = 4;
 
 type Lanes = [f32; LANES];
@@ -200,11 +196,8 @@ impl Bvh8 {
     /// Collapses `bvh2`, built over `triangles` (whose indices are the scene's), its triangles
     /// in `order`: one walk lays out the nodes and numbers the leaves, then the leaves' triangles
     /// are gathered into their [`Tri4`]s in parallel. The walk chases the binary tree's nodes
-    /// (a cache miss each); gathering inside it, as the collapse did before, added a miss per
-    /// triangle to that serial path, the BVH stage's longest: Sponza (187k triangles, 2 threads,
-    /// 1.9 m), the collapse then took 36-50 ms beside the asset BVH's 20-30 ms. With the gather
-    /// in parallel (and [`open`] without allocating), the BVH stage took 84-98 ms against
-    /// 96-105 ms (six alternating bakes each).
+    /// (a cache miss each) on the BVH stage's longest serial path, so it does nothing else:
+    /// gathering there would add a miss per triangle to that path.
     pub(crate) fn from_bvh2(bvh2: &Bvh2, order: &LeafOrder, triangles: &[Triangle]) -> Bvh8 {
         let below = &order.below;
         if bvh2.nodes.is_empty() || triangles.is_empty() {
@@ -334,7 +327,7 @@ impl Bvh8 {
         &self.triangles[first..first + usize::from(count)]
     }
 
-    /// The leaves (first [`Tri4`], count) whose boxes overlap the box `lo..=hi`: every
+    /// The leaves (first `Tri4`, count) whose boxes overlap the box `lo..=hi`: every
     /// triangle a ray inside that box can hit there.
     pub fn leaves_in(&self, lo: Vec3, hi: Vec3) -> Vec<(u32, u8)> {
         let mut leaves = Vec::new();
@@ -382,9 +375,8 @@ impl Bvh8 {
     /// Written over plain arrays of eight lanes, one per child, with `min` and `max` as `minps`
     /// and `maxps` compute them (the second operand when either is NaN), so that the compiler
     /// can vectorize it for the instruction set it compiles for: AVX in
-    /// [`Bvh8::closest_hits_avx`], SSE elsewhere (`tests` hold the two to the same bits).
-    /// Sponza at 1.9 m, bare tracing: 0.27-0.28 s with the same test written as two glam
-    /// `Vec4`s, 0.21-0.28 s as arrays for SSE, 0.17-0.19 s for AVX.
+    /// [`Bvh8::closest_hits_avx`], SSE elsewhere (`tests` hold the two to the same bits);
+    /// written as two glam `Vec4`s, the same test ran slower even than the SSE build of this.
     #[inline(always)]
     fn visit(&self, node: &Node, p: &Packet, mask: RayMask, stack: &mut Vec<Entry>) {
         let rel = |planes: &[Lanes; 3]| -> [Lanes; 3] {
@@ -528,10 +520,10 @@ fn open(bvh2: &Bvh2, below: &[u32], node: usize) -> ([usize; LANES], usize) {
     // area is at least its own: ties go to the first, and a kid whose area is NaN (a box with
     // an infinite side and a zero one) is opened too, so that every inner node is opened and
     // the collapse ends. An inner kid is opened here or becomes a node of the walk: its children
-    // are asked for as soon as it is seen ([`crate::bvh::prefetch_children`]).
+    // are asked for as soon as it is seen ([`prefetch_children`]).
     let area = |i: usize| {
         inner(bvh2, below, i).then(|| {
-            crate::bvh::prefetch_children(bvh2, i);
+            prefetch_children(bvh2, i);
             bvh2.nodes[i].aabb().half_area()
         })
     };

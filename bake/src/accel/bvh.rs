@@ -3,13 +3,10 @@
 //! Construction", 2018, with parallel reinsertion):
 //!
 //! - an uncompressed 8-wide BVH that the bake traces its probe rays with, a packet of rays
-//!   from one probe at a time ([`crate::bvh8`]);
+//!   from one probe at a time ([`crate::accel::bvh8`]);
 //! - the binary BVH it was made from, flattened with children after parents and triangles in
 //!   leaf order, which the asset carries so that the runtime (CPU reference and WGSL alike) can
-//!   trace shadow rays with a plain stack traversal.
-
-use crate::error::BakeError;
-use std::collections::VecDeque;
+//!   trace shadow rays with a plain stack traversal ([`crate::accel::asset`]).
 
 use glam::Vec3;
 use obvhs::{
@@ -18,15 +15,19 @@ use obvhs::{
     triangle::Triangle,
     BvhBuildParams,
 };
-use prt_format::{BvhNode, Geometry};
+use prt_format::Geometry;
 use rayon::prelude::*;
 
-use crate::bvh8::{Bvh8, PACKET};
+use crate::accel::asset::flatten;
+use crate::accel::bvh8::{Bvh8, PACKET};
+use crate::accel::leaf_order::LeafOrder;
+use crate::error::BakeError;
+use crate::memory::written;
 
 /// The power of two nearest `1 / spacing`: the bake traces in a frame where the probe spacing is
 /// about one unit. The triangle test's normal and `ng . (v0 - origin)` grow with the square and
 /// the cube of the coordinates (a quad scaled by 1e19 overflows f32 in metres), and obvhs 0.4's
-/// traversal, which the bake used before [`crate::bvh8`], clamped box entry distances to an
+/// traversal, which the bake used before [`crate::accel::bvh8`], clamped box entry distances to an
 /// absolute 1e-4. Scaled by a power of two, every float operation of the build and traversal is
 /// the same at any scene scale short of overflow, so results do not depend on the scale
 /// (tests/tests/scale.rs).
@@ -50,12 +51,9 @@ pub(crate) fn traced_triangles(triangles: &[[Vec3; 3]], scale: f32) -> Vec<Trian
 }
 
 /// Rays per triangle below which [`build_params`] takes obvhs' `fast_build` preset. Against
-/// `medium_build` (a wider PLOC search, more reinsertion), Sponza's 187k triangles, 2 threads,
-/// least of 5-10 alternating bakes: at 1.9 m spacing (8 rays a triangle) the BVH stage took
-/// 0.092 s against 0.108 s and the trace stage 0.354 s against 0.357 s; at 1.4 m (19) 0.088
-/// against 0.122 s and 0.872 against 0.855 s; at 1.0 m (46) 0.085 against 0.106 s and 2.104
-/// against 2.052 s. The build saves about 20-30 ms; the trace loses about 2%, which passes that
-/// at about 25 rays a triangle.
+/// `medium_build` (a wider PLOC search, more reinsertion) it builds faster and gives a tree
+/// that traces about 2% slower: the cheaper build pays until the rays are many enough for that
+/// 2% to pass what it saves, at about 25 rays a triangle.
 pub const FAST_BUILD_RAYS_PER_TRIANGLE: u64 = 24;
 
 /// obvhs' build preset for tracing `rays` rays through `triangles` triangles: the cheaper
@@ -93,15 +91,9 @@ pub(crate) fn ploc(tris: &[Triangle], params: &BvhBuildParams, memory: Option<Pl
 }
 
 /// What obvhs' PLOC builds a binary BVH in, its pages already written, so that the build does
-/// not stop at each first touch of a page. The development machine's kernel takes 2.6 us a
-/// page (`docs/results/bake.md`), and PLOC touches its arrays from its serial passes:
-/// Sponza's 187k triangles fault in about 6,600 pages, some 17 ms. The bake makes it beside
-/// the load, whose single thread leaves the pool's other threads idle
-/// (`prt_scene::read`). Sponza at 1.9 m (dist, twelve alternating bakes
-/// each, twice): the load stage's median 29.5 ms against 19-20.5 ms (it now ends when the
-/// memory is ready), the BVH stage's 80.5-86.5 ms against 105.5-106.5 ms, end to end 538-556 ms
-/// against 565-573 ms; the bricks stage ran 3-7 ms longer (glibc's allocator: with its mmap
-/// threshold fixed, 4 ms) and the peak was 7 MiB higher (168 MiB).
+/// not stop at each first touch of a page: PLOC touches its arrays from its serial passes, where
+/// a page fault holds up every thread. The bake makes it beside the load, whose single thread
+/// leaves the pool's other threads idle (`prt_scene::read`).
 pub struct PlocMemory {
     builder: PlocBuilder,
     bvh2: Bvh2,
@@ -112,11 +104,6 @@ impl PlocMemory {
     /// Morton codes (two 64-bit codes a slot with obvhs' `SortPrecision::U64`, which both build
     /// presets the bake uses take), and the nodes.
     pub fn faulted(n: usize) -> PlocMemory {
-        fn written<T: Copy>(len: usize, value: T) -> Vec<T> {
-            let mut v = Vec::with_capacity(len);
-            v.resize(len, value);
-            v
-        }
         let node = Bvh2Node::default();
         let mut builder = PlocBuilder::new();
         builder.current_nodes = written(n, node);
@@ -156,12 +143,10 @@ impl SceneBvh {
     /// [`SceneBvh::build`] for tracing about `rays` rays ([`build_params`]), PLOC working in
     /// `memory` when given, running `beside` on the pool while the binary BVH is collapsed into
     /// the two the bake uses. PLOC and reinsertion take every thread; the collapse (the
-    /// triangles put in leaf order by one walk, [`LeafOrder`], then the two trees walked out of
-    /// it side by side) is serial work that leaves room on the pool.
-    /// A single-sided bake runs its winding check there: beside the PLOC build instead, the BVH
-    /// stage took 0.113 s against 0.106 s (Sponza at 1.9 m with `medium_build`, 2 threads,
-    /// least of 8 alternating bakes); with `fast_build`, least of 20 builds in one process,
-    /// 65.6-70.8 ms against 54.7-57.8 ms.
+    /// triangles put in leaf order by one walk, `LeafOrder`, then the two trees walked out of
+    /// it side by side) is serial work that leaves room on the pool. A single-sided bake runs
+    /// its winding check there: beside the PLOC build, which takes every thread, it only
+    /// lengthens the stage.
     pub fn build_beside<R: Send>(
         triangles: &[[Vec3; 3]],
         scale: f32,
@@ -196,7 +181,7 @@ impl SceneBvh {
 
     /// [`SceneBvh::build_beside`], with a panic inside obvhs ended as an error naming the
     /// scene's extent in metres (0.4's CWBVH conversion, which the bake used before
-    /// [`crate::bvh8`], indexed out of bounds on boxes near f32's range, e.g. a quad scaled by
+    /// [`crate::accel::bvh8`], indexed out of bounds on boxes near f32's range, e.g. a quad scaled by
     /// 1e19; `tests/tests/hostile.rs`). A panic of `beside` is reported the same way.
     pub fn build_checked<R: Send>(
         triangles: &[[Vec3; 3]],
@@ -285,153 +270,5 @@ impl Near<'_> {
             .bvh8
             .closest_hit_among(&self.leaves, origin * scale, dir, tmax * scale);
         bvh.unscaled(hit)
-    }
-}
-
-/// Most triangles in a leaf of the asset's BVH: subtrees of at most this many become one leaf.
-/// PLOC leaves hold one triangle each, so without collapsing the node array was larger than the
-/// triangles (Sponza: 12.0 MB of nodes for 9.0 MB of triangles). With 4: 4.4 MB of nodes, and
-/// the CPU relight of Sponza's default bake with 32 lights took 0.25 s either way (measured with
-/// `prt relight`, README "Bake throughput").
-pub const LEAF_TRIANGLES: u32 = 4;
-
-/// The binary BVH's triangles in leaf order, left subtree before right, from one walk over it:
-/// every subtree's triangles are then a run of them ([`LeafOrder::under`]), so the two
-/// collapses read a leaf's triangles from one run instead of walking its subtree again. The
-/// reinsertion optimiser leaves no order between parents and children in the node array, so
-/// a walk over it is about a cache miss a node. Counting each subtree's triangles in one walk
-/// and then walking every leaf's subtree again in both collapses, Sponza's BVH stage at 1.9 m
-/// took 0.154-0.201 s on one thread against 0.141-0.188 s now (eight alternating bakes each,
-/// release build; on two threads the collapse shares the time with the winding check of a
-/// single-sided bake, and the stage took about as long either way).
-pub(crate) struct LeafOrder {
-    /// Per node reachable from the root: the triangles under it.
-    pub below: Vec<u32>,
-    /// Per node reachable from the root: where its run starts in `triangles`.
-    first: Vec<u32>,
-    /// Triangle indices (the scene's), leaf after leaf.
-    triangles: Vec<u32>,
-}
-
-impl LeafOrder {
-    pub(crate) fn of(bvh2: &Bvh2) -> LeafOrder {
-        let mut order = LeafOrder {
-            below: vec![0; bvh2.nodes.len()],
-            first: vec![0; bvh2.nodes.len()],
-            triangles: Vec::with_capacity(bvh2.primitive_indices.len()),
-        };
-        let mut stack = vec![(0usize, false)];
-        while let Some((i, children_done)) = stack.pop() {
-            let n = &bvh2.nodes[i];
-            if children_done {
-                let l = n.first_index as usize;
-                order.below[i] = order.below[l].saturating_add(order.below[l + 1]);
-            } else if n.is_leaf() {
-                order.first[i] = order.triangles.len() as u32;
-                order.below[i] = n.prim_count;
-                let prims = n.first_index as usize..(n.first_index + n.prim_count) as usize;
-                order
-                    .triangles
-                    .extend_from_slice(&bvh2.primitive_indices[prims]);
-            } else {
-                order.first[i] = order.triangles.len() as u32;
-                // The grandchildren asked for now: the walk reaches the left ones next and the
-                // right ones later, and each read of a node waits for the one before.
-                let l = n.first_index as usize;
-                for c in [l, l + 1] {
-                    if !bvh2.nodes[c].is_leaf() {
-                        prefetch_children(bvh2, c);
-                    }
-                }
-                stack.push((i, true));
-                // Right pushed first, so the left subtree's triangles come first.
-                stack.push((l + 1, false));
-                stack.push((l, false));
-            }
-        }
-        order
-    }
-
-    /// The triangles under `node`, in leaf order.
-    pub(crate) fn under(&self, node: usize) -> &[u32] {
-        let first = self.first[node] as usize;
-        &self.triangles[first..first + self.below[node] as usize]
-    }
-}
-
-/// How far ahead in its queue [`flatten`] asks for the node it will read: the queue of a
-/// breadth-first walk says which nodes come next, so their cache misses can overlap.
-const PREFETCH_AHEAD: usize = 8;
-
-/// Asks for inner node `i`'s two children: every cache line of the pair (64 bytes from a 16-byte
-/// boundary with obvhs' `small_bvh2_node`: one or two lines, so its first and last bytes; 96 bytes
-/// without it, hence also the 64th). The reinsertion optimiser leaves the node array in no order a
-/// walk could stream, so each walk over the binary tree ([`LeafOrder::of`], [`flatten`], the wide
-/// BVH's collapse) waited for a miss a node. With the children of the nodes in sight asked for
-/// ahead, Sponza's collapse (all three, with the winding check of a single-sided bake beside them,
-/// 2 threads) took 31.9-35.9 ms against 36.4-39.7 ms asking for each child's first line only (least
-/// of 15 builds in one process, three alternating runs each); asking for every line, the collapse
-/// alone took 39.9-49.6 ms against 46.2-53.7 ms for the first lines (least of 20, four alternating
-/// runs, a slower sitting).
-pub(crate) fn prefetch_children(bvh2: &Bvh2, i: usize) {
-    let first = bvh2.nodes[i].first_index as usize;
-    if let Some(pair) = bvh2.nodes.get(first..first + 2) {
-        prefetch_lines(bytemuck::cast_slice(pair));
-    }
-}
-
-/// Asks for every cache line of `bytes` (at most 128 of them: its first, 64th and last bytes).
-fn prefetch_lines(bytes: &[u8]) {
-    debug_assert!(bytes.len() <= 128);
-    for at in [0, 64, bytes.len().saturating_sub(1)] {
-        if let Some(b) = bytes.get(at) {
-            crate::bricks::prefetch(b);
-        }
-    }
-}
-
-/// Renumbers the BVH2 breadth first (children pairs consecutive and after their parent),
-/// collapses subtrees of at most [`LEAF_TRIANGLES`] triangles into one leaf, and lays the
-/// triangles out in leaf order, back in world units (boxes times `unscale`, exact for a power of
-/// two).
-fn flatten(bvh2: &Bvh2, order: &LeafOrder, triangles: &[[Vec3; 3]], unscale: f32) -> Geometry {
-    let mut nodes: Vec<BvhNode> = Vec::with_capacity(bvh2.nodes.len());
-    let mut tris = Vec::with_capacity(triangles.len());
-    let mut queue = VecDeque::from([0usize]);
-    while let Some(src) = queue.pop_front() {
-        if let Some(&ahead) = queue.get(PREFETCH_AHEAD) {
-            prefetch_lines(bytemuck::bytes_of(&bvh2.nodes[ahead]));
-        }
-        let n = &bvh2.nodes[src];
-        let aabb = n.aabb();
-        let mut out = BvhNode {
-            min: (aabb.min * unscale).to_array(),
-            max: (aabb.max * unscale).to_array(),
-            count: 0,
-            first: 0,
-        };
-        if n.is_leaf() || order.below[src] <= LEAF_TRIANGLES {
-            out.first = tris.len() as u32;
-            tris.extend(order.under(src).iter().map(|&p| {
-                let t = triangles[p as usize];
-                prt_format::Triangle {
-                    v0: t[0].to_array(),
-                    v1: t[1].to_array(),
-                    v2: t[2].to_array(),
-                    ..Default::default()
-                }
-            }));
-            out.count = tris.len() as u32 - out.first;
-        } else {
-            // Children land at the next two free slots, in queue order.
-            out.first = (nodes.len() + queue.len() + 1) as u32;
-            queue.push_back(n.first_index as usize);
-            queue.push_back(n.first_index as usize + 1);
-        }
-        nodes.push(out);
-    }
-    Geometry {
-        nodes,
-        triangles: tris,
     }
 }

@@ -17,20 +17,18 @@ use prt_format::{
 use bytemuck::Pod;
 use rayon::prelude::*;
 
-use crate::row_store::RowStore;
+use crate::tables::row_store::RowStore;
 use crate::trace::Hit;
 use crate::BakeError;
 
-/// Factor rows of one probe while bricks are provisional ([`crate::bricks::BrickFolder`]):
+/// Factor rows of one probe while bricks are provisional ([`crate::merge::fold::BrickFolder`]):
 /// one per provisional brick its rays hit, each row's sums taken ray by ray in lattice order,
 /// kept in the form `precision` keeps them ([`ProbeRows`]); rows in the order of their first
 /// rays (encoding sorts them by final brick).
 ///
 /// Without a sort: the hits are put in ray order through a table of the lattice (a probe's
-/// rays are distinct), and grouped through `table`, a row per brick ([`RowTable`]). Sorting
-/// (brick, ray) keys instead, Sponza at 1.0 m took 4.53-4.71 s of CPU time against 4.39-4.60 s
-/// with the hash map from brick to row that the table replaced (one thread, five alternating
-/// bakes each, an earlier sitting).
+/// rays are distinct), and grouped through `table`, a row per brick ([`RowTable`]); sorting
+/// (brick, ray) keys costs more than either.
 pub fn probe_rows(
     hits: &[Hit],
     hit_brick: &[u32],
@@ -74,10 +72,8 @@ pub fn probe_rows(
 /// probe's lowest, its row: an entry is that probe's only if it carries the probe's stamp, so
 /// nothing is cleared between probes. One table per thread, as long as the widest span of
 /// bricks one probe hit: 8 bytes a brick when merging (a probe sees bricks made by the first
-/// probes and by itself; 1.1 MB at Sponza's 1.0 m, 3.6 MB at 105k probes), one entry per ray
-/// unmerged (each hit a brick of its own, numbered together). With a hash map from brick to row
-/// made for every probe instead, Sponza at 1.0 m took 4.32-4.51 s of user time against
-/// 4.25-4.43 s (one thread, release build, five alternating bakes each, this sitting).
+/// probes and by itself, a few MB), one entry per ray unmerged (each hit a brick of its own,
+/// numbered together). Cheaper than a hash map from brick to row made for every probe.
 #[derive(Default)]
 pub struct RowTable {
     /// The stamp of the probe being grouped (0: none yet).
@@ -105,9 +101,9 @@ impl RowTable {
 
 /// One probe's factor rows while bricks are provisional, as close to their final form as that
 /// allows: f32 sums for f32 and f16 tables (the last field the sum of the rays' hit points until
-/// [`finish`] turns it into the offset); for u8 tables, the transfer already encoded (rows of
-/// more than 255 rays split) beside the rays' mean hit point, 28 bytes a row against 52 (the
-/// rows are the largest thing the bake holds: 1.9 GB as sums at 105k Sponza probes).
+/// `finish` turns it into the offset); for u8 tables, the transfer already encoded (rows of
+/// more than 255 rays split) beside the rays' mean hit point, 28 bytes a row against 52: the
+/// rows are the largest thing the bake holds.
 pub enum ProbeRows {
     Sums(Vec<FactorRow>),
     U8(Vec<RowU8>),
@@ -117,7 +113,7 @@ pub enum ProbeRows {
 /// brick waits in the factor's own brick field, which [`FactorU8::place`] overwrites (a row
 /// beside it took 32 bytes; the rows are the bake's largest working set). A provisional brick
 /// past [`U8_MAX_BRICK`] loses its high bits here, but such a bake is refused before
-/// [`encode_u8`] reads them (`pipeline::bricks_and_tables`; provisional and final bricks are as
+/// `encode_u8` reads them (`pipeline::bricks_and_tables`; provisional and final bricks are as
 /// many).
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 #[repr(C)]
@@ -279,8 +275,7 @@ impl Rows {
 }
 
 /// Per provisional brick: its final number and its centroid, side by side so that a factor
-/// finds both in one load (through the renumbering, then in the bricks, the two cache misses
-/// took most of the table encoding's time at Sponza's 1.0 m spacing).
+/// finds both in one load, where the renumbering and then the bricks cost two cache misses.
 type Placed = (u32, Vec3);
 
 /// u8 rows encoded into `out` (one factor each): bricks renumbered, offsets from the bricks'
@@ -294,8 +289,7 @@ fn encode_u8(rows: &[RowU8], out: &mut [FactorU8], placed: &[Placed], offset_sca
     // were split: the key is the final brick above the rays' complement. The rows are sorted
     // as integers, key above row index (distinct, so any sort gives one order; only a split
     // row's full parts share a key, and they are equal byte for byte), then placed in that
-    // order. Sorting the 16-byte factors by their key instead, the table encoding took
-    // 359-364 ms against 319-323 ms (Sponza at 1.0 m, one thread, release build).
+    // order: cheaper than sorting the 16-byte factors by their key.
     const _: () = assert!(U8_MAX_RAYS == 0xff);
     prefetch_placed(rows.iter().map(RowU8::brick), placed);
     let mut order: Vec<u64> = rows
@@ -327,10 +321,9 @@ pub struct Carried<'a> {
 
 /// The asset's factor table, every carried table put in its place in probe order: tables in
 /// parallel, each encoded straight into its place,
-/// a dilated probe's copied from its source's, an invalid probe's rows dropped unencoded.
-/// Encoding a table per probe and joining them copied every factor once more: at Sponza's
-/// 1.0 m spacing (74 MB of factors, 2 threads) the assemble stage took 0.050 s, 0.001 s now.
-/// Fails when rows in the temporary file cannot be read back ([`RowStore`]).
+/// a dilated probe's copied from its source's, an invalid probe's rows dropped unencoded (a
+/// table per probe, joined, would copy every factor once more). Fails when rows in the
+/// temporary file cannot be read back ([`RowStore`]).
 pub fn encode_tables(
     rows: Rows,
     carried: Carried,
@@ -381,7 +374,7 @@ fn place_tables<R: Pod + Sync + Send, T: bytemuck::Zeroable + Copy + Send + Sync
         "a row entry per probe"
     );
     let mut out: Vec<T> = bytemuck::zeroed_vec(carried.lens.iter().sum());
-    let places = crate::split_runs(&mut out, carried.lens);
+    let places = crate::memory::split_runs(&mut out, carried.lens);
     let starts: Vec<usize> = places.iter().map(|&(start, _)| start).collect();
     let mut places = places.into_iter();
     rows.drain(|first, runs, chunk| {
@@ -413,14 +406,12 @@ fn place_tables<R: Pod + Sync + Send, T: bytemuck::Zeroable + Copy + Send + Sync
 
 /// Asks for the [`Placed`] entries of the provisional bricks `bricks` (one probe's rows) before
 /// any is read: a probe's bricks are scattered over the table, a cache miss each, and the
-/// loads that follow do not wait for one another once the lines are on their way. Sponza at
-/// 1.0 m (5.1 M u8 factors, 2 threads, release build, twelve alternating bakes): the tables
-/// were encoded in 123-168 ms against 123-205 ms (medians 137 and 175 ms), ten of twelve
-/// faster. Rows of sums (f16 and f32 tables) read the same table the same way; not measured.
+/// loads that follow do not wait for one another once the lines are on their way. Rows of
+/// sums (f16 and f32 tables) read the same table the same way.
 fn prefetch_placed(bricks: impl Iterator<Item = usize>, placed: &[Placed]) {
     for b in bricks {
         if let Some(p) = placed.get(b) {
-            crate::bricks::prefetch(p);
+            crate::memory::prefetch(p);
         }
     }
 }

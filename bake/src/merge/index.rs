@@ -1,16 +1,14 @@
 //! The fold's map from brick key to provisional brick: open addressing with linear probing,
 //! the key stored beside its brick in one 16-byte slot, so that a lookup is one cache line.
 //!
-//! The fold looks a brick up for every run of a probe's hits in one brick (5.7 M lookups for
-//! 6.5 M hits at Sponza's 1.0 m spacing) in a table far larger than the caches.
-//! A lookup in foldhash's `HashMap` read a line of control bytes, then the line of the entry:
-//! two dependent cache misses. Here the fold hashes every run of a probe first and asks for
-//! their slots' lines together ([`BrickIndex::home`], [`crate::bricks::prefetch`]), then looks
-//! them up in order ([`BrickIndex::find`]). Hashing the key through foldhash's `Hasher` (the
-//! cell as a slice, length first, then the flags) cost more than the lookups: the fold's key
-//! and lookup part took 547 ms with the `HashMap`, 545 ms with this table and that hash, 470 ms
-//! with the one folded multiply of [`BrickIndex::hash`] (Sponza at 1.0 m, one thread, release
-//! build).
+//! The fold looks a brick up for nearly every run of a probe's hits in one brick (runs are
+//! short) in a table far larger than the caches. A lookup in foldhash's `HashMap` reads a line
+//! of control bytes, then the line of the entry: two dependent cache misses. Here the fold
+//! hashes every run of a probe first and asks for their slots' lines together
+//! ([`BrickIndex::home`], [`crate::memory::prefetch`]), then looks them up in order
+//! ([`BrickIndex::find`]). The key is hashed by one folded multiply ([`BrickIndex::hash`]):
+//! through foldhash's `Hasher` (the cell as a slice, length first, then the flags) hashing
+//! cost more than the lookups.
 //!
 //! The hash is foldhash's folded multiply with a seed drawn per process from foldhash: the keys
 //! come from where the file's geometry is, so a fixed fast hash could be made to collide. The
@@ -19,7 +17,7 @@
 
 use std::hash::BuildHasher;
 
-use crate::bricks::Key;
+use crate::merge::key::Key;
 
 /// Bricks the index can number: the brick shares its slot's last word with the key's flags
 /// (4 bits).
@@ -88,7 +86,7 @@ impl BrickIndex {
     #[inline]
     pub fn home(&self, key: &Key) -> usize {
         let i = self.hash([key.0, key.1, key.2], key.3) & (self.slots.len() - 1);
-        crate::bricks::prefetch(&self.slots[i]);
+        crate::memory::prefetch(&self.slots[i]);
         i
     }
 

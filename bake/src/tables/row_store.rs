@@ -2,34 +2,31 @@
 //! chunks: the newest in memory, older ones in a temporary file once the rows pass a budget.
 //!
 //! The rows are the bake's largest working set and the only one that grows with the probe
-//! count alone (Sponza at 105k probes: 35.9 million rows, 957 MiB, against a 1,060 MiB asset).
+//! count alone (about as large as the asset).
 //! They cannot be encoded as they arrive: a factor names its brick's final number and is placed
 //! from its brick's centroid, both known only once every probe is folded
-//! ([`crate::bricks::BrickFolder::finish`]). So past the budget the oldest chunks are written
+//! ([`crate::merge::fold::BrickFolder::finish`]). So past the budget the oldest chunks are written
 //! to a file and read back one at a time when the tables are encoded, which is also in probe
 //! order: the memory the rows hold stays within the budget whatever the probe count, and the
 //! asset's bytes do not change. Past the budget, two more chunks are held: the one being
 //! written and the writer's page-aligned copy of it. Once any chunk is in the file, the rest
 //! follow when the trace ends, before the bricks are finished (the bake's peak, with the
-//! surfels under merge and the final ones both held). Sponza at 105k probes: peak 2,057 MiB
-//! with every row in memory, 1,266-1,283 MiB with the default budget of 256 MiB.
+//! surfels under merge and the final ones both held).
 //!
 //! The file is made in [`std::env::temp_dir`] (`TMPDIR`) and, on Unix, unlinked at once, so
 //! nothing is left behind however the bake ends. On Linux it is opened for direct I/O where
 //! the file system allows it (`O_DIRECT`, else through the page cache; a write refused for
-//! its alignment falls back to the page cache too): through the page cache, the 105k bake's
-//! system time was 3.9-6.9 s against 2.0-3.2 s with every row in memory (the kernel allocating
-//! and tracking a page for every 4 KiB, which is memory too: `dd` of 960 MiB to a new file on
-//! this machine's ext4 takes 2.2-3.7 s of system time, 0.24 s direct); direct, 2.3-2.7 s.
+//! its alignment falls back to the page cache too): through the page cache the kernel
+//! allocates and tracks a page for every 4 KiB written, which costs system time and is memory
+//! too.
 //! Direct I/O waits for the disk instead, so a thread of its own writes each chunk while the
 //! bake goes on, and another reads the next chunk while the one before is encoded.
 //!
 //! Why chunks: a probe's rows never span two, so a chunk is freed as soon as its probes are
 //! encoded, and chunks of [`CHUNK_BYTES`] are mapped on their own (glibc's mmap threshold
 //! rises to at most 32 MiB), so each goes back to the system when freed. Per-probe vectors
-//! came from the allocator's shared heaps, which kept the memory: the bake's peak was reached
-//! while the factor table was written beside rows already encoded (Sponza at 105k probes:
-//! 2,355-2,369 MiB then, 2,057 MiB with chunks; at 1.0 m 512 then, 475 MiB).
+//! came from the allocator's shared heaps, which kept the memory: the bake's peak was then
+//! reached while the factor table was written beside rows already encoded.
 
 use std::fs::File;
 use std::io::{Read, Seek, SeekFrom, Write};
@@ -45,7 +42,7 @@ use crate::BakeError;
 pub const CHUNK_BYTES: usize = 64 << 20;
 
 /// Bytes of the smallest chunk, whatever the budget: with a chunk per probe (a budget of
-/// nothing), Sponza at 105k probes would write 105k chunks, each padded to a page.
+/// nothing), a large bake would write a chunk per probe, each padded to a page.
 pub const MIN_CHUNK_BYTES: usize = 64 << 10;
 
 /// Every probe's rows in chunks, the oldest in a file past the budget (module doc).

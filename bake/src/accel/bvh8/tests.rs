@@ -30,10 +30,14 @@ impl Rng {
 }
 
 /// The bake's wide BVH over `tris`, built with obvhs' `medium_build` preset or (`fast`) its
-/// `fast_build` ([`crate::bvh::build_params`]): hits must not depend on which.
+/// `fast_build` ([`crate::accel::bvh::build_params`]): hits must not depend on which.
 fn build(tris: &[Triangle], fast: bool) -> Bvh8 {
     let rays = if fast { 0 } else { u64::MAX };
-    let bvh2 = crate::bvh::ploc(tris, &crate::bvh::build_params(tris.len(), rays), None);
+    let bvh2 = crate::accel::bvh::ploc(
+        tris,
+        &crate::accel::bvh::build_params(tris.len(), rays),
+        None,
+    );
     Bvh8::from_bvh2(&bvh2, &LeafOrder::of(&bvh2), tris)
 }
 
@@ -119,7 +123,7 @@ fn packets_find_the_brute_force_hit_in_a_triangle_soup() {
     }
 }
 
-/// PLOC in memory made ready beforehand ([`crate::bvh::PlocMemory`]), too small, exact or too
+/// PLOC in memory made ready beforehand ([`crate::accel::bvh::PlocMemory`]), too small, exact or too
 /// large, builds the tree it builds in its own: the same nodes and primitive order, bit for bit.
 /// (5,000 triangles stay below obvhs' parallel passes, from 4,000 to 500,000 primitives
 /// depending on the pass; they size their work from the arrays' lengths, which obvhs sets,
@@ -132,10 +136,10 @@ fn ploc_in_memory_made_ready_builds_the_same_tree() {
         obvhs::BvhBuildParams::fast_build(),
         obvhs::BvhBuildParams::medium_build(),
     ] {
-        let own = crate::bvh::ploc(&tris, &params, None);
+        let own = crate::accel::bvh::ploc(&tris, &params, None);
         for room in [0, 1000, tris.len(), 3 * tris.len()] {
-            let memory = crate::bvh::PlocMemory::faulted(room);
-            let given = crate::bvh::ploc(&tris, &params, Some(memory));
+            let memory = crate::accel::bvh::PlocMemory::faulted(room);
+            let given = crate::accel::bvh::ploc(&tris, &params, Some(memory));
             let bytes = |b: &Bvh2| bytemuck::cast_slice::<_, u8>(&b.nodes).to_vec();
             assert_eq!(bytes(&given), bytes(&own), "room for {room}");
             assert_eq!(

@@ -20,8 +20,10 @@ use glam::{DMat3, DVec3, Vec3};
 use prt_format::{Brick, Surfel, BRICK_BACKFACE};
 use rayon::prelude::*;
 
-use crate::brick_index::{BrickIndex, MAX_BRICKS};
-use crate::chunked::Chunked;
+use crate::memory::chunked::Chunked;
+use crate::memory::{prefetch, split_runs};
+use crate::merge::index::{BrickIndex, MAX_BRICKS};
+use crate::merge::key::{flags_of, floor_i32, Key};
 use crate::trace::Hit;
 use crate::BakeError;
 
@@ -29,26 +31,6 @@ use crate::BakeError;
 pub struct Bricked {
     pub bricks: Vec<Brick>,
     pub surfels: Vec<Surfel>,
-}
-
-/// Dominant axis of a normal: 0..6 for +X, -X, +Y, -Y, +Z, -Z.
-pub fn dominant_axis(n: Vec3) -> u32 {
-    let a = n.abs();
-    let (axis, v) = if a.x >= a.y && a.x >= a.z {
-        (0, n.x)
-    } else if a.y >= a.z {
-        (1, n.y)
-    } else {
-        (2, n.z)
-    };
-    2 * axis + u32::from(v < 0.0)
-}
-
-/// Brick cell (x, y, z) and flags (dominant axis | backface).
-pub(crate) type Key = (i32, i32, i32, u32);
-
-fn flags_of(h: &Hit) -> u32 {
-    dominant_axis(h.normal) | if h.backface { BRICK_BACKFACE } else { 0 }
 }
 
 /// Merges ray hits into bricks as they arrive, so that the bake never holds every hit at once
@@ -60,11 +42,9 @@ fn flags_of(h: &Hit) -> u32 {
 /// so the result depends only on the hits and their order, never on how they were blocked or
 /// on the thread count (`tests::blocking_does_not_change_the_result`).
 ///
-/// A brick is found by hashing its key ([`BrickIndex`], seeded per process), then its cell's
-/// surfels through a list per cell. Sponza at 1.0 m, 6.2 M hits, 2 threads: the sort-based
-/// merge this replaces (every hit's key sorted, then grouped) took 1.65-2.45 s and held every
-/// hit, its key and its rank at once; scanning a brick's surfels for the hit's cell instead of
-/// one list per cell took 17% of the bake's CPU time.
+/// A brick is found by hashing its key (`BrickIndex`, seeded per process), then its cell's
+/// surfels through a list per cell: no sort of every hit's key (which held every hit, its key
+/// and its rank at once), and no scan of a brick's surfels for the hit's cell.
 pub struct BrickFolder {
     anchor: Vec3,
     cell_size: f32,
@@ -100,11 +80,10 @@ impl BrickFolder {
     /// `cell_size == 0` switches merging off (one brick per hit, in hit order). The cell lattice
     /// starts at `anchor`: the bake puts it half a cell off the world origin, so that walls at
     /// round coordinates (whole numbers of cells from the origin) lie in the middle of cells.
-    /// Anchored at the origin itself, such walls lay exactly on cell boundaries, and float
-    /// rounding split their hits between two cells at random: more bricks and surfels, and
-    /// different ones at every scene scale (Cornell scaled by 10: 6,234 bricks against 5,976,
-    /// SH 1.9% of SH0 apart; now 7e-6). Anchoring at the bounds' corner instead measured worse
-    /// on the two-room fixture (14.9% mean surface error against 8.7%).
+    /// Anchored at the origin itself, such walls lie exactly on cell boundaries, and float
+    /// rounding splits their hits between two cells at random: more bricks and surfels, and
+    /// different ones at every scene scale. Anchoring at the bounds' corner instead gave a
+    /// larger surface error on the two-room fixture.
     pub fn new(cell_size: f32, merge_normal_cos: f32, anchor: Vec3) -> Self {
         BrickFolder {
             anchor,
@@ -124,18 +103,16 @@ impl BrickFolder {
 
     /// Folds the next `hits` (one probe's) in and appends the provisional brick of each to
     /// `brick_of_hit`. Fails, before any change, when the surfels would pass 2^32 - 1 or the
-    /// bricks what the index numbers ([`MAX_BRICKS`] merged, 2^32 - 1 unmerged; every hit adds
+    /// bricks what the index numbers (`MAX_BRICKS` merged, 2^32 - 1 unmerged; every hit adds
     /// at most one of each).
     ///
     /// The hits are taken in their order, a brick looked up once for each run of consecutive
     /// hits in it (the coherent ray order makes runs common), all the runs' lookups together so
     /// that their cache misses overlap; then the cells' heads and first surfels are loaded for
-    /// every hit before any is merged ([`BrickFolder::touch`]). Merged hit by hit, each waiting
-    /// for its misses, the fold took 3.0 s on Sponza at 1.0 m; with the hits sorted by brick,
-    /// so that each brick was found once per probe, 1.5 s. With the loads taken together, the
-    /// sort cost more than it saved: the bake took 4.44-4.62 s of CPU time without it against
-    /// 4.59-4.80 s (one thread, five alternating bakes each). A brick's surfels depend only on
-    /// the order of its own hits, which every one of these orders keeps.
+    /// every hit before any is merged (`BrickFolder::touch`), instead of each hit waiting for
+    /// its own misses. With the loads taken together, sorting the hits by brick first costs
+    /// more than it saves. A brick's surfels depend only on the order of its own hits, which
+    /// every one of these orders keeps.
     pub fn fold(&mut self, hits: &[Hit], brick_of_hit: &mut Vec<u32>) -> Result<(), BakeError> {
         let room = |limit: u32| limit as usize - hits.len().min(limit as usize);
         let unmerged = self.cell_size == 0.0;
@@ -216,11 +193,10 @@ impl BrickFolder {
 
     /// Loads the cells' heads, then their first surfels, for every hit before any is merged.
     /// The loads do not depend on each other, so the CPU overlaps their cache misses; merging
-    /// hit by hit, each hit waited for two misses in turn (its cell's head, then the surfel it
-    /// points to: 83% of the fold's time on Sponza at 1.0 m). Merging then finds them in cache.
-    /// On x86-64 as prefetches, which the CPU does not wait for, where a load it must finish
-    /// before the next instructions retire (Sponza at 1.0 m, one thread, least of four
-    /// alternating bakes: the trace stage took 3.895 s against 3.975 s with loads).
+    /// hit by hit, each hit would wait for two misses in turn (its cell's head, then the surfel
+    /// it points to), most of the fold's time. Merging then finds them in cache. On x86-64 as
+    /// prefetches, which the CPU does not wait for, where a load it must finish before the next
+    /// instructions retire.
     fn touch(&self, slots: &[(u32, u8, u32)]) {
         for &(b, cell, _) in slots {
             prefetch(&self.heads[b as usize][usize::from(cell)]);
@@ -273,9 +249,7 @@ impl BrickFolder {
     /// Asks for what [`BrickFolder::finish`] reads next: the first surfel of each of brick `b`'s
     /// cells, and the cell heads of the brick after it, `next`. Bricks are finished in key
     /// order, their surfels were made in arrival order, so each is a cache miss; the loads do
-    /// not depend on each other, but the walk of the cells waited for each in turn. Sponza at
-    /// 1.0 m (1.47 M surfels, 2 threads, release build, four alternating bakes, the noisiest
-    /// left out): the surfels took 103-114 ms to write against 133-146 ms.
+    /// not depend on each other, but the walk of the cells would wait for each in turn.
     fn prefetch_brick(&self, b: u32, next: Option<u32>) {
         if self.cell_size == 0.0 {
             return;
@@ -312,10 +286,9 @@ impl BrickFolder {
     /// final number of every provisional brick.
     pub fn finish(self) -> (Bricked, Vec<u32>) {
         let unmerged = self.cell_size == 0.0;
-        // Keys sorted beside their bricks, not bricks through their keys: each comparison read
-        // two keys scattered over the table (Sponza at 1.0 m, 134k bricks, release build: the
-        // bricks stage took 0.250-0.290 s against 0.245-0.310 s, medians about 0.27 s against
-        // 0.30 s, eight alternating bakes). Keys are distinct, so any sort gives one order.
+        // Keys sorted beside their bricks, not bricks through their keys, where each comparison
+        // reads two keys scattered over the table. Keys are distinct, so any sort gives one
+        // order.
         let order: Vec<u32> = match unmerged {
             true => (0..self.keys.len() as u32).collect(),
             false => {
@@ -329,8 +302,7 @@ impl BrickFolder {
             remap[b as usize] = final_index as u32;
         }
         // Each brick's surfels written in parallel straight into their run of the one surfel
-        // array (at 105k Sponza probes, building a vector per brick and joining them held 434 MB
-        // twice at the bake's peak).
+        // array: a vector per brick, joined, would hold every surfel twice at the bake's peak.
         let counts: Vec<usize> = order
             .iter()
             .map(|&b| match unmerged {
@@ -339,9 +311,9 @@ impl BrickFolder {
             })
             .collect();
         // Zeroed by the allocator, not filled here: the pages are first touched by the parallel
-        // writes below (a serial fill took 1.3% of a 1.9 m Sponza bake, one thread).
+        // writes below, not by a serial fill.
         let mut surfels: Vec<Surfel> = bytemuck::zeroed_vec(counts.iter().sum());
-        let runs = crate::split_runs(&mut surfels, &counts);
+        let runs = split_runs(&mut surfels, &counts);
         let bricks: Vec<Brick> = order
             .par_iter()
             .zip(runs)
@@ -361,39 +333,6 @@ impl BrickFolder {
             })
             .collect();
         (Bricked { bricks, surfels }, remap)
-    }
-}
-
-/// Asks for the cache line holding `item` without waiting for it (`prefetcht0`).
-#[cfg(all(target_arch = "x86_64", target_feature = "sse"))]
-#[inline(always)]
-pub(crate) fn prefetch<T>(item: &T) {
-    use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-    let p: *const T = item;
-    // SAFETY: SSE is part of the x86-64 baseline, and a prefetch reads nothing and never faults.
-    unsafe { _mm_prefetch::<_MM_HINT_T0>(p.cast()) };
-}
-
-/// Loads the cache line holding `item` (its first byte, which the compiler may not drop):
-/// where there is no prefetch instruction, independent loads still overlap their misses.
-#[cfg(not(all(target_arch = "x86_64", target_feature = "sse")))]
-#[inline(always)]
-pub(crate) fn prefetch<T>(item: &T) {
-    let p: *const T = item;
-    // SAFETY: `p` comes from a reference, so its first byte is valid to read.
-    std::hint::black_box(unsafe { std::ptr::read_volatile(p.cast::<u8>()) });
-}
-
-/// `v.floor() as i32` (saturating, NaN to 0) by truncation: the baseline x86-64 target has no
-/// SSE4.1 `roundps`, so `floor` is a call to a software routine, and the fold takes six per
-/// hit (8% of its time on Sponza at 1.0 m, one thread).
-#[inline]
-fn floor_i32(v: f32) -> i32 {
-    let t = v as i32;
-    if t as f32 > v {
-        t.saturating_sub(1)
-    } else {
-        t
     }
 }
 
@@ -443,9 +382,8 @@ fn brick_of(surfels: &mut [Surfel], flags: u32, first_surfel: u32) -> Brick {
 
 /// Running sums of one surfel being merged, in one cache line: merging a hit reads the
 /// cluster's direction and adds to its sums. The cell's list link is kept beside it
-/// ([`BrickFolder`]'s `next`) and the back-face flag is its brick's; with both inside, a
-/// cluster took 72 bytes and most straddled two lines (Sponza at 1.0 m: 5.30 s of CPU time
-/// against 5.19 s, the least of four alternating bakes each).
+/// ([`BrickFolder`]'s `next`) and the back-face flag is its brick's: with both inside, a
+/// cluster takes 72 bytes and most straddle two lines.
 #[repr(C, align(64))]
 struct Cluster {
     count: f32,
@@ -503,32 +441,6 @@ impl Cluster {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// [`floor_i32`] is `floor` then a saturating cast, for every 61st float of all 2^32 bit
-    /// patterns (NaNs among them), the infinities, and around every integer near zero.
-    #[test]
-    fn floor_by_truncation_is_floor() {
-        let check = |v: f32| assert_eq!(floor_i32(v), v.floor() as i32, "{v:e}");
-        for bits in (0..=u32::MAX).step_by(61) {
-            check(f32::from_bits(bits));
-        }
-        check(f32::INFINITY);
-        check(f32::NEG_INFINITY);
-        for n in -300..300 {
-            let v = n as f32;
-            for w in [
-                v,
-                v.next_down(),
-                v.next_up(),
-                v + 0.5,
-                -0.0,
-                2147483520.0,
-                -2147483648.0,
-            ] {
-                check(w);
-            }
-        }
-    }
 
     /// Folds `hits` in one go: bricks and each hit's final brick.
     fn build(hits: &[Hit], cell_size: f32, cos: f32, anchor: Vec3) -> (Bricked, Vec<u32>) {

@@ -3,16 +3,13 @@
 //! The brick fold appends surfels and bricks one at a time, up to hundreds of megabytes, while
 //! it runs alone beside the tracing threads. A `Vec` doubling its buffer copies everything into
 //! fresh pages each time: for the 64-byte-aligned surfel clusters the allocator cannot extend
-//! in place, so every growth was a copy (Sponza at 1.9 m, one thread: 2.7% of the bake's time
-//! in copies and page faults of the fold's growing vectors). Chunks are allocated once and
-//! filled in place.
+//! in place, so every growth is a copy, and the fold's thread is the one the tracing waits
+//! for. Chunks are allocated once and filled in place.
 //!
 //! Chunks should be of 32 MiB or more: glibc maps allocations that large on their own (its
 //! mmap threshold rises to at most 32 MiB on 64-bit targets), so a chunk costs only the pages
-//! written and goes back to the system when freed. Chunks of 1 MiB came from the heaps the
-//! bake's other allocations share, and fragmented them. Peak memory of Sponza's bake at 1.0 m:
-//! 626 MiB with chunks of 1 MiB, 564 MiB with chunks of 32 MiB, 555-568 MiB with growing
-//! vectors; at 1.9 m, 177 MiB with chunks of 32 MiB against 203-205 MiB with growing vectors.
+//! written and goes back to the system when freed. Smaller chunks come from the heaps the
+//! bake's other allocations share, and fragment them (a higher peak than growing vectors).
 
 use std::ops::{Index, IndexMut};
 

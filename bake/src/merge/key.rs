@@ -1,0 +1,71 @@
+//! Brick keys: which brick a ray hit belongs to, by its world cell and its normal's dominant
+//! axis, so that the two sides of a thin wall never share a brick.
+
+use glam::Vec3;
+use prt_format::BRICK_BACKFACE;
+
+use crate::trace::Hit;
+
+/// Dominant axis of a normal: 0..6 for +X, -X, +Y, -Y, +Z, -Z.
+pub fn dominant_axis(n: Vec3) -> u32 {
+    let a = n.abs();
+    let (axis, v) = if a.x >= a.y && a.x >= a.z {
+        (0, n.x)
+    } else if a.y >= a.z {
+        (1, n.y)
+    } else {
+        (2, n.z)
+    };
+    2 * axis + u32::from(v < 0.0)
+}
+
+/// Brick cell (x, y, z) and flags (dominant axis | backface).
+pub(crate) type Key = (i32, i32, i32, u32);
+
+/// A hit's brick flags: its normal's dominant axis, and whether it is a back face.
+pub(crate) fn flags_of(h: &Hit) -> u32 {
+    dominant_axis(h.normal) | if h.backface { BRICK_BACKFACE } else { 0 }
+}
+
+/// `v.floor() as i32` (saturating, NaN to 0) by truncation: the baseline x86-64 target has no
+/// SSE4.1 `roundps`, so `floor` is a call to a software routine, and the fold takes six a hit.
+#[inline]
+pub(crate) fn floor_i32(v: f32) -> i32 {
+    let t = v as i32;
+    if t as f32 > v {
+        t.saturating_sub(1)
+    } else {
+        t
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// [`floor_i32`] is `floor` then a saturating cast, for every 61st float of all 2^32 bit
+    /// patterns (NaNs among them), the infinities, and around every integer near zero.
+    #[test]
+    fn floor_by_truncation_is_floor() {
+        let check = |v: f32| assert_eq!(floor_i32(v), v.floor() as i32, "{v:e}");
+        for bits in (0..=u32::MAX).step_by(61) {
+            check(f32::from_bits(bits));
+        }
+        check(f32::INFINITY);
+        check(f32::NEG_INFINITY);
+        for n in -300..300 {
+            let v = n as f32;
+            for w in [
+                v,
+                v.next_down(),
+                v.next_up(),
+                v + 0.5,
+                -0.0,
+                2147483520.0,
+                -2147483648.0,
+            ] {
+                check(w);
+            }
+        }
+    }
+}

@@ -1,0 +1,7 @@
+//! Merging ray hits into bricks and surfels as they arrive: [`key`] says which brick a hit
+//! belongs to, `index` finds that brick, [`fold`] merges the hit into its cell's surfels and
+//! numbers the bricks at the end.
+
+pub mod fold;
+pub(crate) mod index;
+pub mod key;
