@@ -10,7 +10,8 @@ use std::time::Instant;
 use anyhow::Result;
 use glam::Vec3;
 use prt_bake::BakeSettings;
-use prt_runtime::gpu::{headless_device, layout::Counters, wgpu, PrtRuntime, RuntimeSettings};
+use prt_runtime::gpu::{headless_device, wgpu, PrtRuntime, RuntimeSettings};
+use prt_runtime::contract::Counters;
 use prt_runtime::{Lighting, SkyModel};
 
 use prt_bake::NoProgress;
@@ -124,7 +125,7 @@ pub fn table(args: &LightsArgs) -> Result<String> {
             .iter()
             .map(prt_runtime::lights::PreparedLight::new)
             .collect();
-        let normals = prt_runtime::relight::brick_normal_bounds(&asset);
+        let normals = prt_runtime::lights::brick_normal_bounds(&asset);
         // Front-face bricks each light reaches (the CPU twin of the cull stage).
         let reach: Vec<usize> = prepared
             .iter()

@@ -131,8 +131,10 @@ pub fn parse_size(s: &str) -> Result<(u32, u32), String> {
 pub fn run(args: RenderArgs) -> Result<()> {
     let camera = camera_of(args.eye, args.target, args.fov)?;
     let runtime = RuntimeSettings {
-        visibility: !args.no_visibility,
-        normal_bias: crate::normal_bias(args.normal_bias)?,
+        lookup: prt_runtime::LookupSettings {
+            normal_bias: crate::normal_bias(args.normal_bias)?,
+            depth_moments: !args.no_visibility,
+        },
         bounces: prt_runtime::gpu::Bounces::Fixed(args.bounces),
         ..RuntimeSettings::default()
     };

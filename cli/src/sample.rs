@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use prt_format::sh::ShRgb;
 use prt_runtime::gpu::{PrtRuntime, RuntimeSettings};
-use prt_runtime::{Sample, VolumeSampler};
+use prt_runtime::{LookupSettings, Sample, VolumeSampler};
 use serde_json::{json, Value};
 
 use crate::Backend;
@@ -41,8 +41,10 @@ type Point = ([f32; 3], [f32; 3]);
 pub fn run(args: SampleArgs) -> Result<()> {
     let normal_bias = crate::normal_bias(args.normal_bias)?;
     let settings = RuntimeSettings {
-        normal_bias,
-        visibility: !args.no_visibility,
+        lookup: LookupSettings {
+            normal_bias,
+            depth_moments: !args.no_visibility,
+        },
         ..RuntimeSettings::default()
     };
     crate::ensure_not_input(&args.json, &[&args.asset, &args.lights, &args.points])?;
@@ -80,7 +82,7 @@ fn sample_cpu(
     settings: &RuntimeSettings,
     points: &[Point],
 ) -> Vec<Sample> {
-    let sampler = VolumeSampler::for_asset(asset, sh, settings);
+    let sampler = VolumeSampler::for_asset(asset, sh, &settings.lookup);
     points.iter().map(|(p, n)| sampler.sample(*p, *n)).collect()
 }
 

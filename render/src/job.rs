@@ -139,7 +139,7 @@ pub fn run(
         )),
         (_, e) => e,
     })?;
-    let max_gi = prt_runtime::gpu::layout::MAX_LIGHTS;
+    let max_gi = prt_runtime::contract::MAX_LIGHTS;
     if job.output.needs_gi() && lighting.rig.lights.len() > max_gi {
         return Err(RenderError::GiLights {
             count: lighting.rig.lights.len(),

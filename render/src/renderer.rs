@@ -3,7 +3,7 @@
 
 use prt_bake::scene::Scene;
 use prt_format::{Asset, LightKind};
-use prt_runtime::gpu::layout::{GpuLight, VolumeInfo};
+use prt_runtime::contract::{GpuLight, VolumeInfo};
 use prt_runtime::gpu::PrtRuntime;
 use prt_runtime::lights::PreparedLight;
 use wgpu::util::DeviceExt;

@@ -6,7 +6,7 @@
 //! a GPU and every GPU result has a reference:
 //!
 //! - the point is first moved along its normal by `normal_bias` metres
-//!   (`RuntimeSettings::normal_bias`, in probe spacings, explains the trade-off);
+//!   (`LookupSettings::normal_bias`, in probe spacings, explains the trade-off);
 //! - grid coordinate `(p - origin) / step` (texel centres sit on the probes), clamped to the
 //!   grid: outside it the nearest face's probes are used, as the sampler's `ClampToEdge` does;
 //! - each of the eight probes around the point gets its trilinear weight times its validity
@@ -28,9 +28,15 @@
 //! `tests/tests/gpu.rs` states the tolerance.
 
 use glam::Vec3;
-use prt_format::depth::{MAX_DEPTH, MAX_DEVIATION};
+use prt_format::depth::MAX_DEPTH;
 use prt_format::sh::{ShRgb, SH_COUNT};
-use prt_format::{Asset, Grid, Probe, DEPTH_MAP_SIDE, DEPTH_WORDS};
+use prt_format::{Asset, Grid, Probe, DEPTH_WORDS};
+
+use crate::contract::{
+    CRUSH_THRESHOLD, FACING_DEPTH, FACING_FLOOR, MIN_DISTANCE, MIN_VALIDITY, MIN_VARIANCE,
+    MIN_VISIBILITY,
+};
+use crate::settings::LookupSettings;
 
 /// What the engine-side snippet returns at one point.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -45,37 +51,6 @@ pub struct Sample {
     pub validity: f32,
 }
 
-/// Summed validity at or below which the sample is empty (as in the shader).
-pub const MIN_VALIDITY: f32 = 1e-6;
-/// Floor of the Chebyshev visibility term: a point that no probe sees still gets the least
-/// occluded probes' light rather than nothing.
-pub const MIN_VISIBILITY: f32 = 1e-5;
-/// Spacings behind the surface's plane over which the facing term falls from 1 to its floor:
-/// `clamp(1 + h / FACING_DEPTH, 0, 1)^2 + FACING_FLOOR`, `h` being the probe's signed distance
-/// from the plane through the (unmoved) surface point, in spacings. Every probe in front of the
-/// plane counts fully, however grazing: with probes on the bounds' faces, the layer just off a
-/// wall (0.05 spacings in front, up to a step aside) sees what the wall sees, and DDGI's
-/// angular term `((n . dir + 1) / 2)^2` gave it a quarter of the weight of the layer a step
-/// inside. Measured (`prt bench surface`, normal bias 0.2): Cornell mean error 5.6% with the
-/// angular term, 4.0% with this one; two rooms at half spacing 6.1% and 4.6%, no leaks with either.
-pub const FACING_DEPTH: f32 = 0.25;
-/// Floor of the facing term: probes behind the surface's plane count less, not zero (a point
-/// whose probes are all behind it still gets light). DDGI uses 0.2; prt's rooms are up to 500
-/// times brighter than their neighbours (two rooms sharing a wall), where even 0.02 of a probe
-/// behind the wall leaked at half spacing (7 of 300 points, normal bias 0.1, angular facing
-/// term), so the floor is 0.002.
-pub const FACING_FLOOR: f32 = 0.002;
-/// Floor of the depth variance, in spacings squared (a perfectly flat hit distribution would
-/// make the test a hard step).
-pub const MIN_VARIANCE: f32 = 1e-4;
-/// Distance in spacings below which a point counts as at the probe (visible).
-pub const MIN_DISTANCE: f32 = 1e-4;
-
-/// Visibility below this is crushed towards zero (DDGI's crush threshold): a probe that sees the
-/// point only partly is most likely on the far side of a thin wall, and a room 500 times
-/// brighter than the point leaks visibly even at a weight of 1/1000.
-pub const CRUSH_THRESHOLD: f32 = 0.2;
-
 /// DDGI's crush: `v` below the threshold becomes `v^3 / threshold^2` (continuous at it).
 fn crush(v: f32) -> f32 {
     if v < CRUSH_THRESHOLD {
@@ -83,27 +58,6 @@ fn crush(v: f32) -> f32 {
     } else {
         v
     }
-}
-
-/// `(name, value)` of the sampling constants the snippet shares with this twin.
-pub fn wgsl_constants() -> Vec<(&'static str, String)> {
-    vec![
-        ("PRT_MIN_VALIDITY", format!("{MIN_VALIDITY:e}")),
-        ("PRT_MIN_VISIBILITY", format!("{MIN_VISIBILITY:e}")),
-        ("PRT_CRUSH_THRESHOLD", format!("{CRUSH_THRESHOLD:?}")),
-        ("PRT_FACING_FLOOR", format!("{FACING_FLOOR:?}")),
-        ("PRT_FACING_DEPTH", format!("{FACING_DEPTH:?}")),
-        ("PRT_MIN_VARIANCE", format!("{MIN_VARIANCE:e}")),
-        ("PRT_MIN_DISTANCE", format!("{MIN_DISTANCE:e}")),
-        ("PRT_DEPTH_SIDE", format!("{DEPTH_MAP_SIDE}u")),
-        ("PRT_DEPTH_WORDS", format!("{DEPTH_WORDS}u")),
-        ("PRT_MAX_DEPTH", format!("{MAX_DEPTH:?}")),
-        ("PRT_MAX_DEVIATION", format!("{MAX_DEVIATION:?}")),
-        (
-            "PRT_FLAG_VISIBILITY",
-            format!("{}u", crate::gpu::layout::VOLUME_VISIBILITY),
-        ),
-    ]
 }
 
 /// Samples probe SH like the engine-side snippet.
@@ -138,16 +92,12 @@ impl<'a> VolumeSampler<'a> {
         }
     }
 
-    /// What the GPU runtime's snippet samples for `asset` relit to `sh` with `settings`:
-    /// visibility-aware unless `settings.visibility` is off.
-    pub fn for_asset(
-        asset: &'a Asset,
-        sh: &'a [ShRgb],
-        settings: &crate::gpu::RuntimeSettings,
-    ) -> Self {
+    /// What the GPU runtime's snippet samples for `asset` relit to `sh` with `lookup`:
+    /// weighted by the probes' depth moments unless `lookup.depth_moments` is off.
+    pub fn for_asset(asset: &'a Asset, sh: &'a [ShRgb], lookup: &LookupSettings) -> Self {
         let g = &asset.header.grid;
-        let s = VolumeSampler::new(g, &asset.probes, sh, settings.normal_bias * g.spacing);
-        if settings.visibility {
+        let s = VolumeSampler::new(g, &asset.probes, sh, lookup.normal_bias * g.spacing);
+        if lookup.depth_moments {
             s.with_visibility(&asset.probe_depth)
         } else {
             s

@@ -51,7 +51,7 @@ fn update(
     queue: &wgpu::Queue,
     runtime: &mut PrtRuntime,
     lighting: &Lighting,
-) -> (Vec<ShRgb>, prt_runtime::gpu::layout::Counters) {
+) -> (Vec<ShRgb>, prt_runtime::contract::Counters) {
     let mut encoder = device.create_command_encoder(&Default::default());
     runtime.update(&mut encoder, lighting, None).unwrap();
     queue.submit([encoder.finish()]);

@@ -2,10 +2,11 @@
 //! lights (listed) and the moved ones (a bitset: they lose their cached visibility), the sky, and the
 //! cycle accounting of amortised updates and bounces ([`super::Bounces`]).
 
-use super::layout::*;
-use super::{Bounces, GpuError, PrtRuntime};
+use super::{GpuError, PrtRuntime};
+use crate::contract::*;
 use crate::lights::PreparedLight;
 use crate::rig::Lighting;
+use crate::settings::Bounces;
 use crate::sky::SkyModel;
 
 /// The lighting state an update was recorded for (to detect changes).

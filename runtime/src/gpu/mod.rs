@@ -38,7 +38,6 @@ pub use sample::sample_points;
 pub use wgpu;
 
 mod changes;
-pub mod layout;
 pub mod resources;
 pub mod sample;
 pub mod shaders;
@@ -51,10 +50,13 @@ use prt_format::sh::ShRgb;
 use prt_format::{directions, Asset, Factors};
 use wgpu::util::DeviceExt;
 
+pub use crate::settings::{Bounces, LookupSettings};
+
+use crate::contract::*;
 use crate::rig::Lighting;
+use crate::settings::MAX_BOUNCES;
 use crate::sky::SkyModel;
 use changes::{light_changes, Plan, State};
-use layout::*;
 use resources::Resources;
 use shaders::{ShaderConfig, Stage};
 
@@ -86,7 +88,7 @@ pub enum GpuError {
     BvhTooDeep { needed: usize, max: usize },
     #[error("reading back from the GPU failed: {0}")]
     Readback(String),
-    #[error("bounces must be Fixed(1..={max}) or Feedback with damping in (0, 1], got {0:?}", max = crate::relight::MAX_BOUNCES)]
+    #[error("bounces must be Fixed(1..={max}) or Feedback with damping in (0, 1], got {0:?}", max = MAX_BOUNCES)]
     Bounces(Bounces),
 }
 
@@ -118,34 +120,6 @@ impl VolumeFormat {
     }
 }
 
-/// Light bounces of the GPU runtime. Bounces beyond the first feed the volume back into the
-/// surfels, as the prior art does (DDGI, Majercik et al. 2019; Lumen's radiance cache): each
-/// pass of the gather over the probes (a *cycle*: one update, or `probes / budget` amortised
-/// updates) starts by sampling the volume at every surfel with the engine's own lookup
-/// ([`RuntimeSettings::normal_bias`], [`RuntimeSettings::visibility`]) and adding albedo / pi
-/// times that irradiance to the surfel's radiance.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Bounces {
-    /// Exactly this many bounces (1: direct light at surfels only, the one-bounce contract).
-    /// After a change of lights or sky the bounce light starts again from zero and one cycle
-    /// adds one bounce: `n` cycles after the change the volume equals
-    /// [`crate::CpuRelighter::relight_with`] with `n` bounces, and the runtime goes idle.
-    Fixed(u32),
-    /// Bounces without end: every cycle feeds the volume back, never idle, and a change of
-    /// lights carries the old bounce light over instead of restarting (no dip in indirect
-    /// light). The fed-back light is multiplied by `damping` in (0, 1]: 1 converges to the
-    /// full multi-bounce solution (a furnace of albedo a to e / (1 - a), geometrically, since
-    /// albedo < 1); lower values settle faster and stay further below it (e / (1 - d a)).
-    Feedback { damping: f32 },
-}
-
-impl Bounces {
-    /// Whether any bounce beyond the first is computed.
-    pub fn feeds_back(self) -> bool {
-        !matches!(self, Bounces::Fixed(0 | 1))
-    }
-}
-
 /// Runtime options.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RuntimeSettings {
@@ -158,24 +132,9 @@ pub struct RuntimeSettings {
     /// (default: the device's storage binding limit), whole bricks each. Each chunk costs one
     /// more dispatch of the per-surfel and per-brick stages.
     pub max_surfel_chunk_bytes: Option<u64>,
-    /// How far the sampling snippet moves a point along its normal before sampling, in probe
-    /// spacings (relative to the scene, so one value suits every grid; [`PrtRuntime::volume_info`]
-    /// turns it into metres). Probes just behind a surface see its back faces: they are invalid
-    /// or dark, and a point sampled on the surface still gives them trilinear weight
-    /// (self-shadowing, and light leaking through thin walls from probes on the other side).
-    /// A larger bias weights the probes in front of the surface more, at the price of sampling
-    /// the lighting off the surface (contact detail blurs, and a bias beyond the wall's distance
-    /// to the next probe can reach past nearby geometry). 0 samples exactly at the point.
-    /// Default 0.2: with visibility it also moves a point on the dark side of a thin wall far
-    /// enough past the wall, as the lit side's probes see it, for the Chebyshev test to reject
-    /// them (`prt bench surface`: Sponza at 1.2 m, 12 of 300 points leaking at 0.2 against 16
-    /// at 0.1, mean error 16.3% against 19.4%; the Cornell room 4.05% against 3.7%).
-    pub normal_bias: f32,
-    /// Visibility-aware sampling (DDGI's Chebyshev test against each probe's visibility map, see
-    /// `shaders/sample_irradiance.wgsl`): no light through walls from probes on their far side,
-    /// for 56 texel loads and 8 visibility words per lookup instead of 7 filtered fetches. Off:
-    /// hardware trilinear over the probes' weights only.
-    pub visibility: bool,
+    /// How the engine's snippet looks the volume up ([`LookupSettings`]); bounces beyond the
+    /// first sample the volume at the surfels through the same lookup.
+    pub lookup: LookupSettings,
     /// Light bounces ([`Bounces`]); default one.
     pub bounces: Bounces,
     /// Most lights a rig may have (1 to [`MAX_LIGHTS`], default 256; see
@@ -210,8 +169,7 @@ impl Default for RuntimeSettings {
             volume_format: VolumeFormat::default(),
             max_factor_chunk_bytes: None,
             max_surfel_chunk_bytes: None,
-            normal_bias: 0.2,
-            visibility: true,
+            lookup: LookupSettings::default(),
         }
     }
 }
@@ -314,11 +272,7 @@ impl PrtRuntime {
         asset: &Asset,
         settings: RuntimeSettings,
     ) -> Result<PrtRuntime, GpuError> {
-        let bounces_ok = match settings.bounces {
-            Bounces::Fixed(n) => (1..=crate::relight::MAX_BOUNCES).contains(&n),
-            Bounces::Feedback { damping } => damping > 0.0 && damping <= 1.0,
-        };
-        if !bounces_ok {
+        if !settings.bounces.is_valid() {
             return Err(GpuError::Bounces(settings.bounces));
         }
         if !(1..=MAX_LIGHTS).contains(&settings.max_lights) {
@@ -341,10 +295,10 @@ impl PrtRuntime {
             return Err(GpuError::NoProbes);
         }
         let needed = asset.geometry.stack_needed();
-        if needed > crate::visibility::MAX_STACK {
+        if needed > MAX_STACK {
             return Err(GpuError::BvhTooDeep {
                 needed,
-                max: crate::visibility::MAX_STACK,
+                max: MAX_STACK,
             });
         }
         let subgroups = device.features().contains(wgpu::Features::SUBGROUP);

@@ -7,9 +7,9 @@
 use prt_format::{Asset, Factors};
 use wgpu::util::DeviceExt;
 
-use super::layout::*;
 use super::{GpuError, RuntimeSettings};
-use crate::relight::brick_normal_bounds;
+use crate::contract::*;
+use crate::lights::brick_normal_bounds;
 
 /// Every GPU object of one asset's runtime, named after the WGSL variables that bind them
 /// ([`super::stages`] binds them by those names).
@@ -377,8 +377,8 @@ fn volume(
 /// The sampling snippet's uniform for `grid` and `settings`.
 pub fn volume_info(grid: &prt_format::Grid, settings: &RuntimeSettings) -> VolumeInfo {
     VolumeInfo {
-        normal_bias: settings.normal_bias * grid.spacing,
-        flags: if settings.visibility {
+        normal_bias: settings.lookup.normal_bias * grid.spacing,
+        flags: if settings.lookup.depth_moments {
             VOLUME_VISIBILITY
         } else {
             0

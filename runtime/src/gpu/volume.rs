@@ -4,7 +4,7 @@
 
 use prt_format::sh::{ShRgb, SH_COUNT};
 
-use super::layout::{Counters, VolumeInfo};
+use crate::contract::{Counters, VolumeInfo};
 use super::{resources, shaders, GpuError, PrtRuntime, RuntimeSettings, VolumeFormat};
 
 impl PrtRuntime {
