@@ -102,7 +102,7 @@ pub fn table(args: &LightsArgs) -> Result<String> {
         args.rays,
         args.repeats
     )?;
-    writeln!(md, "| lights | full update (all moved) | reaching (light, brick) pairs | shadow rays | per 1k pairs | one light moved (the widest) | its bricks | rays traced | bricks relit | visibility pool |")?;
+    writeln!(md, "| lights | full update (all moved) | reaching (light, brick) pairs | shadow rays | per 1k pairs | one light moved (the widest) | its bricks | rays traced | bricks relit | shadow-ray cache |")?;
     writeln!(md, "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")?;
     for &count in &args.lights {
         let base = crate::bench_render::scattered_lights(count, lo, hi);
@@ -163,7 +163,7 @@ pub fn table(args: &LightsArgs) -> Result<String> {
             reach.get(one).copied().unwrap_or(0),
             c.shadow_rays,
             c.bricks_relit,
-            all.visibility_words,
+            all.shadow_cache_words,
         )?;
     }
     Ok(md)

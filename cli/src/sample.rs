@@ -30,9 +30,9 @@ pub struct SampleArgs {
     /// runtime's, 0.2].
     #[arg(long, allow_hyphen_values = true)]
     normal_bias: Option<f32>,
-    /// Plain trilinear interpolation: no visibility test against the probes' visibility maps.
-    #[arg(long)]
-    no_visibility: bool,
+    /// Plain trilinear interpolation: no Chebyshev test against the probes' depth moments.
+    #[arg(long, alias = "no-visibility")]
+    no_depth_moments: bool,
 }
 
 /// A surface point: position and unit normal.
@@ -43,7 +43,7 @@ pub fn run(args: SampleArgs) -> Result<()> {
     let settings = RuntimeSettings {
         lookup: LookupSettings {
             normal_bias,
-            depth_moments: !args.no_visibility,
+            depth_moments: !args.no_depth_moments,
         },
         ..RuntimeSettings::default()
     };

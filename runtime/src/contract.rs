@@ -1,6 +1,6 @@
 //! # The contract between Rust and WGSL: every constant, flag and struct both sides read
 //!
-//! The CPU reference ([`crate::relight`], [`crate::sample`], [`crate::visibility`]) and the GPU
+//! The CPU reference ([`crate::relight`], [`crate::sample`], [`crate::shadow_rays`]) and the GPU
 //! runtime ([`crate::gpu`]) take their shared numbers from here, and the WGSL gets them
 //! generated from here: [`wgsl_constants`] is prepended to every compute stage,
 //! [`snippet_constants`] to the engine-side sampling snippet. The structs are the GPU twins
@@ -27,7 +27,7 @@ pub const GATHER_WORKGROUP: u32 = 32;
 /// the last), 64 MiB for 64k bricks at this limit, and the CPU reference's own limit
 /// ([`crate::relight::MAX_CPU_LIGHTS`]), which every GPU result is checked against.
 pub const MAX_LIGHTS: usize = 4096;
-/// A brick without room in the visibility pool (its lights are traced whenever it is relit).
+/// A brick without room in the shadow-ray cache (its lights are traced whenever it is relit).
 pub const NO_CACHE: u32 = u32::MAX;
 /// Workgroups along x of every dispatch; more work continues along y.
 pub const DISPATCH_WIDTH: u32 = 32768;
@@ -41,10 +41,10 @@ pub const HALF_MAX: f32 = 65504.0;
 /// `BVH_STACK`); the asset format guarantees it (`prt_format::validate::MAX_BVH_STACK`).
 pub const MAX_STACK: usize = prt_format::validate::MAX_BVH_STACK;
 /// Shadow-ray origin offset per unit of coordinate magnitude
-/// ([`crate::visibility::ray_offset`]).
+/// ([`crate::shadow_rays::ray_offset`]).
 pub const RAY_OFFSET_MAGNITUDE: f32 = 1e-6;
 /// Shadow-ray origin offset per unit of the scene's length scale
-/// ([`crate::visibility::ray_offset`]).
+/// ([`crate::shadow_rays::ray_offset`]).
 pub const RAY_OFFSET_SCALE: f32 = 1e-4;
 /// Floor of the squared distance in the inverse-square law, in m^2: only a guard against
 /// dividing by zero at the light itself. docs/conventions.md section 3 has the seed's 1e-5 m^2 (a
@@ -126,11 +126,11 @@ pub struct Counters {
     pub probes_clamped: u32,
     /// Light-brick reach tests of the cull stage: changed lights x front-face bricks.
     pub light_tests: u32,
-    /// Visibility pool words handed out (one bit per surfel and reaching light, rounded to
+    /// Shadow-ray cache words handed out (one bit per surfel and reaching light, rounded to
     /// words per surfel); `plus` keeps the larger.
-    pub visibility_words: u32,
+    pub shadow_cache_words: u32,
     /// Bricks with lights left uncached because the pool was full
-    /// ([`crate::gpu::RuntimeSettings::visibility_words`]): from the next relight on they trace all
+    /// ([`crate::gpu::RuntimeSettings::shadow_cache_words`]): from the next relight on they trace all
     /// their lights whenever relit; `plus` keeps the larger.
     pub bricks_uncached: u32,
 }
@@ -146,7 +146,7 @@ impl Counters {
             probes_gathered: self.probes_gathered.saturating_add(o.probes_gathered),
             probes_clamped: self.probes_clamped.max(o.probes_clamped),
             light_tests: self.light_tests.saturating_add(o.light_tests),
-            visibility_words: self.visibility_words.max(o.visibility_words),
+            shadow_cache_words: self.shadow_cache_words.max(o.shadow_cache_words),
             bricks_uncached: self.bricks_uncached.max(o.bricks_uncached),
         }
     }
@@ -175,20 +175,20 @@ pub struct Params {
     pub dispatch_width: u32,
     /// Words of the light masks in use: `ceil(max(previous, current light count) / 32)`. The
     /// previous count matters: removed lights' bits must be cleared and the old masks counted
-    /// in full, or cached-visibility slots shift (`tests/tests/lights.rs`).
+    /// in full, or cached shadow-ray slots shift (`tests/tests/lights.rs`).
     pub light_words: u32,
     pub offset_scale: f32,
     pub all_bricks_dirty: u32,
-    /// The scene's length scale for shadow-ray offsets (`visibility::ray_offset`): the spacing.
+    /// The scene's length scale for shadow-ray offsets (`shadow_rays::ray_offset`): the spacing.
     pub ray_scale: f32,
     /// Factor on the fed-back bounce light (`shaders/bounce_surfels.wgsl`): 1 for
     /// [`crate::settings::Bounces::Fixed`], the damping of
     /// [`crate::settings::Bounces::Feedback`].
     pub bounce_damping: f32,
-    /// This update's half of the visibility pool (0 or 1).
-    pub vis_parity: u32,
-    /// Words in each half of the visibility pool.
-    pub vis_capacity: u32,
+    /// This update's half of the shadow-ray cache (0 or 1).
+    pub cache_parity: u32,
+    /// Words in each half of the shadow-ray cache.
+    pub cache_capacity: u32,
     pub _pad: [u32; 2],
 }
 const _: () = assert!(std::mem::size_of::<Params>() == 112);
@@ -199,7 +199,7 @@ const _: () = assert!(std::mem::size_of::<Params>() == 112);
 #[repr(C)]
 pub struct VolumeInfo {
     pub origin: [f32; 3],
-    /// The grid's spacing: the unit of the visibility maps' distances.
+    /// The grid's spacing: the unit of the depth moments' distances.
     pub spacing: f32,
     /// Probe counts along x, y, z, as floats.
     pub counts: [f32; 3],
@@ -207,14 +207,15 @@ pub struct VolumeInfo {
     pub normal_bias: f32,
     /// The lattice step along x, y, z (`prt_format::Grid::step`).
     pub step: [f32; 3],
-    /// [`VOLUME_VISIBILITY`]: weight each of the eight probes by whether the point is visible
-    /// from it (eight manual fetches); without it, one hardware trilinear fetch per texture.
+    /// [`VOLUME_DEPTH_MOMENTS`]: weight each of the eight probes by its depth moments (whether
+    /// the point is visible from it; eight manual fetches); without it, one hardware trilinear
+    /// fetch per texture.
     pub flags: u32,
 }
 const _: () = assert!(std::mem::size_of::<VolumeInfo>() == 48);
 
-/// `VolumeInfo::flags`: visibility-aware sampling.
-pub const VOLUME_VISIBILITY: u32 = 1;
+/// `VolumeInfo::flags`: weight probes by their depth moments (`LookupSettings::depth_moments`).
+pub const VOLUME_DEPTH_MOMENTS: u32 = 1;
 
 impl From<&prt_format::Grid> for VolumeInfo {
     fn from(g: &prt_format::Grid) -> Self {
@@ -307,9 +308,9 @@ pub fn factor_format_code(precision: TransferPrecision) -> u32 {
 
 /// Summed validity at or below which the sample is empty (as in the shader).
 pub const MIN_VALIDITY: f32 = 1e-6;
-/// Floor of the Chebyshev visibility term: a point that no probe sees still gets the least
+/// Floor of the Chebyshev term (the probe's chance to see the point): a point that no probe sees still gets the least
 /// occluded probes' light rather than nothing.
-pub const MIN_VISIBILITY: f32 = 1e-5;
+pub const MIN_CHEBYSHEV: f32 = 1e-5;
 /// Spacings behind the surface's plane over which the facing term falls from 1 to its floor:
 /// `clamp(1 + h / FACING_DEPTH, 0, 1)^2 + FACING_FLOOR`, `h` being the probe's signed distance
 /// from the plane through the (unmoved) surface point, in spacings. Every probe in front of the
@@ -331,7 +332,7 @@ pub const MIN_VARIANCE: f32 = 1e-4;
 /// Distance in spacings below which a point counts as at the probe (visible).
 pub const MIN_DISTANCE: f32 = 1e-4;
 
-/// Visibility below this is crushed towards zero (DDGI's crush threshold): a probe that sees the
+/// A Chebyshev term below this is crushed towards zero (DDGI's crush threshold): a probe that sees the
 /// point only partly is most likely on the far side of a thin wall, and a room 500 times
 /// brighter than the point leaks visibly even at a weight of 1/1000.
 pub const CRUSH_THRESHOLD: f32 = 0.2;
@@ -341,7 +342,7 @@ pub const CRUSH_THRESHOLD: f32 = 0.2;
 pub fn snippet_constants() -> Vec<(&'static str, String)> {
     vec![
         ("PRT_MIN_VALIDITY", format!("{MIN_VALIDITY:e}")),
-        ("PRT_MIN_VISIBILITY", format!("{MIN_VISIBILITY:e}")),
+        ("PRT_MIN_CHEBYSHEV", format!("{MIN_CHEBYSHEV:e}")),
         ("PRT_CRUSH_THRESHOLD", format!("{CRUSH_THRESHOLD:?}")),
         ("PRT_FACING_FLOOR", format!("{FACING_FLOOR:?}")),
         ("PRT_FACING_DEPTH", format!("{FACING_DEPTH:?}")),
@@ -351,7 +352,7 @@ pub fn snippet_constants() -> Vec<(&'static str, String)> {
         ("PRT_DEPTH_WORDS", format!("{DEPTH_WORDS}u")),
         ("PRT_MAX_DEPTH", format!("{MAX_DEPTH:?}")),
         ("PRT_MAX_DEVIATION", format!("{MAX_DEVIATION:?}")),
-        ("PRT_FLAG_VISIBILITY", format!("{VOLUME_VISIBILITY}u")),
+        ("PRT_FLAG_DEPTH_MOMENTS", format!("{VOLUME_DEPTH_MOMENTS}u")),
     ]
 }
 

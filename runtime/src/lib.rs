@@ -15,8 +15,8 @@ pub mod relight;
 pub mod rig;
 pub mod sample;
 pub mod settings;
+pub mod shadow_rays;
 pub mod sky;
-pub mod visibility;
 
 pub use relight::{CpuRelighter, RelightError, RelightStats, Relit};
 pub use rig::{load_rig, load_rig_with_warnings, Lighting, RigLoadError};

@@ -3,14 +3,14 @@
 //! 1. **Direct light at surfels.** Per brick: cull each light by range, cone and facing
 //!    ([`PreparedLight::cull`]); for the lights left, every surfel gets the irradiance of
 //!    docs/conventions.md section 3, with a shadow ray through the asset's BVH
-//!    ([`crate::visibility`]). Back-face bricks are black and skipped.
+//!    ([`crate::shadow_rays`]). Back-face bricks are black and skipped.
 //! 2. **Surfel radiance** `L = emission + albedo / pi * E`.
 //! 3. **Brick radiance**: the weighted mean of its surfels'.
 //! 4. **Gather**: probe SH9 = sum over its factors of transfer x brick radiance, plus the sky
 //!    term. Invalid probes are skipped (zero, flagged invalid).
 //! 5. **Bounces** (optional, `bounces > 1`): surfels also receive the irradiance of the probe
 //!    volume from the previous iteration, sampled at the surfel with its normal through the
-//!    engine's lookup (`sample_irradiance`: normal bias, validity and visibility weights), and
+//!    engine's lookup (`sample_irradiance`: normal bias, validity and depth-moment weights), and
 //!    steps 2-4 repeat. `bounces = 1` is the one-bounce contract of
 //!    docs/conventions.md section 5, exactly when the bake did not merge surfels.
 
@@ -24,7 +24,7 @@ use crate::lights::{brick_normal_bounds, CullReason, NormalBounds, PreparedLight
 use crate::rig::Lighting;
 use crate::sample::VolumeSampler;
 use crate::settings::{LookupSettings, MAX_BOUNCES};
-use crate::visibility::{occluded, ray_offset};
+use crate::shadow_rays::{occluded, ray_offset};
 
 /// Why an asset cannot be relit.
 #[derive(Debug, thiserror::Error)]

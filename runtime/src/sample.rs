@@ -11,11 +11,12 @@
 //!   grid: outside it the nearest face's probes are used, as the sampler's `ClampToEdge` does;
 //! - each of the eight probes around the point gets its trilinear weight times its validity
 //!   (`Probe::sample_weight`: 1 for a valid or dilated probe, 0 for an invalid one), and **with
-//!   visibility** (the runtime's default) also the facing term `clamp(1 + h / FACING_DEPTH, 0,
-//!   1)^2 + FACING_FLOOR` (`h`: the probe's signed distance in spacings from the plane through
-//!   the unmoved surface point) and the Chebyshev visibility `max(crush(cheb^3), MIN_VISIBILITY)` of the point's
-//!   distance against the probe's visibility map in that direction (`prt_format::depth`;
-//!   Majercik et al., JCGT 2019); distances are measured from where the probe's rays started
+//!   depth moments** (the runtime's default) also the facing term `clamp(1 + h / FACING_DEPTH,
+//!   0, 1)^2 + FACING_FLOOR` (`h`: the probe's signed distance in spacings from the plane
+//!   through the unmoved surface point) and the Chebyshev term `max(crush(cheb^3),
+//!   MIN_CHEBYSHEV)` of the point's distance against the probe's depth moments in that
+//!   direction (the mean and deviation of its hit distances, `prt_format::depth`; Majercik et
+//!   al., JCGT 2019); distances are measured from where the probe's rays started
 //!   (`Probe::position`: the grid position unless the probe was moved off a surface). A
 //!   dilated probe sits inside geometry and its map sees that geometry close by, so it only
 //!   weighs where no real probe sees the point;
@@ -23,8 +24,8 @@
 //!   (`Sample::validity`) is at most `MIN_VALIDITY` (no probe around the point);
 //! - irradiance = `prt_format::sh::irradiance` (clamped-cosine convolution, clamped at 0).
 //!
-//! The GPU differs only by the volume's storage (half floats by default) and, without
-//! visibility, the hardware's filter weights (8-bit fixed-point fractions on most GPUs);
+//! The GPU differs only by the volume's storage (half floats by default) and, without depth
+//! moments, the hardware's filter weights (8-bit fixed-point fractions on most GPUs);
 //! `tests/tests/gpu.rs` states the tolerance.
 
 use glam::Vec3;
@@ -34,7 +35,7 @@ use prt_format::{Asset, Grid, Probe, DEPTH_WORDS};
 
 use crate::contract::{
     CRUSH_THRESHOLD, FACING_DEPTH, FACING_FLOOR, MIN_DISTANCE, MIN_VALIDITY, MIN_VARIANCE,
-    MIN_VISIBILITY,
+    MIN_CHEBYSHEV,
 };
 use crate::settings::LookupSettings;
 
@@ -68,13 +69,13 @@ pub struct VolumeSampler<'a> {
     /// Where each probe's rays started (`Probe::position`).
     positions: Vec<Vec3>,
     sh: &'a [ShRgb],
-    /// Visibility maps (`Asset::probe_depth`); empty: trilinear only.
-    depth: &'a [u32],
+    /// The probes' depth moments (`Asset::probe_depth`); empty: trilinear only.
+    depth_moments: &'a [u32],
     normal_bias: f32,
 }
 
 impl<'a> VolumeSampler<'a> {
-    /// A trilinear sampler (no visibility) over `sh` (one per probe, in `grid` index order),
+    /// A trilinear sampler (no depth moments) over `sh` (one per probe, in `grid` index order),
     /// each probe weighted by `Probe::sample_weight`; `normal_bias` is in metres. Probes missing
     /// from `probes` or `sh` count as invalid.
     pub fn new(grid: &Grid, probes: &[Probe], sh: &'a [ShRgb], normal_bias: f32) -> Self {
@@ -87,7 +88,7 @@ impl<'a> VolumeSampler<'a> {
             weight,
             positions,
             sh,
-            depth: &[],
+            depth_moments: &[],
             normal_bias,
         }
     }
@@ -98,23 +99,23 @@ impl<'a> VolumeSampler<'a> {
         let g = &asset.header.grid;
         let s = VolumeSampler::new(g, &asset.probes, sh, lookup.normal_bias * g.spacing);
         if lookup.depth_moments {
-            s.with_visibility(&asset.probe_depth)
+            s.with_depth_moments(&asset.probe_depth)
         } else {
             s
         }
     }
 
-    /// Weights probes by visibility from `depth` (`Asset::probe_depth`).
-    pub fn with_visibility(mut self, depth: &'a [u32]) -> Self {
+    /// Weights probes by their depth moments `depth` (`Asset::probe_depth`).
+    pub fn with_depth_moments(mut self, depth: &'a [u32]) -> Self {
         if depth.len() >= self.weight.len() * DEPTH_WORDS {
-            self.depth = depth;
+            self.depth_moments = depth;
         }
         self
     }
 
-    /// Visibility and facing weight of probe `i` at `probe` for the surface point `surface`
-    /// (facing), moved along its normal `n` to `x` (visibility), as DDGI does.
-    fn visibility(&self, i: usize, probe: Vec3, surface: Vec3, x: Vec3, n: Vec3) -> f32 {
+    /// Facing and Chebyshev weight of probe `i` at `probe` for the surface point `surface`
+    /// (facing), moved along its normal `n` to `x` (Chebyshev test), as DDGI does.
+    fn depth_weight(&self, i: usize, probe: Vec3, surface: Vec3, x: Vec3, n: Vec3) -> f32 {
         let v = x - probe;
         let len = v.length();
         let dist = len / self.grid.spacing;
@@ -125,7 +126,7 @@ impl<'a> VolumeSampler<'a> {
         let behind =
             ((probe - surface).dot(n) / self.grid.spacing / FACING_DEPTH + 1.0).clamp(0.0, 1.0);
         let mut w = behind * behind + FACING_FLOOR;
-        let words = &self.depth[i * DEPTH_WORDS..(i + 1) * DEPTH_WORDS];
+        let words = &self.depth_moments[i * DEPTH_WORDS..(i + 1) * DEPTH_WORDS];
         let (mean, deviation) =
             prt_format::depth::moments(words, prt_format::depth::texel_of(dir.to_array()));
         // A saturated mean (sky, or hits beyond MAX_DEPTH) bounds nothing: points beyond it,
@@ -134,7 +135,7 @@ impl<'a> VolumeSampler<'a> {
             let variance = (deviation * deviation).max(MIN_VARIANCE);
             let d = dist - mean;
             let chebyshev = variance / (variance + d * d);
-            w *= crush(chebyshev * chebyshev * chebyshev).max(MIN_VISIBILITY);
+            w *= crush(chebyshev * chebyshev * chebyshev).max(MIN_CHEBYSHEV);
         }
         w
     }
@@ -166,8 +167,8 @@ impl<'a> VolumeSampler<'a> {
             }
             validity += w_tri * probe_weight;
             let mut w = w_tri;
-            if !self.depth.is_empty() {
-                w *= self.visibility(i, self.positions[i], Vec3::from(position), p, n);
+            if !self.depth_moments.is_empty() {
+                w *= self.depth_weight(i, self.positions[i], Vec3::from(position), p, n);
             }
             let w = w * probe_weight;
             total += w;

@@ -1,4 +1,4 @@
-//! Light visibility at surfels: any-hit rays through the binary BVH the asset carries.
+//! Shadow rays from surfels to lights: any-hit rays through the binary BVH the asset carries.
 //!
 //! The traversal is the plain stack loop the WGSL twin runs (`shaders/`), with the same slab
 //! test and the same Moller-Trumbore intersection ("Fast, Minimum Storage Ray/Triangle

@@ -252,7 +252,7 @@ fn amortised_updates_and_skipped_work() {
     let counters = amortised.read_counters().unwrap();
     assert_eq!(
         counters.shadow_rays, 0,
-        "visibility cached for a light that did not move"
+        "shadow ray cached for a light that did not move"
     );
     assert!(counters.bricks_relit > 0 && (counters.bricks_relit as usize) < asset.bricks.len());
     assert_close(
@@ -366,10 +366,10 @@ fn hostile_values_stay_finite() {
 }
 
 /// Emissive bricks no light reaches are relit on the first update (GPU furnace: c0 = 4pi Y00 e
-/// with no lights at all), and the visibility cache is re-traced whenever a change can light
+/// with no lights at all), and the shadow-ray cache is re-traced whenever a change can light
 /// new surfels: a dark light turned on, a longer range.
 #[test]
-fn emission_and_visibility_cache_follow_every_change() {
+fn emission_and_shadow_cache_follow_every_change() {
     let (device, queue) = gpu_device();
     let settings = BakeSettings {
         spacing: Some(0.6),
@@ -639,7 +639,7 @@ fn sample_points_matches_the_cpu_sampler() {
         let mixed = compare_samplers(&device, &queue, &asset, &lighting, settings);
         assert!(mixed > 0, "no point beside a probe inside geometry");
     }
-    // Two rooms sharing a thin wall: the visibility test decides most of the weights there.
+    // Two rooms sharing a thin wall: the depth moments decide most of the weights there.
     let rooms = bake(&fixture("two_rooms.gltf"), &BakeSettings::default());
     let lighting = load_rig(&fixture("rigs/two_rooms.json")).unwrap();
     compare_samplers(
@@ -703,7 +703,7 @@ fn compare_samplers(
         }
     }
     eprintln!(
-        "visibility {}: {} points ({mixed} beside probes inside geometry): worst |dSH|/SH0 {worst_sh:.2e}, |dE|/E0 {worst_e:.2e}, |dvalidity| {worst_v:.2e}",
+        "depth moments {}: {} points ({mixed} beside probes inside geometry): worst |dSH|/SH0 {worst_sh:.2e}, |dE|/E0 {worst_e:.2e}, |dvalidity| {worst_v:.2e}",
         settings.lookup.depth_moments,
         points.len()
     );

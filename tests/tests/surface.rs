@@ -1,4 +1,4 @@
-//! Irradiance where a renderer samples it, at surfaces: no light through walls (visibility-aware
+//! Irradiance where a renderer samples it, at surfaces: no light through walls (depth-moment weighted
 //! lookup), no holes (dilation of probes inside geometry), probes inside double-sided solids
 //! detected and probes on surfaces moved off them. Fixtures: `fixtures/two_rooms.gltf` (a lit
 //! and a dark room sharing a zero-thickness wall with a door) and `fixtures/thick_walls.gltf`
@@ -204,10 +204,10 @@ fn probes_on_a_wall_move_off_it() {
     assert!(fixed.probes.iter().any(|p| on_wall(p.position[0])));
 }
 
-/// A probe's visibility map holds the distance to what it sees, in spacings: at the centre of
+/// A probe's depth moments hold the distance to what it sees, in spacings: at the centre of
 /// the closed 2 m box, the walls are 1 m away along the axes.
 #[test]
-fn visibility_maps_hold_distances_in_spacings() {
+fn depth_moments_hold_distances_in_spacings() {
     let asset = bake_ok(
         &fixture("closed_box_inward.gltf"),
         &BakeSettings {

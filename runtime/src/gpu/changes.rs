@@ -1,5 +1,5 @@
 //! What changed since the last update, and what this update must therefore do: the changed
-//! lights (listed) and the moved ones (a bitset: they lose their cached visibility), the sky, and the
+//! lights (listed) and the moved ones (a bitset: they lose their cached shadow rays), the sky, and the
 //! cycle accounting of amortised updates and bounces ([`super::Bounces`]).
 
 use super::{GpuError, PrtRuntime};
@@ -41,8 +41,8 @@ impl Plan {
 
 /// What changed between the lights of two updates (`old` is `None` on the first), as the cull
 /// and relight stages read it: the moved lights' bitset (`stride` words: lights whose cached
-/// visibility is stale), then the changed lights' indices in ascending order. Only a change of
-/// colour or intensity of a light that was lit keeps its visibility: anything else can light
+/// shadow rays are stale), then the changed lights' indices in ascending order. Only a change of
+/// colour or intensity of a light that was lit keeps its shadow rays: anything else can light
 /// surfels never traced for it.
 pub(super) fn light_changes(old: Option<&[GpuLight]>, new: &[GpuLight], stride: usize) -> Vec<u32> {
     let mut words = vec![0u32; stride];

@@ -8,9 +8,9 @@
 //!    cone, facing, in world space; never through screen-space clusters), kept as one bit per
 //!    light in the brick's light mask, and whether a changed light reaches it now or did before:
 //!    only then is the brick *dirty*. Each brick takes one bit per (surfel, reaching light) pair
-//!    in the visibility pool (two halves, written in turn).
+//!    in the shadow-ray cache (two halves, written in turn).
 //! 2. **relight_surfels** (per surfel; for a dirty brick's): direct irradiance from the brick's
-//!    lights with visibility from shadow rays through the asset's BVH, cached per pair and
+//!    lights, shadowed by shadow rays through the asset's BVH, cached per pair and
 //!    re-traced only for lights that moved; other bricks' bits move to the new half.
 //! 3. **bounce_surfels** (per surfel; multi-bounce only, at the start of a cycle): the volume's
 //!    irradiance at the surfel through the engine's `sample_irradiance`, as bounce radiance;
@@ -142,11 +142,11 @@ pub struct RuntimeSettings {
     /// twice, so the masks take `bricks x max_lights / 4` bytes in one storage binding (128 MiB
     /// on lavapipe: 2 M bricks at 256 lights, 524k at 1,024).
     pub max_lights: usize,
-    /// Words in each half of the visibility pool, one bit per (surfel, light that reaches its
+    /// Words in each half of the shadow-ray cache, one bit per (surfel, light that reaches its
     /// brick) pair, rounded to words per surfel [default: 2 words per surfel, for bricks reached
     /// by up to 64 lights on average]. Bricks past it are left uncached (traced every time they
     /// are relit; `Counters::bricks_uncached`), never wrong.
-    pub visibility_words: Option<u64>,
+    pub shadow_cache_words: Option<u64>,
 }
 
 impl RuntimeSettings {
@@ -165,7 +165,7 @@ impl Default for RuntimeSettings {
         RuntimeSettings {
             bounces: Bounces::Fixed(1),
             max_lights: 256,
-            visibility_words: None,
+            shadow_cache_words: None,
             volume_format: VolumeFormat::default(),
             max_factor_chunk_bytes: None,
             max_surfel_chunk_bytes: None,
@@ -233,9 +233,9 @@ pub struct PrtRuntime {
     settings: RuntimeSettings,
     /// Every buffer and texture, bound by name ([`stages`]).
     res: Resources,
-    vis_capacity: u32,
-    /// The half of the visibility pool the last relight wrote.
-    vis_parity: u32,
+    cache_capacity: u32,
+    /// The half of the shadow-ray cache the last relight wrote.
+    cache_parity: u32,
     pipelines: Vec<(Stage, stages::Pipeline)>,
     state: Option<State>,
     /// The last equirect sky and its lattice radiance (`SkyModel::lattice` averages the map over
@@ -328,9 +328,9 @@ impl PrtRuntime {
                 _ => 1.0,
             },
             settings,
-            vis_capacity: res.vis_capacity as u32,
+            cache_capacity: res.cache_capacity as u32,
             res,
-            vis_parity: 1,
+            cache_parity: 1,
             pipelines,
             state: None,
             sky_cache: None,
@@ -373,7 +373,7 @@ impl PrtRuntime {
         }
         let params = self.params(&new, changed, light_words, &plan);
         if plan.relight() {
-            self.vis_parity = params.vis_parity;
+            self.cache_parity = params.cache_parity;
         }
         let copy = |encoder: &mut wgpu::CommandEncoder, dst: &wgpu::Buffer, bytes: &[u8]| {
             if bytes.is_empty() {
@@ -456,12 +456,12 @@ impl PrtRuntime {
                 Bounces::Feedback { damping } => damping,
                 Bounces::Fixed(_) => 1.0,
             },
-            vis_parity: if plan.relight() {
-                1 - self.vis_parity
+            cache_parity: if plan.relight() {
+                1 - self.cache_parity
             } else {
-                self.vis_parity
+                self.cache_parity
             },
-            vis_capacity: self.vis_capacity,
+            cache_capacity: self.cache_capacity,
             _pad: [0; 2],
         }
     }

@@ -1,6 +1,6 @@
 //! Every buffer and texture of the GPU runtime, created from one asset: the asset's arrays as
 //! they are (factor tables and surfel arrays split into chunks that fit one storage binding
-//! each), the runtime's own state (light masks, visibility pool, brick radiance, probe SH,
+//! each), the runtime's own state (light masks, shadow-ray cache, brick radiance, probe SH,
 //! counters) and the SH volume. Sizes are checked against the device's limits before anything
 //! is allocated.
 
@@ -31,19 +31,19 @@ pub struct Resources {
     pub triangles: wgpu::Buffer,
     pub sky_transfer: wgpu::Buffer,
     pub sky_mask: wgpu::Buffer,
-    /// Visibility maps (`Asset::probe_depth`).
-    pub probe_depth: wgpu::Buffer,
+    /// The probes' depth moments (`Asset::probe_depth`, `prt_format::depth`).
+    pub depth_moments: wgpu::Buffer,
     /// Where each probe's rays started (xyz, w unused).
     pub probe_positions: wgpu::Buffer,
     /// Per brick, `mask_stride` words of light mask, then as many of the previous mask.
     pub brick_lights: wgpu::Buffer,
     pub brick_dirty: wgpu::Buffer,
-    /// Per brick, its offsets in the two halves of the visibility pool.
-    pub brick_vis: wgpu::Buffer,
-    /// Words in each half of the visibility pool.
-    pub vis_capacity: u64,
-    /// The visibility pool: one bit per (surfel, reaching light) pair, two halves.
-    pub visibility: wgpu::Buffer,
+    /// Per brick, its offsets in the two halves of the shadow-ray cache.
+    pub brick_cache: wgpu::Buffer,
+    /// Words in each half of the shadow-ray cache.
+    pub cache_capacity: u64,
+    /// The shadow-ray cache: one bit per (surfel, reaching light) pair, two halves.
+    pub shadow_cache: wgpu::Buffer,
     /// Per update: the moved lights' bitset, then the changed lights' indices.
     pub light_changes: wgpu::Buffer,
     pub brick_radiance: wgpu::Buffer,
@@ -116,8 +116,8 @@ impl Resources {
         )?;
         let sky_mask =
             alloc.storage("prt sky mask", bytemuck::cast_slice(&asset.sky_mask), none)?;
-        let probe_depth = alloc.storage(
-            "prt probe visibility",
+        let depth_moments = alloc.storage(
+            "prt probe depth moments",
             bytemuck::cast_slice(&asset.probe_depth),
             none,
         )?;
@@ -137,16 +137,16 @@ impl Resources {
         let stride = u64::from(mask_stride);
         let brick_lights = alloc.zeroed("prt brick light masks", 8 * stride * n_bricks, none)?;
         let brick_dirty = alloc.zeroed("prt brick dirty", 4 * n_bricks, none)?;
-        let brick_vis = alloc.storage(
-            "prt brick visibility offsets",
+        let brick_cache = alloc.storage(
+            "prt brick shadow-cache offsets",
             bytemuck::cast_slice(&vec![NO_CACHE; 2 * asset.bricks.len()]),
             none,
         )?;
-        let vis_capacity = settings
-            .visibility_words
+        let cache_capacity = settings
+            .shadow_cache_words
             .unwrap_or(2 * n_surfels)
             .clamp(1, (max_binding / 8).min(u64::from(u32::MAX / 2)));
-        let visibility = alloc.zeroed("prt visibility pool", 8 * vis_capacity, none)?;
+        let shadow_cache = alloc.zeroed("prt shadow-ray cache", 8 * cache_capacity, none)?;
         let light_changes = alloc.zeroed(
             "prt light changes",
             4 * (stride + settings.max_lights as u64),
@@ -192,13 +192,13 @@ impl Resources {
             triangles,
             sky_transfer,
             sky_mask,
-            probe_depth,
+            depth_moments,
             probe_positions,
             brick_lights,
             brick_dirty,
-            brick_vis,
-            vis_capacity,
-            visibility,
+            brick_cache,
+            cache_capacity,
+            shadow_cache,
             light_changes,
             brick_radiance,
             probe_dirty,
@@ -379,7 +379,7 @@ pub fn volume_info(grid: &prt_format::Grid, settings: &RuntimeSettings) -> Volum
     VolumeInfo {
         normal_bias: settings.lookup.normal_bias * grid.spacing,
         flags: if settings.lookup.depth_moments {
-            VOLUME_VISIBILITY
+            VOLUME_DEPTH_MOMENTS
         } else {
             0
         },

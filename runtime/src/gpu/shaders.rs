@@ -1,11 +1,12 @@
 //! Assembles each stage's WGSL: constants generated from Rust ([`crate::contract`]), the shared
-//! `types.wgsl`, the BVH traversal where a stage traces rays, and the stage's own file. The
-//! sources are the `prt-shaders` crate's (`shaders/` at the top of the repository).
+//! `types.wgsl`, the light model and the shadow-ray traversal where a stage traces rays, and the
+//! stage's own file. The sources are the `prt-shaders` crate's (`shaders/` at the top of the
+//! repository).
 
 use crate::contract;
 use prt_shaders::{
-    BOUNCE_SURFELS, BRICK_RADIANCE, CULL_LIGHTS, GATHER, GATHER_SUBGROUP, GATHER_TREE, MARK_PROBES,
-    RELIGHT_SURFELS, SAMPLE_IRRADIANCE, TYPES, VISIBILITY,
+    BOUNCE_SURFELS, BRICK_RADIANCE, CULL_LIGHTS, GATHER, GATHER_SUBGROUP, GATHER_TREE, LIGHT_SAMPLE,
+    MARK_PROBES, RELIGHT_SURFELS, SAMPLE_IRRADIANCE, SHADOW_RAYS, TYPES,
 };
 
 /// The compute stages, one WGSL file each (the gather has two reduction variants).
@@ -78,7 +79,7 @@ pub fn prelude(config: &ShaderConfig) -> String {
 pub fn source(stage: Stage, config: &ShaderConfig) -> String {
     let body: Vec<&str> = match stage {
         Stage::CullLights => vec![CULL_LIGHTS],
-        Stage::RelightSurfels => vec![VISIBILITY, RELIGHT_SURFELS],
+        Stage::RelightSurfels => vec![LIGHT_SAMPLE, SHADOW_RAYS, RELIGHT_SURFELS],
         Stage::BounceSurfels => vec![BOUNCE_SURFELS],
         Stage::BrickRadiance => vec![BRICK_RADIANCE],
         Stage::MarkProbes => vec![MARK_PROBES],
@@ -116,7 +117,8 @@ pub fn light_model_source() -> String {
     };
     let mut s = prelude(&config);
     s.push_str(TYPES);
-    s.push_str(VISIBILITY);
+    s.push_str(LIGHT_SAMPLE);
+    s.push_str(SHADOW_RAYS);
     s
 }
 
@@ -372,8 +374,8 @@ pub(crate) mod tests {
                         offset_of!(contract::Params, all_bricks_dirty),
                     ),
                     ("bounce_damping", offset_of!(contract::Params, bounce_damping)),
-                    ("vis_parity", offset_of!(contract::Params, vis_parity)),
-                    ("vis_capacity", offset_of!(contract::Params, vis_capacity)),
+                    ("cache_parity", offset_of!(contract::Params, cache_parity)),
+                    ("cache_capacity", offset_of!(contract::Params, cache_capacity)),
                 ],
             ),
         ];

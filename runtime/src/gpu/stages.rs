@@ -47,8 +47,8 @@ enum Binding {
     SurfelBounce,
     BrickLights,
     BrickDirty,
-    BrickVis,
-    Visibility,
+    BrickCache,
+    ShadowCache,
     LightChanges,
     BrickRadiance,
     ProbeDirty,
@@ -65,7 +65,7 @@ enum Binding {
     SampledVolume(usize),
     Sampler,
     VolumeInfo,
-    Depth,
+    DepthMoments,
     ProbePositions,
 }
 
@@ -96,8 +96,8 @@ impl Binding {
             "surfel_bounce" => Binding::SurfelBounce,
             "brick_lights" => Binding::BrickLights,
             "brick_dirty" => Binding::BrickDirty,
-            "brick_vis" => Binding::BrickVis,
-            "visibility" => Binding::Visibility,
+            "brick_cache" => Binding::BrickCache,
+            "shadow_cache" => Binding::ShadowCache,
             "light_changes" => Binding::LightChanges,
             "brick_radiance" => Binding::BrickRadiance,
             "probe_dirty" => Binding::ProbeDirty,
@@ -110,7 +110,7 @@ impl Binding {
             "triangles" => Binding::Triangles,
             "prt_sampler" => Binding::Sampler,
             "prt_volume" => Binding::VolumeInfo,
-            "prt_depth" => Binding::Depth,
+            "prt_depth_moments" => Binding::DepthMoments,
             "prt_probe_positions" => Binding::ProbePositions,
             _ => return None,
         })
@@ -140,8 +140,8 @@ impl Binding {
             Binding::SurfelBounce => b(&r.chunk_surfels[s][2]),
             Binding::BrickLights => b(&r.brick_lights),
             Binding::BrickDirty => b(&r.brick_dirty),
-            Binding::BrickVis => b(&r.brick_vis),
-            Binding::Visibility => b(&r.visibility),
+            Binding::BrickCache => b(&r.brick_cache),
+            Binding::ShadowCache => b(&r.shadow_cache),
             Binding::LightChanges => b(&r.light_changes),
             Binding::BrickRadiance => b(&r.brick_radiance),
             Binding::ProbeDirty => b(&r.probe_dirty),
@@ -157,7 +157,7 @@ impl Binding {
             }
             Binding::Sampler => wgpu::BindingResource::Sampler(&r.sampler),
             Binding::VolumeInfo => b(&r.volume_info),
-            Binding::Depth => b(&r.probe_depth),
+            Binding::DepthMoments => b(&r.depth_moments),
             Binding::ProbePositions => b(&r.probe_positions),
         }
     }
@@ -280,12 +280,12 @@ mod tests {
     fn every_declared_binding_has_a_resource() {
         assert_eq!(
             declared_bindings(
-                "@group(1) @binding(3) var<storage, read_write> visibility: array<u32>;\n\
+                "@group(1) @binding(3) var<storage, read_write> shadow_cache: array<u32>;\n\
                  @group(0) @binding(12) var prt_volume4: texture_3d<f32>;\n\
                  fn f() { var x = 1; }"
             ),
             vec![
-                (1, 3, "visibility".to_string()),
+                (1, 3, "shadow_cache".to_string()),
                 (0, 12, "prt_volume4".to_string())
             ]
         );

@@ -34,7 +34,7 @@ impl PrtRuntime {
     }
 
     /// The bind group layout entries of the sampling snippet (`wgsl_snippet`), visible to
-    /// `stages`: textures 0-6, sampler 7, uniform 8, visibility maps 9, probe positions 10.
+    /// `stages`: textures 0-6, sampler 7, uniform 8, depth moments 9, probe positions 10.
     /// The textures are declared filterable: a [`VolumeFormat::F32`] volume needs a device with
     /// `Features::FLOAT32_FILTERABLE` (as its trilinear sampler does anyway).
     pub fn volume_layout_entries(stages: wgpu::ShaderStages) -> Vec<wgpu::BindGroupLayoutEntry> {
@@ -98,7 +98,7 @@ impl PrtRuntime {
         });
         entries.push(wgpu::BindGroupEntry {
             binding: 9,
-            resource: self.res.probe_depth.as_entire_binding(),
+            resource: self.res.depth_moments.as_entire_binding(),
         });
         entries.push(wgpu::BindGroupEntry {
             binding: 10,
