@@ -1,32 +1,23 @@
-//! The compute stages' pipelines and bind groups. Nothing here lists bindings by number: each
-//! stage's assembled WGSL declares its bindings (`@group(g) @binding(b) var ... name`), and
-//! every bind group is built from those declarations, binding each variable to the resource of
+//! Bind groups built from the WGSL. Nothing here lists bindings by number: each stage's
+//! assembled WGSL declares its bindings (`@group(g) @binding(b) var ... name`), and every bind
+//! group is built from those declarations, binding each variable to the resource of
 //! [`Resources`] that carries its name ([`Binding::of`]). A shader can therefore renumber,
 //! reorder or drop bindings without a Rust change (a new resource name takes one line in
-//! [`Binding::of`]), and a unit test checks, for every stage and shader configuration, that
-//! every name is one the runtime provides, that naga reads the same declarations, and that
-//! `main` uses each of them (the pipeline layout is derived from what it uses).
+//! [`Binding::of`] and one in [`Binding::resource`]), and a unit test checks, for every stage
+//! and shader configuration, that every name is one the runtime provides, that naga reads the
+//! same declarations, and that `main` uses each of them (the pipeline layout is derived from
+//! what it uses). The engine-side sampling snippet's bind group is built the same way.
 //!
 //! The split arrays make a stage's bind groups come in *sets*, dispatched in turn: one per
 //! factor chunk for the stages that read factors (`mark_probes`, `gather`), one per surfel
 //! chunk for those that read surfels (`relight_surfels`, `bounce_surfels`, `brick_radiance`).
 
 use super::resources::Resources;
-use super::shaders::{self, ShaderConfig, Stage};
-use super::GpuError;
-
-/// A stage's pipeline and its bind-group sets.
-pub struct Pipeline {
-    pub pipeline: wgpu::ComputePipeline,
-    pub bind_group_sets: Vec<Vec<wgpu::BindGroup>>,
-    /// Per set, the work items of a surfel-chunked stage (its chunk's surfels or bricks);
-    /// `None`: the stage's own count.
-    pub set_work: Vec<Option<u32>>,
-}
+use super::{shaders, GpuError};
 
 /// Which slice of the split arrays a bind-group set binds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Set {
+pub(super) enum Set {
     Whole,
     Factors(usize),
     Surfels(usize),
@@ -34,7 +25,7 @@ enum Set {
 
 /// A resource of the runtime, by the WGSL variable name that binds it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Binding {
+pub(super) enum Binding {
     Params,
     Lights,
     Probes,
@@ -71,7 +62,7 @@ enum Binding {
 
 impl Binding {
     /// The resource a WGSL variable named `name` binds to.
-    fn of(name: &str) -> Option<Binding> {
+    pub(super) fn of(name: &str) -> Option<Binding> {
         let volume = |prefix: &str| {
             name.strip_prefix(prefix)
                 .and_then(|i| i.parse::<usize>().ok())
@@ -117,7 +108,7 @@ impl Binding {
     }
 
     /// The resource itself, for the bind-group set `set`.
-    fn resource<'a>(self, r: &'a Resources, set: Set) -> wgpu::BindingResource<'a> {
+    pub(super) fn resource<'a>(self, r: &'a Resources, set: Set) -> wgpu::BindingResource<'a> {
         let (f, s) = match set {
             Set::Whole => (0, 0),
             Set::Factors(c) => (c, 0),
@@ -161,6 +152,38 @@ impl Binding {
             Binding::ProbePositions => b(&r.probe_positions),
         }
     }
+
+    /// The layout type of a binding of the sampling snippet, as any shader stage reads it
+    /// (`None` for the compute stages' own resources).
+    pub(super) fn snippet_type(self) -> Option<wgpu::BindingType> {
+        let buffer = |ty| wgpu::BindingType::Buffer {
+            ty,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        };
+        Some(match self {
+            Binding::SampledVolume(_) => wgpu::BindingType::Texture {
+                sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                view_dimension: wgpu::TextureViewDimension::D3,
+                multisampled: false,
+            },
+            Binding::Sampler => wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+            Binding::VolumeInfo => buffer(wgpu::BufferBindingType::Uniform),
+            Binding::DepthMoments | Binding::ProbePositions => {
+                buffer(wgpu::BufferBindingType::Storage { read_only: true })
+            }
+            _ => return None,
+        })
+    }
+}
+
+/// The `(binding, resource)` of every variable the engine-side sampling snippet declares
+/// (`shaders/sample_irradiance.wgsl`), in source order.
+pub(super) fn snippet_bindings() -> Vec<(u32, Binding)> {
+    declared_bindings(&shaders::sample_irradiance_snippet(0))
+        .into_iter()
+        .filter_map(|(_, binding, name)| Some((binding, Binding::of(&name)?)))
+        .collect()
 }
 
 /// The `(group, binding, name)` of every resource variable `src` declares, in source order.
@@ -184,57 +207,19 @@ pub fn declared_bindings(src: &str) -> Vec<(u32, u32, String)> {
         .collect()
 }
 
-/// The bind-group sets `stage` is dispatched with, and each set's work items where the set
-/// fixes them (a surfel chunk's surfels or bricks).
-fn sets(stage: Stage, r: &Resources) -> Vec<(Set, Option<u32>)> {
-    match stage {
-        Stage::MarkProbes | Stage::Gather => (0..r.chunks.len())
-            .map(|c| (Set::Factors(c), None))
-            .collect(),
-        Stage::RelightSurfels | Stage::BounceSurfels | Stage::BrickRadiance => r
-            .surfel_chunks
-            .iter()
-            .enumerate()
-            .map(|(c, s)| {
-                let work = if stage == Stage::BrickRadiance {
-                    s.brick_end - s.brick_begin
-                } else {
-                    s.surfel_end - s.surfel_begin
-                };
-                (Set::Surfels(c), Some(work))
-            })
-            .collect(),
-        Stage::CullLights => vec![(Set::Whole, None)],
-    }
-}
-
-/// Builds `stage`'s pipeline from its WGSL and binds every variable it declares by name.
-pub fn build(
+/// The bind groups of `pipeline` (labelled `label`) for `set`: each group's entries are the
+/// variables `declared` in its WGSL ([`declared_bindings`]), bound by name.
+pub(super) fn bind_groups(
     device: &wgpu::Device,
     r: &Resources,
-    stage: Stage,
-    config: &ShaderConfig,
-) -> Result<Pipeline, GpuError> {
-    let source = shaders::source(stage, config);
-    let declared = declared_bindings(&source);
-    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-        label: Some(stage.label()),
-        source: wgpu::ShaderSource::Wgsl(source.into()),
-    });
-    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some(stage.label()),
-        layout: None,
-        module: &module,
-        entry_point: Some("main"),
-        compilation_options: Default::default(),
-        cache: None,
-    });
+    label: &str,
+    pipeline: &wgpu::ComputePipeline,
+    declared: &[(u32, u32, String)],
+    set: Set,
+) -> Result<Vec<wgpu::BindGroup>, GpuError> {
     let groups = declared.iter().map(|d| d.0 + 1).max().unwrap_or(0);
-    let mut bind_group_sets = Vec::new();
-    let mut set_work = Vec::new();
-    for (set, work) in sets(stage, r) {
-        let mut bind_groups = Vec::new();
-        for g in 0..groups {
+    (0..groups)
+        .map(|g| {
             let entries = declared
                 .iter()
                 .filter(|d| d.0 == g)
@@ -242,8 +227,7 @@ pub fn build(
                     let resource = Binding::of(name)
                         .ok_or_else(|| {
                             GpuError::Device(format!(
-                                "{} declares `{name}`, which the runtime does not provide",
-                                stage.label()
+                                "{label} declares `{name}`, which the runtime does not provide"
                             ))
                         })?
                         .resource(r, set);
@@ -253,24 +237,18 @@ pub fn build(
                     })
                 })
                 .collect::<Result<Vec<_>, GpuError>>()?;
-            bind_groups.push(device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some(stage.label()),
+            Ok(device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some(label),
                 layout: &pipeline.get_bind_group_layout(g),
                 entries: &entries,
-            }));
-        }
-        bind_group_sets.push(bind_groups);
-        set_work.push(work);
-    }
-    Ok(Pipeline {
-        pipeline,
-        bind_group_sets,
-        set_work,
-    })
+            }))
+        })
+        .collect()
 }
 
 #[cfg(test)]
 mod tests {
+    use super::super::stages::STAGES;
     use super::*;
 
     /// Every binding every stage declares (with every shader configuration) is one the runtime
@@ -290,17 +268,18 @@ mod tests {
             ]
         );
         for config in shaders::tests::configs() {
-            for stage in Stage::ALL {
+            for stage in &STAGES {
                 let src = shaders::source(stage, &config);
                 let declared = declared_bindings(&src);
-                assert!(!declared.is_empty(), "{stage:?}");
+                let stage = stage.label;
+                assert!(!declared.is_empty(), "{stage}");
                 let mut seen = std::collections::HashSet::new();
                 for (g, b, name) in &declared {
                     assert!(
                         Binding::of(name).is_some(),
-                        "{stage:?} declares unknown `{name}`"
+                        "{stage} declares unknown `{name}`"
                     );
-                    assert!(seen.insert((*g, *b)), "{stage:?}: ({g}, {b}) twice");
+                    assert!(seen.insert((*g, *b)), "{stage}: ({g}, {b}) twice");
                 }
                 // naga agrees with the line parser, and `main` uses every binding (the
                 // pipeline's layout is derived from what it uses: an unused one would make
@@ -323,15 +302,29 @@ mod tests {
                     let name = var.name.clone().unwrap_or_default();
                     assert!(
                         !info.get_entry_point(main)[handle].is_empty(),
-                        "{stage:?}: `{name}` declared but unused"
+                        "{stage}: `{name}` declared but unused"
                     );
                     from_naga.push((rb.group, rb.binding, name));
                 }
                 let mut parsed = declared.clone();
                 parsed.sort();
                 from_naga.sort();
-                assert_eq!(parsed, from_naga, "{stage:?}");
+                assert_eq!(parsed, from_naga, "{stage}");
             }
         }
+    }
+
+    /// Every variable the sampling snippet declares is a runtime resource with a layout type,
+    /// each number once: `volume_layout_entries` and `volume_bind_group` cover the snippet.
+    #[test]
+    fn every_snippet_binding_has_a_resource_and_a_type() {
+        let declared = declared_bindings(&shaders::sample_irradiance_snippet(0));
+        let bound = snippet_bindings();
+        assert_eq!(bound.len(), declared.len(), "{declared:?}");
+        assert!(bound.iter().all(|(_, b)| b.snippet_type().is_some()));
+        let mut numbers: Vec<u32> = bound.iter().map(|b| b.0).collect();
+        numbers.sort_unstable();
+        numbers.dedup();
+        assert_eq!(numbers.len(), bound.len());
     }
 }

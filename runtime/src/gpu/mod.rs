@@ -1,25 +1,28 @@
 //! # The GPU runtime: relight bricks and gather probes into a 3D SH volume, in wgpu compute
 //!
 //! [`PrtRuntime::update`] records, into a command encoder the engine owns, one dispatch per
-//! stage and chunk of the split arrays ([`stages`]; each stage is one WGSL file in `shaders/`,
-//! and a CPU twin in [`crate::relight`]):
+//! stage and chunk of the split arrays. Each stage is one entry of the table in `stages.rs`
+//! (its WGSL, its dispatch, when it runs), one WGSL file in `shaders/` and a CPU twin in
+//! [`crate::relight`]; its bindings are read from its WGSL and bound by name (`bindings.rs`) to
+//! the buffers of [`resources`]. In dispatch order:
 //!
 //! 1. **cull_lights** (per brick): which of the lights that changed reach the brick (range,
 //!    cone, facing, in world space; never through screen-space clusters), kept as one bit per
 //!    light in the brick's light mask, and whether a changed light reaches it now or did before:
 //!    only then is the brick *dirty*. Each brick takes one bit per (surfel, reaching light) pair
 //!    in the shadow-ray cache (two halves, written in turn).
-//! 2. **relight_surfels** (per surfel; for a dirty brick's): direct irradiance from the brick's
+//! 2. **relight_surfels** (per surfel, per surfel chunk; for a dirty brick's): direct irradiance from the brick's
 //!    lights, shadowed by shadow rays through the asset's BVH, cached per pair and
 //!    re-traced only for lights that moved; other bricks' bits move to the new half.
-//! 3. **bounce_surfels** (per surfel; multi-bounce only, at the start of a cycle): the volume's
+//! 3. **bounce_surfels** (per surfel, per surfel chunk; built for multi-bounce only, run at the
+//!    start of a cycle): the volume's
 //!    irradiance at the surfel through the engine's `sample_irradiance`, as bounce radiance;
 //!    every front-face brick becomes dirty ([`Bounces`]).
-//! 4. **brick_radiance** (per dirty brick; every front-face brick when a fixed bounce count
-//!    restarts): mean and gradient of the brick's radiance, direct plus bounce.
-//! 5. **mark_probes** (per probe): probes with a factor on a dirty brick (or all, when the sky
+//! 4. **brick_radiance** (per brick, per surfel chunk; for a dirty brick, or every front-face
+//!    brick when a fixed bounce count restarts): mean and gradient of the brick's radiance, direct plus bounce.
+//! 5. **mark_probes** (per probe, per factor chunk): probes with a factor on a dirty brick (or all, when the sky
 //!    changed, a bounce began or a fixed bounce count restarted) are flagged for gathering.
-//! 6. **gather** (one workgroup per probe of this update's window): the probe's factors and sky
+//! 6. **gather** (one workgroup per probe of this update's window, per factor chunk): the probe's factors and sky
 //!    term reduced into SH9 RGB (subgroup adds where the adapter has them, a shared-memory tree
 //!    otherwise), written with its validity into the seven volume textures at once.
 //!
@@ -37,11 +40,12 @@
 pub use sample::sample_points;
 pub use wgpu;
 
+mod bindings;
 mod changes;
 pub mod resources;
 pub mod sample;
 pub mod shaders;
-pub mod stages;
+mod stages;
 mod volume;
 
 pub use volume::{read_buffer, sh_from_texels};
@@ -58,7 +62,8 @@ use crate::settings::MAX_BOUNCES;
 use crate::sky::SkyModel;
 use changes::{light_changes, Plan, State};
 use resources::Resources;
-use shaders::{ShaderConfig, Stage};
+use shaders::ShaderConfig;
+use stages::{Counts, Pipeline, STAGES};
 
 /// Why the GPU runtime could not start or update.
 #[derive(Debug, thiserror::Error)]
@@ -226,17 +231,17 @@ pub struct PrtRuntime {
     queue: wgpu::Queue,
     probe_count: u32,
     brick_count: u32,
-    surfel_count: u32,
     ray_count: u32,
     grid: prt_format::Grid,
     offset_scale: f32,
     settings: RuntimeSettings,
-    /// Every buffer and texture, bound by name ([`stages`]).
+    /// Every buffer and texture, bound by name (`bindings.rs`).
     res: Resources,
     cache_capacity: u32,
     /// The half of the shadow-ray cache the last relight wrote.
     cache_parity: u32,
-    pipelines: Vec<(Stage, stages::Pipeline)>,
+    /// The stages built for these settings, in dispatch order.
+    pipelines: Vec<Pipeline>,
     state: Option<State>,
     /// The last equirect sky and its lattice radiance (`SkyModel::lattice` averages the map over
     /// every direction's cell: computed again only when the sky changes, not every update).
@@ -310,17 +315,20 @@ impl PrtRuntime {
             bounces: settings.bounces.feeds_back(),
         };
         let res = Resources::new(device, asset, &settings, mask_stride)?;
-        let pipelines = Stage::ALL
+        let counts = Counts {
+            bricks: asset.bricks.len() as u32,
+            probes: asset.probes.len() as u32,
+        };
+        let pipelines = STAGES
             .iter()
-            .filter(|&&s| s != Stage::BounceSurfels || settings.bounces.feeds_back())
-            .map(|&stage| Ok((stage, stages::build(device, &res, stage, &config)?)))
+            .filter(|stage| !stage.bounces_only || settings.bounces.feeds_back())
+            .map(|stage| Pipeline::new(device, &res, stage, &config, counts))
             .collect::<Result<_, GpuError>>()?;
         Ok(PrtRuntime {
             device: device.clone(),
             queue: queue.clone(),
             probe_count: asset.probes.len() as u32,
             brick_count: asset.bricks.len() as u32,
-            surfel_count: asset.surfels.len() as u32,
             ray_count: asset.header.ray_count,
             grid: asset.header.grid,
             offset_scale: match &asset.factors {
@@ -466,42 +474,14 @@ impl PrtRuntime {
         }
     }
 
-    /// One compute pass: each stage that has work this update, once per bind-group set.
+    /// One compute pass: each stage that runs this update, once per bind-group set.
     fn record(&self, encoder: &mut wgpu::CommandEncoder, plan: &Plan) {
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("prt update"),
             timestamp_writes: None,
         });
-        let groups = |n: u32| n.div_ceil(WORKGROUP);
-        for (stage, p) in &self.pipelines {
-            let work = match stage {
-                Stage::CullLights if plan.relight() => groups(self.brick_count),
-                Stage::BrickRadiance if plan.relight() || plan.bounce || plan.fixed_restart => {
-                    groups(self.brick_count)
-                }
-                Stage::RelightSurfels if plan.relight() => groups(self.surfel_count),
-                Stage::BounceSurfels if plan.bounce => groups(self.surfel_count),
-                Stage::MarkProbes if plan.lights_changed || plan.sky_changed || plan.bounce => {
-                    groups(self.probe_count)
-                }
-                Stage::Gather => plan.window.1,
-                _ => 0,
-            };
-            if work == 0 {
-                continue;
-            }
-            pass.set_pipeline(&p.pipeline);
-            for (set, chunk_work) in p.bind_group_sets.iter().zip(&p.set_work) {
-                let work = chunk_work.map_or(work, groups);
-                if work == 0 {
-                    continue;
-                }
-                for (i, bg) in set.iter().enumerate() {
-                    pass.set_bind_group(i as u32, bg, &[]);
-                }
-                let (x, y) = dispatch_size(work);
-                pass.dispatch_workgroups(x, y, 1);
-            }
+        for pipeline in &self.pipelines {
+            pipeline.record(&mut pass, plan);
         }
     }
 

@@ -3,46 +3,10 @@
 //! stage's own file. The sources are the `prt-shaders` crate's (`shaders/` at the top of the
 //! repository).
 
+use prt_shaders::{GATHER_SUBGROUP, GATHER_TREE, LIGHT_SAMPLE, SAMPLE_IRRADIANCE, SHADOW_RAYS, TYPES};
+
+use super::stages::{Part, Stage};
 use crate::contract;
-use prt_shaders::{
-    BOUNCE_SURFELS, BRICK_RADIANCE, CULL_LIGHTS, GATHER, GATHER_SUBGROUP, GATHER_TREE, LIGHT_SAMPLE,
-    MARK_PROBES, RELIGHT_SURFELS, SAMPLE_IRRADIANCE, SHADOW_RAYS, TYPES,
-};
-
-/// The compute stages, one WGSL file each (the gather has two reduction variants).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Stage {
-    CullLights,
-    RelightSurfels,
-    /// Multi-bounce: the volume's irradiance at the surfels (built only with bounces on).
-    BounceSurfels,
-    BrickRadiance,
-    MarkProbes,
-    Gather,
-}
-
-impl Stage {
-    /// In dispatch order.
-    pub const ALL: [Stage; 6] = [
-        Stage::CullLights,
-        Stage::RelightSurfels,
-        Stage::BounceSurfels,
-        Stage::BrickRadiance,
-        Stage::MarkProbes,
-        Stage::Gather,
-    ];
-
-    pub fn label(self) -> &'static str {
-        match self {
-            Stage::CullLights => "prt cull_lights",
-            Stage::RelightSurfels => "prt relight_surfels",
-            Stage::BounceSurfels => "prt bounce_surfels",
-            Stage::BrickRadiance => "prt brick_radiance",
-            Stage::MarkProbes => "prt mark_probes",
-            Stage::Gather => "prt gather",
-        }
-    }
-}
 
 /// Choices that change shader source.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -75,30 +39,17 @@ pub fn prelude(config: &ShaderConfig) -> String {
     s
 }
 
-/// Full WGSL source of `stage`.
-pub fn source(stage: Stage, config: &ShaderConfig) -> String {
-    let body: Vec<&str> = match stage {
-        Stage::CullLights => vec![CULL_LIGHTS],
-        Stage::RelightSurfels => vec![LIGHT_SAMPLE, SHADOW_RAYS, RELIGHT_SURFELS],
-        Stage::BounceSurfels => vec![BOUNCE_SURFELS],
-        Stage::BrickRadiance => vec![BRICK_RADIANCE],
-        Stage::MarkProbes => vec![MARK_PROBES],
-        Stage::Gather => vec![
-            GATHER,
-            if config.subgroups {
-                GATHER_SUBGROUP
-            } else {
-                GATHER_TREE
-            },
-        ],
-    };
+/// Full WGSL source of `stage`: the generated constants, `types.wgsl` and the stage's parts.
+pub(super) fn source(stage: &Stage, config: &ShaderConfig) -> String {
     let mut s = prelude(config);
     s.push_str(TYPES);
-    for b in body {
-        s.push_str(b);
-    }
-    if stage == Stage::BounceSurfels {
-        s.push_str(&sample_irradiance_snippet(1));
+    for part in stage.wgsl {
+        match part {
+            Part::File(wgsl) => s.push_str(wgsl),
+            Part::Reduction if config.subgroups => s.push_str(GATHER_SUBGROUP),
+            Part::Reduction => s.push_str(GATHER_TREE),
+            Part::Snippet => s.push_str(&sample_irradiance_snippet(1)),
+        }
     }
     s.replace("VOLUME_FORMAT", config.volume_format)
 }
@@ -195,6 +146,7 @@ pub mod validation {
 
 #[cfg(test)]
 pub(crate) mod tests {
+    use super::super::stages::STAGES;
     use super::validation::{assert_layouts, validate, Expected};
     use super::*;
 
@@ -225,8 +177,8 @@ pub(crate) mod tests {
     #[test]
     fn every_shader_validates() {
         for config in configs() {
-            for stage in Stage::ALL {
-                validate(&source(stage, &config), &format!("{stage:?} {config:?}"));
+            for stage in &STAGES {
+                validate(&source(stage, &config), &format!("{} {config:?}", stage.label));
             }
         }
         let snippet = sample_irradiance_snippet(2)
@@ -239,7 +191,8 @@ pub(crate) mod tests {
     fn wgsl_structs_match_rust_layouts() {
         use std::mem::{offset_of, size_of};
         let config = configs()[0];
-        let mut src = source(Stage::Gather, &config);
+        let gather = STAGES.iter().find(|s| s.label == "prt gather").expect("gather");
+        let mut src = source(gather, &config);
         src.push_str(&sample_irradiance_snippet(3));
         // (struct, size, [(field, offset)])
         let expect: Expected = vec![
