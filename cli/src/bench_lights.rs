@@ -10,8 +10,8 @@ use std::time::Instant;
 use anyhow::Result;
 use glam::Vec3;
 use prt_bake::BakeSettings;
-use prt_runtime::gpu::{headless_device, wgpu, PrtRuntime, RuntimeSettings};
 use prt_runtime::contract::Counters;
+use prt_runtime::gpu::{headless_device, wgpu, PrtRuntime, RuntimeSettings};
 use prt_runtime::{Lighting, SkyModel};
 
 use prt_bake::NoProgress;

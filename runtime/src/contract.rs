@@ -355,4 +355,3 @@ pub fn snippet_constants() -> Vec<(&'static str, String)> {
         ("PRT_FLAG_DEPTH_MOMENTS", format!("{VOLUME_DEPTH_MOMENTS}u")),
     ]
 }
-

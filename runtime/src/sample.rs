@@ -34,8 +34,8 @@ use prt_format::sh::{ShRgb, SH_COUNT};
 use prt_format::{Asset, Grid, Probe, DEPTH_WORDS};
 
 use crate::contract::{
-    CRUSH_THRESHOLD, FACING_DEPTH, FACING_FLOOR, MIN_DISTANCE, MIN_VALIDITY, MIN_VARIANCE,
-    MIN_CHEBYSHEV,
+    CRUSH_THRESHOLD, FACING_DEPTH, FACING_FLOOR, MIN_CHEBYSHEV, MIN_DISTANCE, MIN_VALIDITY,
+    MIN_VARIANCE,
 };
 use crate::settings::LookupSettings;
 

@@ -113,6 +113,21 @@ impl PrtRuntime {
         }
     }
 
+    /// Moves the gather's cursor past the `gathered` probes of this update and counts a cycle
+    /// when every probe has been gathered.
+    pub(super) fn advance(&mut self, gathered: u32) {
+        self.cursor = (self.cursor + gathered) % self.probe_count.max(1);
+        self.cycle_gathered += gathered;
+        if self.cycle_gathered >= self.probe_count {
+            self.cycle_gathered = 0;
+            // Feedback needs only "the first cycle is done": stop counting there, so that it
+            // never reaches the owed (unbounded) count and goes idle.
+            if matches!(self.settings.bounces, Bounces::Fixed(_)) || self.cycles_done == 0 {
+                self.cycles_done += 1;
+            }
+        }
+    }
+
     /// Updates still owed at `budget` probes per update: the rest of this cycle and the cycles
     /// after it (with [`Bounces::Feedback`] only the first cycle after a change counts).
     pub(super) fn pending(&self, budget: u32) -> u32 {

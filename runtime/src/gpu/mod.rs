@@ -336,7 +336,7 @@ impl PrtRuntime {
                 _ => 1.0,
             },
             settings,
-            cache_capacity: res.cache_capacity as u32,
+            cache_capacity: res.state.cache_capacity as u32,
             res,
             cache_parity: 1,
             pipelines,
@@ -374,14 +374,39 @@ impl PrtRuntime {
                 ..UpdateReport::default()
             });
         };
+        let params = self.params(&new, changed, light_words, &plan);
+        if plan.relight() {
+            self.cache_parity = params.cache_parity;
+        }
+        self.upload(encoder, &params, &new, &changes, &plan);
+        self.record(encoder, &plan);
+        self.advance(plan.window.1);
+        self.state = Some(new);
+        Ok(UpdateReport {
+            idle: false,
+            changed_lights: changed,
+            sky_changed: plan.sky_changed,
+            window: plan.window,
+            pending_windows: self.pending(plan.window.1),
+            bounce: plan.bounce,
+        })
+    }
+
+    /// Records what this update's stages read before they run: the uniform block, the lights,
+    /// the light changes and sky where they changed, zeroed counters, and (when a fixed bounce
+    /// count restarts) zeroed bounce radiance.
+    fn upload(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        params: &Params,
+        new: &State,
+        changes: &[u32],
+        plan: &Plan,
+    ) {
         if plan.fixed_restart {
             for [_, _, bounce, _] in &self.res.chunk_surfels {
                 encoder.clear_buffer(bounce, 0, None);
             }
-        }
-        let params = self.params(&new, changed, light_words, &plan);
-        if plan.relight() {
-            self.cache_parity = params.cache_parity;
         }
         let copy = |encoder: &mut wgpu::CommandEncoder, dst: &wgpu::Buffer, bytes: &[u8]| {
             if bytes.is_empty() {
@@ -396,43 +421,27 @@ impl PrtRuntime {
                 });
             encoder.copy_buffer_to_buffer(&src, 0, dst, 0, bytes.len() as u64);
         };
-        copy(encoder, &self.res.params, bytemuck::bytes_of(&params));
-        copy(encoder, &self.res.lights, bytemuck::cast_slice(&new.lights));
+        copy(encoder, &self.res.state.params, bytemuck::bytes_of(params));
+        copy(
+            encoder,
+            &self.res.state.lights,
+            bytemuck::cast_slice(&new.lights),
+        );
         if plan.relight() {
             copy(
                 encoder,
-                &self.res.light_changes,
-                bytemuck::cast_slice(&changes),
+                &self.res.state.light_changes,
+                bytemuck::cast_slice(changes),
             );
         }
         if plan.sky_changed {
             copy(
                 encoder,
-                &self.res.sky_directions,
+                &self.res.state.sky_directions,
                 bytemuck::cast_slice(&new.sky_directions),
             );
         }
-        encoder.clear_buffer(&self.res.counters, 0, None);
-        self.record(encoder, &plan);
-        self.cursor = (self.cursor + plan.window.1) % self.probe_count.max(1);
-        self.cycle_gathered += plan.window.1;
-        if self.cycle_gathered >= self.probe_count {
-            self.cycle_gathered = 0;
-            // Feedback needs only "the first cycle is done": stop counting there, so that it
-            // never reaches the owed (unbounded) count and goes idle.
-            if matches!(self.settings.bounces, Bounces::Fixed(_)) || self.cycles_done == 0 {
-                self.cycles_done += 1;
-            }
-        }
-        self.state = Some(new);
-        Ok(UpdateReport {
-            idle: false,
-            changed_lights: changed,
-            sky_changed: plan.sky_changed,
-            window: plan.window,
-            pending_windows: self.pending(plan.window.1),
-            bounce: plan.bounce,
-        })
+        encoder.clear_buffer(&self.res.state.counters, 0, None);
     }
 
     /// The uniform block of this update.

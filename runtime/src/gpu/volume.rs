@@ -4,9 +4,9 @@
 
 use prt_format::sh::{ShRgb, SH_COUNT};
 
-use crate::contract::{Counters, VolumeInfo};
 use super::bindings::{snippet_bindings, Set};
 use super::{resources, shaders, GpuError, PrtRuntime, RuntimeSettings, VolumeFormat};
+use crate::contract::{Counters, VolumeInfo};
 
 impl PrtRuntime {
     /// The seven volume texture views (layout in `shaders/gather.wgsl`).
@@ -81,7 +81,7 @@ impl PrtRuntime {
         let bytes = read_buffer(
             &self.device,
             &self.queue,
-            &self.res.probe_sh,
+            &self.res.state.probe_sh,
             16 * 9 * u64::from(self.probe_count.max(1)),
         )?;
         let v: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
@@ -93,7 +93,7 @@ impl PrtRuntime {
     /// Blocks and returns the work counters of the last submitted update.
     pub fn read_counters(&self) -> Result<Counters, GpuError> {
         let size = std::mem::size_of::<Counters>() as u64;
-        let bytes = read_buffer(&self.device, &self.queue, &self.res.counters, size)?;
+        let bytes = read_buffer(&self.device, &self.queue, &self.res.state.counters, size)?;
         Ok(*bytemuck::from_bytes(&bytes))
     }
 
