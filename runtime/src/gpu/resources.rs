@@ -480,7 +480,7 @@ pub fn surfel_chunks(asset: &Asset, limit: u64) -> Result<Vec<SurfelChunk>, GpuE
 
 /// A buffer holding `bytes`, refused with [`GpuError::Limit`] beyond `limit` bytes (a device
 /// limit: one storage binding, or the largest buffer). wgpu cannot bind empty buffers, nor ones
-/// smaller than one element: an empty array gets [`MIN_BUFFER`] zero bytes.
+/// smaller than one element: an empty array gets `MIN_BUFFER` (256) zero bytes.
 pub fn buffer_with(
     device: &wgpu::Device,
     label: &'static str,
