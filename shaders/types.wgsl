@@ -1,5 +1,5 @@
 // Shared by every prt compute stage: the GPU twins of the Rust structs (prt_format::asset and
-// prt_runtime::gpu::layout; a unit test checks that sizes and offsets agree) and the functions
+// prt_runtime::contract; a unit test checks that sizes and offsets agree) and the functions
 // whose CPU reference lives in prt_runtime::relight. Constants such as
 // MASK_STRIDE, NO_CACHE, WORKGROUP and the flag bits are injected from Rust before this file.
 
