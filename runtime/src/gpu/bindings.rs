@@ -269,7 +269,7 @@ mod tests {
         );
         for config in shaders::tests::configs() {
             for stage in &STAGES {
-                let src = shaders::source(stage, &config);
+                let src = stage.source(&config);
                 let declared = declared_bindings(&src);
                 let stage = stage.label;
                 assert!(!declared.is_empty(), "{stage}");

@@ -1,13 +1,12 @@
-//! Assembles each stage's WGSL: constants generated from Rust ([`crate::contract`]), the shared
-//! `types.wgsl`, the light model and the shadow-ray traversal where a stage traces rays, and the
-//! stage's own file. The sources are the `prt-shaders` crate's (`shaders/` at the top of the
-//! repository).
+//! The generated WGSL every shader starts from: the constants from Rust ([`crate::contract`])
+//! and the shader configuration ([`prelude`]), the light model and shadow-ray traversal for the
+//! renderer ([`light_model_source`]) and the engine-side sampling snippet
+//! ([`sample_irradiance_snippet`]). A stage joins the prelude, `types.wgsl` and its own parts
+//! (its entry in the stage table of `stages.rs`). The sources are the `prt-shaders` crate's
+//! (`shaders/` at the top of the repository).
 
-use prt_shaders::{
-    GATHER_SUBGROUP, GATHER_TREE, LIGHT_SAMPLE, SAMPLE_IRRADIANCE, SHADOW_RAYS, TYPES,
-};
+use prt_shaders::{LIGHT_SAMPLE, SAMPLE_IRRADIANCE, SHADOW_RAYS, TYPES};
 
-use super::stages::{Part, Stage};
 use crate::contract;
 
 /// Choices that change shader source.
@@ -39,21 +38,6 @@ pub fn prelude(config: &ShaderConfig) -> String {
         config.bounces
     ));
     s
-}
-
-/// Full WGSL source of `stage`: the generated constants, `types.wgsl` and the stage's parts.
-pub(super) fn source(stage: &Stage, config: &ShaderConfig) -> String {
-    let mut s = prelude(config);
-    s.push_str(TYPES);
-    for part in stage.wgsl {
-        match part {
-            Part::File(wgsl) => s.push_str(wgsl),
-            Part::Reduction if config.subgroups => s.push_str(GATHER_SUBGROUP),
-            Part::Reduction => s.push_str(GATHER_TREE),
-            Part::Snippet => s.push_str(&sample_irradiance_snippet(1)),
-        }
-    }
-    s.replace("VOLUME_FORMAT", config.volume_format)
 }
 
 /// The shared types, the light model (`light_sample`) and the any-hit shadow-ray traversal
@@ -182,7 +166,7 @@ pub(crate) mod tests {
         for config in configs() {
             for stage in &STAGES {
                 validate(
-                    &source(stage, &config),
+                    &stage.source(&config),
                     &format!("{} {config:?}", stage.label),
                 );
             }
@@ -201,7 +185,7 @@ pub(crate) mod tests {
             .iter()
             .find(|s| s.label == "prt gather")
             .expect("gather");
-        let mut src = source(gather, &config);
+        let mut src = gather.source(&config);
         src.push_str(&sample_irradiance_snippet(3));
         // (struct, size, [(field, offset)])
         let expect: Expected = vec![

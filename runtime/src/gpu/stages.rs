@@ -5,8 +5,8 @@
 //! in `bindings.rs` and its buffer in `resources.rs`.
 
 use prt_shaders::{
-    BOUNCE_SURFELS, BRICK_RADIANCE, CULL_LIGHTS, GATHER, LIGHT_SAMPLE, MARK_PROBES,
-    RELIGHT_SURFELS, SHADOW_RAYS,
+    BOUNCE_SURFELS, BRICK_RADIANCE, CULL_LIGHTS, GATHER, GATHER_SUBGROUP, GATHER_TREE,
+    LIGHT_SAMPLE, MARK_PROBES, RELIGHT_SURFELS, SHADOW_RAYS, TYPES,
 };
 
 use super::bindings::{bind_groups, declared_bindings, Set};
@@ -55,6 +55,23 @@ pub(super) struct Stage {
     pub(super) runs: fn(&Plan) -> bool,
     /// Built only when bounces feed the volume back ([`crate::settings::Bounces::feeds_back`]).
     pub(super) bounces_only: bool,
+}
+
+impl Stage {
+    /// Its full WGSL: the generated constants, `types.wgsl` and its parts.
+    pub(super) fn source(&self, config: &ShaderConfig) -> String {
+        let mut s = shaders::prelude(config);
+        s.push_str(TYPES);
+        for part in self.wgsl {
+            match part {
+                Part::File(wgsl) => s.push_str(wgsl),
+                Part::Reduction if config.subgroups => s.push_str(GATHER_SUBGROUP),
+                Part::Reduction => s.push_str(GATHER_TREE),
+                Part::Snippet => s.push_str(&shaders::sample_irradiance_snippet(1)),
+            }
+        }
+        s.replace("VOLUME_FORMAT", config.volume_format)
+    }
 }
 
 /// Every stage, in dispatch order (the module docs of [`super`] say what each computes).
@@ -138,7 +155,7 @@ impl Pipeline {
         config: &ShaderConfig,
         counts: Counts,
     ) -> Result<Pipeline, GpuError> {
-        let source = shaders::source(stage, config);
+        let source = stage.source(config);
         let declared = declared_bindings(&source);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some(stage.label),
