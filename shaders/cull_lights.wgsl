@@ -7,7 +7,7 @@
 // is dirty (relit) when a changed light reaches it now or did before (every brick on the first
 // update, so that emissive bricks no light reaches get their radiance).
 //
-// Each brick then takes room in this update's half of the visibility pool for one bit per
+// Each brick then takes room in this update's half of the shadow-ray cache for one bit per
 // (surfel, reaching light) pair, rounded to words per surfel: the cache is sized by the pairs
 // that can see each other, not by surfels x lights. Past the pool's capacity a brick is left
 // uncached (NO_CACHE: its lights are traced every time it is relit; counted). Back-face bricks
@@ -23,8 +23,8 @@
 @group(0) @binding(5) var<storage, read_write> brick_dirty: array<u32>;
 @group(0) @binding(6) var<storage, read_write> counters: Counters;
 @group(0) @binding(7) var<storage, read> light_changes: array<u32>;
-// Per brick two visibility offsets, one per pool half (params.vis_parity is this update's).
-@group(0) @binding(8) var<storage, read_write> brick_vis: array<u32>;
+// Per brick two shadow-ray cache offsets, one per half (params.cache_parity is this update's).
+@group(0) @binding(8) var<storage, read_write> brick_cache: array<u32>;
 
 // Upper bound of dot(n, v) for n in the normal box and v in the box [a, b] (per-axis interval
 // arithmetic).
@@ -103,20 +103,20 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         n = n + countOneBits(brick_lights[base + w]);
     }
     // A brick uncached before and not relit now has nothing to keep: it stays uncached.
-    let old = brick_vis[2u * b + 1u - params.vis_parity];
+    let old = brick_cache[2u * b + 1u - params.cache_parity];
     var offset = NO_CACHE;
     if old != NO_CACHE || dirty {
         // A compare-and-swap loop, not atomicAdd: failed requests must not move the counter
         // (it would wrap past 2^32 on a huge asset and hand out overlapping room).
         let words = brick.surfel_count * ((n + 31u) / 32u);
-        var at = atomicLoad(&counters.visibility_words);
+        var at = atomicLoad(&counters.shadow_cache_words);
         loop {
-            if at > params.vis_capacity || words > params.vis_capacity - at {
+            if at > params.cache_capacity || words > params.cache_capacity - at {
                 break;
             }
-            let r = atomicCompareExchangeWeak(&counters.visibility_words, at, at + words);
+            let r = atomicCompareExchangeWeak(&counters.shadow_cache_words, at, at + words);
             if r.exchanged {
-                offset = params.vis_parity * params.vis_capacity + at;
+                offset = params.cache_parity * params.cache_capacity + at;
                 break;
             }
             at = r.old_value;
@@ -125,5 +125,5 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     if offset == NO_CACHE && n > 0u {
         atomicAdd(&counters.bricks_uncached, 1u);
     }
-    brick_vis[2u * b + params.vis_parity] = offset;
+    brick_cache[2u * b + params.cache_parity] = offset;
 }

@@ -1,8 +1,8 @@
 // Stage 2, one thread per surfel of a front-face brick. For a dirty brick: direct irradiance
 // from every light in the brick's mask, shadowed by an any-hit ray through the BVH, then the
 // surfel's exitant radiance emission + albedo / pi * E (twin of CpuRelighter::direct_irradiance).
-// Visibility is cached per (surfel, reaching light) pair, one bit each in this update's half of
-// the visibility pool (stage 1 placed the brick there), and traced again only for lights that
+// Shadow rays are cached per (surfel, reaching light) pair, one bit each in this update's half
+// of the shadow-ray cache (stage 1 placed the brick there), and traced again only for lights that
 // moved, lights new to the brick, and bricks left uncached. For a brick that is not dirty the
 // bits only move from the other half (its mask did not change, so neither did their layout).
 
@@ -12,8 +12,8 @@
 @group(0) @binding(3) var<storage, read> bricks: array<Brick>;
 @group(0) @binding(4) var<storage, read> brick_lights: array<u32>;
 @group(0) @binding(5) var<storage, read> brick_dirty: array<u32>;
-@group(0) @binding(6) var<storage, read> brick_vis: array<u32>;
-@group(0) @binding(7) var<storage, read_write> visibility: array<u32>;
+@group(0) @binding(6) var<storage, read> brick_cache: array<u32>;
+@group(0) @binding(7) var<storage, read_write> shadow_cache: array<u32>;
 @group(0) @binding(8) var<storage, read> light_changes: array<u32>;
 @group(0) @binding(9) var<storage, read_write> surfel_radiance: array<vec4<f32>>;
 @group(0) @binding(10) var<storage, read_write> counters: Counters;
@@ -44,14 +44,14 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     }
     let new_words = (n_new + 31u) / 32u;
     let old_words = (n_old + 31u) / 32u;
-    let new_at = brick_vis[2u * b + params.vis_parity];
-    let old_at = brick_vis[2u * b + 1u - params.vis_parity];
+    let new_at = brick_cache[2u * b + params.cache_parity];
+    let old_at = brick_cache[2u * b + 1u - params.cache_parity];
     let new_first = new_at + local * new_words;
     let old_first = old_at + local * old_words;
     if brick_dirty[b] == 0u {
         if new_at != NO_CACHE && old_at != NO_CACHE {
             for (var w = 0u; w < new_words; w = w + 1u) {
-                visibility[new_first + w] = visibility[old_first + w];
+                shadow_cache[new_first + w] = shadow_cache[old_first + w];
             }
         }
         return;
@@ -74,9 +74,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
             let r_old = rank_old + countOneBits(old_bits & (bit - 1u));
             let cached = (old_bits & bit) != 0u && (moved_bits & bit) == 0u && old_at != NO_CACHE;
             let ls = light_sample(lights[i], surfel.position, surfel.normal);
-            var visible = false;
+            var unshadowed = false;
             if cached {
-                visible = ((visibility[old_first + r_old / 32u] >> (r_old % 32u)) & 1u) != 0u;
+                unshadowed = ((shadow_cache[old_first + r_old / 32u] >> (r_old % 32u)) & 1u) != 0u;
             } else if max(max(ls.irradiance.x, ls.irradiance.y), ls.irradiance.z) > 0.0 {
                 let off = ray_offset(surfel.position, params.ray_scale);
                 let o = surfel.position + surfel.normal * off;
@@ -85,16 +85,16 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                     tmax = length(lights[i].position - o) - off;
                 }
                 rays = rays + 1u;
-                visible = !occluded(o, ls.to_light, tmax);
+                unshadowed = !occluded(o, ls.to_light, tmax);
             }
-            if visible {
+            if unshadowed {
                 e = e + ls.irradiance;
                 word = word | (1u << (rank_new % 32u));
             }
             rank_new = rank_new + 1u;
             if rank_new % 32u == 0u {
                 if new_at != NO_CACHE {
-                    visibility[new_first + rank_new / 32u - 1u] = word;
+                    shadow_cache[new_first + rank_new / 32u - 1u] = word;
                 }
                 word = 0u;
             }
@@ -102,7 +102,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         rank_old = rank_old + countOneBits(old_bits);
     }
     if rank_new % 32u != 0u && new_at != NO_CACHE {
-        visibility[new_first + rank_new / 32u] = word;
+        shadow_cache[new_first + rank_new / 32u] = word;
     }
     surfel_radiance[c] = vec4<f32>(surfel.emission + surfel.albedo * (1.0 / PI) * e, 0.0);
     atomicAdd(&counters.surfels_relit, 1u);

@@ -1,7 +1,7 @@
 // Engines include this snippet in their shaders to shade with prt's indirect diffuse light.
 // Bind the runtime's bindings at the group given by PRT_GROUP (PrtRuntime::wgsl_snippet injects
 // it; PrtRuntime::volume_bind_group makes the group): seven volume textures, a sampler, the
-// PrtVolumeInfo uniform and the probes' visibility maps. sample_irradiance returns irradiance E
+// PrtVolumeInfo uniform and the probes' depth moments. sample_irradiance returns irradiance E
 // (W/m^2, not divided by pi): diffuse exitance is albedo / pi * E. Twin: prt_runtime::sample.
 //
 // The textures hold SH premultiplied by each probe's validity (texture 0's alpha: 1 for a valid
@@ -11,30 +11,30 @@
 // in probe spacings): probes just behind a surface see its back faces, and moving the point off
 // the surface along its normal weights the probes in front more.
 //
-// With visibility (PrtVolumeInfo.flags, the default) the eight probes around the point are read
+// With depth moments (PrtVolumeInfo.flags, the default) the eight probes around the point are read
 // one by one and weighted, as DDGI does (Majercik et al., JCGT 2019), by
 //   trilinear weight x validity x (clamp(1 + h / PRT_FACING_DEPTH, 0, 1)^2 + PRT_FACING_FLOOR)
-//                    x Chebyshev visibility,
+//                    x Chebyshev term,
 // where h is the probe's signed distance, in spacings, from the plane through the unmoved
 // surface point (probes in front of the surface count fully, probes behind it fade out; DDGI's
 // angular term instead, see prt_runtime::sample::FACING_DEPTH for why), and
 // where the Chebyshev term tests the point's distance from the probe (from where its rays
 // started) against the mean and
-// variance of the probe's hit distances in that direction (its octahedral visibility map): a
+// variance of the probe's hit distances in that direction (its octahedral depth moments): a
 // probe on the far side of a wall sees the wall nearer than the point and drops out. Cost: 56
-// texel loads and 8 visibility words instead of 7 filtered fetches. Without it, one hardware
+// texel loads and 8 depth-moment words instead of 7 filtered fetches. Without it, one hardware
 // trilinear fetch per texture weights the probes by their weight alone.
 
 struct PrtVolumeInfo {
     origin: vec3<f32>,
-    // The grid's spacing: the unit of the visibility maps' distances.
+    // The grid's spacing: the unit of the depth moments' distances.
     spacing: f32,
     counts: vec3<f32>,
     // Metres along the normal that prt_sample_sh moves the point before sampling.
     normal_bias: f32,
     // The lattice step along x, y, z (at most the spacing; outer probes lie on the bounds).
     step: vec3<f32>,
-    // PRT_FLAG_VISIBILITY: visibility-aware interpolation.
+    // PRT_FLAG_DEPTH_MOMENTS: weight the probes by their depth moments.
     flags: u32,
 }
 
@@ -56,9 +56,9 @@ struct PrtSample {
 @group(PRT_GROUP) @binding(8) var<uniform> prt_volume: PrtVolumeInfo;
 // Per probe, PRT_DEPTH_WORDS words: per texel, mean and standard deviation of hit distances in
 // spacings, one byte each, two texels per word (prt_format::depth).
-@group(PRT_GROUP) @binding(9) var<storage, read> prt_depth: array<u32>;
+@group(PRT_GROUP) @binding(9) var<storage, read> prt_depth_moments: array<u32>;
 // Per probe, where its rays started (xyz; the grid position unless it was moved off a surface or
-// out of geometry): visibility distances are measured from there.
+// out of geometry): depth-moment distances are measured from there.
 @group(PRT_GROUP) @binding(10) var<storage, read> prt_probe_positions: array<vec4<f32>>;
 
 fn prt_sh_of_texels(t: array<vec4<f32>, 7>, inv: f32) -> array<vec3<f32>, 9> {
@@ -99,7 +99,7 @@ fn prt_sign_not_zero(v: vec2<f32>) -> vec2<f32> {
     return select(vec2<f32>(-1.0), vec2<f32>(1.0), v >= vec2<f32>(0.0));
 }
 
-// Texel of a probe's octahedral visibility map holding unit direction d (prt_format::depth).
+// Texel of a probe's octahedral depth moments holding unit direction d (prt_format::depth).
 fn prt_depth_texel(d: vec3<f32>) -> u32 {
     var e = vec2<f32>(d.x, d.z) / (abs(d.x) + abs(d.y) + abs(d.z));
     if d.y < 0.0 {
@@ -110,9 +110,9 @@ fn prt_depth_texel(d: vec3<f32>) -> u32 {
     return t.y * PRT_DEPTH_SIDE + t.x;
 }
 
-// Visibility-and-facing weight of probe `index` at `probe` for the surface point `surface`
-// (facing) moved along its normal n to x (visibility).
-fn prt_probe_visibility(index: u32, probe: vec3<f32>, surface: vec3<f32>, x: vec3<f32>, n: vec3<f32>) -> f32 {
+// Facing and Chebyshev weight of probe `index` at `probe` for the surface point `surface`
+// (facing) moved along its normal n to x (Chebyshev test against its depth moments).
+fn prt_depth_weight(index: u32, probe: vec3<f32>, surface: vec3<f32>, x: vec3<f32>, n: vec3<f32>) -> f32 {
     let v = x - probe;
     let len = length(v);
     let dist = len / prt_volume.spacing;
@@ -123,7 +123,7 @@ fn prt_probe_visibility(index: u32, probe: vec3<f32>, surface: vec3<f32>, x: vec
     let behind = clamp(dot(probe - surface, n) / prt_volume.spacing / PRT_FACING_DEPTH + 1.0, 0.0, 1.0);
     var w = behind * behind + PRT_FACING_FLOOR;
     let texel = prt_depth_texel(dir);
-    let bytes = unpack4x8unorm(prt_depth[index * PRT_DEPTH_WORDS + texel / 2u]);
+    let bytes = unpack4x8unorm(prt_depth_moments[index * PRT_DEPTH_WORDS + texel / 2u]);
     let pair = select(bytes.xy, bytes.zw, (texel & 1u) == 1u);
     let mean = pair.x * PRT_MAX_DEPTH;
     let deviation = pair.y * PRT_MAX_DEVIATION;
@@ -136,14 +136,14 @@ fn prt_probe_visibility(index: u32, probe: vec3<f32>, surface: vec3<f32>, x: vec
         if v < PRT_CRUSH_THRESHOLD {
             v = v * v * v / (PRT_CRUSH_THRESHOLD * PRT_CRUSH_THRESHOLD);
         }
-        w = w * max(v, PRT_MIN_VISIBILITY);
+        w = w * max(v, PRT_MIN_CHEBYSHEV);
     }
     return w;
 }
 
 // The eight probes around p (the surface point `surface` moved along its normal n) read one by
-// one, weighted by visibility.
-fn prt_sample_visible(surface: vec3<f32>, p: vec3<f32>, n: vec3<f32>) -> PrtSample {
+// one, weighted by their depth moments.
+fn prt_sample_depth_weighted(surface: vec3<f32>, p: vec3<f32>, n: vec3<f32>) -> PrtSample {
     var s: PrtSample;
     let last = prt_volume.counts - 1.0;
     let g = clamp((p - prt_volume.origin) / prt_volume.step, vec3<f32>(0.0), last);
@@ -164,7 +164,7 @@ fn prt_sample_visible(surface: vec3<f32>, p: vec3<f32>, n: vec3<f32>) -> PrtSamp
         }
         s.validity = s.validity + w_tri * t0.w;
         let index = ijk.x + counts.x * (ijk.y + counts.y * ijk.z);
-        let w = w_tri * prt_probe_visibility(index, prt_probe_positions[index].xyz, surface, p, n);
+        let w = w_tri * prt_depth_weight(index, prt_probe_positions[index].xyz, surface, p, n);
         total = total + w * t0.w;
         acc[0] = acc[0] + w * t0;
         acc[1] = acc[1] + w * textureLoad(prt_volume1, at, 0);
@@ -184,8 +184,8 @@ fn prt_sample_visible(surface: vec3<f32>, p: vec3<f32>, n: vec3<f32>) -> PrtSamp
 
 fn prt_sample_sh(world_pos: vec3<f32>, normal: vec3<f32>) -> PrtSample {
     let p = world_pos + normal * prt_volume.normal_bias;
-    if (prt_volume.flags & PRT_FLAG_VISIBILITY) != 0u {
-        return prt_sample_visible(world_pos, p, normal);
+    if (prt_volume.flags & PRT_FLAG_DEPTH_MOMENTS) != 0u {
+        return prt_sample_depth_weighted(world_pos, p, normal);
     }
     return prt_sample_trilinear(p);
 }

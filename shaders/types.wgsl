@@ -1,6 +1,6 @@
 // Shared by every prt compute stage: the GPU twins of the Rust structs (prt_format::asset and
-// prt_runtime::gpu::layout; a unit test checks that sizes and offsets agree) and the functions
-// whose CPU reference lives in prt_runtime::{lights, visibility, relight}. Constants such as
+// prt_runtime::contract; a unit test checks that sizes and offsets agree) and the functions
+// whose CPU reference lives in prt_runtime::relight. Constants such as
 // MASK_STRIDE, NO_CACHE, WORKGROUP and the flag bits are injected from Rust before this file.
 
 struct Probe {
@@ -96,9 +96,9 @@ struct Counters {
     probes_clamped: atomic<u32>,
     // Light-brick reach tests of stage 1 (changed lights x front-face bricks).
     light_tests: atomic<u32>,
-    // Visibility pool words handed out this update (stage 1).
-    visibility_words: atomic<u32>,
-    // Bricks with lights left without a visibility cache (the pool was full).
+    // Shadow-ray cache words handed out this update (stage 1).
+    shadow_cache_words: atomic<u32>,
+    // Bricks with lights left out of the shadow-ray cache (it was full).
     bricks_uncached: atomic<u32>,
 }
 
@@ -139,9 +139,9 @@ struct Params {
     ray_scale: f32,
     // Scales the fed-back bounce light (RuntimeSettings::bounces): 1 for fixed bounce counts.
     bounce_damping: f32,
-    // This update's half of the visibility pool (0 or 1), and the words in each half.
-    vis_parity: u32,
-    vis_capacity: u32,
+    // This update's half of the shadow-ray cache (0 or 1), and the words in each half.
+    cache_parity: u32,
+    cache_capacity: u32,
     pad0: u32,
     pad1: u32,
 }
@@ -161,44 +161,6 @@ fn sh_basis(d: vec3<f32>) -> array<f32, 9> {
         SH_Y2_OFF * d.x * d.z,
         SH_Y22 * (d.x * d.x - d.y * d.y),
     );
-}
-
-// Unshadowed irradiance of a light at p with normal n, the unit direction towards the light and
-// its distance (INFINITE_DISTANCE for directional lights). Twin of PreparedLight::irradiance.
-struct LightSample {
-    irradiance: vec3<f32>,
-    to_light: vec3<f32>,
-    distance: f32,
-}
-
-fn light_sample(light: Light, p: vec3<f32>, n: vec3<f32>) -> LightSample {
-    var s: LightSample;
-    if light.kind == LIGHT_DIRECTIONAL {
-        let l = -light.direction;
-        s.irradiance = light.radiant * max(dot(n, l), 0.0);
-        s.to_light = l;
-        s.distance = INFINITE_DISTANCE;
-        return s;
-    }
-    let to_light = light.position - p;
-    let d2 = dot(to_light, to_light);
-    let d = sqrt(d2);
-    var l = vec3<f32>(0.0, 1.0, 0.0);
-    if d > 0.0 {
-        l = to_light / d;
-    }
-    let cosine = max(dot(n, l), 0.0);
-    let x = d2 * light.inv_range_sq;
-    let window = clamp(1.0 - x * x, 0.0, 1.0);
-    var e = cosine * window * window / max(d2, MIN_DISTANCE_SQ);
-    if light.kind == LIGHT_SPOT {
-        let c = clamp((dot(light.direction, -l) - light.cos_outer) * light.cone_scale, 0.0, 1.0);
-        e = e * c * c;
-    }
-    s.irradiance = light.radiant * e;
-    s.to_light = l;
-    s.distance = d;
-    return s;
 }
 
 // Linear index of a 2D dispatch.

@@ -10,7 +10,8 @@ use std::time::Instant;
 use anyhow::Result;
 use glam::Vec3;
 use prt_bake::{BakeSettings, NoProgress};
-use prt_runtime::gpu::{headless_device, layout::Counters, wgpu, PrtRuntime, RuntimeSettings};
+use prt_runtime::contract::Counters;
+use prt_runtime::gpu::{headless_device, wgpu, PrtRuntime, RuntimeSettings};
 use prt_runtime::{Lighting, SkyModel};
 
 use crate::results::Out;
@@ -103,7 +104,7 @@ pub fn table(args: &LightsArgs) -> Result<String> {
         args.rays,
         args.repeats
     )?;
-    writeln!(md, "| lights | full update (all moved) | reaching (light, brick) pairs | shadow rays | per 1k pairs | one light moved (the widest) | its bricks | rays traced | bricks relit | visibility pool |")?;
+    writeln!(md, "| lights | full update (all moved) | reaching (light, brick) pairs | shadow rays | per 1k pairs | one light moved (the widest) | its bricks | rays traced | bricks relit | shadow-ray cache |")?;
     writeln!(md, "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")?;
     let bench = Bench {
         device: &device,
@@ -175,14 +176,14 @@ impl Bench<'_> {
             reach.get(one).copied().unwrap_or(0),
             c.shadow_rays,
             c.bricks_relit,
-            all.visibility_words,
+            all.shadow_cache_words,
         ))
     }
 }
 
 /// The front-face bricks of `asset` each of `lights` reaches (the CPU twin of the cull stage).
 fn reach(asset: &prt_format::Asset, lights: &[prt_format::Light]) -> Vec<usize> {
-    let normals = prt_runtime::relight::brick_normal_bounds(asset);
+    let normals = prt_runtime::lights::brick_normal_bounds(asset);
     lights
         .iter()
         .map(|light| {

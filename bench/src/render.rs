@@ -251,9 +251,12 @@ fn sampling_cost(
         sky: prt_runtime::SkyModel::Constant([1.0; 3]),
     };
     let mut out = [0.0; 3];
-    for (k, visibility) in [true, false].into_iter().enumerate() {
+    for (k, depth_moments) in [true, false].into_iter().enumerate() {
         let runtime = RuntimeSettings {
-            visibility,
+            lookup: prt_runtime::LookupSettings {
+                depth_moments,
+                ..Default::default()
+            },
             ..RuntimeSettings::default()
         };
         let mut gi = PrtRuntime::new(device, queue, asset, runtime)?;

@@ -27,8 +27,7 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use prt_bake::{BakeSettings, NoProgress};
 use prt_format::sh::ShRgb;
-use prt_runtime::gpu::RuntimeSettings;
-use prt_runtime::{Lighting, Sample};
+use prt_runtime::{Lighting, LookupSettings, Sample};
 use serde_json::Value;
 
 use crate::results::Out;
@@ -199,14 +198,13 @@ fn measure(
     let relight_s = t.elapsed().as_secs_f64();
     let spacing = asset.header.grid.spacing;
     let mut rows = Vec::new();
-    for (lookup, visibility) in [("trilinear", false), ("visibility", true)] {
-        let runtime = RuntimeSettings {
+    for (lookup, depth_moments) in [("trilinear", false), ("visibility", true)] {
+        let settings = LookupSettings {
             normal_bias: bias,
-            visibility,
-            ..RuntimeSettings::default()
+            depth_moments,
         };
         let t = Instant::now();
-        let sampler = prt_runtime::VolumeSampler::for_asset(&asset, &sh, &runtime);
+        let sampler = prt_runtime::VolumeSampler::for_asset(&asset, &sh, &settings);
         let samples: Vec<Sample> = reference
             .points
             .iter()

@@ -59,7 +59,7 @@ pub fn camera_of(
 
 /// `--normal-bias` in probe spacings, or the runtime's default: finite and non-negative.
 pub fn normal_bias(arg: Option<f32>) -> Result<f32> {
-    let bias = arg.unwrap_or(prt_runtime::gpu::RuntimeSettings::default().normal_bias);
+    let bias = arg.unwrap_or(prt_runtime::LookupSettings::default().normal_bias);
     anyhow::ensure!(
         bias.is_finite() && bias >= 0.0,
         "--normal-bias {bias}: expected a finite number of probe spacings >= 0"

@@ -84,10 +84,10 @@ pub struct RenderArgs {
     /// runtime's].
     #[arg(long, allow_hyphen_values = true)]
     normal_bias: Option<f32>,
-    /// Indirect light by plain trilinear interpolation, without the visibility test that keeps
-    /// light from leaking through walls (to compare).
-    #[arg(long)]
-    no_visibility: bool,
+    /// Indirect light by plain trilinear interpolation, without the Chebyshev test against the
+    /// probes' depth moments that keeps light from leaking through walls (to compare).
+    #[arg(long, alias = "no-visibility")]
+    no_depth_moments: bool,
     /// Render even if the asset was baked from another scene file.
     #[arg(long)]
     force: bool,
@@ -100,8 +100,10 @@ pub struct RenderArgs {
 pub fn run(args: RenderArgs) -> Result<()> {
     let camera = camera_of(args.eye, args.target, args.fov)?;
     let runtime = RuntimeSettings {
-        visibility: !args.no_visibility,
-        normal_bias: normal_bias(args.normal_bias)?,
+        lookup: prt_runtime::LookupSettings {
+            normal_bias: normal_bias(args.normal_bias)?,
+            depth_moments: !args.no_depth_moments,
+        },
         bounces: prt_runtime::gpu::Bounces::Fixed(args.bounces),
         ..RuntimeSettings::default()
     };

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use prt_format::sh::ShRgb;
 use prt_runtime::gpu::{PrtRuntime, RuntimeSettings};
-use prt_runtime::{Sample, VolumeSampler};
+use prt_runtime::{LookupSettings, Sample, VolumeSampler};
 use serde_json::{json, Value};
 
 use prt_cli::options::normal_bias;
@@ -32,9 +32,9 @@ pub struct SampleArgs {
     /// runtime's, 0.2].
     #[arg(long, allow_hyphen_values = true)]
     normal_bias: Option<f32>,
-    /// Plain trilinear interpolation: no visibility test against the probes' visibility maps.
-    #[arg(long)]
-    no_visibility: bool,
+    /// Plain trilinear interpolation: no Chebyshev test against the probes' depth moments.
+    #[arg(long, alias = "no-visibility")]
+    no_depth_moments: bool,
 }
 
 /// A surface point: position and unit normal.
@@ -43,8 +43,10 @@ type Point = ([f32; 3], [f32; 3]);
 pub fn run(args: SampleArgs) -> Result<()> {
     let normal_bias = normal_bias(args.normal_bias)?;
     let settings = RuntimeSettings {
-        normal_bias,
-        visibility: !args.no_visibility,
+        lookup: LookupSettings {
+            normal_bias,
+            depth_moments: !args.no_depth_moments,
+        },
         ..RuntimeSettings::default()
     };
     ensure_not_input(&args.json, &[&args.asset, &args.lights, &args.points])?;
@@ -82,7 +84,7 @@ fn sample_cpu(
     settings: &RuntimeSettings,
     points: &[Point],
 ) -> Vec<Sample> {
-    let sampler = VolumeSampler::for_asset(asset, sh, settings);
+    let sampler = VolumeSampler::for_asset(asset, sh, &settings.lookup);
     points.iter().map(|(p, n)| sampler.sample(*p, *n)).collect()
 }
 

@@ -91,10 +91,10 @@ fn check(scene: &Scene, asset: &Asset) -> Result<(Vec3, Vec3), RenderError> {
         )));
     }
     let needed = asset.geometry.stack_needed();
-    if needed > prt_runtime::visibility::MAX_STACK || asset.geometry.nodes.is_empty() {
+    if needed > prt_runtime::contract::MAX_STACK || asset.geometry.nodes.is_empty() {
         return Err(RenderError::Scene(format!(
             "the asset's BVH needs a traversal stack of {needed} entries (at most {}) and at least one node",
-            prt_runtime::visibility::MAX_STACK
+            prt_runtime::contract::MAX_STACK
         )));
     }
     Ok(bounds)

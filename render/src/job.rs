@@ -237,7 +237,7 @@ pub fn run(
         .map_err(|e| RenderError::Scene(e.to_string()))?;
     let scene_camera = scene.cameras.first().map(Camera::from_gltf);
     let camera = choose_camera(job, scene_camera, scene.bounds())?;
-    let max_gi = prt_runtime::gpu::layout::MAX_LIGHTS;
+    let max_gi = prt_runtime::contract::MAX_LIGHTS;
     if job.output.needs_gi() && lighting.rig.lights.len() > max_gi {
         return Err(RenderError::GiLights {
             count: lighting.rig.lights.len(),

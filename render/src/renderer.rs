@@ -10,7 +10,7 @@
 //! whose probes are all invalid, so indirect light is zero with the same pipelines.
 
 use prt_format::{Asset, LightKind};
-use prt_runtime::gpu::layout::GpuLight;
+use prt_runtime::contract::GpuLight;
 use prt_runtime::gpu::PrtRuntime;
 use prt_runtime::lights::PreparedLight;
 use prt_scene::Scene;

@@ -7,16 +7,19 @@
 // SH and colour maths index several parallel arrays with one index; range loops read best.
 #![allow(clippy::needless_range_loop)]
 
+pub mod contract;
 pub mod gpu;
 pub mod lights;
 pub mod output;
 pub mod relight;
 pub mod rig;
 pub mod sample;
+pub mod settings;
+pub mod shadow_rays;
 pub mod sky;
-pub mod visibility;
 
 pub use relight::{CpuRelighter, RelightError, RelightStats, Relit};
 pub use rig::{load_rig, load_rig_with_warnings, Lighting, RigLoadError};
 pub use sample::{Sample, VolumeSampler};
+pub use settings::{Bounces, LookupSettings, MAX_BOUNCES};
 pub use sky::SkyModel;

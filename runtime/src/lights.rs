@@ -5,13 +5,9 @@
 //! versions are the reference the GPU is tested against.
 
 use glam::Vec3;
-use prt_format::{Brick, Light, LightKind};
+use prt_format::{Asset, Brick, Light, LightKind};
 
-/// Floor of the squared distance in the inverse-square law, in m^2: only a guard against
-/// dividing by zero at the light itself. docs/conventions.md section 3 has the seed's 1e-5 m^2 (a
-/// 3 mm radius), which capped the light of every surface in a millimetre-sized scene (issue 8:
-/// 122% error at a scale of 0.001); 1e-16 m^2 keeps scenes down to 10 micrometres exact.
-pub const MIN_DISTANCE_SQ: f32 = 1e-16;
+use crate::contract::{light_kind_code, GpuLight, GpuNormalBounds, MIN_DISTANCE_SQ};
 
 /// A light prepared for evaluation: unit direction, premultiplied colour, cone constants.
 #[derive(Clone, Copy, Debug)]
@@ -129,6 +125,55 @@ pub enum CullReason {
 pub struct NormalBounds {
     pub min: Vec3,
     pub max: Vec3,
+}
+
+/// Per-brick component-wise bounds of surfel normals, for facing culls.
+pub fn brick_normal_bounds(asset: &Asset) -> Vec<NormalBounds> {
+    asset
+        .bricks
+        .iter()
+        .map(|b| {
+            let surfels =
+                &asset.surfels[b.first_surfel as usize..(b.first_surfel + b.surfel_count) as usize];
+            surfels.iter().fold(
+                NormalBounds {
+                    min: Vec3::INFINITY,
+                    max: Vec3::NEG_INFINITY,
+                },
+                |nb, s| NormalBounds {
+                    min: nb.min.min(Vec3::from(s.normal)),
+                    max: nb.max.max(Vec3::from(s.normal)),
+                },
+            )
+        })
+        .collect()
+}
+
+/// A light as the shaders read it.
+impl From<&PreparedLight> for GpuLight {
+    fn from(l: &PreparedLight) -> Self {
+        GpuLight {
+            position: l.position.to_array(),
+            kind: light_kind_code(l.kind),
+            direction: l.direction.to_array(),
+            inv_range_sq: l.inv_range_sq,
+            radiant: l.radiant.to_array(),
+            cos_outer: l.cos_outer,
+            cone_scale: l.cone_scale,
+            range: l.range.min(f32::MAX),
+            _pad: [0; 2],
+        }
+    }
+}
+
+impl From<&NormalBounds> for GpuNormalBounds {
+    fn from(n: &NormalBounds) -> Self {
+        GpuNormalBounds {
+            min: n.min.to_array(),
+            max: n.max.to_array(),
+            ..Default::default()
+        }
+    }
 }
 
 /// Upper bound of `dot(n, v)` for n in the normal box and v in the box `[vlo, vhi]`

@@ -7,7 +7,7 @@ use prt_format::sh::ShRgb;
 use prt_format::Asset;
 use serde_json::{json, Value};
 
-use crate::gpu::layout::Counters;
+use crate::contract::Counters;
 use crate::relight::RelightStats;
 
 /// The JSON document for `sh` relit from `asset` by `backend`, with that backend's work counts

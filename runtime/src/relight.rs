@@ -3,14 +3,14 @@
 //! 1. **Direct light at surfels.** Per brick: cull each light by range, cone and facing
 //!    ([`PreparedLight::cull`]); for the lights left, every surfel gets the irradiance of
 //!    docs/conventions.md section 3, with a shadow ray through the asset's BVH
-//!    ([`crate::visibility`]). Back-face bricks are black and skipped.
+//!    ([`crate::shadow_rays`]). Back-face bricks are black and skipped.
 //! 2. **Surfel radiance** `L = emission + albedo / pi * E`.
 //! 3. **Brick radiance**: the weighted mean of its surfels'.
 //! 4. **Gather**: probe SH9 = sum over its factors of transfer x brick radiance, plus the sky
 //!    term. Invalid probes are skipped (zero, flagged invalid).
 //! 5. **Bounces** (optional, `bounces > 1`): surfels also receive the irradiance of the probe
 //!    volume from the previous iteration, sampled at the surfel with its normal through the
-//!    engine's lookup (`sample_irradiance`: normal bias, validity and visibility weights), and
+//!    engine's lookup (`sample_irradiance`: normal bias, validity and depth-moment weights), and
 //!    steps 2-4 repeat. `bounces = 1` is the one-bounce contract of
 //!    docs/conventions.md section 5, exactly when the bake did not merge surfels.
 
@@ -19,10 +19,12 @@ use prt_format::sh::{ShRgb, SH_COUNT};
 use prt_format::{Asset, BRICK_BACKFACE};
 use rayon::prelude::*;
 
-use crate::lights::{CullReason, NormalBounds, PreparedLight};
+use crate::contract::MAX_STACK;
+use crate::lights::{brick_normal_bounds, CullReason, NormalBounds, PreparedLight};
 use crate::rig::Lighting;
 use crate::sample::VolumeSampler;
-use crate::visibility::{self, occluded, ray_offset};
+use crate::settings::{LookupSettings, MAX_BOUNCES};
+use crate::shadow_rays::{occluded, ray_offset};
 
 /// Why an asset cannot be relit.
 #[derive(Debug, thiserror::Error)]
@@ -57,9 +59,6 @@ pub fn check_finite(sh: &[ShRgb], lighting: &Lighting) -> Result<(), RelightErro
     }
 }
 
-/// Most bounces a relight computes: each adds at most the albedo (below 1) times the previous
-/// one, so after 100 bounces of albedo 0.9 the next would add 3e-5 of the first.
-pub const MAX_BOUNCES: u32 = 100;
 /// Most lights the CPU relight takes (the renderer's own limit): beyond it a relight takes
 /// minutes per update on a real level, which is not what a reference is for.
 pub const MAX_CPU_LIGHTS: usize = 4096;
@@ -133,10 +132,10 @@ pub struct CpuRelighter<'a> {
 impl<'a> CpuRelighter<'a> {
     pub fn new(asset: &'a Asset) -> Result<Self, RelightError> {
         let needed = asset.geometry.stack_needed();
-        if needed > visibility::MAX_STACK {
+        if needed > MAX_STACK {
             return Err(RelightError::BvhTooDeep {
                 needed,
-                max: visibility::MAX_STACK,
+                max: MAX_STACK,
             });
         }
         Ok(CpuRelighter {
@@ -146,20 +145,19 @@ impl<'a> CpuRelighter<'a> {
     }
 
     /// Relights with `lighting`; `bounces` >= 1. Bounces beyond the first sample the volume as
-    /// the GPU runtime does by default ([`crate::gpu::RuntimeSettings::default`]).
+    /// the GPU runtime does by default ([`LookupSettings::default`]).
     pub fn relight(&self, lighting: &Lighting, bounces: u32) -> Result<Relit, RelightError> {
-        self.relight_with(lighting, bounces, &crate::gpu::RuntimeSettings::default())
+        self.relight_with(lighting, bounces, &LookupSettings::default())
     }
 
-    /// [`CpuRelighter::relight`], with bounces beyond the first sampling the volume as the GPU
-    /// runtime does with `lookup` (its normal bias and visibility: the engine's
-    /// `sample_irradiance`, twin [`VolumeSampler::for_asset`]). Its `bounces` is not read: the
-    /// count is `bounces`.
+    /// [`CpuRelighter::relight`], with bounces beyond the first sampling the volume through
+    /// the engine's lookup with `lookup` (`sample_irradiance`, twin
+    /// [`VolumeSampler::for_asset`]), as the GPU runtime does with the same settings.
     pub fn relight_with(
         &self,
         lighting: &Lighting,
         bounces: u32,
-        lookup: &crate::gpu::RuntimeSettings,
+        lookup: &LookupSettings,
     ) -> Result<Relit, RelightError> {
         if bounces == 0 || bounces > MAX_BOUNCES {
             return Err(RelightError::Bounces(bounces));
@@ -359,26 +357,4 @@ impl BrickRadiance {
             (self.mean[c] + g[0] * offset[0] + g[1] * offset[1] + g[2] * offset[2]).max(0.0)
         })
     }
-}
-
-/// Per-brick component-wise bounds of surfel normals, for facing culls.
-pub fn brick_normal_bounds(asset: &Asset) -> Vec<NormalBounds> {
-    asset
-        .bricks
-        .iter()
-        .map(|b| {
-            let surfels =
-                &asset.surfels[b.first_surfel as usize..(b.first_surfel + b.surfel_count) as usize];
-            surfels.iter().fold(
-                NormalBounds {
-                    min: Vec3::INFINITY,
-                    max: Vec3::NEG_INFINITY,
-                },
-                |nb, s| NormalBounds {
-                    min: nb.min.min(Vec3::from(s.normal)),
-                    max: nb.max.max(Vec3::from(s.normal)),
-                },
-            )
-        })
-        .collect()
 }

@@ -6,16 +6,17 @@
 //! a GPU and every GPU result has a reference:
 //!
 //! - the point is first moved along its normal by `normal_bias` metres
-//!   (`RuntimeSettings::normal_bias`, in probe spacings, explains the trade-off);
+//!   (`LookupSettings::normal_bias`, in probe spacings, explains the trade-off);
 //! - grid coordinate `(p - origin) / step` (texel centres sit on the probes), clamped to the
 //!   grid: outside it the nearest face's probes are used, as the sampler's `ClampToEdge` does;
 //! - each of the eight probes around the point gets its trilinear weight times its validity
 //!   (`Probe::sample_weight`: 1 for a valid or dilated probe, 0 for an invalid one), and **with
-//!   visibility** (the runtime's default) also the facing term `clamp(1 + h / FACING_DEPTH, 0,
-//!   1)^2 + FACING_FLOOR` (`h`: the probe's signed distance in spacings from the plane through
-//!   the unmoved surface point) and the Chebyshev visibility `max(crush(cheb^3), MIN_VISIBILITY)` of the point's
-//!   distance against the probe's visibility map in that direction (`prt_format::depth`;
-//!   Majercik et al., JCGT 2019); distances are measured from where the probe's rays started
+//!   depth moments** (the runtime's default) also the facing term `clamp(1 + h / FACING_DEPTH,
+//!   0, 1)^2 + FACING_FLOOR` (`h`: the probe's signed distance in spacings from the plane
+//!   through the unmoved surface point) and the Chebyshev term `max(crush(cheb^3),
+//!   MIN_CHEBYSHEV)` of the point's distance against the probe's depth moments in that
+//!   direction (the mean and deviation of its hit distances, `prt_format::depth`; Majercik et
+//!   al., JCGT 2019); distances are measured from where the probe's rays started
 //!   (`Probe::position`: the grid position unless the probe was moved off a surface). A
 //!   dilated probe sits inside geometry and its map sees that geometry close by, so it only
 //!   weighs where no real probe sees the point;
@@ -23,14 +24,20 @@
 //!   (`Sample::validity`) is at most `MIN_VALIDITY` (no probe around the point);
 //! - irradiance = `prt_format::sh::irradiance` (clamped-cosine convolution, clamped at 0).
 //!
-//! The GPU differs only by the volume's storage (half floats by default) and, without
-//! visibility, the hardware's filter weights (8-bit fixed-point fractions on most GPUs);
+//! The GPU differs only by the volume's storage (half floats by default) and, without depth
+//! moments, the hardware's filter weights (8-bit fixed-point fractions on most GPUs);
 //! `tests/tests/gpu.rs` states the tolerance.
 
 use glam::Vec3;
-use prt_format::depth::{MAX_DEPTH, MAX_DEVIATION};
+use prt_format::depth::MAX_DEPTH;
 use prt_format::sh::{ShRgb, SH_COUNT};
-use prt_format::{Asset, Grid, Probe, DEPTH_MAP_SIDE, DEPTH_WORDS};
+use prt_format::{Asset, Grid, Probe, DEPTH_WORDS};
+
+use crate::contract::{
+    CRUSH_THRESHOLD, FACING_DEPTH, FACING_FLOOR, MIN_CHEBYSHEV, MIN_DISTANCE, MIN_VALIDITY,
+    MIN_VARIANCE,
+};
+use crate::settings::LookupSettings;
 
 /// What the engine-side snippet returns at one point.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -45,37 +52,6 @@ pub struct Sample {
     pub validity: f32,
 }
 
-/// Summed validity at or below which the sample is empty (as in the shader).
-pub const MIN_VALIDITY: f32 = 1e-6;
-/// Floor of the Chebyshev visibility term: a point that no probe sees still gets the least
-/// occluded probes' light rather than nothing.
-pub const MIN_VISIBILITY: f32 = 1e-5;
-/// Spacings behind the surface's plane over which the facing term falls from 1 to its floor:
-/// `clamp(1 + h / FACING_DEPTH, 0, 1)^2 + FACING_FLOOR`, `h` being the probe's signed distance
-/// from the plane through the (unmoved) surface point, in spacings. Every probe in front of the
-/// plane counts fully, however grazing: with probes on the bounds' faces, the layer just off a
-/// wall (0.05 spacings in front, up to a step aside) sees what the wall sees, and DDGI's
-/// angular term `((n . dir + 1) / 2)^2` gave it a quarter of the weight of the layer a step
-/// inside. Measured (`prt bench surface`, normal bias 0.2): Cornell mean error 5.6% with the
-/// angular term, 4.0% with this one; two rooms at half spacing 6.1% and 4.6%, no leaks with either.
-pub const FACING_DEPTH: f32 = 0.25;
-/// Floor of the facing term: probes behind the surface's plane count less, not zero (a point
-/// whose probes are all behind it still gets light). DDGI uses 0.2; prt's rooms are up to 500
-/// times brighter than their neighbours (two rooms sharing a wall), where even 0.02 of a probe
-/// behind the wall leaked at half spacing (7 of 300 points, normal bias 0.1, angular facing
-/// term), so the floor is 0.002.
-pub const FACING_FLOOR: f32 = 0.002;
-/// Floor of the depth variance, in spacings squared (a perfectly flat hit distribution would
-/// make the test a hard step).
-pub const MIN_VARIANCE: f32 = 1e-4;
-/// Distance in spacings below which a point counts as at the probe (visible).
-pub const MIN_DISTANCE: f32 = 1e-4;
-
-/// Visibility below this is crushed towards zero (DDGI's crush threshold): a probe that sees the
-/// point only partly is most likely on the far side of a thin wall, and a room 500 times
-/// brighter than the point leaks visibly even at a weight of 1/1000.
-pub const CRUSH_THRESHOLD: f32 = 0.2;
-
 /// DDGI's crush: `v` below the threshold becomes `v^3 / threshold^2` (continuous at it).
 fn crush(v: f32) -> f32 {
     if v < CRUSH_THRESHOLD {
@@ -83,27 +59,6 @@ fn crush(v: f32) -> f32 {
     } else {
         v
     }
-}
-
-/// `(name, value)` of the sampling constants the snippet shares with this twin.
-pub fn wgsl_constants() -> Vec<(&'static str, String)> {
-    vec![
-        ("PRT_MIN_VALIDITY", format!("{MIN_VALIDITY:e}")),
-        ("PRT_MIN_VISIBILITY", format!("{MIN_VISIBILITY:e}")),
-        ("PRT_CRUSH_THRESHOLD", format!("{CRUSH_THRESHOLD:?}")),
-        ("PRT_FACING_FLOOR", format!("{FACING_FLOOR:?}")),
-        ("PRT_FACING_DEPTH", format!("{FACING_DEPTH:?}")),
-        ("PRT_MIN_VARIANCE", format!("{MIN_VARIANCE:e}")),
-        ("PRT_MIN_DISTANCE", format!("{MIN_DISTANCE:e}")),
-        ("PRT_DEPTH_SIDE", format!("{DEPTH_MAP_SIDE}u")),
-        ("PRT_DEPTH_WORDS", format!("{DEPTH_WORDS}u")),
-        ("PRT_MAX_DEPTH", format!("{MAX_DEPTH:?}")),
-        ("PRT_MAX_DEVIATION", format!("{MAX_DEVIATION:?}")),
-        (
-            "PRT_FLAG_VISIBILITY",
-            format!("{}u", crate::gpu::layout::VOLUME_VISIBILITY),
-        ),
-    ]
 }
 
 /// Samples probe SH like the engine-side snippet.
@@ -114,13 +69,13 @@ pub struct VolumeSampler<'a> {
     /// Where each probe's rays started (`Probe::position`).
     positions: Vec<Vec3>,
     sh: &'a [ShRgb],
-    /// Visibility maps (`Asset::probe_depth`); empty: trilinear only.
-    depth: &'a [u32],
+    /// The probes' depth moments (`Asset::probe_depth`); empty: trilinear only.
+    depth_moments: &'a [u32],
     normal_bias: f32,
 }
 
 impl<'a> VolumeSampler<'a> {
-    /// A trilinear sampler (no visibility) over `sh` (one per probe, in `grid` index order),
+    /// A trilinear sampler (no depth moments) over `sh` (one per probe, in `grid` index order),
     /// each probe weighted by `Probe::sample_weight`; `normal_bias` is in metres. Probes missing
     /// from `probes` or `sh` count as invalid.
     pub fn new(grid: &Grid, probes: &[Probe], sh: &'a [ShRgb], normal_bias: f32) -> Self {
@@ -133,38 +88,34 @@ impl<'a> VolumeSampler<'a> {
             weight,
             positions,
             sh,
-            depth: &[],
+            depth_moments: &[],
             normal_bias,
         }
     }
 
-    /// What the GPU runtime's snippet samples for `asset` relit to `sh` with `settings`:
-    /// visibility-aware unless `settings.visibility` is off.
-    pub fn for_asset(
-        asset: &'a Asset,
-        sh: &'a [ShRgb],
-        settings: &crate::gpu::RuntimeSettings,
-    ) -> Self {
+    /// What the GPU runtime's snippet samples for `asset` relit to `sh` with `lookup`:
+    /// weighted by the probes' depth moments unless `lookup.depth_moments` is off.
+    pub fn for_asset(asset: &'a Asset, sh: &'a [ShRgb], lookup: &LookupSettings) -> Self {
         let g = &asset.header.grid;
-        let s = VolumeSampler::new(g, &asset.probes, sh, settings.normal_bias * g.spacing);
-        if settings.visibility {
-            s.with_visibility(&asset.probe_depth)
+        let s = VolumeSampler::new(g, &asset.probes, sh, lookup.normal_bias * g.spacing);
+        if lookup.depth_moments {
+            s.with_depth_moments(&asset.probe_depth)
         } else {
             s
         }
     }
 
-    /// Weights probes by visibility from `depth` (`Asset::probe_depth`).
-    pub fn with_visibility(mut self, depth: &'a [u32]) -> Self {
+    /// Weights probes by their depth moments `depth` (`Asset::probe_depth`).
+    pub fn with_depth_moments(mut self, depth: &'a [u32]) -> Self {
         if depth.len() >= self.weight.len() * DEPTH_WORDS {
-            self.depth = depth;
+            self.depth_moments = depth;
         }
         self
     }
 
-    /// Visibility and facing weight of probe `i` at `probe` for the surface point `surface`
-    /// (facing), moved along its normal `n` to `x` (visibility), as DDGI does.
-    fn visibility(&self, i: usize, probe: Vec3, surface: Vec3, x: Vec3, n: Vec3) -> f32 {
+    /// Facing and Chebyshev weight of probe `i` at `probe` for the surface point `surface`
+    /// (facing), moved along its normal `n` to `x` (Chebyshev test), as DDGI does.
+    fn depth_weight(&self, i: usize, probe: Vec3, surface: Vec3, x: Vec3, n: Vec3) -> f32 {
         let v = x - probe;
         let len = v.length();
         let dist = len / self.grid.spacing;
@@ -175,7 +126,7 @@ impl<'a> VolumeSampler<'a> {
         let behind =
             ((probe - surface).dot(n) / self.grid.spacing / FACING_DEPTH + 1.0).clamp(0.0, 1.0);
         let mut w = behind * behind + FACING_FLOOR;
-        let words = &self.depth[i * DEPTH_WORDS..(i + 1) * DEPTH_WORDS];
+        let words = &self.depth_moments[i * DEPTH_WORDS..(i + 1) * DEPTH_WORDS];
         let (mean, deviation) =
             prt_format::depth::moments(words, prt_format::depth::texel_of(dir.to_array()));
         // A saturated mean (sky, or hits beyond MAX_DEPTH) bounds nothing: points beyond it,
@@ -184,7 +135,7 @@ impl<'a> VolumeSampler<'a> {
             let variance = (deviation * deviation).max(MIN_VARIANCE);
             let d = dist - mean;
             let chebyshev = variance / (variance + d * d);
-            w *= crush(chebyshev * chebyshev * chebyshev).max(MIN_VISIBILITY);
+            w *= crush(chebyshev * chebyshev * chebyshev).max(MIN_CHEBYSHEV);
         }
         w
     }
@@ -216,8 +167,8 @@ impl<'a> VolumeSampler<'a> {
             }
             validity += w_tri * probe_weight;
             let mut w = w_tri;
-            if !self.depth.is_empty() {
-                w *= self.visibility(i, self.positions[i], Vec3::from(position), p, n);
+            if !self.depth_moments.is_empty() {
+                w *= self.depth_weight(i, self.positions[i], Vec3::from(position), p, n);
             }
             let w = w * probe_weight;
             total += w;

@@ -9,7 +9,7 @@
 pub const BOUNCE_SURFELS: &str = include_str!("../bounce_surfels.wgsl");
 /// `brick_radiance.wgsl`: Runtime stage 4: brick radiance (mean and gradient) from its surfels.
 pub const BRICK_RADIANCE: &str = include_str!("../brick_radiance.wgsl");
-/// `cull_lights.wgsl`: Runtime stage 1: per-brick light masks, dirty bricks, visibility pool room.
+/// `cull_lights.wgsl`: Runtime stage 1: per-brick light masks, dirty bricks, shadow-ray cache room.
 pub const CULL_LIGHTS: &str = include_str!("../cull_lights.wgsl");
 /// `gather.wgsl`: Runtime stage 6: factors and sky reduced into probe SH, written to the volume.
 pub const GATHER: &str = include_str!("../gather.wgsl");
@@ -17,6 +17,8 @@ pub const GATHER: &str = include_str!("../gather.wgsl");
 pub const GATHER_SUBGROUP: &str = include_str!("../gather_subgroup.wgsl");
 /// `gather_tree.wgsl`: Stage 6 entry point with a shared-memory tree reduction.
 pub const GATHER_TREE: &str = include_str!("../gather_tree.wgsl");
+/// `light_sample.wgsl`: The light model (`light_sample`): a punctual light's unshadowed irradiance.
+pub const LIGHT_SAMPLE: &str = include_str!("../light_sample.wgsl");
 /// `mark_probes.wgsl`: Runtime stage 5: probes whose bricks changed.
 pub const MARK_PROBES: &str = include_str!("../mark_probes.wgsl");
 /// `relight_surfels.wgsl`: Runtime stage 2: direct irradiance at surfels with cached shadow rays.
@@ -31,5 +33,5 @@ pub const RENDER_TYPES: &str = include_str!("../render_types.wgsl");
 pub const SAMPLE_IRRADIANCE: &str = include_str!("../sample_irradiance.wgsl");
 /// `types.wgsl`: Structs and helpers every runtime stage shares (Params, Counters, the asset's arrays).
 pub const TYPES: &str = include_str!("../types.wgsl");
-/// `visibility.wgsl`: The light model (`light_sample`) and the any-hit shadow-ray BVH traversal (`occluded`).
-pub const VISIBILITY: &str = include_str!("../visibility.wgsl");
+/// `shadow_rays.wgsl`: The any-hit shadow-ray BVH traversal (`occluded`, `ray_offset`).
+pub const SHADOW_RAYS: &str = include_str!("../shadow_rays.wgsl");

@@ -85,7 +85,7 @@ fn gpu_bounces_equal_the_cpu_bounce_by_bounce() {
             let mut runtime = PrtRuntime::new(&device, &queue, &asset, s).unwrap();
             let (gpu, updates) = settle(&device, &queue, &mut runtime, &lighting, None);
             assert_eq!(updates, n, "one update per bounce");
-            let reference = cpu.relight_with(&lighting, n, &s).unwrap().sh;
+            let reference = cpu.relight_with(&lighting, n, &s.lookup).unwrap().sh;
             let w = worst_of_sh0(&asset, &gpu, &reference);
             let name = scene.file_name().unwrap().to_string_lossy().to_string();
             let gain = previous.as_ref().map(|p| {
@@ -185,7 +185,7 @@ fn amortised_bounces_converge_to_the_full_update() {
     assert_eq!(updates, 12);
     let expect = CpuRelighter::new(&asset)
         .unwrap()
-        .relight_with(&moved, 4, &s)
+        .relight_with(&moved, 4, &s.lookup)
         .unwrap()
         .sh;
     let w = worst_of_sh0(&asset, &sh, &expect);
@@ -216,7 +216,7 @@ fn amortised_bounces_converge_to_the_full_update() {
     }
     let expect = CpuRelighter::new(&asset)
         .unwrap()
-        .relight_with(&again, 4, &s)
+        .relight_with(&again, 4, &s.lookup)
         .unwrap()
         .sh;
     let w = worst_of_sh0(&asset, &amortised.read_probe_sh().unwrap(), &expect);

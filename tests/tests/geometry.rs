@@ -95,7 +95,7 @@ fn shadow_rays_through_edges_are_occluded() {
                     let d = (target - o).normalize();
                     tried += 1;
                     // Far beyond the box: the ray must stop at its wall.
-                    if prt_runtime::visibility::occluded(geo, o, d, 10.0) {
+                    if prt_runtime::shadow_rays::occluded(geo, o, d, 10.0) {
                         blocked += 1;
                     }
                 }

@@ -9,7 +9,7 @@ use prt_format::{Asset, Light, LightKind, LightRig, Sky};
 use prt_runtime::gpu::{
     sample_points, sh_from_texels, wgpu, PrtRuntime, RuntimeSettings, VolumeFormat,
 };
-use prt_runtime::{load_rig, CpuRelighter, Lighting, SkyModel, VolumeSampler};
+use prt_runtime::{load_rig, CpuRelighter, Lighting, LookupSettings, SkyModel, VolumeSampler};
 use prt_tests::{bake_ok as bake, fixture, gpu_device};
 
 fn cpu(asset: &Asset, lighting: &Lighting) -> Vec<ShRgb> {
@@ -252,7 +252,7 @@ fn amortised_updates_and_skipped_work() {
     let counters = amortised.read_counters().unwrap();
     assert_eq!(
         counters.shadow_rays, 0,
-        "visibility cached for a light that did not move"
+        "shadow ray cached for a light that did not move"
     );
     assert!(counters.bricks_relit > 0 && (counters.bricks_relit as usize) < asset.bricks.len());
     assert_close(
@@ -278,7 +278,7 @@ fn hostile_values_stay_finite() {
         .max()
         .unwrap_or(0);
     assert!(
-        most > prt_runtime::gpu::layout::GATHER_WORKGROUP,
+        most > prt_runtime::contract::GATHER_WORKGROUP,
         "a probe has more factors ({most}) than gather threads"
     );
     let no_lights = Lighting {
@@ -366,10 +366,10 @@ fn hostile_values_stay_finite() {
 }
 
 /// Emissive bricks no light reaches are relit on the first update (GPU furnace: c0 = 4pi Y00 e
-/// with no lights at all), and the visibility cache is re-traced whenever a change can light
+/// with no lights at all), and the shadow-ray cache is re-traced whenever a change can light
 /// new surfels: a dark light turned on, a longer range.
 #[test]
-fn emission_and_visibility_cache_follow_every_change() {
+fn emission_and_shadow_cache_follow_every_change() {
     let (device, queue) = gpu_device();
     let settings = BakeSettings {
         spacing: Some(0.6),
@@ -474,7 +474,7 @@ fn chunked_surfels_match_the_unsplit_result() {
     assert_eq!(got, expect, "chunked surfels change nothing");
     let cpu = CpuRelighter::new(&asset)
         .unwrap()
-        .relight_with(&lighting, 2, &settings)
+        .relight_with(&lighting, 2, &settings.lookup)
         .unwrap()
         .sh;
     assert_close("chunked surfels, 2 bounces", &asset, &got, &cpu, 1e-4);
@@ -506,7 +506,10 @@ fn sample_irradiance_snippet_matches_the_cpu() {
     );
     let lighting = load_rig(&fixture("cornell/rig.json")).unwrap();
     let settings = RuntimeSettings {
-        normal_bias: 0.0,
+        lookup: LookupSettings {
+            normal_bias: 0.0,
+            ..LookupSettings::default()
+        },
         ..RuntimeSettings::default()
     };
     let mut runtime = PrtRuntime::new(&device, &queue, &asset, settings).unwrap();
@@ -625,15 +628,18 @@ fn sample_points_matches_the_cpu_sampler() {
     let (device, queue) = gpu_device();
     let asset = bake(&fixture("cornell/cornell.gltf"), &BakeSettings::default());
     let lighting = load_rig(&fixture("cornell/rig.json")).unwrap();
-    for visibility in [true, false] {
+    for depth_moments in [true, false] {
         let settings = RuntimeSettings {
-            visibility,
+            lookup: LookupSettings {
+                depth_moments,
+                ..LookupSettings::default()
+            },
             ..RuntimeSettings::default()
         };
         let mixed = compare_samplers(&device, &queue, &asset, &lighting, settings);
         assert!(mixed > 0, "no point beside a probe inside geometry");
     }
-    // Two rooms sharing a thin wall: the visibility test decides most of the weights there.
+    // Two rooms sharing a thin wall: the depth moments decide most of the weights there.
     let rooms = bake(&fixture("two_rooms.gltf"), &BakeSettings::default());
     let lighting = load_rig(&fixture("rigs/two_rooms.json")).unwrap();
     compare_samplers(
@@ -655,7 +661,7 @@ fn compare_samplers(
     let (device, queue) = (device.clone(), queue.clone());
     let mut runtime = PrtRuntime::new(&device, &queue, asset, settings).unwrap();
     let sh = gpu_update(&device, &queue, &mut runtime, lighting, None);
-    let cpu = VolumeSampler::for_asset(asset, &sh, &settings);
+    let cpu = VolumeSampler::for_asset(asset, &sh, &settings.lookup);
     let points = sample_queries(asset, 384);
     let mixed = points.len() - 384;
     let gpu = sample_points(&device, &queue, &runtime, &points).unwrap();
@@ -697,8 +703,8 @@ fn compare_samplers(
         }
     }
     eprintln!(
-        "visibility {}: {} points ({mixed} beside probes inside geometry): worst |dSH|/SH0 {worst_sh:.2e}, |dE|/E0 {worst_e:.2e}, |dvalidity| {worst_v:.2e}",
-        settings.visibility,
+        "depth moments {}: {} points ({mixed} beside probes inside geometry): worst |dSH|/SH0 {worst_sh:.2e}, |dE|/E0 {worst_e:.2e}, |dvalidity| {worst_v:.2e}",
+        settings.lookup.depth_moments,
         points.len()
     );
     mixed

@@ -1,4 +1,4 @@
-//! The GPU runtime with many lights (per-brick light masks, a visibility cache sized by the
+//! The GPU runtime with many lights (per-brick light masks, a shadow-ray cache sized by the
 //! (surfel, light) pairs that can reach each other) against the CPU reference, on lavapipe.
 
 use std::path::Path;
@@ -51,7 +51,7 @@ fn update(
     queue: &wgpu::Queue,
     runtime: &mut PrtRuntime,
     lighting: &Lighting,
-) -> (Vec<ShRgb>, prt_runtime::gpu::layout::Counters) {
+) -> (Vec<ShRgb>, prt_runtime::contract::Counters) {
     let mut encoder = device.create_command_encoder(&Default::default());
     runtime.update(&mut encoder, lighting, None).unwrap();
     queue.submit([encoder.finish()]);
@@ -117,11 +117,11 @@ fn a_thousand_lights_equal_the_cpu_and_one_moved_light_costs_its_pairs() {
         pairs_of(&cpu, &lighting.rig.lights[517]),
         "only the moved light's pairs are traced"
     );
-    assert!(moved.bricks_uncached == 0 && moved.visibility_words > 0);
+    assert!(moved.bricks_uncached == 0 && moved.shadow_cache_words > 0);
     eprintln!(
-        "1,024 lights: first update {} rays, {} visibility words (surfels {}); one moved: {} rays, {} bricks relit of {front}",
+        "1,024 lights: first update {} rays, {} shadow-cache words (surfels {}); one moved: {} rays, {} bricks relit of {front}",
         first.shadow_rays,
-        first.visibility_words,
+        first.shadow_cache_words,
         asset.surfels.len(),
         moved.shadow_rays,
         moved.bricks_relit
@@ -129,7 +129,7 @@ fn a_thousand_lights_equal_the_cpu_and_one_moved_light_costs_its_pairs() {
 
     // A pool of 1,000 words: most bricks stay uncached, the light is the same.
     let small = RuntimeSettings {
-        visibility_words: Some(1000),
+        shadow_cache_words: Some(1000),
         ..settings
     };
     let mut runtime = PrtRuntime::new(&device, &queue, &asset, small).unwrap();

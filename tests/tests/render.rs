@@ -199,7 +199,7 @@ fn indirect_light_equals_the_cpu_volume_lookup() {
     let lighting = load_rig(&fixture("cornell/rig.json")).unwrap();
     let rt = gi(&s, &lighting);
     let sh = rt.read_probe_sh().unwrap();
-    let sampler = VolumeSampler::for_asset(&s.asset, &sh, rt.settings());
+    let sampler = VolumeSampler::for_asset(&s.asset, &sh, &rt.settings().lookup);
     let st = settings(16, Culling::Tiled, true);
     let (indirect, _) = render(&s, st, &lighting, View::Indirect, Some(&rt));
     let (albedo, _) = render(&s, st, &lighting, View::Albedo, None);

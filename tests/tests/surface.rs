@@ -1,4 +1,4 @@
-//! Irradiance where a renderer samples it, at surfaces: no light through walls (visibility-aware
+//! Irradiance where a renderer samples it, at surfaces: no light through walls (depth-moment weighted
 //! lookup), no holes (dilation of probes inside geometry), probes inside double-sided solids
 //! detected and probes on surfaces moved off them. Fixtures: `fixtures/two_rooms.gltf` (a lit
 //! and a dark room sharing a zero-thickness wall with a door) and `fixtures/thick_walls.gltf`
@@ -8,8 +8,7 @@ use glam::Vec3;
 use prt_bake::BakeSettings;
 use prt_format::sh::ShRgb;
 use prt_format::Asset;
-use prt_runtime::gpu::RuntimeSettings;
-use prt_runtime::{load_rig, CpuRelighter, VolumeSampler};
+use prt_runtime::{load_rig, CpuRelighter, LookupSettings, VolumeSampler};
 use prt_tests::{bake_ok, fixture};
 
 fn relit(asset: &Asset, rig: &str) -> Vec<ShRgb> {
@@ -56,13 +55,13 @@ fn no_light_leaks_through_a_shared_wall() {
     for (name, bake) in [("default", BakeSettings::default()), ("midway", midway)] {
         let asset = bake_ok(&fixture("two_rooms.gltf"), &bake);
         let sh = relit(&asset, "rigs/two_rooms.json");
-        let settings = RuntimeSettings::default();
+        let settings = LookupSettings::default();
         let visible = VolumeSampler::for_asset(&asset, &sh, &settings);
         let plain = VolumeSampler::for_asset(
             &asset,
             &sh,
-            &RuntimeSettings {
-                visibility: false,
+            &LookupSettings {
+                depth_moments: false,
                 ..settings
             },
         );
@@ -102,9 +101,9 @@ fn holes_are_filled_by_dilation() {
         spacing: Some(0.5),
         ..BakeSettings::default()
     };
-    let settings = RuntimeSettings {
+    let settings = LookupSettings {
         normal_bias: 0.0,
-        ..RuntimeSettings::default()
+        ..LookupSettings::default()
     };
     let inside = [
         ([0.0, 0.0, 0.0], [0.0, 1.0, 0.0]),
@@ -205,10 +204,10 @@ fn probes_on_a_wall_move_off_it() {
     assert!(fixed.probes.iter().any(|p| on_wall(p.position[0])));
 }
 
-/// A probe's visibility map holds the distance to what it sees, in spacings: at the centre of
+/// A probe's depth moments hold the distance to what it sees, in spacings: at the centre of
 /// the closed 2 m box, the walls are 1 m away along the axes.
 #[test]
-fn visibility_maps_hold_distances_in_spacings() {
+fn depth_moments_hold_distances_in_spacings() {
     let asset = bake_ok(
         &fixture("closed_box_inward.gltf"),
         &BakeSettings {

@@ -2,7 +2,7 @@
 //! stand-in volume of frames without GI; and which of them each WGSL variable binds
 //! ([`bound`]).
 
-use prt_runtime::gpu::layout::{GpuLight, VolumeInfo};
+use prt_runtime::contract::{GpuLight, VolumeInfo};
 use wgpu::util::DeviceExt;
 
 use crate::bindings::{Resource, StageBindings};

@@ -1,11 +1,12 @@
 //! What changed since the last update, and what this update must therefore do: the changed
-//! lights (listed) and the moved ones (a bitset: they lose their cached visibility), the sky, and the
+//! lights (listed) and the moved ones (a bitset: they lose their cached shadow rays), the sky, and the
 //! cycle accounting of amortised updates and bounces ([`super::Bounces`]).
 
-use super::layout::*;
-use super::{Bounces, GpuError, PrtRuntime};
+use super::{GpuError, PrtRuntime};
+use crate::contract::*;
 use crate::lights::PreparedLight;
 use crate::rig::Lighting;
+use crate::settings::Bounces;
 use crate::sky::SkyModel;
 
 /// The lighting state an update was recorded for (to detect changes).
@@ -40,8 +41,8 @@ impl Plan {
 
 /// What changed between the lights of two updates (`old` is `None` on the first), as the cull
 /// and relight stages read it: the moved lights' bitset (`stride` words: lights whose cached
-/// visibility is stale), then the changed lights' indices in ascending order. Only a change of
-/// colour or intensity of a light that was lit keeps its visibility: anything else can light
+/// shadow rays are stale), then the changed lights' indices in ascending order. Only a change of
+/// colour or intensity of a light that was lit keeps its shadow rays: anything else can light
 /// surfels never traced for it.
 pub(super) fn light_changes(old: Option<&[GpuLight]>, new: &[GpuLight], stride: usize) -> Vec<u32> {
     let mut words = vec![0u32; stride];
@@ -109,6 +110,21 @@ impl PrtRuntime {
         match self.settings.bounces {
             Bounces::Fixed(n) => n.max(1),
             Bounces::Feedback { .. } => u32::MAX,
+        }
+    }
+
+    /// Moves the gather's cursor past the `gathered` probes of this update and counts a cycle
+    /// when every probe has been gathered.
+    pub(super) fn advance(&mut self, gathered: u32) {
+        self.cursor = (self.cursor + gathered) % self.probe_count.max(1);
+        self.cycle_gathered += gathered;
+        if self.cycle_gathered >= self.probe_count {
+            self.cycle_gathered = 0;
+            // Feedback needs only "the first cycle is done": stop counting there, so that it
+            // never reaches the owed (unbounded) count and goes idle.
+            if matches!(self.settings.bounces, Bounces::Fixed(_)) || self.cycles_done == 0 {
+                self.cycles_done += 1;
+            }
         }
     }
 

@@ -1,25 +1,28 @@
 //! # The GPU runtime: relight bricks and gather probes into a 3D SH volume, in wgpu compute
 //!
 //! [`PrtRuntime::update`] records, into a command encoder the engine owns, one dispatch per
-//! stage and chunk of the split arrays ([`stages`]; each stage is one WGSL file in `shaders/`,
-//! and a CPU twin in [`crate::relight`]):
+//! stage and chunk of the split arrays. Each stage is one entry of the table in `stages.rs`
+//! (its WGSL, its dispatch, when it runs), one WGSL file in `shaders/` and a CPU twin in
+//! [`crate::relight`]; its bindings are read from its WGSL and bound by name (`bindings.rs`) to
+//! the buffers of [`resources`]. In dispatch order:
 //!
 //! 1. **cull_lights** (per brick): which of the lights that changed reach the brick (range,
 //!    cone, facing, in world space; never through screen-space clusters), kept as one bit per
 //!    light in the brick's light mask, and whether a changed light reaches it now or did before:
 //!    only then is the brick *dirty*. Each brick takes one bit per (surfel, reaching light) pair
-//!    in the visibility pool (two halves, written in turn).
-//! 2. **relight_surfels** (per surfel; for a dirty brick's): direct irradiance from the brick's
-//!    lights with visibility from shadow rays through the asset's BVH, cached per pair and
+//!    in the shadow-ray cache (two halves, written in turn).
+//! 2. **relight_surfels** (per surfel, per surfel chunk; for a dirty brick's): direct irradiance from the brick's
+//!    lights, shadowed by shadow rays through the asset's BVH, cached per pair and
 //!    re-traced only for lights that moved; other bricks' bits move to the new half.
-//! 3. **bounce_surfels** (per surfel; multi-bounce only, at the start of a cycle): the volume's
+//! 3. **bounce_surfels** (per surfel, per surfel chunk; built for multi-bounce only, run at the
+//!    start of a cycle): the volume's
 //!    irradiance at the surfel through the engine's `sample_irradiance`, as bounce radiance;
 //!    every front-face brick becomes dirty ([`Bounces`]).
-//! 4. **brick_radiance** (per dirty brick; every front-face brick when a fixed bounce count
-//!    restarts): mean and gradient of the brick's radiance, direct plus bounce.
-//! 5. **mark_probes** (per probe): probes with a factor on a dirty brick (or all, when the sky
+//! 4. **brick_radiance** (per brick, per surfel chunk; for a dirty brick, or every front-face
+//!    brick when a fixed bounce count restarts): mean and gradient of the brick's radiance, direct plus bounce.
+//! 5. **mark_probes** (per probe, per factor chunk): probes with a factor on a dirty brick (or all, when the sky
 //!    changed, a bounce began or a fixed bounce count restarted) are flagged for gathering.
-//! 6. **gather** (one workgroup per probe of this update's window): the probe's factors and sky
+//! 6. **gather** (one workgroup per probe of this update's window, per factor chunk): the probe's factors and sky
 //!    term reduced into SH9 RGB (subgroup adds where the adapter has them, a shared-memory tree
 //!    otherwise), written with its validity into the seven volume textures at once.
 //!
@@ -37,12 +40,12 @@
 pub use sample::sample_points;
 pub use wgpu;
 
+mod bindings;
 mod changes;
-pub mod layout;
 pub mod resources;
 pub mod sample;
 pub mod shaders;
-pub mod stages;
+mod stages;
 mod volume;
 
 pub use volume::{read_buffer, sh_from_texels};
@@ -51,12 +54,16 @@ use prt_format::sh::ShRgb;
 use prt_format::{directions, Asset, Factors};
 use wgpu::util::DeviceExt;
 
+pub use crate::settings::{Bounces, LookupSettings};
+
+use crate::contract::*;
 use crate::rig::Lighting;
+use crate::settings::MAX_BOUNCES;
 use crate::sky::SkyModel;
 use changes::{light_changes, Plan, State};
-use layout::*;
 use resources::Resources;
-use shaders::{ShaderConfig, Stage};
+use shaders::ShaderConfig;
+use stages::{Counts, Pipeline, STAGES};
 
 /// Why the GPU runtime could not start or update.
 #[derive(Debug, thiserror::Error)]
@@ -86,7 +93,7 @@ pub enum GpuError {
     BvhTooDeep { needed: usize, max: usize },
     #[error("reading back from the GPU failed: {0}")]
     Readback(String),
-    #[error("bounces must be Fixed(1..={max}) or Feedback with damping in (0, 1], got {0:?}", max = crate::relight::MAX_BOUNCES)]
+    #[error("bounces must be Fixed(1..={max}) or Feedback with damping in (0, 1], got {0:?}", max = MAX_BOUNCES)]
     Bounces(Bounces),
 }
 
@@ -118,34 +125,6 @@ impl VolumeFormat {
     }
 }
 
-/// Light bounces of the GPU runtime. Bounces beyond the first feed the volume back into the
-/// surfels, as the prior art does (DDGI, Majercik et al. 2019; Lumen's radiance cache): each
-/// pass of the gather over the probes (a *cycle*: one update, or `probes / budget` amortised
-/// updates) starts by sampling the volume at every surfel with the engine's own lookup
-/// ([`RuntimeSettings::normal_bias`], [`RuntimeSettings::visibility`]) and adding albedo / pi
-/// times that irradiance to the surfel's radiance.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Bounces {
-    /// Exactly this many bounces (1: direct light at surfels only, the one-bounce contract).
-    /// After a change of lights or sky the bounce light starts again from zero and one cycle
-    /// adds one bounce: `n` cycles after the change the volume equals
-    /// [`crate::CpuRelighter::relight_with`] with `n` bounces, and the runtime goes idle.
-    Fixed(u32),
-    /// Bounces without end: every cycle feeds the volume back, never idle, and a change of
-    /// lights carries the old bounce light over instead of restarting (no dip in indirect
-    /// light). The fed-back light is multiplied by `damping` in (0, 1]: 1 converges to the
-    /// full multi-bounce solution (a furnace of albedo a to e / (1 - a), geometrically, since
-    /// albedo < 1); lower values settle faster and stay further below it (e / (1 - d a)).
-    Feedback { damping: f32 },
-}
-
-impl Bounces {
-    /// Whether any bounce beyond the first is computed.
-    pub fn feeds_back(self) -> bool {
-        !matches!(self, Bounces::Fixed(0 | 1))
-    }
-}
-
 /// Runtime options.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RuntimeSettings {
@@ -158,24 +137,9 @@ pub struct RuntimeSettings {
     /// (default: the device's storage binding limit), whole bricks each. Each chunk costs one
     /// more dispatch of the per-surfel and per-brick stages.
     pub max_surfel_chunk_bytes: Option<u64>,
-    /// How far the sampling snippet moves a point along its normal before sampling, in probe
-    /// spacings (relative to the scene, so one value suits every grid; [`PrtRuntime::volume_info`]
-    /// turns it into metres). Probes just behind a surface see its back faces: they are invalid
-    /// or dark, and a point sampled on the surface still gives them trilinear weight
-    /// (self-shadowing, and light leaking through thin walls from probes on the other side).
-    /// A larger bias weights the probes in front of the surface more, at the price of sampling
-    /// the lighting off the surface (contact detail blurs, and a bias beyond the wall's distance
-    /// to the next probe can reach past nearby geometry). 0 samples exactly at the point.
-    /// Default 0.2: with visibility it also moves a point on the dark side of a thin wall far
-    /// enough past the wall, as the lit side's probes see it, for the Chebyshev test to reject
-    /// them (`prt bench surface`: Sponza at 1.2 m, 12 of 300 points leaking at 0.2 against 16
-    /// at 0.1, mean error 16.3% against 19.4%; the Cornell room 4.05% against 3.7%).
-    pub normal_bias: f32,
-    /// Visibility-aware sampling (DDGI's Chebyshev test against each probe's visibility map, see
-    /// `shaders/sample_irradiance.wgsl`): no light through walls from probes on their far side,
-    /// for 56 texel loads and 8 visibility words per lookup instead of 7 filtered fetches. Off:
-    /// hardware trilinear over the probes' weights only.
-    pub visibility: bool,
+    /// How the engine's snippet looks the volume up ([`LookupSettings`]); bounces beyond the
+    /// first sample the volume at the surfels through the same lookup.
+    pub lookup: LookupSettings,
     /// Light bounces ([`Bounces`]); default one.
     pub bounces: Bounces,
     /// Most lights a rig may have (1 to [`MAX_LIGHTS`], default 256; see
@@ -183,11 +147,11 @@ pub struct RuntimeSettings {
     /// twice, so the masks take `bricks x max_lights / 4` bytes in one storage binding (128 MiB
     /// on lavapipe: 2 M bricks at 256 lights, 524k at 1,024).
     pub max_lights: usize,
-    /// Words in each half of the visibility pool, one bit per (surfel, light that reaches its
+    /// Words in each half of the shadow-ray cache, one bit per (surfel, light that reaches its
     /// brick) pair, rounded to words per surfel [default: 2 words per surfel, for bricks reached
     /// by up to 64 lights on average]. Bricks past it are left uncached (traced every time they
     /// are relit; `Counters::bricks_uncached`), never wrong.
-    pub visibility_words: Option<u64>,
+    pub shadow_cache_words: Option<u64>,
 }
 
 impl RuntimeSettings {
@@ -206,12 +170,11 @@ impl Default for RuntimeSettings {
         RuntimeSettings {
             bounces: Bounces::Fixed(1),
             max_lights: 256,
-            visibility_words: None,
+            shadow_cache_words: None,
             volume_format: VolumeFormat::default(),
             max_factor_chunk_bytes: None,
             max_surfel_chunk_bytes: None,
-            normal_bias: 0.2,
-            visibility: true,
+            lookup: LookupSettings::default(),
         }
     }
 }
@@ -268,17 +231,17 @@ pub struct PrtRuntime {
     queue: wgpu::Queue,
     probe_count: u32,
     brick_count: u32,
-    surfel_count: u32,
     ray_count: u32,
     grid: prt_format::Grid,
     offset_scale: f32,
     settings: RuntimeSettings,
-    /// Every buffer and texture, bound by name ([`stages`]).
+    /// Every buffer and texture, bound by name (`bindings.rs`).
     res: Resources,
-    vis_capacity: u32,
-    /// The half of the visibility pool the last relight wrote.
-    vis_parity: u32,
-    pipelines: Vec<(Stage, stages::Pipeline)>,
+    cache_capacity: u32,
+    /// The half of the shadow-ray cache the last relight wrote.
+    cache_parity: u32,
+    /// The stages built for these settings, in dispatch order.
+    pipelines: Vec<Pipeline>,
     state: Option<State>,
     /// The last equirect sky and its lattice radiance (`SkyModel::lattice` averages the map over
     /// every direction's cell: computed again only when the sky changes, not every update).
@@ -314,11 +277,7 @@ impl PrtRuntime {
         asset: &Asset,
         settings: RuntimeSettings,
     ) -> Result<PrtRuntime, GpuError> {
-        let bounces_ok = match settings.bounces {
-            Bounces::Fixed(n) => (1..=crate::relight::MAX_BOUNCES).contains(&n),
-            Bounces::Feedback { damping } => damping > 0.0 && damping <= 1.0,
-        };
-        if !bounces_ok {
+        if !settings.bounces.is_valid() {
             return Err(GpuError::Bounces(settings.bounces));
         }
         if !(1..=MAX_LIGHTS).contains(&settings.max_lights) {
@@ -341,10 +300,10 @@ impl PrtRuntime {
             return Err(GpuError::NoProbes);
         }
         let needed = asset.geometry.stack_needed();
-        if needed > crate::visibility::MAX_STACK {
+        if needed > MAX_STACK {
             return Err(GpuError::BvhTooDeep {
                 needed,
-                max: crate::visibility::MAX_STACK,
+                max: MAX_STACK,
             });
         }
         let subgroups = device.features().contains(wgpu::Features::SUBGROUP);
@@ -356,17 +315,20 @@ impl PrtRuntime {
             bounces: settings.bounces.feeds_back(),
         };
         let res = Resources::new(device, asset, &settings, mask_stride)?;
-        let pipelines = Stage::ALL
+        let counts = Counts {
+            bricks: asset.bricks.len() as u32,
+            probes: asset.probes.len() as u32,
+        };
+        let pipelines = STAGES
             .iter()
-            .filter(|&&s| s != Stage::BounceSurfels || settings.bounces.feeds_back())
-            .map(|&stage| Ok((stage, stages::build(device, &res, stage, &config)?)))
+            .filter(|stage| !stage.bounces_only || settings.bounces.feeds_back())
+            .map(|stage| Pipeline::new(device, &res, stage, &config, counts))
             .collect::<Result<_, GpuError>>()?;
         Ok(PrtRuntime {
             device: device.clone(),
             queue: queue.clone(),
             probe_count: asset.probes.len() as u32,
             brick_count: asset.bricks.len() as u32,
-            surfel_count: asset.surfels.len() as u32,
             ray_count: asset.header.ray_count,
             grid: asset.header.grid,
             offset_scale: match &asset.factors {
@@ -374,9 +336,9 @@ impl PrtRuntime {
                 _ => 1.0,
             },
             settings,
-            vis_capacity: res.vis_capacity as u32,
+            cache_capacity: res.state.cache_capacity as u32,
             res,
-            vis_parity: 1,
+            cache_parity: 1,
             pipelines,
             state: None,
             sky_cache: None,
@@ -412,14 +374,39 @@ impl PrtRuntime {
                 ..UpdateReport::default()
             });
         };
+        let params = self.params(&new, changed, light_words, &plan);
+        if plan.relight() {
+            self.cache_parity = params.cache_parity;
+        }
+        self.upload(encoder, &params, &new, &changes, &plan);
+        self.record(encoder, &plan);
+        self.advance(plan.window.1);
+        self.state = Some(new);
+        Ok(UpdateReport {
+            idle: false,
+            changed_lights: changed,
+            sky_changed: plan.sky_changed,
+            window: plan.window,
+            pending_windows: self.pending(plan.window.1),
+            bounce: plan.bounce,
+        })
+    }
+
+    /// Records what this update's stages read before they run: the uniform block, the lights,
+    /// the light changes and sky where they changed, zeroed counters, and (when a fixed bounce
+    /// count restarts) zeroed bounce radiance.
+    fn upload(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        params: &Params,
+        new: &State,
+        changes: &[u32],
+        plan: &Plan,
+    ) {
         if plan.fixed_restart {
             for [_, _, bounce, _] in &self.res.chunk_surfels {
                 encoder.clear_buffer(bounce, 0, None);
             }
-        }
-        let params = self.params(&new, changed, light_words, &plan);
-        if plan.relight() {
-            self.vis_parity = params.vis_parity;
         }
         let copy = |encoder: &mut wgpu::CommandEncoder, dst: &wgpu::Buffer, bytes: &[u8]| {
             if bytes.is_empty() {
@@ -434,43 +421,27 @@ impl PrtRuntime {
                 });
             encoder.copy_buffer_to_buffer(&src, 0, dst, 0, bytes.len() as u64);
         };
-        copy(encoder, &self.res.params, bytemuck::bytes_of(&params));
-        copy(encoder, &self.res.lights, bytemuck::cast_slice(&new.lights));
+        copy(encoder, &self.res.state.params, bytemuck::bytes_of(params));
+        copy(
+            encoder,
+            &self.res.state.lights,
+            bytemuck::cast_slice(&new.lights),
+        );
         if plan.relight() {
             copy(
                 encoder,
-                &self.res.light_changes,
-                bytemuck::cast_slice(&changes),
+                &self.res.state.light_changes,
+                bytemuck::cast_slice(changes),
             );
         }
         if plan.sky_changed {
             copy(
                 encoder,
-                &self.res.sky_directions,
+                &self.res.state.sky_directions,
                 bytemuck::cast_slice(&new.sky_directions),
             );
         }
-        encoder.clear_buffer(&self.res.counters, 0, None);
-        self.record(encoder, &plan);
-        self.cursor = (self.cursor + plan.window.1) % self.probe_count.max(1);
-        self.cycle_gathered += plan.window.1;
-        if self.cycle_gathered >= self.probe_count {
-            self.cycle_gathered = 0;
-            // Feedback needs only "the first cycle is done": stop counting there, so that it
-            // never reaches the owed (unbounded) count and goes idle.
-            if matches!(self.settings.bounces, Bounces::Fixed(_)) || self.cycles_done == 0 {
-                self.cycles_done += 1;
-            }
-        }
-        self.state = Some(new);
-        Ok(UpdateReport {
-            idle: false,
-            changed_lights: changed,
-            sky_changed: plan.sky_changed,
-            window: plan.window,
-            pending_windows: self.pending(plan.window.1),
-            bounce: plan.bounce,
-        })
+        encoder.clear_buffer(&self.res.state.counters, 0, None);
     }
 
     /// The uniform block of this update.
@@ -502,52 +473,24 @@ impl PrtRuntime {
                 Bounces::Feedback { damping } => damping,
                 Bounces::Fixed(_) => 1.0,
             },
-            vis_parity: if plan.relight() {
-                1 - self.vis_parity
+            cache_parity: if plan.relight() {
+                1 - self.cache_parity
             } else {
-                self.vis_parity
+                self.cache_parity
             },
-            vis_capacity: self.vis_capacity,
+            cache_capacity: self.cache_capacity,
             _pad: [0; 2],
         }
     }
 
-    /// One compute pass: each stage that has work this update, once per bind-group set.
+    /// One compute pass: each stage that runs this update, once per bind-group set.
     fn record(&self, encoder: &mut wgpu::CommandEncoder, plan: &Plan) {
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("prt update"),
             timestamp_writes: None,
         });
-        let groups = |n: u32| n.div_ceil(WORKGROUP);
-        for (stage, p) in &self.pipelines {
-            let work = match stage {
-                Stage::CullLights if plan.relight() => groups(self.brick_count),
-                Stage::BrickRadiance if plan.relight() || plan.bounce || plan.fixed_restart => {
-                    groups(self.brick_count)
-                }
-                Stage::RelightSurfels if plan.relight() => groups(self.surfel_count),
-                Stage::BounceSurfels if plan.bounce => groups(self.surfel_count),
-                Stage::MarkProbes if plan.lights_changed || plan.sky_changed || plan.bounce => {
-                    groups(self.probe_count)
-                }
-                Stage::Gather => plan.window.1,
-                _ => 0,
-            };
-            if work == 0 {
-                continue;
-            }
-            pass.set_pipeline(&p.pipeline);
-            for (set, chunk_work) in p.bind_group_sets.iter().zip(&p.set_work) {
-                let work = chunk_work.map_or(work, groups);
-                if work == 0 {
-                    continue;
-                }
-                for (i, bg) in set.iter().enumerate() {
-                    pass.set_bind_group(i as u32, bg, &[]);
-                }
-                let (x, y) = dispatch_size(work);
-                pass.dispatch_workgroups(x, y, 1);
-            }
+        for pipeline in &self.pipelines {
+            pipeline.record(&mut pass, plan);
         }
     }
 

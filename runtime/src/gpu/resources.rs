@@ -1,58 +1,36 @@
 //! Every buffer and texture of the GPU runtime, created from one asset: the asset's arrays as
 //! they are (factor tables and surfel arrays split into chunks that fit one storage binding
-//! each), the runtime's own state (light masks, visibility pool, brick radiance, probe SH,
+//! each), the runtime's own state (light masks, shadow-ray cache, brick radiance, probe SH,
 //! counters) and the SH volume. Sizes are checked against the device's limits before anything
 //! is allocated.
+
+use std::mem::size_of;
 
 use prt_format::{Asset, Factors};
 use wgpu::util::DeviceExt;
 
-use super::layout::*;
 use super::{GpuError, RuntimeSettings};
-use crate::relight::brick_normal_bounds;
+use crate::contract::*;
+use crate::lights::brick_normal_bounds;
 
 /// Every GPU object of one asset's runtime, named after the WGSL variables that bind them
-/// ([`super::stages`] binds them by those names).
+/// (`bindings.rs` binds them by those names).
 pub struct Resources {
-    pub probes: wgpu::Buffer,
+    /// The asset's arrays that fit one binding each, uploaded as they are.
+    pub asset: AssetBuffers,
     /// Factor tables split over bindings: whole probes each.
     pub chunks: Vec<FactorChunk>,
     /// Per factor chunk, its factors.
     pub chunk_factors: Vec<wgpu::Buffer>,
     /// Per factor chunk, its `FactorChunk` uniform.
     pub chunk_uniforms: Vec<wgpu::Buffer>,
-    pub bricks: wgpu::Buffer,
     /// Surfel arrays split over bindings: whole bricks each.
     pub surfel_chunks: Vec<SurfelChunk>,
-    /// Per surfel chunk: its surfels, their direct radiance, their bounce radiance (one word without bounces) and its `SurfelChunk` uniform.
+    /// Per surfel chunk: its surfels, their direct radiance, their bounce radiance (one word
+    /// without bounces) and its `SurfelChunk` uniform.
     pub chunk_surfels: Vec<[wgpu::Buffer; 4]>,
-    pub normal_bounds: wgpu::Buffer,
-    pub bvh_nodes: wgpu::Buffer,
-    pub triangles: wgpu::Buffer,
-    pub sky_transfer: wgpu::Buffer,
-    pub sky_mask: wgpu::Buffer,
-    /// Visibility maps (`Asset::probe_depth`).
-    pub probe_depth: wgpu::Buffer,
-    /// Where each probe's rays started (xyz, w unused).
-    pub probe_positions: wgpu::Buffer,
-    /// Per brick, `mask_stride` words of light mask, then as many of the previous mask.
-    pub brick_lights: wgpu::Buffer,
-    pub brick_dirty: wgpu::Buffer,
-    /// Per brick, its offsets in the two halves of the visibility pool.
-    pub brick_vis: wgpu::Buffer,
-    /// Words in each half of the visibility pool.
-    pub vis_capacity: u64,
-    /// The visibility pool: one bit per (surfel, reaching light) pair, two halves.
-    pub visibility: wgpu::Buffer,
-    /// Per update: the moved lights' bitset, then the changed lights' indices.
-    pub light_changes: wgpu::Buffer,
-    pub brick_radiance: wgpu::Buffer,
-    pub probe_dirty: wgpu::Buffer,
-    pub probe_sh: wgpu::Buffer,
-    pub counters: wgpu::Buffer,
-    pub lights: wgpu::Buffer,
-    pub sky_directions: wgpu::Buffer,
-    pub params: wgpu::Buffer,
+    /// The runtime's own state.
+    pub state: StateBuffers,
     /// The seven SH volume textures.
     pub textures: Vec<wgpu::Texture>,
     /// Views of `textures` (storage in the gather, sampled by the snippet).
@@ -62,6 +40,43 @@ pub struct Resources {
     pub volume_info: wgpu::Buffer,
     /// Words per brick light mask, `ceil(max_lights / 32)`.
     pub mask_stride: u32,
+}
+
+/// The asset's arrays the stages and the sampling snippet read whole.
+pub struct AssetBuffers {
+    pub probes: wgpu::Buffer,
+    pub bricks: wgpu::Buffer,
+    pub normal_bounds: wgpu::Buffer,
+    pub bvh_nodes: wgpu::Buffer,
+    pub triangles: wgpu::Buffer,
+    pub sky_transfer: wgpu::Buffer,
+    pub sky_mask: wgpu::Buffer,
+    /// The probes' depth moments (`Asset::probe_depth`, `prt_format::depth`).
+    pub depth_moments: wgpu::Buffer,
+    /// Where each probe's rays started (xyz, w unused).
+    pub probe_positions: wgpu::Buffer,
+}
+
+/// What the stages write and read back between updates, and the per-update uploads.
+pub struct StateBuffers {
+    /// Per brick, `mask_stride` words of light mask, then as many of the previous mask.
+    pub brick_lights: wgpu::Buffer,
+    pub brick_dirty: wgpu::Buffer,
+    /// Per brick, its offsets in the two halves of the shadow-ray cache.
+    pub brick_cache: wgpu::Buffer,
+    /// Words in each half of the shadow-ray cache.
+    pub cache_capacity: u64,
+    /// The shadow-ray cache: one bit per (surfel, reaching light) pair, two halves.
+    pub shadow_cache: wgpu::Buffer,
+    /// Per update: the moved lights' bitset, then the changed lights' indices.
+    pub light_changes: wgpu::Buffer,
+    pub brick_radiance: wgpu::Buffer,
+    pub probe_dirty: wgpu::Buffer,
+    pub probe_sh: wgpu::Buffer,
+    pub counters: wgpu::Buffer,
+    pub lights: wgpu::Buffer,
+    pub sky_directions: wgpu::Buffer,
+    pub params: wgpu::Buffer,
 }
 
 impl Resources {
@@ -80,21 +95,39 @@ impl Resources {
             device,
             max_binding,
         };
-        let none = wgpu::BufferUsages::empty();
-        let probes = alloc.storage("prt probes", bytemuck::cast_slice(&asset.probes), none)?;
         let (chunks, chunk_factors, chunk_uniforms) = factor_buffers(&alloc, asset, settings)?;
-        let bricks = alloc.storage("prt bricks", bytemuck::cast_slice(&asset.bricks), none)?;
         let (surfel_chunks, chunk_surfels) = surfel_buffers(&alloc, asset, settings)?;
+        let asset_buffers = AssetBuffers::new(&alloc, asset)?;
+        let state = StateBuffers::new(&alloc, asset, settings, mask_stride)?;
+        let (textures, views, sampler) = volume(device, &g, settings);
+        let volume_info = alloc.uniform("prt volume info", &volume_info(&g, settings));
+        Ok(Resources {
+            asset: asset_buffers,
+            chunks,
+            chunk_factors,
+            chunk_uniforms,
+            surfel_chunks,
+            chunk_surfels,
+            state,
+            textures,
+            views,
+            sampler,
+            volume_info,
+            mask_stride,
+        })
+    }
+}
+
+impl AssetBuffers {
+    /// Uploads the asset's arrays (a scene without triangles gets one leaf holding a degenerate
+    /// triangle, which no ray hits).
+    fn new(alloc: &Alloc, asset: &Asset) -> Result<AssetBuffers, GpuError> {
+        let none = wgpu::BufferUsages::empty();
+        let upload = |label, bytes: &[u8]| alloc.storage(label, bytes, none);
         let normal_bounds: Vec<GpuNormalBounds> = brick_normal_bounds(asset)
             .iter()
             .map(GpuNormalBounds::from)
             .collect();
-        let normal_bounds = alloc.storage(
-            "prt normal bounds",
-            bytemuck::cast_slice(&normal_bounds),
-            none,
-        )?;
-        // A scene without triangles gets one leaf holding a degenerate triangle: no ray hits it.
         let empty_node = [prt_format::BvhNode {
             min: [f32::MAX; 3],
             max: [f32::MIN; 3],
@@ -107,111 +140,81 @@ impl Resources {
         } else {
             (&asset.geometry.nodes[..], &asset.geometry.triangles[..])
         };
-        let bvh_nodes = alloc.storage("prt bvh nodes", bytemuck::cast_slice(nodes), none)?;
-        let triangles = alloc.storage("prt triangles", bytemuck::cast_slice(tris), none)?;
-        let sky_transfer = alloc.storage(
-            "prt sky transfer",
-            bytemuck::cast_slice(&asset.sky_transfer),
-            none,
-        )?;
-        let sky_mask =
-            alloc.storage("prt sky mask", bytemuck::cast_slice(&asset.sky_mask), none)?;
-        let probe_depth = alloc.storage(
-            "prt probe visibility",
-            bytemuck::cast_slice(&asset.probe_depth),
-            none,
-        )?;
         let positions: Vec<[f32; 4]> = asset
             .probes
             .iter()
             .map(|p| [p.position[0], p.position[1], p.position[2], 0.0])
             .collect();
-        let probe_positions = alloc.storage(
-            "prt probe positions",
-            bytemuck::cast_slice(&positions),
-            none,
-        )?;
+        Ok(AssetBuffers {
+            probes: upload("prt probes", bytemuck::cast_slice(&asset.probes))?,
+            bricks: upload("prt bricks", bytemuck::cast_slice(&asset.bricks))?,
+            normal_bounds: upload("prt normal bounds", bytemuck::cast_slice(&normal_bounds))?,
+            bvh_nodes: upload("prt bvh nodes", bytemuck::cast_slice(nodes))?,
+            triangles: upload("prt triangles", bytemuck::cast_slice(tris))?,
+            sky_transfer: upload(
+                "prt sky transfer",
+                bytemuck::cast_slice(&asset.sky_transfer),
+            )?,
+            sky_mask: upload("prt sky mask", bytemuck::cast_slice(&asset.sky_mask))?,
+            depth_moments: upload(
+                "prt probe depth moments",
+                bytemuck::cast_slice(&asset.probe_depth),
+            )?,
+            probe_positions: upload("prt probe positions", bytemuck::cast_slice(&positions))?,
+        })
+    }
+}
+
+impl StateBuffers {
+    /// Allocates the runtime's state, zeroed (every brick uncached), sized for `asset` and
+    /// `settings`.
+    fn new(
+        alloc: &Alloc,
+        asset: &Asset,
+        settings: &RuntimeSettings,
+        mask_stride: u32,
+    ) -> Result<StateBuffers, GpuError> {
+        let none = wgpu::BufferUsages::empty();
         let n_bricks = asset.bricks.len() as u64;
-        let n_surfels = asset.surfels.len() as u64;
         let n_probes = asset.probes.len() as u64;
         let stride = u64::from(mask_stride);
-        let brick_lights = alloc.zeroed("prt brick light masks", 8 * stride * n_bricks, none)?;
-        let brick_dirty = alloc.zeroed("prt brick dirty", 4 * n_bricks, none)?;
-        let brick_vis = alloc.storage(
-            "prt brick visibility offsets",
-            bytemuck::cast_slice(&vec![NO_CACHE; 2 * asset.bricks.len()]),
-            none,
-        )?;
-        let vis_capacity = settings
-            .visibility_words
-            .unwrap_or(2 * n_surfels)
-            .clamp(1, (max_binding / 8).min(u64::from(u32::MAX / 2)));
-        let visibility = alloc.zeroed("prt visibility pool", 8 * vis_capacity, none)?;
-        let light_changes = alloc.zeroed(
-            "prt light changes",
-            4 * (stride + settings.max_lights as u64),
-            wgpu::BufferUsages::COPY_DST,
-        )?;
-        let brick_radiance = alloc.zeroed("prt brick radiance", 64 * n_bricks, none)?;
-        let probe_dirty = alloc.zeroed("prt probe dirty", 4 * n_probes, none)?;
-        let probe_sh = alloc.zeroed(
-            "prt probe sh",
-            16 * 9 * n_probes,
-            wgpu::BufferUsages::COPY_SRC,
-        )?;
-        let counters = alloc.zeroed(
-            "prt counters",
-            std::mem::size_of::<Counters>() as u64,
-            wgpu::BufferUsages::COPY_SRC,
-        )?;
-        let lights = alloc.zeroed("prt lights", 64 * settings.max_lights as u64, none)?;
-        let sky_directions = alloc.zeroed(
-            "prt sky directions",
-            32 * u64::from(asset.header.ray_count),
-            none,
-        )?;
-        let params = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("prt params"),
-            size: std::mem::size_of::<Params>() as u64,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-
-        let (textures, views, sampler) = volume(device, &g, settings);
-        let volume_info = alloc.uniform("prt volume info", &volume_info(&g, settings));
-        Ok(Resources {
-            probes,
-            chunks,
-            chunk_factors,
-            chunk_uniforms,
-            bricks,
-            surfel_chunks,
-            chunk_surfels,
-            normal_bounds,
-            bvh_nodes,
-            triangles,
-            sky_transfer,
-            sky_mask,
-            probe_depth,
-            probe_positions,
-            brick_lights,
-            brick_dirty,
-            brick_vis,
-            vis_capacity,
-            visibility,
-            light_changes,
-            brick_radiance,
-            probe_dirty,
-            probe_sh,
-            counters,
-            lights,
-            sky_directions,
-            params,
-            textures,
-            views,
-            sampler,
-            volume_info,
-            mask_stride,
+        let cache_capacity = settings
+            .shadow_cache_words
+            .unwrap_or(2 * asset.surfels.len() as u64)
+            .clamp(1, (alloc.max_binding / 8).min(u64::from(u32::MAX / 2)));
+        let max_lights = settings.max_lights as u64;
+        let copy_src = wgpu::BufferUsages::COPY_SRC;
+        Ok(StateBuffers {
+            brick_lights: alloc.zeroed("prt brick light masks", 8 * stride * n_bricks, none)?,
+            brick_dirty: alloc.zeroed("prt brick dirty", 4 * n_bricks, none)?,
+            brick_cache: alloc.storage(
+                "prt brick shadow-cache offsets",
+                bytemuck::cast_slice(&vec![NO_CACHE; 2 * asset.bricks.len()]),
+                none,
+            )?,
+            cache_capacity,
+            shadow_cache: alloc.zeroed("prt shadow-ray cache", 8 * cache_capacity, none)?,
+            light_changes: alloc.zeroed(
+                "prt light changes",
+                4 * (stride + max_lights),
+                wgpu::BufferUsages::COPY_DST,
+            )?,
+            brick_radiance: alloc.zeroed("prt brick radiance", 64 * n_bricks, none)?,
+            probe_dirty: alloc.zeroed("prt probe dirty", 4 * n_probes, none)?,
+            probe_sh: alloc.zeroed("prt probe sh", 16 * 9 * n_probes, copy_src)?,
+            counters: alloc.zeroed("prt counters", size_of::<Counters>() as u64, copy_src)?,
+            lights: alloc.zeroed("prt lights", 64 * max_lights, none)?,
+            sky_directions: alloc.zeroed(
+                "prt sky directions",
+                32 * u64::from(asset.header.ray_count),
+                none,
+            )?,
+            params: alloc.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("prt params"),
+                size: size_of::<Params>() as u64,
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }),
         })
     }
 }
@@ -377,9 +380,9 @@ fn volume(
 /// The sampling snippet's uniform for `grid` and `settings`.
 pub fn volume_info(grid: &prt_format::Grid, settings: &RuntimeSettings) -> VolumeInfo {
     VolumeInfo {
-        normal_bias: settings.normal_bias * grid.spacing,
-        flags: if settings.visibility {
-            VOLUME_VISIBILITY
+        normal_bias: settings.lookup.normal_bias * grid.spacing,
+        flags: if settings.lookup.depth_moments {
+            VOLUME_DEPTH_MOMENTS
         } else {
             0
         },
@@ -477,7 +480,7 @@ pub fn surfel_chunks(asset: &Asset, limit: u64) -> Result<Vec<SurfelChunk>, GpuE
 
 /// A buffer holding `bytes`, refused with [`GpuError::Limit`] beyond `limit` bytes (a device
 /// limit: one storage binding, or the largest buffer). wgpu cannot bind empty buffers, nor ones
-/// smaller than one element: an empty array gets [`MIN_BUFFER`] zero bytes.
+/// smaller than one element: an empty array gets `MIN_BUFFER` (256) zero bytes.
 pub fn buffer_with(
     device: &wgpu::Device,
     label: &'static str,

@@ -1,337 +1,228 @@
-//! The compute stages' pipelines and bind groups. Nothing here lists bindings by number: each
-//! stage's assembled WGSL declares its bindings (`@group(g) @binding(b) var ... name`), and
-//! every bind group is built from those declarations, binding each variable to the resource of
-//! [`Resources`] that carries its name ([`Binding::of`]). A shader can therefore renumber,
-//! reorder or drop bindings without a Rust change (a new resource name takes one line in
-//! [`Binding::of`]), and a unit test checks, for every stage and shader configuration, that
-//! every name is one the runtime provides, that naga reads the same declarations, and that
-//! `main` uses each of them (the pipeline layout is derived from what it uses).
-//!
-//! The split arrays make a stage's bind groups come in *sets*, dispatched in turn: one per
-//! factor chunk for the stages that read factors (`mark_probes`, `gather`), one per surfel
-//! chunk for those that read surfels (`relight_surfels`, `bounce_surfels`, `brick_radiance`).
+//! The compute stages, one entry each in [`STAGES`]: its WGSL, how it is dispatched (and so
+//! which bind-group sets it has), when an update runs it, and whether it is built at all. Its
+//! bindings come from its WGSL ([`super::bindings`]). Adding a stage takes an entry here and a
+//! WGSL file in `shaders/` (exported by `prt_shaders`); a new resource name also takes its line
+//! in `bindings.rs` and its buffer in `resources.rs`.
 
+use prt_shaders::{
+    BOUNCE_SURFELS, BRICK_RADIANCE, CULL_LIGHTS, GATHER, GATHER_SUBGROUP, GATHER_TREE,
+    LIGHT_SAMPLE, MARK_PROBES, RELIGHT_SURFELS, SHADOW_RAYS, TYPES,
+};
+
+use super::bindings::{bind_groups, declared_bindings, Set};
+use super::changes::Plan;
 use super::resources::Resources;
-use super::shaders::{self, ShaderConfig, Stage};
-use super::GpuError;
+use super::shaders::{self, ShaderConfig};
+use super::{dispatch_size, GpuError};
+use crate::contract::WORKGROUP;
+
+/// A piece of a stage's WGSL, after the generated constants and `types.wgsl`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Part {
+    /// A file of `prt_shaders`.
+    File(&'static str),
+    /// The gather's reduction: `gather_subgroup.wgsl` where the adapter has subgroups,
+    /// `gather_tree.wgsl` otherwise.
+    Reduction,
+    /// The engine-side sampling snippet, its bindings at group 1.
+    Snippet,
+}
+
+/// What one invocation of a stage handles, and over which slice of the split arrays its
+/// bind-group sets range (one dispatch per set).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Dispatch {
+    /// A thread per brick, every brick in one dispatch.
+    Bricks,
+    /// A thread per brick, one dispatch per surfel chunk (its bricks).
+    ChunkBricks,
+    /// A thread per surfel, one dispatch per surfel chunk (its surfels).
+    ChunkSurfels,
+    /// A thread per probe (every probe), one dispatch per factor chunk.
+    ChunkProbes,
+    /// A workgroup per probe of the update's window, one dispatch per factor chunk.
+    Window,
+}
+
+/// One compute stage.
+pub(super) struct Stage {
+    /// Pipeline label: `prt` and the stage's name.
+    pub(super) label: &'static str,
+    /// Its WGSL after the generated constants and `types.wgsl`, in order.
+    pub(super) wgsl: &'static [Part],
+    pub(super) dispatch: Dispatch,
+    /// Whether an update with this plan dispatches it.
+    pub(super) runs: fn(&Plan) -> bool,
+    /// Built only when bounces feed the volume back ([`crate::settings::Bounces::feeds_back`]).
+    pub(super) bounces_only: bool,
+}
+
+impl Stage {
+    /// Its full WGSL: the generated constants, `types.wgsl` and its parts.
+    pub(super) fn source(&self, config: &ShaderConfig) -> String {
+        let mut s = shaders::prelude(config);
+        s.push_str(TYPES);
+        for part in self.wgsl {
+            match part {
+                Part::File(wgsl) => s.push_str(wgsl),
+                Part::Reduction if config.subgroups => s.push_str(GATHER_SUBGROUP),
+                Part::Reduction => s.push_str(GATHER_TREE),
+                Part::Snippet => s.push_str(&shaders::sample_irradiance_snippet(1)),
+            }
+        }
+        s.replace("VOLUME_FORMAT", config.volume_format)
+    }
+}
+
+/// Every stage, in dispatch order (the module docs of [`super`] say what each computes).
+pub(super) const STAGES: [Stage; 6] = [
+    // 1. Per brick: light masks of the changed lights, dirty bricks, shadow-ray cache room.
+    Stage {
+        label: "prt cull_lights",
+        wgsl: &[Part::File(CULL_LIGHTS)],
+        dispatch: Dispatch::Bricks,
+        runs: |plan| plan.relight(),
+        bounces_only: false,
+    },
+    // 2. Per surfel of a dirty brick: direct irradiance with cached shadow rays.
+    Stage {
+        label: "prt relight_surfels",
+        wgsl: &[
+            Part::File(LIGHT_SAMPLE),
+            Part::File(SHADOW_RAYS),
+            Part::File(RELIGHT_SURFELS),
+        ],
+        dispatch: Dispatch::ChunkSurfels,
+        runs: |plan| plan.relight(),
+        bounces_only: false,
+    },
+    // 3. Per surfel, at the start of a bounce cycle: the volume's irradiance, fed back.
+    Stage {
+        label: "prt bounce_surfels",
+        wgsl: &[Part::File(BOUNCE_SURFELS), Part::Snippet],
+        dispatch: Dispatch::ChunkSurfels,
+        runs: |plan| plan.bounce,
+        bounces_only: true,
+    },
+    // 4. Per dirty brick: mean and gradient of its radiance, direct plus bounce.
+    Stage {
+        label: "prt brick_radiance",
+        wgsl: &[Part::File(BRICK_RADIANCE)],
+        dispatch: Dispatch::ChunkBricks,
+        runs: |plan| plan.relight() || plan.bounce || plan.fixed_restart,
+        bounces_only: false,
+    },
+    // 5. Per probe: flag the probes to gather.
+    Stage {
+        label: "prt mark_probes",
+        wgsl: &[Part::File(MARK_PROBES)],
+        dispatch: Dispatch::ChunkProbes,
+        runs: |plan| plan.lights_changed || plan.sky_changed || plan.bounce,
+        bounces_only: false,
+    },
+    // 6. A workgroup per probe of the window: SH9 RGB into the volume textures.
+    Stage {
+        label: "prt gather",
+        wgsl: &[Part::File(GATHER), Part::Reduction],
+        dispatch: Dispatch::Window,
+        runs: |_| true,
+        bounces_only: false,
+    },
+];
+
+/// Bricks and probes of the asset, for the dispatches that cover them all.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Counts {
+    pub(super) bricks: u32,
+    pub(super) probes: u32,
+}
 
 /// A stage's pipeline and its bind-group sets.
-pub struct Pipeline {
-    pub pipeline: wgpu::ComputePipeline,
-    pub bind_group_sets: Vec<Vec<wgpu::BindGroup>>,
-    /// Per set, the work items of a surfel-chunked stage (its chunk's surfels or bricks);
-    /// `None`: the stage's own count.
-    pub set_work: Vec<Option<u32>>,
+pub(super) struct Pipeline {
+    stage: &'static Stage,
+    pipeline: wgpu::ComputePipeline,
+    /// Per set: its bind groups, and the threads it dispatches (unused by [`Dispatch::Window`],
+    /// whose workgroups are the update's window).
+    sets: Vec<(Vec<wgpu::BindGroup>, u32)>,
 }
 
-/// Which slice of the split arrays a bind-group set binds.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Set {
-    Whole,
-    Factors(usize),
-    Surfels(usize),
-}
-
-/// A resource of the runtime, by the WGSL variable name that binds it.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Binding {
-    Params,
-    Lights,
-    Probes,
-    Factors,
-    Chunk,
-    Bricks,
-    NormalBounds,
-    Surfels,
-    SurfelRadiance,
-    SurfelBounce,
-    BrickLights,
-    BrickDirty,
-    BrickVis,
-    Visibility,
-    LightChanges,
-    BrickRadiance,
-    ProbeDirty,
-    ProbeSh,
-    Counters,
-    SkyTransfer,
-    SkyMask,
-    SkyDirections,
-    BvhNodes,
-    Triangles,
-    /// A volume texture as the gather writes it (`volume0`..`volume6`).
-    Volume(usize),
-    /// A volume texture as the sampling snippet reads it (`prt_volume0`..`prt_volume6`).
-    SampledVolume(usize),
-    Sampler,
-    VolumeInfo,
-    Depth,
-    ProbePositions,
-}
-
-impl Binding {
-    /// The resource a WGSL variable named `name` binds to.
-    fn of(name: &str) -> Option<Binding> {
-        let volume = |prefix: &str| {
-            name.strip_prefix(prefix)
-                .and_then(|i| i.parse::<usize>().ok())
-                .filter(|&i| i < 7)
-        };
-        if let Some(i) = volume("prt_volume") {
-            return Some(Binding::SampledVolume(i));
-        }
-        if let Some(i) = volume("volume") {
-            return Some(Binding::Volume(i));
-        }
-        Some(match name {
-            "params" => Binding::Params,
-            "lights" => Binding::Lights,
-            "probes" => Binding::Probes,
-            "factors" => Binding::Factors,
-            "chunk" => Binding::Chunk,
-            "bricks" => Binding::Bricks,
-            "normal_bounds" => Binding::NormalBounds,
-            "surfels" => Binding::Surfels,
-            "surfel_radiance" => Binding::SurfelRadiance,
-            "surfel_bounce" => Binding::SurfelBounce,
-            "brick_lights" => Binding::BrickLights,
-            "brick_dirty" => Binding::BrickDirty,
-            "brick_vis" => Binding::BrickVis,
-            "visibility" => Binding::Visibility,
-            "light_changes" => Binding::LightChanges,
-            "brick_radiance" => Binding::BrickRadiance,
-            "probe_dirty" => Binding::ProbeDirty,
-            "probe_sh" => Binding::ProbeSh,
-            "counters" => Binding::Counters,
-            "sky_transfer" => Binding::SkyTransfer,
-            "sky_mask" => Binding::SkyMask,
-            "sky_directions" => Binding::SkyDirections,
-            "bvh_nodes" => Binding::BvhNodes,
-            "triangles" => Binding::Triangles,
-            "prt_sampler" => Binding::Sampler,
-            "prt_volume" => Binding::VolumeInfo,
-            "prt_depth" => Binding::Depth,
-            "prt_probe_positions" => Binding::ProbePositions,
-            _ => return None,
-        })
-    }
-
-    /// The resource itself, for the bind-group set `set`.
-    fn resource<'a>(self, r: &'a Resources, set: Set) -> wgpu::BindingResource<'a> {
-        let (f, s) = match set {
-            Set::Whole => (0, 0),
-            Set::Factors(c) => (c, 0),
-            Set::Surfels(c) => (0, c),
-        };
-        let b = |buffer: &'a wgpu::Buffer| buffer.as_entire_binding();
-        match self {
-            Binding::Params => b(&r.params),
-            Binding::Lights => b(&r.lights),
-            Binding::Probes => b(&r.probes),
-            Binding::Factors => b(&r.chunk_factors[f]),
-            Binding::Chunk => match set {
-                Set::Surfels(c) => b(&r.chunk_surfels[c][3]),
-                _ => b(&r.chunk_uniforms[f]),
-            },
-            Binding::Bricks => b(&r.bricks),
-            Binding::NormalBounds => b(&r.normal_bounds),
-            Binding::Surfels => b(&r.chunk_surfels[s][0]),
-            Binding::SurfelRadiance => b(&r.chunk_surfels[s][1]),
-            Binding::SurfelBounce => b(&r.chunk_surfels[s][2]),
-            Binding::BrickLights => b(&r.brick_lights),
-            Binding::BrickDirty => b(&r.brick_dirty),
-            Binding::BrickVis => b(&r.brick_vis),
-            Binding::Visibility => b(&r.visibility),
-            Binding::LightChanges => b(&r.light_changes),
-            Binding::BrickRadiance => b(&r.brick_radiance),
-            Binding::ProbeDirty => b(&r.probe_dirty),
-            Binding::ProbeSh => b(&r.probe_sh),
-            Binding::Counters => b(&r.counters),
-            Binding::SkyTransfer => b(&r.sky_transfer),
-            Binding::SkyMask => b(&r.sky_mask),
-            Binding::SkyDirections => b(&r.sky_directions),
-            Binding::BvhNodes => b(&r.bvh_nodes),
-            Binding::Triangles => b(&r.triangles),
-            Binding::Volume(i) | Binding::SampledVolume(i) => {
-                wgpu::BindingResource::TextureView(&r.views[i])
-            }
-            Binding::Sampler => wgpu::BindingResource::Sampler(&r.sampler),
-            Binding::VolumeInfo => b(&r.volume_info),
-            Binding::Depth => b(&r.probe_depth),
-            Binding::ProbePositions => b(&r.probe_positions),
-        }
-    }
-}
-
-/// The `(group, binding, name)` of every resource variable `src` declares, in source order.
-pub fn declared_bindings(src: &str) -> Vec<(u32, u32, String)> {
-    let number = |line: &str, key: &str| -> Option<u32> {
-        let rest = &line[line.find(key)? + key.len()..];
-        rest[..rest.find(')')?].trim().parse().ok()
-    };
-    src.lines()
-        .filter_map(|line| {
-            let group = number(line, "@group(")?;
-            let binding = number(line, "@binding(")?;
-            let rest = line[line.find(" var")? + 4..].trim_start();
-            let rest = match rest.strip_prefix('<') {
-                Some(r) => &r[r.find('>')? + 1..],
-                None => rest,
-            };
-            let name = rest.split(':').next()?.trim();
-            Some((group, binding, name.to_string()))
-        })
-        .collect()
-}
-
-/// The bind-group sets `stage` is dispatched with, and each set's work items where the set
-/// fixes them (a surfel chunk's surfels or bricks).
-fn sets(stage: Stage, r: &Resources) -> Vec<(Set, Option<u32>)> {
-    match stage {
-        Stage::MarkProbes | Stage::Gather => (0..r.chunks.len())
-            .map(|c| (Set::Factors(c), None))
-            .collect(),
-        Stage::RelightSurfels | Stage::BounceSurfels | Stage::BrickRadiance => r
-            .surfel_chunks
-            .iter()
-            .enumerate()
-            .map(|(c, s)| {
-                let work = if stage == Stage::BrickRadiance {
-                    s.brick_end - s.brick_begin
-                } else {
-                    s.surfel_end - s.surfel_begin
-                };
-                (Set::Surfels(c), Some(work))
+impl Pipeline {
+    /// Builds `stage`'s pipeline from its WGSL and binds every variable it declares by name.
+    pub(super) fn new(
+        device: &wgpu::Device,
+        r: &Resources,
+        stage: &'static Stage,
+        config: &ShaderConfig,
+        counts: Counts,
+    ) -> Result<Pipeline, GpuError> {
+        let source = stage.source(config);
+        let declared = declared_bindings(&source);
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some(stage.label),
+            source: wgpu::ShaderSource::Wgsl(source.into()),
+        });
+        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(stage.label),
+            layout: None,
+            module: &module,
+            entry_point: Some("main"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        let sets = sets(stage.dispatch, r, counts)
+            .into_iter()
+            .map(|(set, threads)| {
+                let groups = bind_groups(device, r, stage.label, &pipeline, &declared, set)?;
+                Ok((groups, threads))
             })
-            .collect(),
-        Stage::CullLights => vec![(Set::Whole, None)],
+            .collect::<Result<_, GpuError>>()?;
+        Ok(Pipeline {
+            stage,
+            pipeline,
+            sets,
+        })
     }
-}
 
-/// Builds `stage`'s pipeline from its WGSL and binds every variable it declares by name.
-pub fn build(
-    device: &wgpu::Device,
-    r: &Resources,
-    stage: Stage,
-    config: &ShaderConfig,
-) -> Result<Pipeline, GpuError> {
-    let source = shaders::source(stage, config);
-    let declared = declared_bindings(&source);
-    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-        label: Some(stage.label()),
-        source: wgpu::ShaderSource::Wgsl(source.into()),
-    });
-    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some(stage.label()),
-        layout: None,
-        module: &module,
-        entry_point: Some("main"),
-        compilation_options: Default::default(),
-        cache: None,
-    });
-    let groups = declared.iter().map(|d| d.0 + 1).max().unwrap_or(0);
-    let mut bind_group_sets = Vec::new();
-    let mut set_work = Vec::new();
-    for (set, work) in sets(stage, r) {
-        let mut bind_groups = Vec::new();
-        for g in 0..groups {
-            let entries = declared
-                .iter()
-                .filter(|d| d.0 == g)
-                .map(|(_, binding, name)| {
-                    let resource = Binding::of(name)
-                        .ok_or_else(|| {
-                            GpuError::Device(format!(
-                                "{} declares `{name}`, which the runtime does not provide",
-                                stage.label()
-                            ))
-                        })?
-                        .resource(r, set);
-                    Ok(wgpu::BindGroupEntry {
-                        binding: *binding,
-                        resource,
-                    })
-                })
-                .collect::<Result<Vec<_>, GpuError>>()?;
-            bind_groups.push(device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some(stage.label()),
-                layout: &pipeline.get_bind_group_layout(g),
-                entries: &entries,
-            }));
+    /// Records this stage's dispatches for `plan` (none when it does not run), one per set.
+    pub(super) fn record(&self, pass: &mut wgpu::ComputePass, plan: &Plan) {
+        if !(self.stage.runs)(plan) {
+            return;
         }
-        bind_group_sets.push(bind_groups);
-        set_work.push(work);
-    }
-    Ok(Pipeline {
-        pipeline,
-        bind_group_sets,
-        set_work,
-    })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// Every binding every stage declares (with every shader configuration) is one the runtime
-    /// provides, no (group, binding) is declared twice, and the parser reads each declaration
-    /// form in use.
-    #[test]
-    fn every_declared_binding_has_a_resource() {
-        assert_eq!(
-            declared_bindings(
-                "@group(1) @binding(3) var<storage, read_write> visibility: array<u32>;\n\
-                 @group(0) @binding(12) var prt_volume4: texture_3d<f32>;\n\
-                 fn f() { var x = 1; }"
-            ),
-            vec![
-                (1, 3, "visibility".to_string()),
-                (0, 12, "prt_volume4".to_string())
-            ]
-        );
-        for config in shaders::tests::configs() {
-            for stage in Stage::ALL {
-                let src = shaders::source(stage, &config);
-                let declared = declared_bindings(&src);
-                assert!(!declared.is_empty(), "{stage:?}");
-                let mut seen = std::collections::HashSet::new();
-                for (g, b, name) in &declared {
-                    assert!(
-                        Binding::of(name).is_some(),
-                        "{stage:?} declares unknown `{name}`"
-                    );
-                    assert!(seen.insert((*g, *b)), "{stage:?}: ({g}, {b}) twice");
-                }
-                // naga agrees with the line parser, and `main` uses every binding (the
-                // pipeline's layout is derived from what it uses: an unused one would make
-                // the bind group invalid).
-                let module = naga::front::wgsl::parse_str(&src).expect("parses");
-                let info = naga::valid::Validator::new(
-                    naga::valid::ValidationFlags::all(),
-                    naga::valid::Capabilities::all(),
-                )
-                .validate(&module)
-                .expect("valid");
-                let main = module
-                    .entry_points
-                    .iter()
-                    .position(|e| e.name == "main")
-                    .expect("main");
-                let mut from_naga = Vec::new();
-                for (handle, var) in module.global_variables.iter() {
-                    let Some(rb) = &var.binding else { continue };
-                    let name = var.name.clone().unwrap_or_default();
-                    assert!(
-                        !info.get_entry_point(main)[handle].is_empty(),
-                        "{stage:?}: `{name}` declared but unused"
-                    );
-                    from_naga.push((rb.group, rb.binding, name));
-                }
-                let mut parsed = declared.clone();
-                parsed.sort();
-                from_naga.sort();
-                assert_eq!(parsed, from_naga, "{stage:?}");
+        pass.set_pipeline(&self.pipeline);
+        for (groups, threads) in &self.sets {
+            let workgroups = match self.stage.dispatch {
+                Dispatch::Window => plan.window.1,
+                _ => threads.div_ceil(WORKGROUP),
+            };
+            if workgroups == 0 {
+                continue;
             }
+            for (i, bg) in groups.iter().enumerate() {
+                pass.set_bind_group(i as u32, bg, &[]);
+            }
+            let (x, y) = dispatch_size(workgroups);
+            pass.dispatch_workgroups(x, y, 1);
         }
+    }
+}
+
+/// The bind-group sets of a stage dispatched as `dispatch`, each with the threads it runs.
+fn sets(dispatch: Dispatch, r: &Resources, counts: Counts) -> Vec<(Set, u32)> {
+    let surfel_chunks = |threads: fn(&crate::contract::SurfelChunk) -> u32| {
+        (r.surfel_chunks.iter().enumerate())
+            .map(|(c, s)| (Set::Surfels(c), threads(s)))
+            .collect()
+    };
+    let factor_chunks = |threads: u32| {
+        (0..r.chunks.len())
+            .map(|c| (Set::Factors(c), threads))
+            .collect()
+    };
+    match dispatch {
+        Dispatch::Bricks => vec![(Set::Whole, counts.bricks)],
+        Dispatch::ChunkBricks => surfel_chunks(|s| s.brick_end - s.brick_begin),
+        Dispatch::ChunkSurfels => surfel_chunks(|s| s.surfel_end - s.surfel_begin),
+        Dispatch::ChunkProbes => factor_chunks(counts.probes),
+        Dispatch::Window => factor_chunks(0),
     }
 }

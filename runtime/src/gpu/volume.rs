@@ -4,8 +4,9 @@
 
 use prt_format::sh::{ShRgb, SH_COUNT};
 
-use super::layout::{Counters, VolumeInfo};
+use super::bindings::{snippet_bindings, Set};
 use super::{resources, shaders, GpuError, PrtRuntime, RuntimeSettings, VolumeFormat};
+use crate::contract::{Counters, VolumeInfo};
 
 impl PrtRuntime {
     /// The seven volume texture views (layout in `shaders/gather.wgsl`).
@@ -34,76 +35,34 @@ impl PrtRuntime {
     }
 
     /// The bind group layout entries of the sampling snippet (`wgsl_snippet`), visible to
-    /// `stages`: textures 0-6, sampler 7, uniform 8, visibility maps 9, probe positions 10.
-    /// The textures are declared filterable: a [`VolumeFormat::F32`] volume needs a device with
-    /// `Features::FLOAT32_FILTERABLE` (as its trilinear sampler does anyway).
+    /// `stages`, numbered as `shaders/sample_irradiance.wgsl` declares them: seven volume
+    /// textures, the sampler, the `PrtVolumeInfo` uniform, the depth moments and the probe
+    /// positions. The textures are declared filterable: a [`VolumeFormat::F32`] volume needs a
+    /// device with `Features::FLOAT32_FILTERABLE` (as its trilinear sampler does anyway).
     pub fn volume_layout_entries(stages: wgpu::ShaderStages) -> Vec<wgpu::BindGroupLayoutEntry> {
-        let entry = |binding, ty| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: stages,
-            ty,
-            count: None,
-        };
-        let buffer = |ty| wgpu::BindingType::Buffer {
-            ty,
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        };
-        let mut e: Vec<_> = (0..7)
-            .map(|b| {
-                entry(
-                    b,
-                    wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
-                        view_dimension: wgpu::TextureViewDimension::D3,
-                        multisampled: false,
-                    },
-                )
+        snippet_bindings()
+            .into_iter()
+            .filter_map(|(binding, b)| {
+                Some(wgpu::BindGroupLayoutEntry {
+                    binding,
+                    visibility: stages,
+                    ty: b.snippet_type()?,
+                    count: None,
+                })
             })
-            .collect();
-        e.push(entry(
-            7,
-            wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-        ));
-        e.push(entry(8, buffer(wgpu::BufferBindingType::Uniform)));
-        for b in [9, 10] {
-            e.push(entry(
-                b,
-                buffer(wgpu::BufferBindingType::Storage { read_only: true }),
-            ));
-        }
-        e
+            .collect()
     }
 
     /// The bind group of the sampling snippet for `layout` (made from
     /// [`PrtRuntime::volume_layout_entries`] or taken from a pipeline built with the snippet).
     pub fn volume_bind_group(&self, layout: &wgpu::BindGroupLayout) -> wgpu::BindGroup {
-        let mut entries: Vec<wgpu::BindGroupEntry> = self
-            .res
-            .views
-            .iter()
-            .enumerate()
-            .map(|(b, v)| wgpu::BindGroupEntry {
-                binding: b as u32,
-                resource: wgpu::BindingResource::TextureView(v),
+        let entries: Vec<wgpu::BindGroupEntry> = snippet_bindings()
+            .into_iter()
+            .map(|(binding, b)| wgpu::BindGroupEntry {
+                binding,
+                resource: b.resource(&self.res, Set::Whole),
             })
             .collect();
-        entries.push(wgpu::BindGroupEntry {
-            binding: 7,
-            resource: wgpu::BindingResource::Sampler(&self.res.sampler),
-        });
-        entries.push(wgpu::BindGroupEntry {
-            binding: 8,
-            resource: self.res.volume_info.as_entire_binding(),
-        });
-        entries.push(wgpu::BindGroupEntry {
-            binding: 9,
-            resource: self.res.probe_depth.as_entire_binding(),
-        });
-        entries.push(wgpu::BindGroupEntry {
-            binding: 10,
-            resource: self.res.probe_positions.as_entire_binding(),
-        });
         self.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("prt volume"),
             layout,
@@ -122,7 +81,7 @@ impl PrtRuntime {
         let bytes = read_buffer(
             &self.device,
             &self.queue,
-            &self.res.probe_sh,
+            &self.res.state.probe_sh,
             16 * 9 * u64::from(self.probe_count.max(1)),
         )?;
         let v: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
@@ -134,7 +93,7 @@ impl PrtRuntime {
     /// Blocks and returns the work counters of the last submitted update.
     pub fn read_counters(&self) -> Result<Counters, GpuError> {
         let size = std::mem::size_of::<Counters>() as u64;
-        let bytes = read_buffer(&self.device, &self.queue, &self.res.counters, size)?;
+        let bytes = read_buffer(&self.device, &self.queue, &self.res.state.counters, size)?;
         Ok(*bytemuck::from_bytes(&bytes))
     }
 

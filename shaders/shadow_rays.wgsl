@@ -1,5 +1,5 @@
 // Any-hit shadow rays through the asset's BVH2: the plain stack traversal, slab test and
-// Moller-Trumbore intersection of prt_runtime::visibility, operation for operation. A scene
+// Moller-Trumbore intersection of prt_runtime::shadow_rays, operation for operation. A scene
 // without triangles is uploaded as one leaf holding a degenerate (all-zero) triangle, which no
 // ray hits.
 
@@ -73,7 +73,7 @@ fn occluded(o: vec3<f32>, d: vec3<f32>, tmax: f32) -> bool {
     return false;
 }
 
-// Twin of prt_runtime::visibility::ray_offset: `scale` is the scene's length scale.
+// Twin of prt_runtime::shadow_rays::ray_offset: `scale` is the scene's length scale.
 fn ray_offset(p: vec3<f32>, scale: f32) -> f32 {
     let a = abs(p);
     return max(RAY_OFFSET_MAGNITUDE * max(max(a.x, a.y), a.z), RAY_OFFSET_SCALE * scale);

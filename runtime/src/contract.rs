@@ -1,12 +1,20 @@
-//! GPU-side structs of the runtime (the asset's own arrays are uploaded as they are) and the
-//! constants shared with WGSL. `shaders::prelude` injects the constants into every shader, and
-//! a unit test checks every struct's size and field offsets against naga's layout of
-//! `shaders/types.wgsl`, so the two sides cannot drift apart.
+//! # The contract between Rust and WGSL: every constant, flag and struct both sides read
+//!
+//! The CPU reference ([`crate::relight`], [`crate::sample`], [`crate::shadow_rays`]) and the GPU
+//! runtime ([`crate::gpu`]) take their shared numbers from here, and the WGSL gets them
+//! generated from here: [`wgsl_constants`] is prepended to every compute stage,
+//! [`snippet_constants`] to the engine-side sampling snippet. The structs are the GPU twins
+//! of WGSL structs in `shaders/types.wgsl` and `shaders/sample_irradiance.wgsl` (the asset's own
+//! arrays are uploaded as they are); a unit test of `gpu::shaders` checks every struct's size
+//! and field offsets against naga's layout of the WGSL, so the two sides cannot drift apart.
+//! This module imports no other module of the crate.
 
 use bytemuck::{Pod, Zeroable};
-use prt_format::{LightKind, TransferPrecision, BRICK_BACKFACE, PROBE_VALID, U8_SH_RANGE};
-
-use crate::lights::{NormalBounds, PreparedLight};
+use prt_format::depth::{MAX_DEPTH, MAX_DEVIATION};
+use prt_format::{
+    LightKind, TransferPrecision, BRICK_BACKFACE, DEPTH_MAP_SIDE, DEPTH_WORDS, PROBE_VALID,
+    U8_SH_RANGE,
+};
 
 /// Threads per workgroup of the per-brick, per-surfel and per-probe stages.
 pub const WORKGROUP: u32 = 64;
@@ -14,12 +22,12 @@ pub const WORKGROUP: u32 = 64;
 /// lavapipe at 13.8k probes, 74 factors each: 64 threads 243 ms, 32 threads 151 ms, 16 threads
 /// 133 ms per gather; 32 keeps hardware GPUs busy.
 pub const GATHER_WORKGROUP: u32 = 32;
-/// Most lights a runtime can be built for ([`super::RuntimeSettings::max_lights`]): what sets
+/// Most lights a runtime can be built for ([`crate::gpu::RuntimeSettings::max_lights`]): what sets
 /// it is the per-brick light mask, `max_lights / 32` words per brick (twice: this update's and
 /// the last), 64 MiB for 64k bricks at this limit, and the CPU reference's own limit
 /// ([`crate::relight::MAX_CPU_LIGHTS`]), which every GPU result is checked against.
 pub const MAX_LIGHTS: usize = 4096;
-/// A brick without room in the visibility pool (its lights are traced whenever it is relit).
+/// A brick without room in the shadow-ray cache (its lights are traced whenever it is relit).
 pub const NO_CACHE: u32 = u32::MAX;
 /// Workgroups along x of every dispatch; more work continues along y.
 pub const DISPATCH_WIDTH: u32 = 32768;
@@ -29,6 +37,20 @@ pub const SKY_CONSTANT: u32 = 1;
 pub const SKY_DIRECTIONS: u32 = 2;
 /// Largest finite IEEE half: texels of half-float volumes are clamped to +-this.
 pub const HALF_MAX: f32 = 65504.0;
+/// Deepest BVH the shadow-ray traversal stack holds (the GPU kernel has a fixed-size stack,
+/// `BVH_STACK`); the asset format guarantees it (`prt_format::validate::MAX_BVH_STACK`).
+pub const MAX_STACK: usize = prt_format::validate::MAX_BVH_STACK;
+/// Shadow-ray origin offset per unit of coordinate magnitude
+/// ([`crate::shadow_rays::ray_offset`]).
+pub const RAY_OFFSET_MAGNITUDE: f32 = 1e-6;
+/// Shadow-ray origin offset per unit of the scene's length scale
+/// ([`crate::shadow_rays::ray_offset`]).
+pub const RAY_OFFSET_SCALE: f32 = 1e-4;
+/// Floor of the squared distance in the inverse-square law, in m^2: only a guard against
+/// dividing by zero at the light itself. docs/conventions.md section 3 has the seed's 1e-5 m^2 (a
+/// 3 mm radius), which capped the light of every surface in a millimetre-sized scene (issue 8:
+/// 122% error at a scale of 0.001); 1e-16 m^2 keeps scenes down to 10 micrometres exact.
+pub const MIN_DISTANCE_SQ: f32 = 1e-16;
 
 /// A light as the shaders read it (see `PreparedLight`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
@@ -53,22 +75,6 @@ pub fn light_kind_code(kind: LightKind) -> u32 {
         LightKind::Directional => 0,
         LightKind::Point => 1,
         LightKind::Spot => 2,
-    }
-}
-
-impl From<&PreparedLight> for GpuLight {
-    fn from(l: &PreparedLight) -> Self {
-        GpuLight {
-            position: l.position.to_array(),
-            kind: light_kind_code(l.kind),
-            direction: l.direction.to_array(),
-            inv_range_sq: l.inv_range_sq,
-            radiant: l.radiant.to_array(),
-            cos_outer: l.cos_outer,
-            cone_scale: l.cone_scale,
-            range: l.range.min(f32::MAX),
-            _pad: [0; 2],
-        }
     }
 }
 
@@ -107,16 +113,6 @@ pub struct GpuNormalBounds {
 }
 const _: () = assert!(std::mem::size_of::<GpuNormalBounds>() == 32);
 
-impl From<&NormalBounds> for GpuNormalBounds {
-    fn from(n: &NormalBounds) -> Self {
-        GpuNormalBounds {
-            min: n.min.to_array(),
-            max: n.max.to_array(),
-            ..Default::default()
-        }
-    }
-}
-
 /// Work counters the stages increment (read back for reports and tests).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
 #[repr(C)]
@@ -130,11 +126,11 @@ pub struct Counters {
     pub probes_clamped: u32,
     /// Light-brick reach tests of the cull stage: changed lights x front-face bricks.
     pub light_tests: u32,
-    /// Visibility pool words handed out (one bit per surfel and reaching light, rounded to
+    /// Shadow-ray cache words handed out (one bit per surfel and reaching light, rounded to
     /// words per surfel); `plus` keeps the larger.
-    pub visibility_words: u32,
+    pub shadow_cache_words: u32,
     /// Bricks with lights left uncached because the pool was full
-    /// ([`super::RuntimeSettings::visibility_words`]): from the next relight on they trace all
+    /// ([`crate::gpu::RuntimeSettings::shadow_cache_words`]): from the next relight on they trace all
     /// their lights whenever relit; `plus` keeps the larger.
     pub bricks_uncached: u32,
 }
@@ -150,7 +146,7 @@ impl Counters {
             probes_gathered: self.probes_gathered.saturating_add(o.probes_gathered),
             probes_clamped: self.probes_clamped.max(o.probes_clamped),
             light_tests: self.light_tests.saturating_add(o.light_tests),
-            visibility_words: self.visibility_words.max(o.visibility_words),
+            shadow_cache_words: self.shadow_cache_words.max(o.shadow_cache_words),
             bricks_uncached: self.bricks_uncached.max(o.bricks_uncached),
         }
     }
@@ -179,19 +175,20 @@ pub struct Params {
     pub dispatch_width: u32,
     /// Words of the light masks in use: `ceil(max(previous, current light count) / 32)`. The
     /// previous count matters: removed lights' bits must be cleared and the old masks counted
-    /// in full, or cached-visibility slots shift (`tests/tests/lights.rs`).
+    /// in full, or cached shadow-ray slots shift (`tests/tests/lights.rs`).
     pub light_words: u32,
     pub offset_scale: f32,
     pub all_bricks_dirty: u32,
-    /// The scene's length scale for shadow-ray offsets (`visibility::ray_offset`): the spacing.
+    /// The scene's length scale for shadow-ray offsets (`shadow_rays::ray_offset`): the spacing.
     pub ray_scale: f32,
     /// Factor on the fed-back bounce light (`shaders/bounce_surfels.wgsl`): 1 for
-    /// [`super::Bounces::Fixed`], the damping of [`super::Bounces::Feedback`].
+    /// [`crate::settings::Bounces::Fixed`], the damping of
+    /// [`crate::settings::Bounces::Feedback`].
     pub bounce_damping: f32,
-    /// This update's half of the visibility pool (0 or 1).
-    pub vis_parity: u32,
-    /// Words in each half of the visibility pool.
-    pub vis_capacity: u32,
+    /// This update's half of the shadow-ray cache (0 or 1).
+    pub cache_parity: u32,
+    /// Words in each half of the shadow-ray cache.
+    pub cache_capacity: u32,
     pub _pad: [u32; 2],
 }
 const _: () = assert!(std::mem::size_of::<Params>() == 112);
@@ -202,7 +199,7 @@ const _: () = assert!(std::mem::size_of::<Params>() == 112);
 #[repr(C)]
 pub struct VolumeInfo {
     pub origin: [f32; 3],
-    /// The grid's spacing: the unit of the visibility maps' distances.
+    /// The grid's spacing: the unit of the depth moments' distances.
     pub spacing: f32,
     /// Probe counts along x, y, z, as floats.
     pub counts: [f32; 3],
@@ -210,14 +207,15 @@ pub struct VolumeInfo {
     pub normal_bias: f32,
     /// The lattice step along x, y, z (`prt_format::Grid::step`).
     pub step: [f32; 3],
-    /// [`VOLUME_VISIBILITY`]: weight each of the eight probes by whether the point is visible
-    /// from it (eight manual fetches); without it, one hardware trilinear fetch per texture.
+    /// [`VOLUME_DEPTH_MOMENTS`]: weight each of the eight probes by its depth moments (whether
+    /// the point is visible from it; eight manual fetches); without it, one hardware trilinear
+    /// fetch per texture.
     pub flags: u32,
 }
 const _: () = assert!(std::mem::size_of::<VolumeInfo>() == 48);
 
-/// `VolumeInfo::flags`: visibility-aware sampling.
-pub const VOLUME_VISIBILITY: u32 = 1;
+/// `VolumeInfo::flags`: weight probes by their depth moments (`LookupSettings::depth_moments`).
+pub const VOLUME_DEPTH_MOMENTS: u32 = 1;
 
 impl From<&prt_format::Grid> for VolumeInfo {
     fn from(g: &prt_format::Grid) -> Self {
@@ -239,7 +237,7 @@ pub fn wgsl_constants() -> Vec<(&'static str, String)> {
         ("WORKGROUP", format!("{WORKGROUP}u")),
         ("NO_CACHE", format!("{NO_CACHE}u")),
         ("GATHER_WORKGROUP", format!("{GATHER_WORKGROUP}u")),
-        ("BVH_STACK", format!("{}u", crate::visibility::MAX_STACK)),
+        ("BVH_STACK", format!("{MAX_STACK}u")),
         (
             "LIGHT_DIRECTIONAL",
             format!("{}u", light_kind_code(LightKind::Directional)),
@@ -253,22 +251,13 @@ pub fn wgsl_constants() -> Vec<(&'static str, String)> {
             format!("{}u", light_kind_code(LightKind::Spot)),
         ),
         ("INFINITE_DISTANCE", format!("{:e}", f32::MAX)),
-        (
-            "RAY_OFFSET_MAGNITUDE",
-            format!("{:e}", crate::visibility::RAY_OFFSET_MAGNITUDE),
-        ),
-        (
-            "RAY_OFFSET_SCALE",
-            format!("{:e}", crate::visibility::RAY_OFFSET_SCALE),
-        ),
+        ("RAY_OFFSET_MAGNITUDE", format!("{RAY_OFFSET_MAGNITUDE:e}")),
+        ("RAY_OFFSET_SCALE", format!("{RAY_OFFSET_SCALE:e}")),
         (
             "EDGE_TOLERANCE",
             format!("{:e}", prt_format::EDGE_TOLERANCE),
         ),
-        (
-            "MIN_DISTANCE_SQ",
-            format!("{:e}", crate::lights::MIN_DISTANCE_SQ),
-        ),
+        ("MIN_DISTANCE_SQ", format!("{MIN_DISTANCE_SQ:e}")),
         ("BRICK_BACKFACE", format!("{BRICK_BACKFACE}u")),
         ("PROBE_VALID", format!("{PROBE_VALID}u")),
         ("PROBE_NONE", format!("{}u", u32::MAX)),
@@ -313,4 +302,56 @@ pub fn factor_format_code(precision: TransferPrecision) -> u32 {
         TransferPrecision::F16 => 1,
         TransferPrecision::U8 => 2,
     }
+}
+
+// The engine-side sampling snippet (`shaders/sample_irradiance.wgsl`) and its CPU twin.
+
+/// Summed validity at or below which the sample is empty (as in the shader).
+pub const MIN_VALIDITY: f32 = 1e-6;
+/// Floor of the Chebyshev term (the probe's chance to see the point): a point that no probe sees still gets the least
+/// occluded probes' light rather than nothing.
+pub const MIN_CHEBYSHEV: f32 = 1e-5;
+/// Spacings behind the surface's plane over which the facing term falls from 1 to its floor:
+/// `clamp(1 + h / FACING_DEPTH, 0, 1)^2 + FACING_FLOOR`, `h` being the probe's signed distance
+/// from the plane through the (unmoved) surface point, in spacings. Every probe in front of the
+/// plane counts fully, however grazing: with probes on the bounds' faces, the layer just off a
+/// wall (0.05 spacings in front, up to a step aside) sees what the wall sees, and DDGI's
+/// angular term `((n . dir + 1) / 2)^2` gave it a quarter of the weight of the layer a step
+/// inside. Measured (`prt bench surface`, normal bias 0.2): Cornell mean error 5.6% with the
+/// angular term, 4.0% with this one; two rooms at half spacing 6.1% and 4.6%, no leaks with either.
+pub const FACING_DEPTH: f32 = 0.25;
+/// Floor of the facing term: probes behind the surface's plane count less, not zero (a point
+/// whose probes are all behind it still gets light). DDGI uses 0.2; prt's rooms are up to 500
+/// times brighter than their neighbours (two rooms sharing a wall), where even 0.02 of a probe
+/// behind the wall leaked at half spacing (7 of 300 points, normal bias 0.1, angular facing
+/// term), so the floor is 0.002.
+pub const FACING_FLOOR: f32 = 0.002;
+/// Floor of the depth variance, in spacings squared (a perfectly flat hit distribution would
+/// make the test a hard step).
+pub const MIN_VARIANCE: f32 = 1e-4;
+/// Distance in spacings below which a point counts as at the probe (visible).
+pub const MIN_DISTANCE: f32 = 1e-4;
+
+/// A Chebyshev term below this is crushed towards zero (DDGI's crush threshold): a probe that sees the
+/// point only partly is most likely on the far side of a thin wall, and a room 500 times
+/// brighter than the point leaks visibly even at a weight of 1/1000.
+pub const CRUSH_THRESHOLD: f32 = 0.2;
+
+/// `(name, value)` of the constants the engine-side sampling snippet shares with its CPU twin
+/// ([`crate::sample::VolumeSampler`]), as WGSL source text.
+pub fn snippet_constants() -> Vec<(&'static str, String)> {
+    vec![
+        ("PRT_MIN_VALIDITY", format!("{MIN_VALIDITY:e}")),
+        ("PRT_MIN_CHEBYSHEV", format!("{MIN_CHEBYSHEV:e}")),
+        ("PRT_CRUSH_THRESHOLD", format!("{CRUSH_THRESHOLD:?}")),
+        ("PRT_FACING_FLOOR", format!("{FACING_FLOOR:?}")),
+        ("PRT_FACING_DEPTH", format!("{FACING_DEPTH:?}")),
+        ("PRT_MIN_VARIANCE", format!("{MIN_VARIANCE:e}")),
+        ("PRT_MIN_DISTANCE", format!("{MIN_DISTANCE:e}")),
+        ("PRT_DEPTH_SIDE", format!("{DEPTH_MAP_SIDE}u")),
+        ("PRT_DEPTH_WORDS", format!("{DEPTH_WORDS}u")),
+        ("PRT_MAX_DEPTH", format!("{MAX_DEPTH:?}")),
+        ("PRT_MAX_DEVIATION", format!("{MAX_DEVIATION:?}")),
+        ("PRT_FLAG_DEPTH_MOMENTS", format!("{VOLUME_DEPTH_MOMENTS}u")),
+    ]
 }

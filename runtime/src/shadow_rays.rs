@@ -1,4 +1,4 @@
-//! Light visibility at surfels: any-hit rays through the binary BVH the asset carries.
+//! Shadow rays from surfels to lights: any-hit rays through the binary BVH the asset carries.
 //!
 //! The traversal is the plain stack loop the WGSL twin runs (`shaders/`), with the same slab
 //! test and the same Moller-Trumbore intersection ("Fast, Minimum Storage Ray/Triangle
@@ -7,9 +7,7 @@
 use glam::Vec3;
 use prt_format::{BvhNode, Geometry, Triangle};
 
-/// Deepest BVH the traversal stack holds (the GPU kernel has a fixed-size stack); the asset
-/// format guarantees it (`prt_format::validate::MAX_BVH_STACK`).
-pub const MAX_STACK: usize = prt_format::validate::MAX_BVH_STACK;
+use crate::contract::{MAX_STACK, RAY_OFFSET_MAGNITUDE, RAY_OFFSET_SCALE};
 
 #[inline]
 fn safe_inverse(x: f32) -> f32 {
@@ -87,19 +85,15 @@ pub fn occluded(geo: &Geometry, o: Vec3, d: Vec3, tmax: f32) -> bool {
     false
 }
 
-/// Offset of shadow-ray origins along the surface normal: 1e-6 of the coordinates' magnitude
-/// (about 8 float32 ulps: the rounding of a stored position grows with it), and at least 1e-4 of
-/// `scale`, the scene's own length scale (the probe spacing), near the origin. Nothing
+/// Offset of shadow-ray origins along the surface normal: [`RAY_OFFSET_MAGNITUDE`] (1e-6) of
+/// the coordinates' magnitude (about 8 float32 ulps: the rounding of a stored position grows
+/// with it), and at least [`RAY_OFFSET_SCALE`] (1e-4) of `scale`, the scene's own length scale
+/// (the probe spacing), near the origin. Nothing
 /// absolute: a 2 mm room and a 20 km one get the same shadows (tests/tests/scale.rs). The
 /// magnitude term was 1e-4 before, a 10 m offset at 1e5 m from the origin that skipped every
 /// nearby occluder: the Cornell room moved 1 km, 10 km and 100 km away baked and relit 9%, 85%
 /// and 129% off (of SH0), against 0.5%, 2.4% and 9.5% now (`tests/tests/scale.rs`; 3e-7
 /// measured better still, but leaves 2.5 ulps).
-/// Shadow-ray offset per unit of coordinate magnitude ([`ray_offset`]).
-pub const RAY_OFFSET_MAGNITUDE: f32 = 1e-6;
-/// Shadow-ray offset per unit of the scene's length scale ([`ray_offset`]).
-pub const RAY_OFFSET_SCALE: f32 = 1e-4;
-
 #[inline]
 pub fn ray_offset(p: Vec3, scale: f32) -> f32 {
     (RAY_OFFSET_MAGNITUDE * p.abs().max_element()).max(RAY_OFFSET_SCALE * scale)
