@@ -13,7 +13,7 @@
 //! see the room from inside it: the Cornell ceiling next to its light, seen from 0.1 m below, came
 //! out at half its irradiance. Steps per axis rather than one step, so that the outer layers land
 //! on every face: with one step, a layer that ends up a fraction of a step outside a wall sees
-//! only the wall's back and has to be filled from inside. On the faces, `prt bench surface`
+//! only the wall's back and has to be filled from inside. On the faces, `prt-bench surface`
 //! measures about half the mean error of cell centres on Cornell.
 
 use glam::Vec3;

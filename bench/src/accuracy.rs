@@ -24,7 +24,7 @@ pub struct AccuracyArgs {
     /// Light rig (JSON) every bake is relit with.
     #[arg(long)]
     pub lights: PathBuf,
-    /// Reference SH JSON (oracle output: probes[i].position and .sh).
+    /// Reference SH JSON (oracle output: each probe's position and sh).
     #[arg(long)]
     pub reference: PathBuf,
     /// Probe spacing in metres [default: about 1,000 probes over the bounds].

@@ -98,6 +98,22 @@ pub struct RenderArgs {
 }
 
 pub fn run(args: RenderArgs) -> Result<()> {
+    let job = job_of(args)?;
+    let mut inputs = vec![job.scene.as_path(), job.asset.as_path()];
+    inputs.extend(job.lights.as_deref());
+    for out in std::iter::once(&job.png).chain(&job.exr) {
+        ensure_not_input(out, &inputs)?;
+    }
+    let asset = prt_format::read_asset(&job.asset)
+        .with_context(|| format!("loading {}", job.asset.display()))?;
+    let lighting = lighting_of(job.lights.as_deref(), &asset)?;
+    let report = prt_cli::panics::quietly(|| prt_render::job::run(&job, &lighting, &asset))?;
+    print_report(&job, &lighting, &report);
+    Ok(())
+}
+
+/// The render job the options describe.
+fn job_of(args: RenderArgs) -> Result<RenderJob> {
     let camera = camera_of(args.eye, args.target, args.fov)?;
     let runtime = RuntimeSettings {
         lookup: prt_runtime::LookupSettings {
@@ -107,7 +123,10 @@ pub fn run(args: RenderArgs) -> Result<()> {
         bounces: prt_runtime::gpu::Bounces::Fixed(args.bounces),
         ..RuntimeSettings::default()
     };
-    let job = RenderJob {
+    if !args.exposure.is_finite() {
+        bail!("--exposure {}: expected a finite EV", args.exposure);
+    }
+    Ok(RenderJob {
         scene: args.scene,
         asset: args.asset,
         lights: args.lights,
@@ -139,19 +158,15 @@ pub fn run(args: RenderArgs) -> Result<()> {
         allowed: prt_scene::Allowed {
             dirs: args.allow_path,
         },
-    };
-    if !args.exposure.is_finite() {
-        bail!("--exposure {}: expected a finite EV", args.exposure);
-    }
-    let mut inputs = vec![job.scene.as_path(), job.asset.as_path()];
-    inputs.extend(job.lights.as_deref());
-    for out in std::iter::once(&job.png).chain(&job.exr) {
-        ensure_not_input(out, &inputs)?;
-    }
-    let asset = prt_format::read_asset(&job.asset)
-        .with_context(|| format!("loading {}", job.asset.display()))?;
-    let lighting = lighting_of(job.lights.as_deref(), &asset)?;
-    let report = prt_cli::panics::quietly(|| prt_render::job::run(&job, &lighting, &asset))?;
+    })
+}
+
+/// The summary of a finished render: camera, lights per pixel, overflow warning, times, files.
+fn print_report(
+    job: &RenderJob,
+    lighting: &prt_runtime::Lighting,
+    report: &prt_render::job::RenderReport,
+) {
     eprintln!("adapter: {}", report.adapter);
     let c = report.camera;
     println!(
@@ -178,5 +193,4 @@ pub fn run(args: RenderArgs) -> Result<()> {
     if let Some(exr) = &job.exr {
         println!("wrote            {}", exr.display());
     }
-    Ok(())
 }

@@ -30,7 +30,7 @@
 //!
 //! **Shadows are rays, not shadow maps**: the asset already carries the BVH the GI's surfels are
 //! shadowed with, so direct light and GI agree exactly on what blocks a light, with no resolution,
-//! bias or per-light map to manage for a thousand lights; `prt bench render` measures their cost.
+//! bias or per-light map to manage for a thousand lights; `prt-bench render` measures their cost.
 //!
 //! **Rust and WGSL share one source of truth for each fact**: binding numbers live only in the
 //! WGSL, read with naga and bound by name ([`bindings`]); constants are generated from
@@ -98,7 +98,7 @@ pub struct RenderSettings {
 }
 
 impl Default for RenderSettings {
-    /// 1280x720, 16-pixel tiles (the fewest light evaluations per pixel in `prt bench render`),
+    /// 1280x720, 16-pixel tiles (the fewest light evaluations per pixel in `prt-bench render`),
     /// up to 512 lights per tile, tiled culling, shadows on.
     fn default() -> Self {
         RenderSettings {

@@ -317,7 +317,7 @@ pub const MIN_CHEBYSHEV: f32 = 1e-5;
 /// plane counts fully, however grazing: with probes on the bounds' faces, the layer just off a
 /// wall (0.05 spacings in front, up to a step aside) sees what the wall sees, and DDGI's
 /// angular term `((n . dir + 1) / 2)^2` gave it a quarter of the weight of the layer a step
-/// inside. Measured (`prt bench surface`, normal bias 0.2): Cornell mean error 5.6% with the
+/// inside. Measured (`prt-bench surface`, normal bias 0.2): Cornell mean error 5.6% with the
 /// angular term, 4.0% with this one; two rooms at half spacing 6.1% and 4.6%, no leaks with either.
 pub const FACING_DEPTH: f32 = 0.25;
 /// Floor of the facing term: probes behind the surface's plane count less, not zero (a point

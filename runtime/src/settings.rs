@@ -56,7 +56,7 @@ pub struct LookupSettings {
     /// beyond the wall's distance to the next probe can reach past nearby geometry). 0 samples
     /// exactly at the point. Default 0.2: with depth moments it also moves a point on the dark
     /// side of a thin wall far enough past the wall, as the lit side's probes see it, for the
-    /// Chebyshev test to reject them (`prt bench surface`: Sponza at 1.2 m, 12 of 300 points
+    /// Chebyshev test to reject them (`prt-bench surface`: Sponza at 1.2 m, 12 of 300 points
     /// leaking at 0.2 against 16 at 0.1, mean error 16.3% against 19.4%; the Cornell room
     /// 4.05% against 3.7%).
     pub normal_bias: f32,
