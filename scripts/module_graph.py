@@ -127,7 +127,7 @@ def module_path(src, path):
 def imports(code, own):
     """Absolute module paths (lists of segments) that `code` of module `own` names."""
     found = []
-    for m in re.finditer(r"\b(crate|(?:super\s*::\s*)+)\s*::\s*", code):
+    for m in re.finditer(r"\b(crate|super(?:\s*::\s*super)*)\s*::\s*", code):
         if m.group(1) == "crate":
             base = []
         else:

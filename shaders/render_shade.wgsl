@@ -109,7 +109,7 @@ fn fetch(info: ImageInfo, x: i32, y: i32, sampler_bits: u32) -> vec3<f32> {
     return vec3<f32>(srgb_to_linear(t.x), srgb_to_linear(t.y), srgb_to_linear(t.z));
 }
 
-// Twin of prt_bake::texture::sample: the glTF sampler's wrap modes, nearest or bilinear.
+// Twin of prt_scene::texture::sample: the glTF sampler's wrap modes, nearest or bilinear.
 fn sample_image(image: u32, sampler_bits: u32, uv: vec2<f32>) -> vec3<f32> {
     let info = images[image];
     // Empty images and non-finite coordinates sample white, as on the CPU.

@@ -33,6 +33,8 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
 }
 "#;
 
+/// One function on purpose, over the ~80-line guide: the whole integration an engine programmer
+/// copies, read top to bottom (load, relight, sample, move a light, update, sample again).
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let [asset, png] = args.as_slice() else {

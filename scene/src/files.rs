@@ -125,7 +125,8 @@ pub(crate) fn read_buffer(
         uri: uri.to_owned(),
         message,
     };
-    let mut data = std::fs::read(file).map_err(|e| fail(format!("{}: {e}", file.display())))?;
+    let mut data = prt_format::io::read_regular_file(file)
+        .map_err(|e| fail(format!("{}: {e}", file.display())))?;
     if data.len() < byte_length {
         return Err(fail(format!(
             "the file has {} bytes, byteLength says {byte_length}",

@@ -366,9 +366,8 @@ impl Loader<'_> {
     /// swapped where `flip`) with their material and, when given, their vertex attributes,
     /// skipping degenerate ones. The corners are gathered in parallel straight into one vector
     /// (an indexed collect), which becomes the scene's when it is the first primitive: pushed
-    /// one by one, Sponza's 187k triangles (one primitive, no attributes kept) took 6-9 ms of
-    /// the load stage, most of it page faults of the growing vectors, with the other threads
-    /// idle.
+    /// one by one, a large primitive's growing vectors page-fault on one thread while the others
+    /// idle (docs/results/bake_notes.md).
     fn add_triangles(
         &mut self,
         tris: &[[u32; 3]],
@@ -417,11 +416,11 @@ impl Loader<'_> {
 
 /// The elements of a plain accessor (no sparse values, a buffer view), `size` bytes each, read
 /// as the glTF reader reads them (gltf 1.4 `accessor::util::Iter`: element `i` at `i * stride`
-/// of the view, from the accessor's offset), without its per-element dispatch: Sponza's 562k
-/// indices took 5-7 ms through the reader's converting iterator. `None` for any other accessor
-/// and for one that runs past its view or buffer: the caller then asks the reader, for its
-/// values or its refusal. (`gltf_check` has refused a stride below the element and a count of
-/// 0 before.)
+/// of the view, from the accessor's offset), without its per-element dispatch, which dominates
+/// reading large index buffers (docs/results/bake_notes.md). `None` for any other accessor and
+/// for one that runs past its view or buffer: the caller then asks the reader, for its values
+/// or its refusal. ([`crate::check`] has refused a stride below the element and a count of 0
+/// before.)
 fn plain_elements<'s>(
     a: &gltf::Accessor,
     buffers: &'s [gltf::buffer::Data],

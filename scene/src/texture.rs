@@ -212,7 +212,8 @@ fn encoded_image(
     match img.source() {
         gltf::image::Source::Uri { uri, mime_type } => {
             if let Some(file) = file {
-                let bytes = std::fs::read(file).map_err(|e| format!("{}: {e}", file.display()))?;
+                let bytes = prt_format::io::read_regular_file(file)
+                    .map_err(|e| format!("{}: {e}", file.display()))?;
                 return Ok((bytes, mime_type.map(str::to_owned)));
             }
             let rest = uri
