@@ -20,6 +20,9 @@
 // surfels and surfel_radiance hold this chunk's surfels only (dispatched once per chunk).
 @group(0) @binding(11) var<uniform> chunk: SurfelChunk;
 
+// One entry point over the ~80-line guide (89 lines): the walk over the brick's light mask
+// carries the surfel's irradiance, its shadow-ray count, the cache word and its bit ranks from
+// light to light; it reads top to bottom as the CPU twin does.
 @compute @workgroup_size(WORKGROUP)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let c = linear_index(wg, lid, WORKGROUP, params.dispatch_width);

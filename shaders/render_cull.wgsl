@@ -128,6 +128,9 @@ fn tile_bounds(origin: vec2<u32>, end: vec2<u32>, dmin: f32, dmax: f32) -> TileB
     return b;
 }
 
+// One entry point over the ~80-line guide (84 lines): its numbered phases (depth bounds, then
+// occupied depth bins; light bits; compaction) are separated by workgroup barriers over the
+// tile's shared memory, and read top to bottom in that order.
 @compute @workgroup_size(CULL_GROUP, CULL_GROUP)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) local: vec3<u32>,
         @builtin(local_invocation_index) lid: u32) {
