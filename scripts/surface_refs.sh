@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Regenerates the surface-irradiance references of `prt-bench surface` (issue 11) with the
 # independent Mitsuba 3 oracle (surface_oracle.py; not part of this repository: point
-# PRT_ORACLE_DIR at it, default ../shared/oracle beside the clone): points on visible
+# PRT_ORACLE_DIR at its folder): points on visible
 # surfaces, the SH of incident radiance there and the exact hemispherical irradiance.
 #
 # Not part of CI or the tests (it installs a Python venv and libllvm19, and runs minutes).
@@ -12,7 +12,7 @@
 # the oracle's own sampling noise, about 1e-3 of SH0 at 65,536 directions) to keep them small.
 set -euo pipefail
 ROOT="$(cd "$(dirname "$0")/.." && pwd)"
-ORACLE="${PRT_ORACLE_DIR:-$ROOT/../shared/oracle}"
+ORACLE="${PRT_ORACLE_DIR:-}"
 SCENES="$ROOT/fixtures/scenes"
 if [ ! -f "$ORACLE/surface_oracle.py" ]; then
   echo "surface_refs: no surface_oracle.py in $ORACLE; set PRT_ORACLE_DIR to the oracle's folder" >&2

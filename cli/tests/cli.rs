@@ -80,21 +80,21 @@ fn bake_of_broken_gltf_fails_cleanly() {
     assert!(dir.entries().is_empty(), "left {:?}", dir.entries());
 }
 
-/// `prt bake` of a scene whose buffer lies in a sibling folder (`../shared/quad.bin`) exits
+/// `prt bake` of a scene whose buffer lies in a sibling folder (`../textures/quad.bin`) exits
 /// non-zero with one stderr line naming the buffer, its URI and `--allow-path`, and bakes with
 /// `--allow-path` naming that folder.
 #[test]
 fn bake_needs_allow_path_for_files_outside_the_scene_folder() {
     let dir = Scratch::new("allow_path");
-    let (scenes, shared) = (dir.0.join("scenes"), dir.0.join("shared"));
+    let (scenes, textures) = (dir.0.join("scenes"), dir.0.join("textures"));
     std::fs::create_dir_all(&scenes).unwrap();
-    std::fs::create_dir_all(&shared).unwrap();
-    std::fs::copy(fixture("two_files/scene.bin"), shared.join("quad.bin")).unwrap();
+    std::fs::create_dir_all(&textures).unwrap();
+    std::fs::copy(fixture("two_files/scene.bin"), textures.join("quad.bin")).unwrap();
     let gltf = std::fs::read_to_string(fixture("two_files/scene.gltf")).unwrap();
     let input = scenes.join("quad.gltf");
     std::fs::write(
         &input,
-        gltf.replace("\"scene.bin\"", "\"../shared/quad.bin\""),
+        gltf.replace("\"scene.bin\"", "\"../textures/quad.bin\""),
     )
     .unwrap();
     let out = dir.0.join("quad.prt");
@@ -110,11 +110,11 @@ fn bake_needs_allow_path_for_files_outside_the_scene_folder() {
     let stderr = text(&o.stderr);
     assert!(!o.status.success(), "exit status {:?}", o.status);
     assert_eq!(stderr.lines().count(), 1, "{stderr:?}");
-    for fragment in ["error:", "buffer 0 (../shared/quad.bin)", "--allow-path"] {
+    for fragment in ["error:", "buffer 0 (../textures/quad.bin)", "--allow-path"] {
         assert!(stderr.contains(fragment), "{fragment:?} not in {stderr:?}");
     }
     assert!(!out.exists());
-    args.extend(["--allow-path".as_ref(), shared.as_os_str()]);
+    args.extend(["--allow-path".as_ref(), textures.as_os_str()]);
     let o = prt(&args, None);
     assert!(o.status.success(), "bake failed: {}", text(&o.stderr));
     assert!(out.exists());

@@ -296,19 +296,19 @@ fn decode_errors_name_the_section() {
 #[test]
 fn files_outside_the_scene_folder_need_an_allowed_folder() {
     let dir = ScratchDir::new("outside_the_folder");
-    let (scenes, shared) = (dir.path().join("scenes"), dir.path().join("shared"));
+    let (scenes, textures) = (dir.path().join("scenes"), dir.path().join("textures"));
     std::fs::create_dir_all(&scenes).unwrap();
-    std::fs::create_dir_all(&shared).unwrap();
-    std::fs::copy(fixture("two_files/scene.bin"), shared.join("quad.bin")).unwrap();
-    std::os::unix::fs::symlink(shared.join("quad.bin"), scenes.join("link.bin")).unwrap();
+    std::fs::create_dir_all(&textures).unwrap();
+    std::fs::copy(fixture("two_files/scene.bin"), textures.join("quad.bin")).unwrap();
+    std::os::unix::fs::symlink(textures.join("quad.bin"), scenes.join("link.bin")).unwrap();
     let gltf = std::fs::read_to_string(fixture("two_files/scene.gltf")).unwrap();
     assert!(gltf.contains("\"uri\": \"scene.bin\""));
-    let absolute = shared.join("quad.bin").display().to_string();
+    let absolute = textures.join("quad.bin").display().to_string();
     let allowed = Allowed {
-        dirs: vec![shared.clone()],
+        dirs: vec![textures.clone()],
     };
     for (case, uri) in [
-        ("dotdot", "../shared/quad.bin"),
+        ("dotdot", "../textures/quad.bin"),
         ("absolute", absolute.as_str()),
         ("symlink", "link.bin"),
     ] {
