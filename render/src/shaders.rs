@@ -31,7 +31,7 @@ pub fn shade_source() -> String {
 mod tests {
     use super::*;
     use crate::bindings::{self, Declared, Resource};
-    use prt_runtime::gpu::shaders::validation::validate;
+    use prt_runtime::gpu::shaders::validation::{struct_layout, validate};
     use std::mem::{offset_of, size_of};
 
     /// `[(field, offset)]` of a Rust struct whose fields the WGSL twin names alike.
@@ -150,20 +150,11 @@ mod tests {
     /// Asserts that WGSL struct `name` has `size` bytes and exactly the members `fields` at
     /// those offsets, padding members (`pad*`) aside.
     fn assert_struct(module: &naga::Module, name: &str, size: usize, fields: &[(&str, usize)]) {
-        let mut layouter = naga::proc::Layouter::default();
-        layouter.update(module.to_ctx()).expect("layout");
-        let (handle, ty) = module
-            .types
-            .iter()
-            .find(|(_, t)| t.name.as_deref() == Some(name))
-            .unwrap_or_else(|| panic!("WGSL struct {name} missing"));
-        assert_eq!(layouter[handle].size as usize, size, "size of {name}");
-        let naga::TypeInner::Struct { members, .. } = &ty.inner else {
-            panic!("{name} is not a struct");
-        };
+        let (wgsl_size, members) = struct_layout(module, name);
+        assert_eq!(wgsl_size, size, "size of {name}");
         let wgsl: Vec<(&str, usize)> = members
             .iter()
-            .filter_map(|m| m.name.as_deref().map(|n| (n, m.offset as usize)))
+            .map(|(n, offset)| (n.as_str(), *offset))
             .filter(|(n, _)| !n.starts_with("pad"))
             .collect();
         assert_eq!(wgsl, fields, "members of {name}");

@@ -105,27 +105,38 @@ pub mod validation {
         module
     }
 
+    /// The size in bytes of WGSL struct `name` in `module` and its members' names and offsets,
+    /// in declaration order (panics when there is no such struct).
+    pub fn struct_layout(module: &naga::Module, name: &str) -> (usize, Vec<(String, usize)>) {
+        let mut layouter = naga::proc::Layouter::default();
+        layouter.update(module.to_ctx()).expect("layout");
+        let (handle, ty) = module
+            .types
+            .iter()
+            .find(|(_, t)| t.name.as_deref() == Some(name))
+            .unwrap_or_else(|| panic!("WGSL struct {name} missing"));
+        let naga::TypeInner::Struct { members, .. } = &ty.inner else {
+            panic!("{name} is not a struct");
+        };
+        let members = members
+            .iter()
+            .filter_map(|m| Some((m.name.clone()?, m.offset as usize)))
+            .collect();
+        (layouter[handle].size as usize, members)
+    }
+
     /// Asserts that every WGSL struct of `expect` has the size and field offsets given.
     pub fn assert_layouts(src: &str, expect: Expected) {
         let module = validate(src, "layout");
-        let mut layouter = naga::proc::Layouter::default();
-        layouter.update(module.to_ctx()).expect("layout");
         for (name, size, fields) in expect {
-            let (handle, ty) = module
-                .types
-                .iter()
-                .find(|(_, t)| t.name.as_deref() == Some(name))
-                .unwrap_or_else(|| panic!("WGSL struct {name} missing"));
-            assert_eq!(layouter[handle].size as usize, size, "size of {name}");
-            let naga::TypeInner::Struct { members, .. } = &ty.inner else {
-                panic!("{name} is not a struct");
-            };
+            let (wgsl_size, members) = struct_layout(&module, name);
+            assert_eq!(wgsl_size, size, "size of {name}");
             for (field, offset) in fields {
                 let m = members
                     .iter()
-                    .find(|m| m.name.as_deref() == Some(field))
+                    .find(|(n, _)| n == field)
                     .unwrap_or_else(|| panic!("{name}.{field} missing"));
-                assert_eq!(m.offset as usize, offset, "offset of {name}.{field}");
+                assert_eq!(m.1, offset, "offset of {name}.{field}");
             }
         }
     }
