@@ -10,6 +10,7 @@ mod fuzz;
 mod gpu;
 mod lights;
 mod render;
+mod ray_lookup;
 mod results;
 mod surface;
 

@@ -142,6 +142,20 @@ impl<'a> VolumeSampler<'a> {
 
     /// The sample at `position` for a surface with unit normal `normal`.
     pub fn sample(&self, position: [f32; 3], normal: [f32; 3]) -> Sample {
+        self.sample_weighted(position, normal, |_, _| 1.0)
+    }
+
+    /// [`Self::sample`] with each probe's weight also multiplied by `extra(index, position)`
+    /// (the probe's index in grid order and where its rays started), for reference lookups
+    /// that know more than the engine-side snippet: `prt-bench`'s ray lookup multiplies by
+    /// the exact visibility of each probe through the asset's BVH. `extra` sees only probes
+    /// with a positive trilinear and probe weight.
+    pub fn sample_weighted(
+        &self,
+        position: [f32; 3],
+        normal: [f32; 3],
+        extra: impl Fn(usize, Vec3) -> f32,
+    ) -> Sample {
         let g = &self.grid;
         let n = Vec3::from(normal);
         let p = Vec3::from(position) + n * self.normal_bias;
@@ -170,7 +184,7 @@ impl<'a> VolumeSampler<'a> {
             if !self.depth_moments.is_empty() {
                 w *= self.depth_weight(i, self.positions[i], Vec3::from(position), p, n);
             }
-            let w = w * probe_weight;
+            let w = w * probe_weight * extra(i, self.positions[i]);
             total += w;
             for k in 0..SH_COUNT {
                 for ch in 0..3 {
