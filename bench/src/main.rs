@@ -9,8 +9,8 @@ mod bake;
 mod fuzz;
 mod gpu;
 mod lights;
-mod render;
 mod ray_lookup;
+mod render;
 mod results;
 mod surface;
 

@@ -74,7 +74,13 @@ pub struct RayLookup<'a> {
 impl<'a> RayLookup<'a> {
     /// The ray lookup of `asset` relit to `sh`.
     pub fn for_asset(asset: &'a Asset, sh: &'a [ShRgb], settings: RaySettings) -> Self {
-        Self::new(&asset.header.grid, &asset.probes, &asset.geometry, sh, settings)
+        Self::new(
+            &asset.header.grid,
+            &asset.probes,
+            &asset.geometry,
+            sh,
+            settings,
+        )
     }
 
     /// The ray lookup over probes `probes` of `grid` with SH `sh`, tracing through `geometry`.
@@ -132,14 +138,23 @@ impl<'a> RayLookup<'a> {
             let y = prt_format::sh::basis(d.to_array());
             let blocked = occluded(self.geometry, start, d, reach);
             for ch in 0..3 {
-                let l = (0..SH_COUNT).map(|i| sh[i][ch] * y[i]).sum::<f32>().max(0.0);
+                let l = (0..SH_COUNT)
+                    .map(|i| sh[i][ch] * y[i])
+                    .sum::<f32>()
+                    .max(0.0);
                 all[ch] += l;
                 if !blocked {
                     open[ch] += l;
                 }
             }
         }
-        std::array::from_fn(|ch| if all[ch] > 0.0 { open[ch] / all[ch] } else { 1.0 })
+        std::array::from_fn(|ch| {
+            if all[ch] > 0.0 {
+                open[ch] / all[ch]
+            } else {
+                1.0
+            }
+        })
     }
 }
 
@@ -222,12 +237,18 @@ mod tests {
         let open = two_probes(false);
         let at = [1.5, 0.0, 0.0];
         let trilinear = VolumeSampler::new(&open.0, &open.1, &sh, 0.4);
-        assert_eq!(lookup(&open, &sh, settings).sample(at, UP), trilinear.sample(at, UP));
+        assert_eq!(
+            lookup(&open, &sh, settings).sample(at, UP),
+            trilinear.sample(at, UP)
+        );
         let walled = two_probes(true);
         let dark_side = lookup(&walled, &sh, settings).sample(at, UP);
         let lit_side = lookup(&walled, &sh, settings).sample([0.5, 0.0, 0.0], UP);
         assert!(dark_side.irradiance[0] < 1e-3 * lit_side.irradiance[0]);
-        assert!(dark_side.irradiance[0] > 0.0, "blocked probes keep a little weight");
+        assert!(
+            dark_side.irradiance[0] > 0.0,
+            "blocked probes keep a little weight"
+        );
     }
 
     /// A point facing the wall 0.1 spacing away loses most of its light with a reach past the

@@ -41,7 +41,9 @@ use prt_bake::{BakeSettings, NoProgress};
 use prt_format::sh::ShRgb;
 use prt_format::{Asset, Summary};
 use prt_runtime::{Lighting, Sample, VolumeSampler};
+use rayon::prelude::*;
 
+use crate::ray_lookup::RayLookup;
 use crate::results::Out;
 use cases::Case;
 use image::Pixel;
@@ -176,17 +178,26 @@ fn bake(case: &Case, settings: &BakeSettings, lighting: &Lighting) -> Result<Bak
 fn sample(case: &Case, baked: &Baked, setting: Setting, refs: &Refs, lookup: &Lookup) -> Row {
     let t = Instant::now();
     let sampler = VolumeSampler::for_asset(&baked.asset, &baked.sh, &lookup.settings);
-    let at = |p: [f32; 3], n: [f32; 3]| sampler.sample(p, n);
+    let rays = lookup
+        .rays
+        .map(|r| RayLookup::for_asset(&baked.asset, &baked.sh, r));
+    let at = |p: [f32; 3], n: [f32; 3]| match &rays {
+        Some(rays) => rays.sample(p, n),
+        None => sampler.sample(p, n),
+    };
     let samples: Vec<Sample> = refs
         .points
         .points
-        .iter()
+        .par_iter()
         .map(|p| at(p.position, p.normal))
         .collect();
     let points_s = t.elapsed().as_secs_f64();
     let t = Instant::now();
     let image = refs.image.as_ref().map(|pixels| {
-        let samples: Vec<Sample> = pixels.iter().map(|p| at(p.position, p.normal)).collect();
+        let samples: Vec<Sample> = pixels
+            .par_iter()
+            .map(|p| at(p.position, p.normal))
+            .collect();
         image::score_image(pixels, &score::irradiance(&samples))
     });
     let image_s = t.elapsed().as_secs_f64();

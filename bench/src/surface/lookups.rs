@@ -5,19 +5,32 @@ use anyhow::{bail, Result};
 use prt_runtime::LookupSettings;
 
 use super::cases::Set;
+use crate::ray_lookup::RaySettings;
 
-/// A lookup's name and how to make its settings.
-type Variant = (&'static str, fn() -> LookupSettings);
+/// A lookup's name and how to make its settings (and its ray terms, for a reference lookup).
+type Variant = (&'static str, fn() -> (LookupSettings, Option<RaySettings>));
 
 /// Every lookup `--lookup` knows, by name, in table order.
-const LOOKUPS: [Variant; 2] = [
+const LOOKUPS: [Variant; 3] = [
     // Hardware trilinear over the probes' validity only: what depth moments are measured against.
-    ("trilinear", || LookupSettings {
-        depth_moments: false,
-        ..LookupSettings::default()
+    ("trilinear", || {
+        let trilinear = LookupSettings {
+            depth_moments: false,
+            ..LookupSettings::default()
+        };
+        (trilinear, None)
     }),
     // The runtime's: depth moments (DDGI's Chebyshev test), normal bias 0.2 spacings.
-    ("default", LookupSettings::default),
+    ("default", || (LookupSettings::default(), None)),
+    // The reference with rays through the asset's BVH (`crate::ray_lookup`): exact probe
+    // visibility and the near-field term, the bound a baked version can reach.
+    ("rays", || {
+        let trilinear = LookupSettings {
+            depth_moments: false,
+            ..LookupSettings::default()
+        };
+        (trilinear, Some(RaySettings::default()))
+    }),
 ];
 
 /// A named lookup.
@@ -25,14 +38,26 @@ const LOOKUPS: [Variant; 2] = [
 pub struct Lookup {
     pub name: &'static str,
     pub settings: LookupSettings,
+    /// The ray terms of a reference lookup (`crate::ray_lookup`), on top of `settings`.
+    pub rays: Option<RaySettings>,
 }
 
 impl Lookup {
     /// What the report says the lookup is.
     pub fn describe(&self) -> String {
         let s = &self.settings;
+        let rays = match self.rays {
+            Some(r) => format!(
+                ", exact probe visibility: {}, near field: {} (rays through the asset's BVH, \
+                 bench/src/ray_lookup.rs)",
+                r.visibility,
+                r.near_field
+                    .map_or("none".into(), |reach| format!("{reach} spacings"))
+            ),
+            None => String::new(),
+        };
         format!(
-            "{}: {}, normal bias {} spacings",
+            "{}: {}, normal bias {} spacings{rays}",
             self.name,
             if s.depth_moments {
                 "depth moments (Chebyshev) and facing weights"
@@ -65,14 +90,15 @@ impl Lookups {
     }
 
     /// The lookups of a case of `set`. Without `--lookup`: the bundled cases keep the two rows
-    /// of the earlier tables (trilinear against the default), the levels the default only.
+    /// of the earlier tables (trilinear against the default), and every case gets the ray
+    /// reference (the bound of issue 31's candidates, `docs/results/surface_candidates.md`).
     pub fn for_set(&self, set: Set) -> Vec<Lookup> {
         let lookups = match &self.chosen {
             Some(chosen) => chosen.clone(),
             None => {
                 let names: &[&str] = match set {
-                    Set::Bundled => &["trilinear", "default"],
-                    _ => &["default"],
+                    Set::Bundled => &["trilinear", "default", "rays"],
+                    _ => &["default", "rays"],
                 };
                 let picked = LOOKUPS.iter().filter(|(n, _)| names.contains(n));
                 picked.map(lookup).collect()
@@ -90,10 +116,12 @@ impl Lookups {
     }
 }
 
-fn lookup(&(name, settings): &Variant) -> Lookup {
+fn lookup(&(name, make): &Variant) -> Lookup {
+    let (settings, rays) = make();
     Lookup {
         name,
-        settings: settings(),
+        settings,
+        rays,
     }
 }
 
@@ -118,8 +146,12 @@ mod tests {
     fn defaults_per_set_and_the_bias_override() {
         let none = Lookups::parse(&[], None).unwrap();
         let names = |ls: Vec<Lookup>| ls.iter().map(|l| l.name).collect::<Vec<_>>();
-        assert_eq!(names(none.for_set(Set::Bundled)), ["trilinear", "default"]);
-        assert_eq!(names(none.for_set(Set::HeldOut)), ["default"]);
+        assert_eq!(
+            names(none.for_set(Set::Bundled)),
+            ["trilinear", "default", "rays"]
+        );
+        assert_eq!(names(none.for_set(Set::HeldOut)), ["default", "rays"]);
+        assert!(none.for_set(Set::HeldOut)[1].rays.is_some());
         assert_eq!(
             none.for_set(Set::Tuning)[0].settings,
             LookupSettings::default()
@@ -130,7 +162,7 @@ mod tests {
         assert!(!l[0].settings.depth_moments);
         let err = Lookups::parse(&["moments".into()], None).err().unwrap();
         assert!(
-            err.to_string().contains("known: trilinear, default"),
+            err.to_string().contains("known: trilinear, default, rays"),
             "{err}"
         );
     }
