@@ -260,6 +260,23 @@ mod tests {
         assert_eq!(got.sh, sh[0]);
     }
 
+    /// An extra weight of zero drops a probe as its invalidity would, but keeps the validity.
+    #[test]
+    fn an_extra_weight_scales_each_probe() {
+        let (grid, probes, sh) = two_probes([true, true]);
+        let s = VolumeSampler::new(&grid, &probes, &sh, 0.0);
+        let got = s.sample_weighted([2.0, 0.0, 0.0], UP, |i, at| {
+            assert_eq!(at, Vec3::from(grid.position(i as u32, 0, 0)));
+            if i == 1 {
+                0.0
+            } else {
+                1.0
+            }
+        });
+        assert_eq!(got.sh, sh[0]);
+        assert_eq!(got.validity, 1.0);
+    }
+
     #[test]
     fn all_invalid_gives_nothing() {
         let (grid, probes, sh) = two_probes([false, false]);
