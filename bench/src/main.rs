@@ -6,6 +6,7 @@
 
 mod accuracy;
 mod bake;
+mod brick_lookup;
 mod fuzz;
 mod gpu;
 mod lights;

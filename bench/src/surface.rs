@@ -43,11 +43,13 @@ use prt_format::{Asset, Summary};
 use prt_runtime::{Lighting, Sample, VolumeSampler};
 use rayon::prelude::*;
 
-use crate::ray_lookup::RayLookup;
+use crate::brick_lookup::BrickLookup;
+use crate::ray_lookup::{NearLight, RayLookup};
 use crate::results::Out;
 use cases::Case;
 use image::Pixel;
 use lookups::{Lookup, Lookups};
+use prt_runtime::lights::PreparedLight;
 use refs::Reference;
 use report::{Row, Setting};
 
@@ -84,6 +86,8 @@ struct Refs {
 /// One bake of a case, relit.
 struct Baked {
     asset: Asset,
+    /// The relit bricks, for the ray lookup's near-field hits.
+    near: NearLight,
     sh: Vec<ShRgb>,
     bake_s: f64,
     relight_s: f64,
@@ -162,13 +166,18 @@ fn bake(case: &Case, settings: &BakeSettings, lighting: &Lighting) -> Result<Bak
         .with_context(|| format!("{}: baking {}", case.name, case.scene.display()))?;
     let bake_s = t.elapsed().as_secs_f64();
     let t = Instant::now();
-    let sh = prt_runtime::CpuRelighter::new(&asset)?
+    let relighter = prt_runtime::CpuRelighter::new(&asset)?;
+    let sh = relighter
         .relight(lighting, 1)
         .with_context(|| format!("{}: relighting with {}", case.name, case.rig.display()))?
         .sh;
+    let lights: Vec<_> = lighting.rig.lights.iter().map(PreparedLight::new).collect();
+    let radiance = relighter.brick_radiance(&relighter.direct_irradiance(&lights).0);
+    let near = NearLight::for_asset(&asset, radiance);
     Ok(Baked {
         asset,
         sh,
+        near,
         bake_s,
         relight_s: t.elapsed().as_secs_f64(),
     })
@@ -180,10 +189,14 @@ fn sample(case: &Case, baked: &Baked, setting: Setting, refs: &Refs, lookup: &Lo
     let sampler = VolumeSampler::for_asset(&baked.asset, &baked.sh, &lookup.settings);
     let rays = lookup
         .rays
-        .map(|r| RayLookup::for_asset(&baked.asset, &baked.sh, r));
-    let at = |p: [f32; 3], n: [f32; 3]| match &rays {
-        Some(rays) => rays.sample(p, n),
-        None => sampler.sample(p, n),
+        .map(|r| RayLookup::for_asset(&baked.asset, &baked.sh, r).with_near_light(&baked.near));
+    let bricks = lookup
+        .bricks
+        .then(|| BrickLookup::new(&baked.asset, &baked.sh, &baked.near));
+    let at = |p: [f32; 3], n: [f32; 3]| match (&bricks, &rays) {
+        (Some(bricks), _) => bricks.sample(p, n).0,
+        (None, Some(rays)) => rays.sample(p, n),
+        (None, None) => sampler.sample(p, n),
     };
     let samples: Vec<Sample> = refs
         .points

@@ -8,20 +8,23 @@ use super::cases::Set;
 use crate::ray_lookup::RaySettings;
 
 /// A lookup's name and how to make its settings (and its ray terms, for a reference lookup).
-type Variant = (&'static str, fn() -> (LookupSettings, Option<RaySettings>));
+type Variant = (
+    &'static str,
+    fn() -> (LookupSettings, Option<RaySettings>, bool),
+);
 
 /// Every lookup `--lookup` knows, by name, in table order.
-const LOOKUPS: [Variant; 3] = [
+const LOOKUPS: [Variant; 5] = [
     // Hardware trilinear over the probes' validity only: what depth moments are measured against.
     ("trilinear", || {
         let trilinear = LookupSettings {
             depth_moments: false,
             ..LookupSettings::default()
         };
-        (trilinear, None)
+        (trilinear, None, false)
     }),
     // The runtime's: depth moments (DDGI's Chebyshev test), normal bias 0.2 spacings.
-    ("default", || (LookupSettings::default(), None)),
+    ("default", || (LookupSettings::default(), None, false)),
     // The reference with rays through the asset's BVH (`crate::ray_lookup`): exact probe
     // visibility and the near-field term, the bound a baked version can reach.
     ("rays", || {
@@ -29,7 +32,21 @@ const LOOKUPS: [Variant; 3] = [
             depth_moments: false,
             ..LookupSettings::default()
         };
-        (trilinear, Some(RaySettings::default()))
+        (trilinear, Some(RaySettings::default()), false)
+    }),
+    // The same, with near-field hits bringing their surface's relit radiance (reach 1 spacing).
+    ("rays_light", || {
+        let trilinear = LookupSettings {
+            depth_moments: false,
+            ..LookupSettings::default()
+        };
+        (trilinear, Some(RaySettings::with_near_light()), false)
+    }),
+    // rays_light's terms decided per brick from its surfels, as a bake would store them
+    // (`crate::brick_lookup`); points without a brick fall back to the default lookup.
+    ("bricks", || {
+        let rays = RaySettings::with_near_light();
+        (LookupSettings::default(), Some(rays), true)
     }),
 ];
 
@@ -40,6 +57,8 @@ pub struct Lookup {
     pub settings: LookupSettings,
     /// The ray terms of a reference lookup (`crate::ray_lookup`), on top of `settings`.
     pub rays: Option<RaySettings>,
+    /// The ray terms per brick (`crate::brick_lookup`) instead of per point.
+    pub bricks: bool,
 }
 
 impl Lookup {
@@ -48,11 +67,16 @@ impl Lookup {
         let s = &self.settings;
         let rays = match self.rays {
             Some(r) => format!(
-                ", exact probe visibility: {}, near field: {} (rays through the asset's BVH, \
-                 bench/src/ray_lookup.rs)",
+                ", exact probe visibility: {}, near field: {}, near hits {} (rays through the \
+                 asset's BVH, bench/src/ray_lookup.rs)",
                 r.visibility,
                 r.near_field
-                    .map_or("none".into(), |reach| format!("{reach} spacings"))
+                    .map_or("none".into(), |reach| format!("{reach} spacings")),
+                if r.near_light {
+                    "bring their brick's relit radiance"
+                } else {
+                    "are dark"
+                }
             ),
             None => String::new(),
         };
@@ -97,8 +121,8 @@ impl Lookups {
             Some(chosen) => chosen.clone(),
             None => {
                 let names: &[&str] = match set {
-                    Set::Bundled => &["trilinear", "default", "rays"],
-                    _ => &["default", "rays"],
+                    Set::Bundled => &["trilinear", "default", "rays", "rays_light"],
+                    _ => &["default", "rays", "rays_light"],
                 };
                 let picked = LOOKUPS.iter().filter(|(n, _)| names.contains(n));
                 picked.map(lookup).collect()
@@ -117,11 +141,12 @@ impl Lookups {
 }
 
 fn lookup(&(name, make): &Variant) -> Lookup {
-    let (settings, rays) = make();
+    let (settings, rays, bricks) = make();
     Lookup {
         name,
         settings,
         rays,
+        bricks,
     }
 }
 
@@ -148,9 +173,12 @@ mod tests {
         let names = |ls: Vec<Lookup>| ls.iter().map(|l| l.name).collect::<Vec<_>>();
         assert_eq!(
             names(none.for_set(Set::Bundled)),
-            ["trilinear", "default", "rays"]
+            ["trilinear", "default", "rays", "rays_light"]
         );
-        assert_eq!(names(none.for_set(Set::HeldOut)), ["default", "rays"]);
+        assert_eq!(
+            names(none.for_set(Set::HeldOut)),
+            ["default", "rays", "rays_light"]
+        );
         assert!(none.for_set(Set::HeldOut)[1].rays.is_some());
         assert_eq!(
             none.for_set(Set::Tuning)[0].settings,
@@ -162,7 +190,8 @@ mod tests {
         assert!(!l[0].settings.depth_moments);
         let err = Lookups::parse(&["moments".into()], None).err().unwrap();
         assert!(
-            err.to_string().contains("known: trilinear, default, rays"),
+            err.to_string()
+                .contains("known: trilinear, default, rays, rays_light, bricks"),
             "{err}"
         );
     }
