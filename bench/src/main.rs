@@ -6,7 +6,6 @@
 
 mod accuracy;
 mod bake;
-mod brick_lookup;
 mod fuzz;
 mod gpu;
 mod lights;
@@ -14,6 +13,7 @@ mod ray_lookup;
 mod render;
 mod results;
 mod surface;
+mod surfel_lookup;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};

@@ -43,9 +43,9 @@ use prt_format::{Asset, Summary};
 use prt_runtime::{Lighting, Sample, VolumeSampler};
 use rayon::prelude::*;
 
-use crate::brick_lookup::BrickLookup;
 use crate::ray_lookup::{NearLight, RayLookup};
 use crate::results::Out;
+use crate::surfel_lookup::SurfelLookup;
 use cases::Case;
 use image::Pixel;
 use lookups::{Lookup, Lookups};
@@ -190,11 +190,11 @@ fn sample(case: &Case, baked: &Baked, setting: Setting, refs: &Refs, lookup: &Lo
     let rays = lookup
         .rays
         .map(|r| RayLookup::for_asset(&baked.asset, &baked.sh, r).with_near_light(&baked.near));
-    let bricks = lookup
-        .bricks
-        .then(|| BrickLookup::new(&baked.asset, &baked.sh, &baked.near));
-    let at = |p: [f32; 3], n: [f32; 3]| match (&bricks, &rays) {
-        (Some(bricks), _) => bricks.sample(p, n).0,
+    let surfels = lookup
+        .surfels
+        .then(|| SurfelLookup::new(&baked.asset, &baked.sh, &baked.near));
+    let at = |p: [f32; 3], n: [f32; 3]| match (&surfels, &rays) {
+        (Some(surfels), _) => surfels.sample(p, n).0,
         (None, Some(rays)) => rays.sample(p, n),
         (None, None) => sampler.sample(p, n),
     };

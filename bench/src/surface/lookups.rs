@@ -42,9 +42,9 @@ const LOOKUPS: [Variant; 5] = [
         };
         (trilinear, Some(RaySettings::with_near_light()), false)
     }),
-    // rays_light's terms decided per brick from its surfels, as a bake would store them
-    // (`crate::brick_lookup`); points without a brick fall back to the default lookup.
-    ("bricks", || {
+    // rays_light's terms decided per surfel, as a bake would store them
+    // (`crate::surfel_lookup`); points without a surfel fall back to the default lookup.
+    ("surfels", || {
         let rays = RaySettings::with_near_light();
         (LookupSettings::default(), Some(rays), true)
     }),
@@ -57,14 +57,22 @@ pub struct Lookup {
     pub settings: LookupSettings,
     /// The ray terms of a reference lookup (`crate::ray_lookup`), on top of `settings`.
     pub rays: Option<RaySettings>,
-    /// The ray terms per brick (`crate::brick_lookup`) instead of per point.
-    pub bricks: bool,
+    /// The ray terms per surfel (`crate::surfel_lookup`) instead of per point.
+    pub surfels: bool,
 }
 
 impl Lookup {
     /// What the report says the lookup is.
     pub fn describe(&self) -> String {
         let s = &self.settings;
+        if self.surfels {
+            return format!(
+                "{}: rays_light's visibility and near field decided per surfel, as a bake would \
+                 store them (the point's nearest surfel of its normal's nearest brick; none: the \
+                 default lookup; bench/src/surfel_lookup.rs)",
+                self.name
+            );
+        }
         let rays = match self.rays {
             Some(r) => format!(
                 ", exact probe visibility: {}, near field: {}, near hits {} (rays through the \
@@ -121,8 +129,8 @@ impl Lookups {
             Some(chosen) => chosen.clone(),
             None => {
                 let names: &[&str] = match set {
-                    Set::Bundled => &["trilinear", "default", "rays", "rays_light"],
-                    _ => &["default", "rays", "rays_light"],
+                    Set::Bundled => &["trilinear", "default", "rays", "rays_light", "surfels"],
+                    _ => &["default", "rays", "rays_light", "surfels"],
                 };
                 let picked = LOOKUPS.iter().filter(|(n, _)| names.contains(n));
                 picked.map(lookup).collect()
@@ -141,12 +149,12 @@ impl Lookups {
 }
 
 fn lookup(&(name, make): &Variant) -> Lookup {
-    let (settings, rays, bricks) = make();
+    let (settings, rays, surfels) = make();
     Lookup {
         name,
         settings,
         rays,
-        bricks,
+        surfels,
     }
 }
 
@@ -173,11 +181,11 @@ mod tests {
         let names = |ls: Vec<Lookup>| ls.iter().map(|l| l.name).collect::<Vec<_>>();
         assert_eq!(
             names(none.for_set(Set::Bundled)),
-            ["trilinear", "default", "rays", "rays_light"]
+            ["trilinear", "default", "rays", "rays_light", "surfels"]
         );
         assert_eq!(
             names(none.for_set(Set::HeldOut)),
-            ["default", "rays", "rays_light"]
+            ["default", "rays", "rays_light", "surfels"]
         );
         assert!(none.for_set(Set::HeldOut)[1].rays.is_some());
         assert_eq!(
@@ -191,7 +199,7 @@ mod tests {
         let err = Lookups::parse(&["moments".into()], None).err().unwrap();
         assert!(
             err.to_string()
-                .contains("known: trilinear, default, rays, rays_light, bricks"),
+                .contains("known: trilinear, default, rays, rays_light, surfels"),
             "{err}"
         );
     }
