@@ -29,6 +29,7 @@
 mod cases;
 mod image;
 mod lookups;
+mod pictures;
 mod refs;
 mod report;
 mod score;
@@ -47,7 +48,7 @@ use crate::ray_lookup::{NearLight, RayLookup};
 use crate::results::Out;
 use crate::surfel_lookup::SurfelLookup;
 use cases::Case;
-use image::Pixel;
+use image::View;
 use lookups::{Lookup, Lookups};
 use prt_runtime::lights::PreparedLight;
 use refs::Reference;
@@ -61,8 +62,10 @@ pub struct SurfaceArgs {
     /// or with all].
     #[arg(long = "case", value_delimiter = ',')]
     cases: Vec<String>,
-    /// Lookups to sample with (comma-separated): default (the runtime's), trilinear [default:
-    /// trilinear,default on the bundled cases, default on the levels].
+    /// Lookups to sample with (comma-separated): default (the runtime's), trilinear, and the
+    /// references of issue 31: rays, rays_light (per point, through the asset's BVH), surfels
+    /// (the same terms per surfel) [default: all but trilinear, which runs on the bundled
+    /// cases only].
     #[arg(long = "lookup", value_delimiter = ',')]
     lookups: Vec<String>,
     /// Directory the cases' paths are relative to (the repository root).
@@ -72,6 +75,10 @@ pub struct SurfaceArgs {
     /// runtime's is 0.2].
     #[arg(long)]
     normal_bias: Option<f32>,
+    /// Write each camera view (the levels') per spacing and lookup to DIR as a PNG: reference,
+    /// lookup, over-lit (red) and under-lit (blue) pixels (`surface/pictures.rs`).
+    #[arg(long, value_name = "DIR")]
+    pictures: Option<PathBuf>,
     #[command(flatten)]
     out: Out,
 }
@@ -80,7 +87,9 @@ pub struct SurfaceArgs {
 struct Refs {
     points: Reference,
     /// The camera view's hit pixels (levels).
-    image: Option<Vec<Pixel>>,
+    image: Option<View>,
+    /// Where the camera view's pictures go (`--pictures`).
+    pictures: Option<PathBuf>,
 }
 
 /// One bake of a case, relit.
@@ -108,6 +117,7 @@ pub fn run(args: SurfaceArgs) -> Result<()> {
         let refs = Refs {
             points: refs::read_reference(&case.points)?,
             image: case.image.as_deref().map(image::read_image).transpose()?,
+            pictures: args.pictures.clone(),
         };
         eprintln!(
             "{} ({}): {} reference points ({} pockets), {} image pixels",
@@ -115,7 +125,7 @@ pub fn run(args: SurfaceArgs) -> Result<()> {
             case.set.label(),
             refs.points.points.len(),
             refs.points.points.iter().filter(|p| p.pocket).count(),
-            refs.image.as_ref().map_or(0, Vec::len)
+            refs.image.as_ref().map_or(0, |v| v.pixels.len())
         );
         oracle.push((case.name.clone(), refs.points.oracle_seconds));
         rows.extend(measure(case, &refs, &lookups.for_set(case.set))?);
@@ -133,14 +143,14 @@ fn measure(case: &Case, refs: &Refs, lookups: &[Lookup]) -> Result<Vec<Row>> {
         ..BakeSettings::default()
     };
     let baked = bake(case, &base, &lighting)?;
-    let mut rows = sample_all(case, &baked, Setting::Default, refs, lookups);
+    let mut rows = sample_all(case, &baked, Setting::Default, refs, lookups)?;
     let half = BakeSettings {
         spacing: Some(baked.asset.header.grid.spacing / 2.0),
         ..base
     };
     drop(baked);
     let baked = bake(case, &half, &lighting)?;
-    rows.extend(sample_all(case, &baked, Setting::Half, refs, lookups));
+    rows.extend(sample_all(case, &baked, Setting::Half, refs, lookups)?);
     Ok(rows)
 }
 
@@ -151,11 +161,11 @@ fn sample_all(
     setting: Setting,
     refs: &Refs,
     lookups: &[Lookup],
-) -> Vec<Row> {
+) -> Result<Vec<Row>> {
     let row = |lookup| {
-        let row = sample(case, baked, setting, refs, lookup);
+        let row = sample(case, baked, setting, refs, lookup)?;
         eprintln!("{}", report::progress(&row));
-        row
+        Ok(row)
     };
     lookups.iter().map(row).collect()
 }
@@ -184,7 +194,13 @@ fn bake(case: &Case, settings: &BakeSettings, lighting: &Lighting) -> Result<Bak
 }
 
 /// Samples `baked` with `lookup` at the reference points and pixels, and scores it.
-fn sample(case: &Case, baked: &Baked, setting: Setting, refs: &Refs, lookup: &Lookup) -> Row {
+fn sample(
+    case: &Case,
+    baked: &Baked,
+    setting: Setting,
+    refs: &Refs,
+    lookup: &Lookup,
+) -> Result<Row> {
     let t = Instant::now();
     let sampler = VolumeSampler::for_asset(&baked.asset, &baked.sh, &lookup.settings);
     let rays = lookup
@@ -206,16 +222,25 @@ fn sample(case: &Case, baked: &Baked, setting: Setting, refs: &Refs, lookup: &Lo
         .collect();
     let points_s = t.elapsed().as_secs_f64();
     let t = Instant::now();
-    let image = refs.image.as_ref().map(|pixels| {
-        let samples: Vec<Sample> = pixels
-            .par_iter()
-            .map(|p| at(p.position, p.normal))
-            .collect();
-        image::score_image(pixels, &score::irradiance(&samples))
-    });
+    let image = match &refs.image {
+        Some(view) => {
+            let samples: Vec<Sample> = view
+                .pixels
+                .par_iter()
+                .map(|p| at(p.position, p.normal))
+                .collect();
+            let e = score::irradiance(&samples);
+            if let Some(dir) = &refs.pictures {
+                let name = format!("{}_{}_{}", case.name, setting.label(), lookup.name);
+                pictures::write(dir, &name, view, &e)?;
+            }
+            Some(image::score_image(&view.pixels, &e))
+        }
+        None => None,
+    };
     let image_s = t.elapsed().as_secs_f64();
     let summary = Summary::of(&baked.asset, 0);
-    Row {
+    Ok(Row {
         case: case.name.clone(),
         set: case.set,
         setting,
@@ -231,7 +256,7 @@ fn sample(case: &Case, baked: &Baked, setting: Setting, refs: &Refs, lookup: &Lo
         relight_s: baked.relight_s,
         points_s,
         image_s,
-    }
+    })
 }
 
 /// The asset's bytes an engine keeps at runtime: every array section of `prt_format::Summary`

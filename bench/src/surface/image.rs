@@ -20,9 +20,19 @@ use serde_json::Value;
 use super::refs::read_json;
 use super::score::{is_over_lit, mean_rgb, percentile};
 
+/// A camera view's reference: its size and its hit pixels.
+#[derive(Clone, Debug)]
+pub struct View {
+    pub width: usize,
+    pub height: usize,
+    pub pixels: Vec<Pixel>,
+}
+
 /// One hit pixel of the reference.
 #[derive(Clone, Debug)]
 pub struct Pixel {
+    /// Row-major index from the top-left pixel.
+    pub index: usize,
     pub position: [f32; 3],
     pub normal: [f32; 3],
     /// Irradiance of the reference SH of incident radiance there.
@@ -46,33 +56,40 @@ impl ImageScore {
 }
 
 /// The hit pixels (status 1) of an image reference; sky (0) and back faces (2) have no truth.
-pub fn read_image(path: &Path) -> Result<Vec<Pixel>> {
+pub fn read_image(path: &Path) -> Result<View> {
     let doc = read_json(path)?;
     read_columns(&doc).with_context(|| format!("{}: image reference", path.display()))
 }
 
-fn read_columns(doc: &Value) -> Result<Vec<Pixel>> {
+fn read_columns(doc: &Value) -> Result<View> {
     let size = |key: &str| -> Result<usize> {
         let v = doc.get(key).and_then(Value::as_u64);
         Ok(usize::try_from(
             v.with_context(|| format!("no \"{key}\""))?,
         )?)
     };
-    let n = size("width")? * size("height")?;
+    let (width, height) = (size("width")?, size("height")?);
+    let n = width * height;
     let status = column(doc, "status", n, 1)?;
     let [position, normal, e_sh, e_hemi] =
         ["position", "normal", "e_sh", "e_hemi"].map(|key| column(doc, key, n, 3));
     let (position, normal, e_sh, e_hemi) = (position?, normal?, e_sh?, e_hemi?);
     let at = |v: &[f64], i: usize| [v[3 * i], v[3 * i + 1], v[3 * i + 2]];
-    Ok((0..n)
+    let pixels = (0..n)
         .filter(|&i| status[i] == 1.0)
         .map(|i| Pixel {
+            index: i,
             position: at(&position, i).map(|c| c as f32),
             normal: at(&normal, i).map(|c| c as f32),
             e_sh: at(&e_sh, i),
             e_hemi: at(&e_hemi, i),
         })
-        .collect())
+        .collect();
+    Ok(View {
+        width,
+        height,
+        pixels,
+    })
 }
 
 /// The array `key` of `doc`: `per_pixel` numbers for each of `pixels`.
@@ -118,6 +135,7 @@ mod tests {
 
     fn pixel(e_sh: [f64; 3], e_hemi: f64) -> Pixel {
         Pixel {
+            index: 0,
             position: [0.0; 3],
             normal: [0.0, 0.0, 1.0],
             e_sh,
@@ -155,8 +173,10 @@ mod tests {
             "albedo": [0, 0, 0, 0.5, 0.5, 0.5],
             "e_sh": [0, 0, 0, 4, 5, 6], "e_hemi": [0, 0, 0, 7, 8, 9],
         });
-        let pixels = read_columns(&doc).unwrap();
-        assert_eq!(pixels.len(), 1);
+        let view = read_columns(&doc).unwrap();
+        assert_eq!((view.width, view.height), (2, 1));
+        let pixels = view.pixels;
+        assert_eq!((pixels.len(), pixels[0].index), (1, 1));
         assert_eq!(pixels[0].position, [1.0, 2.0, 3.0]);
         assert_eq!(
             (pixels[0].e_sh, pixels[0].e_hemi),

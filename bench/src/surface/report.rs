@@ -18,7 +18,7 @@ pub enum Setting {
 }
 
 impl Setting {
-    fn label(self) -> &'static str {
+    pub fn label(self) -> &'static str {
         match self {
             Setting::Default => "default",
             Setting::Half => "half",
