@@ -30,6 +30,7 @@ mod cases;
 mod image;
 mod lookups;
 mod pictures;
+mod placement;
 mod refs;
 mod report;
 mod score;
@@ -247,6 +248,7 @@ fn sample(
         spacing: baked.asset.header.grid.spacing,
         lookup: *lookup,
         probes: summary.probe_count,
+        surface_probes: placement::surface_probes(&baked.asset),
         valid: summary.valid_probe_count,
         dilated: summary.dilated_probe_count,
         runtime_bytes: runtime_bytes(&summary),

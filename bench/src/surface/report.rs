@@ -34,6 +34,8 @@ pub struct Row {
     pub spacing: f32,
     pub lookup: Lookup,
     pub probes: usize,
+    /// Probes at a corner of a cell holding a surfel (`placement::surface_probes`).
+    pub surface_probes: usize,
     pub valid: usize,
     pub dilated: usize,
     /// The asset's bytes an engine keeps at runtime (`surface::runtime_bytes`).
@@ -249,15 +251,16 @@ fn cases(md: &mut String, rows: &[Row]) -> Result<()> {
     writeln!(
         md,
         "\n## Per case\n\n| case | set | spacing | lookup | probes (valid, dilated) | runtime MB \
-         | open mean | open p95 | open leaks | pocket mean (points) | image rel L1 | over-lit \
-         pixels | black / holes |\n|---|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+         | probes at surfaces | open mean | open p95 | open leaks | pocket mean (points) | image \
+         rel L1 | over-lit pixels | black / holes |\n|---|---|---:|---|---:|---:|---:|---:|---:|---:\
+         |---:|---:|---:|---:|"
     )?;
     for r in rows {
         let p = &r.points;
         writeln!(
             md,
-            "| {} | {} | {:.3} m | {} | {} ({}, {}) | {:.1} | {:.2}% | {} | {} of {} ({:.1}%) | {} | {} \
-             | {} | {} / {} |",
+            "| {} | {} | {:.3} m | {} | {} ({}, {}) | {:.1} | {} ({:.0}%) | {:.2}% | {} | {} of {} \
+             ({:.1}%) | {} | {} | {} | {} / {} |",
             r.case,
             r.set.label(),
             r.spacing,
@@ -266,6 +269,8 @@ fn cases(md: &mut String, rows: &[Row]) -> Result<()> {
             r.valid,
             r.dilated,
             r.runtime_bytes as f64 / 1e6,
+            r.surface_probes,
+            100.0 * r.surface_probes as f64 / r.probes.max(1) as f64,
             100.0 * p.open_mean,
             pct(p.open_p95),
             p.open_leaks,
