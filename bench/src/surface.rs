@@ -76,6 +76,10 @@ pub struct SurfaceArgs {
     /// runtime's is 0.2].
     #[arg(long)]
     normal_bias: Option<f32>,
+    /// Bake at this spacing in metres instead of the default, and at half of it [default: the
+    /// bake's default for each case].
+    #[arg(long)]
+    spacing: Option<f32>,
     /// Write each camera view (the levels') per spacing and lookup to DIR as a PNG: reference,
     /// lookup, over-lit (red) and under-lit (blue) pixels (`surface/pictures.rs`).
     #[arg(long, value_name = "DIR")]
@@ -129,18 +133,25 @@ pub fn run(args: SurfaceArgs) -> Result<()> {
             refs.image.as_ref().map_or(0, |v| v.pixels.len())
         );
         oracle.push((case.name.clone(), refs.points.oracle_seconds));
-        rows.extend(measure(case, &refs, &lookups.for_set(case.set))?);
+        rows.extend(measure(
+            case,
+            &refs,
+            &lookups.for_set(case.set),
+            args.spacing,
+        )?);
     }
     args.out
         .report("surface", &report::markdown(&rows, &oracle)?)
 }
 
-/// Bakes and relights `case` at its default spacing and at half of it, a row per lookup each.
-fn measure(case: &Case, refs: &Refs, lookups: &[Lookup]) -> Result<Vec<Row>> {
+/// Bakes and relights `case` at its default spacing (or `spacing`) and at half of it, a row per
+/// lookup each.
+fn measure(case: &Case, refs: &Refs, lookups: &[Lookup], spacing: Option<f32>) -> Result<Vec<Row>> {
     let lighting = prt_runtime::load_rig(&case.rig)
         .with_context(|| format!("{}: loading the rig {}", case.name, case.rig.display()))?;
     let base = BakeSettings {
         double_sided: case.double_sided,
+        spacing,
         ..BakeSettings::default()
     };
     let baked = bake(case, &base, &lighting)?;
