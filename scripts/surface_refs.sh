@@ -83,9 +83,14 @@ for c in "${cases[@]}"; do
     thick_walls) oracle thick_walls "$ROOT/fixtures/thick_walls.gltf" \
                    "$ROOT/fixtures/rigs/thick_walls.json" "$OUT/thick_walls_views.json" gltf ;;
     # Sponza's faces point out of the atrium; prt bakes it --double-sided, so every face is
-    # two-sided.
+    # two-sided. Then the truth 10 cm off the surface and the pocket flags, as the levels have
+    # them (8192 directions; the image reference, sponza_image.json, is refs.py's too: see
+    # fixtures/README.md).
     sponza) oracle sponza "$SCENES/sponza_lod4.glb" "$ROOT/fixtures/rigs/sponza_sun_31.json" \
-              "$OUT/sponza_views.json" two ;;
+              "$OUT/sponza_views.json" two
+            PRT_ORACLE_DIR="$ORACLE" "$PY" "$ROOT/fixtures/levels/refs.py" \
+              --scene "$SCENES/sponza_lod4.glb" --rig "$ROOT/fixtures/rigs/sponza_sun_31.json" \
+              --sidedness two --extend "$OUT/sponza_surface.json" -n 8192 ;;
     *) echo "unknown case $c (cornell, two_rooms, thick_walls, sponza)" >&2; exit 2 ;;
   esac
 done

@@ -1,9 +1,10 @@
 //! `prt-bench surface` (issues 11 and 31): irradiance where a renderer shows it, at surface
-//! points and (for the levels) over a camera view, against the independent oracle's references:
-//! the bundled scenes' (`fixtures/surface/*_surface.json`, made by `scripts/surface_refs.sh`) and
-//! the level family's (`fixtures/levels/refs/`, made by `fixtures/levels/refs.py`), both with the
-//! Mitsuba 3 oracle, which is not part of this repository: the references are its output,
-//! committed as data.
+//! points and (for the levels and Sponza) over a camera view, against the independent oracle's
+//! references: the bundled scenes' (`fixtures/surface/*_surface.json`, made by
+//! `scripts/surface_refs.sh`; Sponza's pocket flags and `sponza_image.json` by
+//! `fixtures/levels/refs.py --scene`) and the level family's (`fixtures/levels/refs/`, made by
+//! `fixtures/levels/refs.py`), all with the Mitsuba 3 oracle, which is not part of this
+//! repository: the references are its output, committed as data.
 //!
 //! Probe SH are accurate at probe centres; surfaces sample the volume between probes, often with a
 //! wall between the point and some of its eight probes. Each case is baked as a new user would
@@ -91,7 +92,7 @@ pub struct SurfaceArgs {
 /// A case's references, read before its bakes so that a bad file fails fast.
 struct Refs {
     points: Reference,
-    /// The camera view's hit pixels (levels).
+    /// The camera view's hit pixels (levels, Sponza).
     image: Option<View>,
     /// Where the camera view's pictures go (`--pictures`).
     pictures: Option<PathBuf>,

@@ -1,5 +1,5 @@
 //! The cases `prt-bench surface` runs: the four bundled scenes with their oracle references
-//! (`fixtures/surface/`), and the level family of issue 31 (`fixtures/levels/levels.json`),
+//! (`fixtures/surface/`: points, and Sponza's camera view), and the level family of issue 31 (`fixtures/levels/levels.json`),
 //! read at run time so that a regenerated or extended family needs no code change.
 
 use std::path::{Path, PathBuf};
@@ -49,7 +49,7 @@ pub struct Case {
     pub rig: PathBuf,
     /// The surface points' reference (`surface_oracle.py` output).
     pub points: PathBuf,
-    /// The camera view's per-pixel reference, when the case has one (the levels).
+    /// The camera view's per-pixel reference, when the case has one (the levels, Sponza).
     pub image: Option<PathBuf>,
     /// Bake with `--double-sided` (Sponza: its materials say single-sided, its walls are not).
     pub double_sided: bool,
@@ -96,16 +96,20 @@ const GROUPS: [(&str, &str); 5] = [
     ("all", "every case, the size test street_20_L120 included"),
 ];
 
-/// Every case under `root`: the bundled ones, then the family in `levels.json` order.
+/// Every case under `root`: the bundled ones, then the family in `levels.json` order. A bundled
+/// case NAME has an image reference when `fixtures/surface/NAME_image.json` exists (Sponza's).
 pub fn all(root: &Path) -> Result<Vec<Case>> {
-    let bundled = BUNDLED.iter().map(|&(name, scene, rig, points, ds)| Case {
-        name: name.to_owned(),
-        set: Set::Bundled,
-        scene: root.join(scene),
-        rig: root.join(rig),
-        points: root.join(points),
-        image: None,
-        double_sided: ds,
+    let bundled = BUNDLED.iter().map(|&(name, scene, rig, points, ds)| {
+        let image = root.join(format!("fixtures/surface/{name}_image.json"));
+        Case {
+            name: name.to_owned(),
+            set: Set::Bundled,
+            scene: root.join(scene),
+            rig: root.join(rig),
+            points: root.join(points),
+            image: image.is_file().then_some(image),
+            double_sided: ds,
+        }
     });
     Ok(bundled
         .chain(levels(&root.join("fixtures/levels"))?)
@@ -242,6 +246,27 @@ mod tests {
             names("street_20_L120,cornell,tuning,cornell"),
             ["cornell", "interior_0", "street_20_L120"]
         );
+    }
+
+    /// The repository's own references: Sponza's image is found beside its points, and both
+    /// read (its points flag pockets; the other bundled cases have neither).
+    #[test]
+    fn sponza_has_an_image_and_pockets() {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+        let cases = all(&root).unwrap();
+        let case = |name: &str| cases.iter().find(|c| c.name == name).unwrap();
+        let sponza = case("sponza");
+        let image = sponza.image.clone();
+        assert_eq!(image, Some(root.join("fixtures/surface/sponza_image.json")));
+        let view = super::super::image::read_image(&image.unwrap()).unwrap();
+        let hits = view.pixels.len();
+        assert!(hits > 15_000, "{hits} hit pixels");
+        let points = super::super::refs::read_reference(&sponza.points).unwrap();
+        let pockets = points.points.iter().filter(|p| p.pocket).count();
+        assert!((1..30).contains(&pockets), "{pockets} pockets");
+        for name in ["cornell", "two_rooms", "thick_walls"] {
+            assert_eq!(case(name).image, None, "{name}");
+        }
     }
 
     #[test]

@@ -1,5 +1,6 @@
-//! The camera-view score of the levels: the CPU twin's irradiance at each pixel's first hit
-//! against the oracle's per-pixel reference (`refs/L_image.json`, fixtures/levels/README.md).
+//! The camera-view score of the levels and Sponza: the CPU twin's irradiance at each pixel's
+//! first hit against the oracle's per-pixel reference (`fixtures/levels/refs/L_image.json`,
+//! fixtures/levels/README.md; `fixtures/surface/sponza_image.json`, the same format).
 //!
 //! `prt render` adds `albedo / pi * sample_irradiance(p, n)` at each pixel, and its snippet
 //! equals the CPU twin (`prt_runtime::VolumeSampler`), so `E` here, the twin's irradiance at the

@@ -122,9 +122,9 @@ fn definitions(md: &mut String, rows: &[Row]) -> Result<()> {
          - Open mean / p95: relative error per point against the reference SH's irradiance \
          (floor 1e-3 of the median truth), over the points that are not pockets (a pocket's \
          truth 10 cm off the surface differs from its truth at 2 mm by over 1.5x; pocket mean \
-         apart, `-`: none; the bundled references have no pockets).\n\
+         apart, `-`: none; of the bundled references only Sponza's flags pockets).\n\
          - Open leaks: open points lit over 1.5x their truth and by over 5% of the median truth.\n\
-         - Image rel L1 (levels): over the camera view's hit pixels, sum of |E - E_sh| over sum \
+         - Image rel L1 (levels, Sponza): over the camera view's hit pixels, sum of |E - E_sh| over sum \
          of E_sh; over-lit pixels: hit pixels lit over 1.5x their truth and by over 5% of the \
          median hit pixel's truth.\n\
          - Runtime MB: the asset's sections an engine keeps and uploads (probes, sky mask and \
