@@ -1,5 +1,7 @@
-//! The lookups `prt-bench surface` compares: named `LookupSettings`, picked with `--lookup`, so
-//! that a new lookup variant is measured on every case by adding one line to [`LOOKUPS`].
+//! The lookups `prt-bench surface` compares, picked with `--lookup`: named `LookupSettings` (the
+//! runtime's lookups) and the reference lookups of issue 31 that trace rays
+//! (`crate::ray_lookup`, `crate::surfel_lookup`). A new variant is measured on every case by
+//! adding one entry to [`LOOKUPS`].
 
 use anyhow::{bail, Result};
 use prt_runtime::LookupSettings;
@@ -122,8 +124,9 @@ impl Lookups {
     }
 
     /// The lookups of a case of `set`. Without `--lookup`: the bundled cases keep the two rows
-    /// of the earlier tables (trilinear against the default), and every case gets the ray
-    /// reference (the bound of issue 31's candidates, `docs/results/surface_candidates.md`).
+    /// of the earlier tables (trilinear against the default), and every case gets the three
+    /// references of issue 31's candidates (`rays`, `rays_light`, `surfels`;
+    /// `docs/results/surface_candidates.md`).
     pub fn for_set(&self, set: Set) -> Vec<Lookup> {
         let lookups = match &self.chosen {
             Some(chosen) => chosen.clone(),
