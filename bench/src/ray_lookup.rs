@@ -30,18 +30,20 @@
 use std::collections::HashMap;
 
 use glam::Vec3;
+use prt_bake::merge::key::dominant_axis;
 use prt_format::sh::{ShRgb, SH_COUNT};
-use prt_format::{Asset, Brick, Geometry, Grid, Probe, BRICK_AXIS_MASK, BRICK_BACKFACE};
+use prt_format::{Asset, Brick, Geometry, BRICK_AXIS_MASK, BRICK_BACKFACE};
 use prt_runtime::relight::BrickRadiance;
-use prt_runtime::shadow_rays::{occluded, ray_offset};
-use prt_runtime::{LookupSettings, Sample, VolumeSampler};
+use prt_runtime::shadow_rays::{closest_hit, occluded, ray_offset};
+use prt_runtime::{Sample, VolumeSampler};
 
 /// Where the rays start: this many probe spacings off the surface along its normal (1 cm on a
 /// 1 m grid), and never less than the shadow rays' own offset.
 pub const RAY_START: f32 = 0.01;
 
-/// Weight kept by a probe the point cannot see: small enough that any visible probe wins,
-/// nonzero so that a point that sees none of its eight still gets their trilinear mean.
+/// Weight kept by a probe the point cannot see: small enough that the visible probes decide
+/// (unless their trilinear weights are below 1e-4 of the blocked ones'), nonzero so that a
+/// point that sees none of its eight still gets their trilinear mean.
 pub const BLOCKED_WEIGHT: f32 = 1e-4;
 
 /// Hemisphere rays of the near-field term (a Fibonacci spiral, cosine-distributed).
@@ -53,8 +55,9 @@ pub struct RaySettings {
     /// Weight each probe by whether a ray from the point reaches it.
     pub visibility: bool,
     /// Reach of the near-field occlusion term in probe spacings; `None` leaves it out.
-    /// 0.75 was chosen on the family's tuning seeds (0.5 / 0.75 / 1.0 / 1.5, median and worst
-    /// level of the open-point mean: `docs/results/surface_candidates.md`).
+    /// 0.75 was chosen on the family's tuning seeds (0.5 / 0.75 / 1.0 / 1.5: the best median,
+    /// a worst level within 0.3 points of 0.5's, and leaks at 1.7% against 0.5's 4.0%;
+    /// `docs/results/surface_candidates.md`).
     pub near_field: Option<f32>,
     /// Rays of the near-field term that hit a surface within reach bring that surface's relit
     /// radiance (its brick's, [`NearLight`]) instead of nothing. Then the reach can be longer:
@@ -130,11 +133,21 @@ impl NearLight {
 
     /// Radiance leaving `p` on a surface whose normal (facing the ray) has dominant axis `axis`:
     /// the nearest brick's (see [`Self::find`]), or black.
-    pub(crate) fn radiance_at(&self, p: Vec3, axis: u32) -> [f32; 3] {
+    fn radiance_at(&self, p: Vec3, axis: u32) -> [f32; 3] {
         match self.find(p, axis) {
             Some(b) => self.radiance[b as usize].at((p - self.centroids[b as usize]).to_array()),
             None => [0.0; 3],
         }
+    }
+
+    /// What a ray from `o` along `d` sees where it hits triangle `tri` of `geo` at distance
+    /// `t`: the radiance of the nearest brick of the triangle's side that faces the ray.
+    pub fn hit_radiance(&self, geo: &Geometry, o: Vec3, d: Vec3, t: f32, tri: usize) -> [f32; 3] {
+        let tri = &geo.triangles[tri];
+        let (v0, v1, v2) = (Vec3::from(tri.v0), Vec3::from(tri.v1), Vec3::from(tri.v2));
+        let normal = (v1 - v0).cross(v2 - v0);
+        let facing = if normal.dot(d) > 0.0 { -normal } else { normal };
+        self.radiance_at(o + d * t, dominant_axis(facing))
     }
 
     /// The brick of dominant axis `axis` whose centroid is nearest `p`, among those in `p`'s
@@ -164,8 +177,7 @@ impl NearLight {
     }
 }
 
-/// The trilinear lookup (at the runtime's default normal bias, without depth moments) with
-/// [`RaySettings`]' ray tests on top.
+/// The trilinear lookup (without depth moments) with [`RaySettings`]' ray tests on top.
 pub struct RayLookup<'a> {
     sampler: VolumeSampler<'a>,
     near_light: Option<&'a NearLight>,
@@ -175,31 +187,32 @@ pub struct RayLookup<'a> {
 }
 
 impl<'a> RayLookup<'a> {
-    /// The ray lookup of `asset` relit to `sh`.
-    pub fn for_asset(asset: &'a Asset, sh: &'a [ShRgb], settings: RaySettings) -> Self {
-        Self::new(
-            &asset.header.grid,
-            &asset.probes,
-            &asset.geometry,
-            sh,
-            settings,
-        )
-    }
-
-    /// The ray lookup over probes `probes` of `grid` with SH `sh`, tracing through `geometry`.
-    pub fn new(
-        grid: &Grid,
-        probes: &[Probe],
-        geometry: &'a Geometry,
+    /// The ray lookup of `asset` relit to `sh`, the point moved `normal_bias` spacings along
+    /// its normal for the trilinear weights (`LookupSettings::normal_bias`).
+    pub fn for_asset(
+        asset: &'a Asset,
         sh: &'a [ShRgb],
+        normal_bias: f32,
         settings: RaySettings,
     ) -> Self {
-        let bias = LookupSettings::default().normal_bias * grid.spacing;
+        let g = &asset.header.grid;
+        let sampler = VolumeSampler::new(g, &asset.probes, sh, normal_bias * g.spacing);
+        Self::new(sampler, &asset.geometry, g.spacing, settings)
+    }
+
+    /// The ray tests on top of `sampler` (a grid of `spacing` metres), tracing through
+    /// `geometry`.
+    pub fn new(
+        sampler: VolumeSampler<'a>,
+        geometry: &'a Geometry,
+        spacing: f32,
+        settings: RaySettings,
+    ) -> Self {
         RayLookup {
-            sampler: VolumeSampler::new(grid, probes, sh, bias),
+            sampler,
             near_light: None,
             geometry,
-            spacing: grid.spacing,
+            spacing,
             settings,
         }
     }
@@ -247,16 +260,11 @@ impl<'a> RayLookup<'a> {
         for k in 0..NEAR_FIELD_RAYS {
             let d = cosine_spiral(k, t, b, n);
             let y = prt_format::sh::basis(d.to_array());
-            let hit = match near {
-                Some(_) => closest_hit(self.geometry, start, d, reach),
-                None => occluded(self.geometry, start, d, reach).then_some((0.0, Vec3::ZERO)),
-            };
-            let near_radiance = match (near, hit) {
-                (Some(light), Some((t, normal))) => {
-                    let facing = if normal.dot(d) > 0.0 { -normal } else { normal };
-                    light.radiance_at(start + d * t, prt_bake::merge::key::dominant_axis(facing))
-                }
-                _ => [0.0; 3],
+            // None: the ray escapes within reach; else what it brings from the near field.
+            let blocked = match near {
+                Some(light) => closest_hit(self.geometry, start, d, reach)
+                    .map(|(t, tri)| light.hit_radiance(self.geometry, start, d, t, tri)),
+                None => occluded(self.geometry, start, d, reach).then_some([0.0; 3]),
             };
             for ch in 0..3 {
                 let l = (0..SH_COUNT)
@@ -264,7 +272,7 @@ impl<'a> RayLookup<'a> {
                     .sum::<f32>()
                     .max(0.0);
                 all[ch] += l;
-                open[ch] += if hit.is_none() { l } else { near_radiance[ch] };
+                open[ch] += blocked.map_or(l, |r| r[ch]);
             }
         }
         std::array::from_fn(|ch| {
@@ -275,51 +283,6 @@ impl<'a> RayLookup<'a> {
             }
         })
     }
-}
-
-/// The nearest triangle on `o + t d`, `t` in `(0, tmax)`: its distance and unit normal.
-pub(crate) fn closest_hit(geo: &Geometry, o: Vec3, d: Vec3, tmax: f32) -> Option<(f32, Vec3)> {
-    if geo.nodes.is_empty() {
-        return None;
-    }
-    let inv = d.recip();
-    let mut best: Option<(f32, Vec3)> = None;
-    let mut stack = vec![0u32];
-    while let Some(i) = stack.pop() {
-        let node = &geo.nodes[i as usize];
-        let limit = best.map_or(tmax, |(t, _)| t);
-        let t0 = (Vec3::from(node.min) - o) * inv;
-        let t1 = (Vec3::from(node.max) - o) * inv;
-        let near = t0.min(t1).max_element().max(0.0);
-        let far = t0.max(t1).min_element().min(limit);
-        if near > far {
-            continue;
-        }
-        if node.count > 0 {
-            for tri in &geo.triangles[node.first as usize..(node.first + node.count) as usize] {
-                let (v0, v1, v2) = (Vec3::from(tri.v0), Vec3::from(tri.v1), Vec3::from(tri.v2));
-                let (e1, e2) = (v1 - v0, v2 - v0);
-                let p = d.cross(e2);
-                let det = e1.dot(p);
-                if det == 0.0 {
-                    continue;
-                }
-                let s = o - v0;
-                let u = s.dot(p) / det;
-                let q = s.cross(e1);
-                let v = d.dot(q) / det;
-                let t = e2.dot(q) / det;
-                let limit = best.map_or(tmax, |(b, _)| b);
-                if (0.0..=1.0).contains(&u) && v >= 0.0 && u + v <= 1.0 && t > 0.0 && t < limit {
-                    best = Some((t, e1.cross(e2).normalize_or_zero()));
-                }
-            }
-        } else {
-            stack.push(node.first);
-            stack.push(node.first + 1);
-        }
-    }
-    best
 }
 
 /// Direction `k` of [`NEAR_FIELD_RAYS`] on a golden-angle spiral, cosine-distributed over the
@@ -335,7 +298,7 @@ pub(crate) fn cosine_spiral(k: u32, t: Vec3, b: Vec3, n: Vec3) -> Vec3 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use prt_format::{BvhNode, Triangle, PROBE_VALID};
+    use prt_format::{BvhNode, Grid, Probe, Triangle, PROBE_VALID};
 
     /// A 2x1x1 grid (spacing 2, probes at x = 0 and 2) and, with `wall`, a wall at x = 1 over
     /// y, z in [-5, 5].
@@ -378,7 +341,10 @@ mod tests {
         sh: &'a [ShRgb],
         settings: RaySettings,
     ) -> RayLookup<'a> {
-        RayLookup::new(&parts.0, &parts.1, &parts.2, sh, settings)
+        let (grid, probes, geometry) = parts;
+        // The runtime's default bias, 0.2 spacings (0.4 m here).
+        let sampler = VolumeSampler::new(grid, probes, sh, 0.2 * grid.spacing);
+        RayLookup::new(sampler, geometry, grid.spacing, settings)
     }
 
     fn lit_and_dark() -> Vec<ShRgb> {

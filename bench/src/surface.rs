@@ -51,7 +51,7 @@ use crate::results::Out;
 use crate::surfel_lookup::SurfelLookup;
 use cases::Case;
 use image::View;
-use lookups::{Lookup, Lookups};
+use lookups::{Kind, Lookup, Lookups};
 use prt_runtime::lights::PreparedLight;
 use refs::Reference;
 use report::{Row, Setting};
@@ -101,8 +101,8 @@ struct Refs {
 /// One bake of a case, relit.
 struct Baked {
     asset: Asset,
-    /// The relit bricks, for the ray lookup's near-field hits.
-    near: NearLight,
+    /// The relit bricks, for the near-field hits of the reference lookups that need them.
+    near: Option<NearLight>,
     sh: Vec<ShRgb>,
     bake_s: f64,
     relight_s: f64,
@@ -155,14 +155,15 @@ fn measure(case: &Case, refs: &Refs, lookups: &[Lookup], spacing: Option<f32>) -
         spacing,
         ..BakeSettings::default()
     };
-    let baked = bake(case, &base, &lighting)?;
+    let bricks = lookups.iter().any(Lookup::needs_bricks);
+    let baked = bake(case, &base, &lighting, bricks)?;
     let mut rows = sample_all(case, &baked, Setting::Default, refs, lookups)?;
     let half = BakeSettings {
         spacing: Some(baked.asset.header.grid.spacing / 2.0),
         ..base
     };
     drop(baked);
-    let baked = bake(case, &half, &lighting)?;
+    let baked = bake(case, &half, &lighting, bricks)?;
     rows.extend(sample_all(case, &baked, Setting::Half, refs, lookups)?);
     Ok(rows)
 }
@@ -183,7 +184,9 @@ fn sample_all(
     lookups.iter().map(row).collect()
 }
 
-fn bake(case: &Case, settings: &BakeSettings, lighting: &Lighting) -> Result<Baked> {
+/// Bakes `case` with `settings`, relights it with `lighting`, and with `bricks` keeps the relit
+/// bricks for the reference lookups' near field (outside the relight's time).
+fn bake(case: &Case, settings: &BakeSettings, lighting: &Lighting, bricks: bool) -> Result<Baked> {
     let t = Instant::now();
     let (asset, _) = prt_bake::bake(&case.scene, settings, &NoProgress)
         .with_context(|| format!("{}: baking {}", case.name, case.scene.display()))?;
@@ -194,16 +197,57 @@ fn bake(case: &Case, settings: &BakeSettings, lighting: &Lighting) -> Result<Bak
         .relight(lighting, 1)
         .with_context(|| format!("{}: relighting with {}", case.name, case.rig.display()))?
         .sh;
-    let lights: Vec<_> = lighting.rig.lights.iter().map(PreparedLight::new).collect();
-    let radiance = relighter.brick_radiance(&relighter.direct_irradiance(&lights).0);
-    let near = NearLight::for_asset(&asset, radiance);
+    let relight_s = t.elapsed().as_secs_f64();
+    let near = bricks.then(|| {
+        let lights: Vec<_> = lighting.rig.lights.iter().map(PreparedLight::new).collect();
+        let radiance = relighter.brick_radiance(&relighter.direct_irradiance(&lights).0);
+        NearLight::for_asset(&asset, radiance)
+    });
     Ok(Baked {
         asset,
         sh,
         near,
         bake_s,
-        relight_s: t.elapsed().as_secs_f64(),
+        relight_s,
     })
+}
+
+/// The sampler of one lookup over one bake.
+enum Sampler<'a> {
+    Runtime(VolumeSampler<'a>),
+    Rays(RayLookup<'a>),
+    Surfels(SurfelLookup<'a>),
+}
+
+impl<'a> Sampler<'a> {
+    fn new(baked: &'a Baked, lookup: &Lookup) -> Result<Self> {
+        let (asset, sh, settings) = (&baked.asset, &baked.sh[..], &lookup.settings);
+        let near = || {
+            baked
+                .near
+                .as_ref()
+                .context("the relit bricks were not kept")
+        };
+        Ok(match lookup.kind {
+            Kind::Runtime => Sampler::Runtime(VolumeSampler::for_asset(asset, sh, settings)),
+            Kind::Rays(r) => {
+                let rays = RayLookup::for_asset(asset, sh, settings.normal_bias, r);
+                Sampler::Rays(match r.near_light {
+                    true => rays.with_near_light(near()?),
+                    false => rays,
+                })
+            }
+            Kind::Surfels => Sampler::Surfels(SurfelLookup::new(asset, sh, near()?, settings)),
+        })
+    }
+
+    fn sample(&self, p: [f32; 3], n: [f32; 3]) -> Sample {
+        match self {
+            Sampler::Runtime(s) => s.sample(p, n),
+            Sampler::Rays(s) => s.sample(p, n),
+            Sampler::Surfels(s) => s.sample(p, n),
+        }
+    }
 }
 
 /// Samples `baked` with `lookup` at the reference points and pixels, and scores it.
@@ -215,18 +259,8 @@ fn sample(
     lookup: &Lookup,
 ) -> Result<Row> {
     let t = Instant::now();
-    let sampler = VolumeSampler::for_asset(&baked.asset, &baked.sh, &lookup.settings);
-    let rays = lookup
-        .rays
-        .map(|r| RayLookup::for_asset(&baked.asset, &baked.sh, r).with_near_light(&baked.near));
-    let surfels = lookup
-        .surfels
-        .then(|| SurfelLookup::new(&baked.asset, &baked.sh, &baked.near));
-    let at = |p: [f32; 3], n: [f32; 3]| match (&surfels, &rays) {
-        (Some(surfels), _) => surfels.sample(p, n).0,
-        (None, Some(rays)) => rays.sample(p, n),
-        (None, None) => sampler.sample(p, n),
-    };
+    let sampler = Sampler::new(baked, lookup)?;
+    let at = |p: [f32; 3], n: [f32; 3]| sampler.sample(p, n);
     let samples: Vec<Sample> = refs
         .points
         .points

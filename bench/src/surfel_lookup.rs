@@ -6,9 +6,11 @@
 //! probes it sees and its near-field transfer. This lookup computes exactly those per-surfel
 //! values at lookup time, so that the design is measured before the asset format carries it:
 //!
-//! - the point's surfel: the nearest surfel of the nearest brick of its normal's dominant axis
-//!   ([`NearLight::find`]); a point without one falls back to the runtime's default lookup
-//!   (depth moments);
+//! - the point's surfel: the nearest surfel of the brick of its normal's dominant axis whose
+//!   centroid is nearest ([`NearLight::find`]); a point without one falls back to the runtime's
+//!   default lookup (depth moments). A runtime would find it by key instead (the brick's cell
+//!   and axis, then the point's cell inside the brick), which can pick a different surfel near
+//!   brick borders: the bound is for the stored values, not for that search;
 //! - a probe counts when a ray from the surfel reaches it ([`BLOCKED_WEIGHT`] otherwise); a
 //!   surfel that sees none of the point's probes leaves them to the default lookup;
 //! - the irradiance is scaled by `(T_open . L + near) / (T_all . L)` per channel: `T_open` and
@@ -27,11 +29,11 @@ use glam::Vec3;
 use prt_bake::merge::key::dominant_axis;
 use prt_format::sh::{ShRgb, SH_COUNT};
 use prt_format::{Asset, Surfel};
-use prt_runtime::shadow_rays::{occluded, ray_offset};
+use prt_runtime::shadow_rays::{closest_hit, occluded, ray_offset};
 use prt_runtime::{LookupSettings, Sample, VolumeSampler};
 
 use crate::ray_lookup::{
-    closest_hit, cosine_spiral, NearLight, RaySettings, BLOCKED_WEIGHT, NEAR_FIELD_RAYS, RAY_START,
+    cosine_spiral, NearLight, RaySettings, BLOCKED_WEIGHT, NEAR_FIELD_RAYS, RAY_START,
 };
 
 /// The ray terms of [`RaySettings::with_near_light`], decided per surfel.
@@ -44,57 +46,70 @@ pub struct SurfelLookup<'a> {
 }
 
 impl<'a> SurfelLookup<'a> {
-    /// The surfel lookup of `asset` relit to `sh`, its bricks' relit radiance in `near`.
-    pub fn new(asset: &'a Asset, sh: &'a [ShRgb], near: &'a NearLight) -> Self {
+    /// The surfel lookup of `asset` relit to `sh`, its bricks' relit radiance in `near`; the
+    /// trilinear weights and the fallback take `lookup`'s normal bias.
+    pub fn new(
+        asset: &'a Asset,
+        sh: &'a [ShRgb],
+        near: &'a NearLight,
+        lookup: &LookupSettings,
+    ) -> Self {
         let trilinear = LookupSettings {
             depth_moments: false,
-            ..LookupSettings::default()
+            ..*lookup
+        };
+        let fallback = LookupSettings {
+            depth_moments: true,
+            ..*lookup
         };
         let spacing = asset.header.grid.spacing;
         let reach = RaySettings::with_near_light().near_field.unwrap_or(0.0) * spacing;
         SurfelLookup {
             asset,
             trilinear: VolumeSampler::for_asset(asset, sh, &trilinear),
-            fallback: VolumeSampler::for_asset(asset, sh, &LookupSettings::default()),
+            fallback: VolumeSampler::for_asset(asset, sh, &fallback),
             near,
             reach,
         }
     }
 
-    /// The sample at `position` for a surface with unit normal `normal`, and whether a surfel
-    /// was found (false: the fallback's sample).
-    pub fn sample(&self, position: [f32; 3], normal: [f32; 3]) -> (Sample, bool) {
-        let Some(brick) = self
-            .near
-            .find(Vec3::from(position), dominant_axis(normal.into()))
-        else {
-            return (self.fallback.sample(position, normal), false);
-        };
-        let b = &self.asset.bricks[brick as usize];
-        let surfels = &self.asset.surfels
-            [b.first_surfel as usize..(b.first_surfel + b.surfel_count) as usize];
+    /// The sample at `position` for a surface with unit normal `normal`.
+    pub fn sample(&self, position: [f32; 3], normal: [f32; 3]) -> Sample {
         let p = Vec3::from(position);
-        let nearest = surfels.iter().min_by(|a, b| {
-            let d = |s: &Surfel| Vec3::from(s.position).distance_squared(p);
-            d(a).total_cmp(&d(b))
-        });
-        let Some(surfel) = nearest else {
-            return (self.fallback.sample(position, normal), false);
+        let surfel = self
+            .near
+            .find(p, dominant_axis(normal.into()))
+            .and_then(|b| {
+                let b = &self.asset.bricks[b as usize];
+                let range = b.first_surfel as usize..(b.first_surfel + b.surfel_count) as usize;
+                let d = |s: &&Surfel| Vec3::from(s.position).distance_squared(p);
+                self.asset.surfels[range]
+                    .iter()
+                    .min_by(|a, b| d(a).total_cmp(&d(b)))
+            });
+        let Some(surfel) = surfel else {
+            return self.fallback.sample(position, normal);
         };
-        let surfels = std::slice::from_ref(surfel);
+        let start = self.start(surfel);
         let seen = std::cell::Cell::new(false);
         let mut s = self
             .trilinear
             .sample_weighted(position, normal, |_, probe| {
-                let v = self.visibility(surfels, probe);
-                seen.set(seen.get() || v == 1.0);
-                v
+                let d = probe - start;
+                let len = d.length();
+                let sees = len <= 0.0 || !occluded(&self.asset.geometry, start, d / len, len);
+                seen.set(seen.get() || sees);
+                if sees {
+                    1.0
+                } else {
+                    BLOCKED_WEIGHT
+                }
             });
         if !seen.get() {
-            // The brick sees none of the point's probes: the default lookup decides.
+            // The surfel sees none of the point's probes: the default lookup decides.
             s = self.fallback.sample(position, normal);
         }
-        let (open, all, near) = self.transfer(surfels);
+        let (open, all, near) = self.transfer(surfel);
         for (ch, (e, near)) in s.irradiance.iter_mut().zip(near).enumerate() {
             let dot = |t: &[f32; SH_COUNT]| (0..SH_COUNT).map(|i| s.sh[i][ch] * t[i]).sum::<f32>();
             let total = dot(&all);
@@ -102,56 +117,30 @@ impl<'a> SurfelLookup<'a> {
                 *e *= ((dot(&open) + near) / total).max(0.0);
             }
         }
-        (s, true)
+        s
     }
 
-    /// [`BLOCKED_WEIGHT`] unless a ray from one of `surfels` reaches `probe`.
-    fn visibility(&self, surfels: &[Surfel], probe: Vec3) -> f32 {
-        let sees = surfels.iter().any(|s| {
-            let o = self.start(s);
-            let d = probe - o;
-            let len = d.length();
-            len <= 0.0 || !occluded(&self.asset.geometry, o, d / len, len)
-        });
-        if sees {
-            1.0
-        } else {
-            BLOCKED_WEIGHT
-        }
-    }
-
-    /// The open and total SH sums and the near radiance sum (module docs) of [`NEAR_FIELD_RAYS`]
-    /// rays taken in turn from `surfels`.
-    fn transfer(&self, surfels: &[Surfel]) -> ([f32; SH_COUNT], [f32; SH_COUNT], [f32; 3]) {
+    /// The open and total SH sums and the near radiance sum (module docs) of the surfel's
+    /// [`NEAR_FIELD_RAYS`] cosine rays.
+    fn transfer(&self, surfel: &Surfel) -> ([f32; SH_COUNT], [f32; SH_COUNT], [f32; 3]) {
+        let geo = &self.asset.geometry;
         let (mut open, mut all, mut near) = ([0.0; SH_COUNT], [0.0; SH_COUNT], [0.0f32; 3]);
+        let n = Vec3::from(surfel.normal);
+        let (t, b) = n.any_orthonormal_pair();
+        let o = self.start(surfel);
         for k in 0..NEAR_FIELD_RAYS {
-            let s = &surfels[k as usize % surfels.len()];
-            let n = Vec3::from(s.normal);
-            let (t, b) = n.any_orthonormal_pair();
             let d = cosine_spiral(k, t, b, n);
             let y = prt_format::sh::basis(d.to_array());
-            let o = self.start(s);
-            match closest_hit(&self.asset.geometry, o, d, self.reach) {
-                Some((t, hit_normal)) => {
-                    let facing = if hit_normal.dot(d) > 0.0 {
-                        -hit_normal
-                    } else {
-                        hit_normal
-                    };
-                    let r = self.near_radiance(o + d * t, facing);
-                    for ch in 0..3 {
-                        near[ch] += r[ch];
-                    }
+            match closest_hit(geo, o, d, self.reach) {
+                Some((t, tri)) => {
+                    let r = self.near.hit_radiance(geo, o, d, t, tri);
+                    (0..3).for_each(|ch| near[ch] += r[ch]);
                 }
                 None => (0..SH_COUNT).for_each(|i| open[i] += y[i]),
             }
             (0..SH_COUNT).for_each(|i| all[i] += y[i]);
         }
         (open, all, near)
-    }
-
-    fn near_radiance(&self, p: Vec3, facing: Vec3) -> [f32; 3] {
-        self.near.radiance_at(p, dominant_axis(facing))
     }
 
     /// Where a surfel's rays start: [`RAY_START`] spacings along its normal.

@@ -5,7 +5,8 @@
 //! `prt render` adds `albedo / pi * sample_irradiance(p, n)` at each pixel, and its snippet
 //! equals the CPU twin (`prt_runtime::VolumeSampler`), so `E` here, the twin's irradiance at the
 //! pixel's first hit with the reference's normal (turned towards the camera), is exactly what
-//! `prt render` shows as indirect x pi / albedo there: the image is scored without a GPU, and
+//! `prt render` shows as indirect x pi / albedo there (for the runtime's lookups; the ray
+//! references of issue 31 are not in the renderer): the image is scored without a GPU, and
 //! without the albedo, which cancels.
 //!
 //! - rel L1: the sum over hit pixels (status 1) of `|E - e_sh|` over the sum of `e_sh` (mean
@@ -70,7 +71,9 @@ fn read_columns(doc: &Value) -> Result<View> {
         )?)
     };
     let (width, height) = (size("width")?, size("height")?);
-    let n = width * height;
+    let n = width
+        .checked_mul(height)
+        .with_context(|| format!("{width} x {height} pixels overflow"))?;
     let status = column(doc, "status", n, 1)?;
     let [position, normal, e_sh, e_hemi] =
         ["position", "normal", "e_sh", "e_hemi"].map(|key| column(doc, key, n, 3));

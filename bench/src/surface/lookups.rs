@@ -9,47 +9,44 @@ use prt_runtime::LookupSettings;
 use super::cases::Set;
 use crate::ray_lookup::RaySettings;
 
-/// A lookup's name and how to make its settings (and its ray terms, for a reference lookup).
-type Variant = (
-    &'static str,
-    fn() -> (LookupSettings, Option<RaySettings>, bool),
-);
+/// What samples the volume: the runtime's lookup with `Lookup::settings`, or a reference of
+/// issue 31 that traces rays (its trilinear weights take `Lookup::settings`' normal bias).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Kind {
+    /// `prt_runtime::VolumeSampler`: what `prt render` shows.
+    Runtime,
+    /// `crate::ray_lookup::RayLookup`: the ray terms traced from the point.
+    Rays(RaySettings),
+    /// `crate::surfel_lookup::SurfelLookup`: `rays_light`'s terms traced from the point's surfel.
+    Surfels,
+}
+
+/// A lookup's name and how to make it.
+type Variant = (&'static str, fn() -> (LookupSettings, Kind));
+
+/// Trilinear over the probes' validity only, at the runtime's normal bias.
+fn trilinear() -> LookupSettings {
+    LookupSettings {
+        depth_moments: false,
+        ..LookupSettings::default()
+    }
+}
 
 /// Every lookup `--lookup` knows, by name, in table order.
 const LOOKUPS: [Variant; 5] = [
     // Hardware trilinear over the probes' validity only: what depth moments are measured against.
-    ("trilinear", || {
-        let trilinear = LookupSettings {
-            depth_moments: false,
-            ..LookupSettings::default()
-        };
-        (trilinear, None, false)
-    }),
+    ("trilinear", || (trilinear(), Kind::Runtime)),
     // The runtime's: depth moments (DDGI's Chebyshev test), normal bias 0.2 spacings.
-    ("default", || (LookupSettings::default(), None, false)),
-    // The reference with rays through the asset's BVH (`crate::ray_lookup`): exact probe
-    // visibility and the near-field term, the bound a baked version can reach.
-    ("rays", || {
-        let trilinear = LookupSettings {
-            depth_moments: false,
-            ..LookupSettings::default()
-        };
-        (trilinear, Some(RaySettings::default()), false)
-    }),
+    ("default", || (LookupSettings::default(), Kind::Runtime)),
+    // Rays through the asset's BVH from the point: exact probe visibility and a dark near field.
+    ("rays", || (trilinear(), Kind::Rays(RaySettings::default()))),
     // The same, with near-field hits bringing their surface's relit radiance (reach 1 spacing).
     ("rays_light", || {
-        let trilinear = LookupSettings {
-            depth_moments: false,
-            ..LookupSettings::default()
-        };
-        (trilinear, Some(RaySettings::with_near_light()), false)
+        (trilinear(), Kind::Rays(RaySettings::with_near_light()))
     }),
-    // rays_light's terms decided per surfel, as a bake would store them
-    // (`crate::surfel_lookup`); points without a surfel fall back to the default lookup.
-    ("surfels", || {
-        let rays = RaySettings::with_near_light();
-        (LookupSettings::default(), Some(rays), true)
-    }),
+    // rays_light's terms decided per surfel, as a bake would store them; points without a
+    // surfel fall back to the default lookup.
+    ("surfels", || (LookupSettings::default(), Kind::Surfels)),
 ];
 
 /// A named lookup.
@@ -57,28 +54,28 @@ const LOOKUPS: [Variant; 5] = [
 pub struct Lookup {
     pub name: &'static str,
     pub settings: LookupSettings,
-    /// The ray terms of a reference lookup (`crate::ray_lookup`), on top of `settings`.
-    pub rays: Option<RaySettings>,
-    /// The ray terms per surfel (`crate::surfel_lookup`) instead of per point.
-    pub surfels: bool,
+    pub kind: Kind,
 }
 
 impl Lookup {
     /// What the report says the lookup is.
     pub fn describe(&self) -> String {
         let s = &self.settings;
-        if self.surfels {
-            return format!(
-                "{}: rays_light's visibility and near field decided per surfel, as a bake would \
-                 store them (the point's nearest surfel of its normal's nearest brick; none: the \
-                 default lookup; bench/src/surfel_lookup.rs)",
+        let bias = s.normal_bias;
+        match self.kind {
+            Kind::Runtime if s.depth_moments => format!(
+                "{}: depth moments (Chebyshev) and facing weights, normal bias {bias} spacings",
                 self.name
-            );
-        }
-        let rays = match self.rays {
-            Some(r) => format!(
-                ", exact probe visibility: {}, near field: {}, near hits {} (rays through the \
-                 asset's BVH, bench/src/ray_lookup.rs)",
+            ),
+            Kind::Runtime => format!(
+                "{}: trilinear over probe validity, normal bias {bias} spacings",
+                self.name
+            ),
+            Kind::Rays(r) => format!(
+                "{}: trilinear over probe validity, normal bias {bias} spacings, exact probe \
+                 visibility: {}, near field: {}, near hits {} (rays through the asset's BVH \
+                 from the point, bench/src/ray_lookup.rs)",
+                self.name,
                 r.visibility,
                 r.near_field
                     .map_or("none".into(), |reach| format!("{reach} spacings")),
@@ -88,18 +85,22 @@ impl Lookup {
                     "are dark"
                 }
             ),
-            None => String::new(),
-        };
-        format!(
-            "{}: {}, normal bias {} spacings{rays}",
-            self.name,
-            if s.depth_moments {
-                "depth moments (Chebyshev) and facing weights"
-            } else {
-                "trilinear over probe validity"
-            },
-            s.normal_bias
-        )
+            Kind::Surfels => format!(
+                "{}: rays_light's visibility and near field decided per surfel, as a bake would \
+                 store them (the point's nearest surfel of its normal's nearest brick; none: the \
+                 default lookup), normal bias {bias} spacings (bench/src/surfel_lookup.rs)",
+                self.name
+            ),
+        }
+    }
+
+    /// Whether sampling needs the relit bricks (`crate::ray_lookup::NearLight`).
+    pub fn needs_bricks(&self) -> bool {
+        match self.kind {
+            Kind::Runtime => false,
+            Kind::Rays(r) => r.near_light,
+            Kind::Surfels => true,
+        }
     }
 }
 
@@ -152,12 +153,11 @@ impl Lookups {
 }
 
 fn lookup(&(name, make): &Variant) -> Lookup {
-    let (settings, rays, surfels) = make();
+    let (settings, kind) = make();
     Lookup {
         name,
         settings,
-        rays,
-        surfels,
+        kind,
     }
 }
 
@@ -190,7 +190,7 @@ mod tests {
             names(none.for_set(Set::HeldOut)),
             ["default", "rays", "rays_light", "surfels"]
         );
-        assert!(none.for_set(Set::HeldOut)[1].rays.is_some());
+        assert!(matches!(none.for_set(Set::HeldOut)[1].kind, Kind::Rays(_)));
         assert_eq!(
             none.for_set(Set::Tuning)[0].settings,
             LookupSettings::default()

@@ -1,36 +1,53 @@
-//! How many probes the surfaces use: the corners of every grid cell that holds a surfel. The
-//! lookup at a surface point reads only the eight corners of its cell (or of a cell beside it,
-//! after the normal bias), so a sparse placement (issue 32, item 2) that keeps these probes
-//! and drops the rest (empty air, solid interiors) loses nothing at surfaces: the column is what
-//! a uniform grid of the same spacing would keep.
+//! How many probes the surfaces use: the eight probes the lookup reads at each surfel, with and
+//! without the runtime's normal bias (`LookupSettings::normal_bias`: the point is moved along
+//! its normal before the trilinear weights, so a surfel near a cell's face also reads the next
+//! cell). A sparse placement (issue 32, item 2) that keeps these probes and drops the rest
+//! (empty air, solid interiors) keeps what the lookup reads at the surfaces the probes' rays
+//! found: the column is what it would keep of a uniform grid of the same spacing.
 
 use glam::{UVec3, Vec3};
-use prt_format::{Asset, BRICK_BACKFACE};
+use prt_format::{Asset, Grid, BRICK_BACKFACE};
+use prt_runtime::LookupSettings;
 
-/// Probes that are a corner of a grid cell holding a front-face surfel.
+/// Probes the lookup reads at a front-face surfel, at the surfel and moved by the default
+/// normal bias.
 pub fn surface_probes(asset: &Asset) -> usize {
     let g = &asset.header.grid;
-    let counts = UVec3::from(g.counts);
-    if counts.min_element() == 0 {
+    if g.counts.contains(&0) {
         return 0;
     }
-    let last_cell = counts.saturating_sub(UVec3::ONE).max(UVec3::ONE) - UVec3::ONE;
+    let bias = LookupSettings::default().normal_bias * g.spacing;
     let mut used = vec![false; g.probe_count() as usize];
-    let (origin, step) = (Vec3::from(g.origin), Vec3::from(g.step));
     for s in asset
         .surfels
         .iter()
         .filter(|s| s.flags & BRICK_BACKFACE == 0)
     {
-        let t = ((Vec3::from(s.position) - origin) / step).max(Vec3::ZERO);
-        let cell = t.as_uvec3().min(last_cell);
-        for corner in 0..8u32 {
-            let o = UVec3::new(corner & 1, corner >> 1 & 1, corner >> 2 & 1);
-            let p = (cell + o).min(counts - UVec3::ONE);
-            used[g.index(p.x, p.y, p.z)] = true;
-        }
+        let p = Vec3::from(s.position);
+        mark_corners(g, p, &mut used);
+        mark_corners(g, p + Vec3::from(s.normal) * bias, &mut used);
     }
     used.iter().filter(|&&u| u).count()
+}
+
+/// Marks the probes the lookup weights at `p`: those of the eight around it with a positive
+/// trilinear weight, clamped to the grid as `prt_runtime::VolumeSampler::sample` clamps them.
+fn mark_corners(g: &Grid, p: Vec3, used: &mut [bool]) {
+    let last = UVec3::from(g.counts) - UVec3::ONE;
+    let t = ((p - Vec3::from(g.origin)) / Vec3::from(g.step)).clamp(Vec3::ZERO, last.as_vec3());
+    if !t.is_finite() {
+        return;
+    }
+    let base = t.floor();
+    let f = t - base;
+    for corner in 0..8u32 {
+        let o = UVec3::new(corner & 1, corner >> 1 & 1, corner >> 2 & 1);
+        let w = f * o.as_vec3() + (Vec3::ONE - f) * (Vec3::ONE - o.as_vec3());
+        if w.x * w.y * w.z > 0.0 {
+            let c = (base.as_uvec3() + o).min(last);
+            used[g.index(c.x, c.y, c.z)] = true;
+        }
+    }
 }
 
 #[cfg(test)]
@@ -48,13 +65,14 @@ mod tests {
     }
 
     /// A plane on a one-layer grid uses every probe; a closed box on the grid's outer faces
-    /// uses its two outer layers (11^3 - 7^3), not the 7^3 probes deep inside it.
+    /// uses the probes on its faces (11^3 - 9^3): its surfels lie on those layers, where the
+    /// next layer in has no trilinear weight, and the bias moves them outwards.
     #[test]
     fn probes_at_surfaces() {
         let quad = bake("textured_quad.gltf");
         assert_eq!(surface_probes(&quad), quad.probes.len());
         let cube = bake("closed_box_outward.gltf");
         assert_eq!(cube.header.grid.counts, [11, 11, 11]);
-        assert_eq!(surface_probes(&cube), 11 * 11 * 11 - 7 * 7 * 7);
+        assert_eq!(surface_probes(&cube), 11 * 11 * 11 - 9 * 9 * 9);
     }
 }

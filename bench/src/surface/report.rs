@@ -94,7 +94,9 @@ pub fn markdown(rows: &[Row], oracle: &[(String, Option<f64>)]) -> Result<String
          (`fixtures/surface/`) and the level family of issue 31 (`fixtures/levels/`, tuning set \
          seeds 0-7, held-out set seeds 8-15). Each case baked as a new user would (whole scene, \
          default spacing) and at half that spacing, relit on the CPU (one bounce) and sampled \
-         with the CPU twin of `sample_irradiance`, which is what `prt render` shows."
+         with each lookup: `trilinear` and `default` are the CPU twin of `sample_irradiance`, \
+         which is what `prt render` shows; `rays`, `rays_light` and `surfels` are references \
+         that trace rays (issue 31's candidates, not in the runtime)."
     )?;
     summary(&mut md, rows)?;
     definitions(&mut md, rows)?;
