@@ -49,6 +49,19 @@ pub const BLOCKED_WEIGHT: f32 = 1e-4;
 /// Hemisphere rays of the near-field term (a Fibonacci spiral, cosine-distributed).
 pub const NEAR_FIELD_RAYS: u32 = 256;
 
+/// Where rays from a surface point `p` with unit normal `n` start: [`RAY_START`] spacings along
+/// the normal, and never less than the shadow rays' own offset.
+pub(crate) fn ray_start(p: Vec3, n: Vec3, spacing: f32) -> Vec3 {
+    p + n * (RAY_START * spacing).max(ray_offset(p, spacing))
+}
+
+/// Whether a ray from `start` reaches `probe` through `geo` (a probe at `start` is seen).
+pub(crate) fn sees(geo: &Geometry, start: Vec3, probe: Vec3) -> bool {
+    let d = probe - start;
+    let len = d.length();
+    !(len > 0.0 && occluded(geo, start, d / len, len))
+}
+
 /// What the ray lookup adds to the trilinear one.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RaySettings {
@@ -140,9 +153,15 @@ impl NearLight {
         }
     }
 
+    /// What a ray from `o` along unit `d` brings from within `reach` through `geo`: the
+    /// radiance where it first hits ([`Self::hit_radiance`]), or `None` when it escapes.
+    pub fn trace(&self, geo: &Geometry, o: Vec3, d: Vec3, reach: f32) -> Option<[f32; 3]> {
+        closest_hit(geo, o, d, reach).map(|(t, tri)| self.hit_radiance(geo, o, d, t, tri))
+    }
+
     /// What a ray from `o` along `d` sees where it hits triangle `tri` of `geo` at distance
     /// `t`: the radiance of the nearest brick of the triangle's side that faces the ray.
-    pub fn hit_radiance(&self, geo: &Geometry, o: Vec3, d: Vec3, t: f32, tri: usize) -> [f32; 3] {
+    fn hit_radiance(&self, geo: &Geometry, o: Vec3, d: Vec3, t: f32, tri: usize) -> [f32; 3] {
         let tri = &geo.triangles[tri];
         let (v0, v1, v2) = (Vec3::from(tri.v0), Vec3::from(tri.v1), Vec3::from(tri.v2));
         let normal = (v1 - v0).cross(v2 - v0);
@@ -227,15 +246,13 @@ impl<'a> RayLookup<'a> {
     pub fn sample(&self, position: [f32; 3], normal: [f32; 3]) -> Sample {
         let n = Vec3::from(normal);
         let p = Vec3::from(position);
-        let start = p + n * (RAY_START * self.spacing).max(ray_offset(p, self.spacing));
+        let start = ray_start(p, n, self.spacing);
         let mut s = if self.settings.visibility {
             self.sampler.sample_weighted(position, normal, |_, probe| {
-                let d = probe - start;
-                let len = d.length();
-                if len > 0.0 && occluded(self.geometry, start, d / len, len) {
-                    BLOCKED_WEIGHT
-                } else {
+                if sees(self.geometry, start, probe) {
                     1.0
+                } else {
+                    BLOCKED_WEIGHT
                 }
             })
         } else {
@@ -262,8 +279,7 @@ impl<'a> RayLookup<'a> {
             let y = prt_format::sh::basis(d.to_array());
             // None: the ray escapes within reach; else what it brings from the near field.
             let blocked = match near {
-                Some(light) => closest_hit(self.geometry, start, d, reach)
-                    .map(|(t, tri)| light.hit_radiance(self.geometry, start, d, t, tri)),
+                Some(light) => light.trace(self.geometry, start, d, reach),
                 None => occluded(self.geometry, start, d, reach).then_some([0.0; 3]),
             };
             for ch in 0..3 {

@@ -29,11 +29,10 @@ use glam::Vec3;
 use prt_bake::merge::key::dominant_axis;
 use prt_format::sh::{ShRgb, SH_COUNT};
 use prt_format::{Asset, Surfel};
-use prt_runtime::shadow_rays::{closest_hit, occluded, ray_offset};
 use prt_runtime::{LookupSettings, Sample, VolumeSampler};
 
 use crate::ray_lookup::{
-    cosine_spiral, NearLight, RaySettings, BLOCKED_WEIGHT, NEAR_FIELD_RAYS, RAY_START,
+    cosine_spiral, ray_start, sees, NearLight, RaySettings, BLOCKED_WEIGHT, NEAR_FIELD_RAYS,
 };
 
 /// The ray terms of [`RaySettings::with_near_light`], decided per surfel.
@@ -91,13 +90,12 @@ impl<'a> SurfelLookup<'a> {
             return self.fallback.sample(position, normal);
         };
         let start = self.start(surfel);
+        let geo = &self.asset.geometry;
         let seen = std::cell::Cell::new(false);
         let mut s = self
             .trilinear
             .sample_weighted(position, normal, |_, probe| {
-                let d = probe - start;
-                let len = d.length();
-                let sees = len <= 0.0 || !occluded(&self.asset.geometry, start, d / len, len);
+                let sees = sees(geo, start, probe);
                 seen.set(seen.get() || sees);
                 if sees {
                     1.0
@@ -131,11 +129,8 @@ impl<'a> SurfelLookup<'a> {
         for k in 0..NEAR_FIELD_RAYS {
             let d = cosine_spiral(k, t, b, n);
             let y = prt_format::sh::basis(d.to_array());
-            match closest_hit(geo, o, d, self.reach) {
-                Some((t, tri)) => {
-                    let r = self.near.hit_radiance(geo, o, d, t, tri);
-                    (0..3).for_each(|ch| near[ch] += r[ch]);
-                }
+            match self.near.trace(geo, o, d, self.reach) {
+                Some(r) => (0..3).for_each(|ch| near[ch] += r[ch]),
                 None => (0..SH_COUNT).for_each(|i| open[i] += y[i]),
             }
             (0..SH_COUNT).for_each(|i| all[i] += y[i]);
@@ -143,10 +138,9 @@ impl<'a> SurfelLookup<'a> {
         (open, all, near)
     }
 
-    /// Where a surfel's rays start: [`RAY_START`] spacings along its normal.
+    /// Where a surfel's rays start ([`ray_start`]).
     fn start(&self, s: &Surfel) -> Vec3 {
-        let p = Vec3::from(s.position);
         let spacing = self.asset.header.grid.spacing;
-        p + Vec3::from(s.normal) * (RAY_START * spacing).max(ray_offset(p, spacing))
+        ray_start(s.position.into(), s.normal.into(), spacing)
     }
 }

@@ -5,8 +5,9 @@
 //! (empty air, solid interiors) keeps what the lookup reads at the surfaces the probes' rays
 //! found: the column is what it would keep of a uniform grid of the same spacing.
 
-use glam::{UVec3, Vec3};
+use glam::Vec3;
 use prt_format::{Asset, Grid, BRICK_BACKFACE};
+use prt_runtime::sample::corners;
 use prt_runtime::LookupSettings;
 
 /// Probes the lookup reads at a front-face surfel, at the surfel and moved by the default
@@ -31,21 +32,11 @@ pub fn surface_probes(asset: &Asset) -> usize {
 }
 
 /// Marks the probes the lookup weights at `p`: those of the eight around it with a positive
-/// trilinear weight, clamped to the grid as `prt_runtime::VolumeSampler::sample` clamps them.
+/// trilinear weight (`prt_runtime::sample::corners`, the CPU twin's own corner walk).
 fn mark_corners(g: &Grid, p: Vec3, used: &mut [bool]) {
-    let last = UVec3::from(g.counts) - UVec3::ONE;
-    let t = ((p - Vec3::from(g.origin)) / Vec3::from(g.step)).clamp(Vec3::ZERO, last.as_vec3());
-    if !t.is_finite() {
-        return;
-    }
-    let base = t.floor();
-    let f = t - base;
-    for corner in 0..8u32 {
-        let o = UVec3::new(corner & 1, corner >> 1 & 1, corner >> 2 & 1);
-        let w = f * o.as_vec3() + (Vec3::ONE - f) * (Vec3::ONE - o.as_vec3());
-        if w.x * w.y * w.z > 0.0 {
-            let c = (base.as_uvec3() + o).min(last);
-            used[g.index(c.x, c.y, c.z)] = true;
+    for (i, w) in corners(g, p) {
+        if w > 0.0 {
+            used[i] = true;
         }
     }
 }
