@@ -34,8 +34,23 @@ struct PrtVolumeInfo {
     normal_bias: f32,
     // The lattice step along x, y, z (at most the spacing; outer probes lie on the bounds).
     step: vec3<f32>,
-    // PRT_FLAG_DEPTH_MOMENTS: weight the probes by their depth moments.
+    // PRT_FLAG_DEPTH_MOMENTS: weight the probes by their depth moments; PRT_FLAG_SURFACE: the
+    // surface lookup (prt_surface) decides where the point has a surfel.
     flags: u32,
+    // The surface lookup's brick lattice (prt_format::surface): its origin and brick edge.
+    surface_anchor: vec3<f32>,
+    brick_size: f32,
+    // Slots of the brick table minus one (a power of two minus one), its longest search, and
+    // where in prt_surface the cell table, the surfel terms and the brick links start.
+    slot_mask: u32,
+    max_probe: u32,
+    cells_at: u32,
+    terms_at: u32,
+    bricks_at: u32,
+    // Near-field rays per surfel.
+    near_rays: f32,
+    _pad0: u32,
+    _pad1: u32,
 }
 
 // The interpolated probe SH at a point (validity-renormalised; zero where validity <= 1e-6) and
@@ -60,6 +75,14 @@ struct PrtSample {
 // Per probe, where its rays started (xyz; the grid position unless it was moved off a surface or
 // out of geometry): depth-moment distances are measured from there.
 @group(PRT_GROUP) @binding(10) var<storage, read> prt_probe_positions: array<vec4<f32>>;
+// The surface lookup's tables, one array of words (prt_format::surface): the brick table (four
+// words a slot: key xyz, axis << 29 | brick + 1), then from the offsets in prt_volume the cells
+// (16 words a brick), the surfel terms (8 words a surfel) and per brick its first surfel and
+// first near group.
+@group(PRT_GROUP) @binding(11) var<storage, read> prt_surface: array<u32>;
+// Per near group, the mean radiance its surfels' near-field hits bring (xyz), as the runtime
+// last relit it.
+@group(PRT_GROUP) @binding(12) var<storage, read> prt_near: array<vec4<f32>>;
 
 fn prt_sh_of_texels(t: array<vec4<f32>, 7>, inv: f32) -> array<vec3<f32>, 9> {
     return array<vec3<f32>, 9>(
@@ -190,11 +213,8 @@ fn prt_sample_sh(world_pos: vec3<f32>, normal: vec3<f32>) -> PrtSample {
     return prt_sample_trilinear(p);
 }
 
-// Irradiance E at world_pos for a surface with unit normal `normal` (0 where no valid probe
-// surrounds the biased point).
-fn sample_irradiance(world_pos: vec3<f32>, normal: vec3<f32>) -> vec3<f32> {
-    let c = prt_sample_sh(world_pos, normal).sh;
-    let n = normal;
+// Irradiance E of interpolated SH c on a surface with unit normal n (clamped at 0).
+fn prt_irradiance(c: array<vec3<f32>, 9>, n: vec3<f32>) -> vec3<f32> {
     // Clamped-cosine factors A_l (pi, 2pi/3, pi/4) times the basis of docs/conventions.md section 2.
     let e = PRT_A0 * PRT_SH_Y00 * c[0]
         + PRT_A1 * PRT_SH_Y1 * (n.y * c[1] + n.z * c[2] + n.x * c[3])
@@ -202,4 +222,219 @@ fn sample_irradiance(world_pos: vec3<f32>, normal: vec3<f32>) -> vec3<f32> {
         + PRT_A2 * PRT_SH_Y20 * (3.0 * n.z * n.z - 1.0) * c[6]
         + PRT_A2 * PRT_SH_Y22 * (n.x * n.x - n.y * n.y) * c[8];
     return max(e, vec3<f32>(0.0));
+}
+
+// Irradiance of the probe volume alone at world_pos (prt_sample_sh): what bounces feed back.
+fn prt_volume_irradiance(world_pos: vec3<f32>, normal: vec3<f32>) -> vec3<f32> {
+    return prt_irradiance(prt_sample_sh(world_pos, normal).sh, normal);
+}
+
+// ---- The surface lookup (twin: prt_runtime::surface::SurfaceSampler) ----
+//
+// Where the asset carries surface terms (PRT_FLAG_SURFACE), the point's surfel is found by
+// brick key (brick lattice cell, the normal's dominant axis) in the hash table, then by the
+// point's cell of that brick. Its terms say which of the 27 probes around it the surfel sees
+// (a probe it cannot see keeps PRT_BLOCKED_WEIGHT of its trilinear weight) and scale the
+// irradiance by (open . L + hits / rays * near) / (A(n_s) . L) per channel: open the mean SH
+// basis of its near-field rays that escape, near its near group's relit radiance per hit, A the
+// clamped-cosine transfer of the surfel's normal. A point without one gets prt_sample_sh.
+
+// What sample_irradiance computed: the SH it interpolated, its validity and the irradiance.
+struct PrtSurfaceSample {
+    sh: array<vec3<f32>, 9>,
+    validity: f32,
+    irradiance: vec3<f32>,
+}
+
+fn prt_dominant_axis(n: vec3<f32>) -> u32 {
+    let a = abs(n);
+    if a.x >= a.y && a.x >= a.z {
+        return select(0u, 1u, n.x < 0.0);
+    }
+    if a.y >= a.z {
+        return select(2u, 3u, n.y < 0.0);
+    }
+    return select(4u, 5u, n.z < 0.0);
+}
+
+// prt_format::surface::slot_hash.
+fn prt_slot_hash(key: vec3<i32>, axis: u32) -> u32 {
+    var h = bitcast<u32>(key.x) * 0x8da6b343u;
+    h = h ^ (bitcast<u32>(key.y) * 0xd8163841u);
+    h = h ^ (bitcast<u32>(key.z) * 0xcb1ab31fu);
+    h = h ^ (axis * 0x9e3779b9u);
+    h = h ^ (h >> 16u);
+    h = h * 0x7feb352du;
+    return h ^ (h >> 15u);
+}
+
+// The point's surfel (x) and its brick (y), or PRT_NONE in x.
+fn prt_find_surfel(p: vec3<f32>, n: vec3<f32>) -> vec2<u32> {
+    let key = vec3<i32>(floor((p - prt_volume.surface_anchor) / prt_volume.brick_size));
+    let axis = prt_dominant_axis(n);
+    let start = prt_slot_hash(key, axis);
+    var brick = PRT_NONE;
+    for (var i = 0u; i <= prt_volume.max_probe; i++) {
+        let at = ((start + i) & prt_volume.slot_mask) * 4u;
+        let value = prt_surface[at + 3u];
+        if value == 0u {
+            break;
+        }
+        let k = vec3<i32>(bitcast<i32>(prt_surface[at]), bitcast<i32>(prt_surface[at + 1u]), bitcast<i32>(prt_surface[at + 2u]));
+        if all(k == key) && (value >> PRT_SLOT_AXIS_SHIFT) == axis {
+            brick = (value & ((1u << PRT_SLOT_AXIS_SHIFT) - 1u)) - 1u;
+            break;
+        }
+    }
+    if brick == PRT_NONE {
+        return vec2<u32>(PRT_NONE, 0u);
+    }
+    let origin = prt_volume.surface_anchor + vec3<f32>(key) * prt_volume.brick_size;
+    let c = vec3<u32>(clamp(floor((p - origin) / (prt_volume.brick_size / 4.0)), vec3<f32>(0.0), vec3<f32>(3.0)));
+    let byte = c.x + 4u * (c.y + 4u * c.z);
+    let within = (prt_surface[prt_volume.cells_at + 16u * brick + byte / 4u] >> (8u * (byte % 4u))) & 0xffu;
+    if within == PRT_NO_SURFEL {
+        return vec2<u32>(PRT_NONE, 0u);
+    }
+    let surfel = prt_surface[prt_volume.bricks_at + 2u * brick] + within;
+    if (prt_surface[prt_volume.terms_at + 8u * surfel] & PRT_TERMS_TRACED) == 0u {
+        return vec2<u32>(PRT_NONE, 0u);
+    }
+    return vec2<u32>(surfel, brick);
+}
+
+// Grid position of probe `index`.
+fn prt_probe_ijk(index: u32) -> vec3<i32> {
+    let c = vec3<u32>(prt_volume.counts);
+    return vec3<i32>(vec3<u32>(index % c.x, (index / c.x) % c.y, index / (c.x * c.y)));
+}
+
+// The eight probes around p read one by one, trilinear weights times the mask's visibility
+// (centre: the grid position of the mask's middle probe). validity < 0: the surfel sees none.
+fn prt_sample_masked(p: vec3<f32>, mask: u32, centre: vec3<i32>) -> PrtSample {
+    var s: PrtSample;
+    let last = prt_volume.counts - 1.0;
+    let g = clamp((p - prt_volume.origin) / prt_volume.step, vec3<f32>(0.0), last);
+    let base = floor(g);
+    let f = g - base;
+    var acc: array<vec4<f32>, 7>;
+    var total = 0.0;
+    var seen = false;
+    for (var c = 0u; c < 8u; c = c + 1u) {
+        let o = vec3<f32>(f32(c & 1u), f32((c >> 1u) & 1u), f32((c >> 2u) & 1u));
+        let tri = mix(1.0 - f, f, o);
+        let w_tri = tri.x * tri.y * tri.z;
+        let ijk = vec3<u32>(min(base + o, last));
+        let at = vec3<i32>(ijk);
+        let t0 = textureLoad(prt_volume0, at, 0);
+        if w_tri <= 0.0 || t0.w <= 0.0 {
+            continue;
+        }
+        s.validity = s.validity + w_tri * t0.w;
+        let d = at - centre;
+        var visible = true;
+        if all(abs(d) <= vec3<i32>(1)) {
+            let bit = u32((d.x + 1) + 3 * (d.y + 1) + 9 * (d.z + 1));
+            visible = ((mask >> bit) & 1u) != 0u;
+        }
+        seen = seen || visible;
+        let w = w_tri * select(PRT_BLOCKED_WEIGHT, 1.0, visible);
+        total = total + w * t0.w;
+        acc[0] = acc[0] + w * t0;
+        acc[1] = acc[1] + w * textureLoad(prt_volume1, at, 0);
+        acc[2] = acc[2] + w * textureLoad(prt_volume2, at, 0);
+        acc[3] = acc[3] + w * textureLoad(prt_volume3, at, 0);
+        acc[4] = acc[4] + w * textureLoad(prt_volume4, at, 0);
+        acc[5] = acc[5] + w * textureLoad(prt_volume5, at, 0);
+        acc[6] = acc[6] + w * textureLoad(prt_volume6, at, 0);
+    }
+    if !seen {
+        s.validity = -1.0;
+        return s;
+    }
+    if s.validity <= PRT_MIN_VALIDITY || total <= 0.0 {
+        s.validity = 0.0;
+        return s;
+    }
+    s.sh = prt_sh_of_texels(acc, 1.0 / total);
+    return s;
+}
+
+// prt_format::surface::decode_normal.
+fn prt_decode_normal(bits: u32) -> vec3<f32> {
+    let e = unpack2x16snorm(bits);
+    var v = vec3<f32>(e.x, e.y, 1.0 - abs(e.x) - abs(e.y));
+    let t = max(-v.z, 0.0);
+    v.x = v.x + select(t, -t, v.x >= 0.0);
+    v.y = v.y + select(t, -t, v.y >= 0.0);
+    return v / sqrt(v.x * v.x + v.y * v.y + v.z * v.z);
+}
+
+// The SH9 basis of docs/conventions.md section 2 at unit n.
+fn prt_basis(n: vec3<f32>) -> array<f32, 9> {
+    return array<f32, 9>(
+        PRT_SH_Y00,
+        PRT_SH_Y1 * n.y,
+        PRT_SH_Y1 * n.z,
+        PRT_SH_Y1 * n.x,
+        PRT_SH_Y2_OFF * n.x * n.y,
+        PRT_SH_Y2_OFF * n.y * n.z,
+        PRT_SH_Y20 * (3.0 * n.z * n.z - 1.0),
+        PRT_SH_Y2_OFF * n.x * n.z,
+        PRT_SH_Y22 * (n.x * n.x - n.y * n.y),
+    );
+}
+
+// The full lookup at world_pos for a surface with unit normal `normal`.
+fn prt_sample_surface(world_pos: vec3<f32>, normal: vec3<f32>) -> PrtSurfaceSample {
+    var out: PrtSurfaceSample;
+    var found = vec2<u32>(PRT_NONE, 0u);
+    if (prt_volume.flags & PRT_FLAG_SURFACE) != 0u {
+        found = prt_find_surfel(world_pos, normal);
+    }
+    if found.x == PRT_NONE {
+        let s = prt_sample_sh(world_pos, normal);
+        out.sh = s.sh;
+        out.validity = s.validity;
+        out.irradiance = prt_irradiance(s.sh, normal);
+        return out;
+    }
+    let t = prt_volume.terms_at + 8u * found.x;
+    let p = world_pos + normal * prt_volume.normal_bias;
+    var s = prt_sample_masked(p, prt_surface[t], prt_probe_ijk(prt_surface[t + 6u]));
+    if s.validity < 0.0 {
+        s = prt_sample_sh(world_pos, normal);
+    }
+    out.sh = s.sh;
+    out.validity = s.validity;
+    out.irradiance = prt_irradiance(s.sh, normal);
+    var open: array<f32, 9>;
+    for (var k = 0u; k < 4u; k++) {
+        let pair = unpack2x16float(prt_surface[t + 1u + k]);
+        open[2u * k] = pair.x;
+        open[2u * k + 1u] = pair.y;
+    }
+    let last = prt_surface[t + 5u];
+    open[8] = unpack2x16float(last).x;
+    let share = f32((last >> 16u) & 0xffu) / prt_volume.near_rays;
+    let group = prt_surface[prt_volume.bricks_at + 2u * found.y + 1u] + (last >> 24u);
+    let near = prt_near[group].xyz;
+    let y = prt_basis(prt_decode_normal(prt_surface[t + 7u]));
+    var lo = vec3<f32>(0.0);
+    var all_l = vec3<f32>(0.0);
+    for (var k = 0u; k < 9u; k++) {
+        let a = select(select(0.25, 2.0 / 3.0, k < 4u), 1.0, k == 0u);
+        lo = lo + s.sh[k] * open[k];
+        all_l = all_l + s.sh[k] * (a * y[k]);
+    }
+    let ratio = max((lo + share * near) / all_l, vec3<f32>(0.0));
+    out.irradiance = select(out.irradiance, out.irradiance * ratio, all_l > vec3<f32>(0.0));
+    return out;
+}
+
+// Irradiance E at world_pos for a surface with unit normal `normal` (0 where no valid probe
+// surrounds the biased point): the surface lookup where the asset has terms for the point,
+// the probe volume alone elsewhere.
+fn sample_irradiance(world_pos: vec3<f32>, normal: vec3<f32>) -> vec3<f32> {
+    return prt_sample_surface(world_pos, normal).irradiance;
 }

@@ -38,6 +38,7 @@ mod pipeline;
 pub mod probes;
 mod settings;
 pub mod stream;
+pub mod surface_terms;
 pub mod tables;
 pub mod trace;
 

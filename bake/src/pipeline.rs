@@ -16,6 +16,7 @@ use prt_scene::Scene;
 
 use crate::accel::bvh;
 use crate::merge::fold;
+use crate::surface_terms;
 use crate::tables::factors;
 use crate::{
     diagnostics, dilate, offset, probes, stream, trace, BakeError, BakeReport, BakeSettings,
@@ -72,8 +73,20 @@ pub(crate) fn bake_in_pool(
         depth: probe_depth,
         folder,
     } = traced;
-    let (bricked, factors) = bricks_and_tables(folder, tables, carried, settings, cell_size)?;
-    lap(&mut report, "bricks", Some("assemble"));
+    let (mut bricked, factors) = bricks_and_tables(folder, tables, carried, settings, cell_size)?;
+    lap(&mut report, "bricks", Some("surface"));
+
+    let probe_positions: Vec<Vec3> = positions.iter().map(|&(p, _)| p).collect();
+    let inputs = surface_terms::Inputs {
+        bricks: &bricked.bricks,
+        grid: &grid,
+        probes: &probe_positions,
+        bvh: &built.bvh,
+        triangles: &scene.triangles,
+        cell_size,
+    };
+    let surface = surface_terms::surface_terms(&inputs, &mut bricked.surfels);
+    lap(&mut report, "surface", Some("assemble"));
 
     let Assembled {
         probes: probes_out,
@@ -92,6 +105,7 @@ pub(crate) fn bake_in_pool(
         surfels: bricked.surfels,
         geometry: built.bvh.geometry,
         lights: loaded.scene.lights,
+        surface,
     };
     lap(&mut report, "assemble", None);
     Ok((asset, report))

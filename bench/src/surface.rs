@@ -52,7 +52,7 @@ use crate::surfel_lookup::SurfelLookup;
 use cases::Case;
 use image::View;
 use lookups::{Kind, Lookup, Lookups};
-use prt_runtime::lights::PreparedLight;
+use prt_runtime::surface::SurfaceSampler;
 use refs::Reference;
 use report::{Row, Setting};
 
@@ -104,6 +104,8 @@ struct Baked {
     /// The relit bricks, for the near-field hits of the reference lookups that need them.
     near: Option<NearLight>,
     sh: Vec<ShRgb>,
+    /// The relit surfels' irradiance (the surface lookup's near field).
+    irradiance: Vec<[f32; 3]>,
     bake_s: f64,
     relight_s: f64,
 }
@@ -193,19 +195,16 @@ fn bake(case: &Case, settings: &BakeSettings, lighting: &Lighting, bricks: bool)
     let bake_s = t.elapsed().as_secs_f64();
     let t = Instant::now();
     let relighter = prt_runtime::CpuRelighter::new(&asset)?;
-    let sh = relighter
+    let relit = relighter
         .relight(lighting, 1)
-        .with_context(|| format!("{}: relighting with {}", case.name, case.rig.display()))?
-        .sh;
+        .with_context(|| format!("{}: relighting with {}", case.name, case.rig.display()))?;
     let relight_s = t.elapsed().as_secs_f64();
-    let near = bricks.then(|| {
-        let lights: Vec<_> = lighting.rig.lights.iter().map(PreparedLight::new).collect();
-        let radiance = relighter.brick_radiance(&relighter.direct_irradiance(&lights).0);
-        NearLight::for_asset(&asset, radiance)
-    });
+    let near = bricks
+        .then(|| NearLight::for_asset(&asset, relighter.brick_radiance(&relit.surfel_irradiance)));
     Ok(Baked {
         asset,
-        sh,
+        sh: relit.sh,
+        irradiance: relit.surfel_irradiance,
         near,
         bake_s,
         relight_s,
@@ -217,6 +216,7 @@ enum Sampler<'a> {
     Runtime(VolumeSampler<'a>),
     Rays(RayLookup<'a>),
     Surfels(SurfelLookup<'a>),
+    Surface(SurfaceSampler<'a>),
 }
 
 impl<'a> Sampler<'a> {
@@ -238,6 +238,9 @@ impl<'a> Sampler<'a> {
                 })
             }
             Kind::Surfels => Sampler::Surfels(SurfelLookup::new(asset, sh, near()?, settings)),
+            Kind::Surface => {
+                Sampler::Surface(SurfaceSampler::new(asset, sh, &baked.irradiance, settings))
+            }
         })
     }
 
@@ -246,6 +249,7 @@ impl<'a> Sampler<'a> {
             Sampler::Runtime(s) => s.sample(p, n),
             Sampler::Rays(s) => s.sample(p, n),
             Sampler::Surfels(s) => s.sample(p, n),
+            Sampler::Surface(s) => s.sample(p, n),
         }
     }
 }

@@ -7,6 +7,7 @@ use serde::{Deserialize, Serialize};
 use crate::rig::Light;
 use crate::sh::SH_COUNT;
 use crate::snorm::{snorm8_div4, snorm8_div8};
+use crate::surface::SurfaceTerms;
 
 /// One baked asset: everything an engine needs to relight probes at runtime.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -34,6 +35,9 @@ pub struct Asset {
     pub geometry: Geometry,
     /// The scene's KHR_lights_punctual lights: its default light rig.
     pub lights: Vec<Light>,
+    /// Per surfel, the probes it sees and its near field, and how a point finds its surfel
+    /// ([`crate::surface`]); empty when the bake did not merge surfels.
+    pub surface: SurfaceTerms,
 }
 
 /// Counts, grid and provenance. Validated against the sections on load.

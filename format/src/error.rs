@@ -20,7 +20,7 @@ pub enum FormatError {
     TooShort { len: usize, min: usize },
     #[error("not a prt asset: magic bytes are {found:02x?}, expected {expected:02x?}")]
     BadMagic { found: [u8; 8], expected: [u8; 8] },
-    #[error("unsupported format version {found} (this build reads version {supported})")]
+    #[error("unsupported format version {found} (this build reads version {supported}): re-bake the scene with this build's `prt bake`")]
     UnsupportedVersion { found: u32, supported: u32 },
     #[error("truncated or padded asset: header declares a {declared}-byte payload, the file holds {actual}")]
     LengthMismatch { declared: u64, actual: u64 },

@@ -38,6 +38,7 @@ mod sections;
 pub mod sh;
 mod snorm;
 pub mod summary;
+pub mod surface;
 pub mod validate;
 
 pub use asset::*;

@@ -16,6 +16,7 @@ use serde::Serialize;
 
 use crate::asset::{Asset, Factors, Geometry};
 use crate::error::FormatError;
+use crate::surface::SurfaceTerms;
 
 /// Bincode's variant indices of [`Factors`] (its declaration order).
 const F32: u32 = 0;
@@ -68,7 +69,16 @@ pub(crate) fn write_payload<W: Write>(asset: &Asset, out: &mut W) -> Result<(), 
     pod(out, &asset.surfels)?;
     pod(out, &asset.geometry.nodes)?;
     pod(out, &asset.geometry.triangles)?;
-    via_serde(out, &asset.lights)
+    via_serde(out, &asset.lights)?;
+    let t = &asset.surface;
+    via_serde(out, &t.header)?;
+    pod(out, &t.slots)?;
+    pod(out, &t.cells)?;
+    pod(out, &t.surfels)?;
+    pod(out, &t.groups)?;
+    pod(out, &t.group_surfels)?;
+    pod(out, &t.near_ranges)?;
+    pod(out, &t.near)
 }
 
 /// Bytes of the payload of `asset` (a pass that copies nothing).
@@ -138,6 +148,16 @@ impl Sections<'_> {
                 triangles: self.pod("geometry")?,
             },
             lights: self.via_serde("lights")?,
+            surface: SurfaceTerms {
+                header: self.via_serde("surface")?,
+                slots: self.pod("surface")?,
+                cells: self.pod("surface")?,
+                surfels: self.pod("surface")?,
+                groups: self.pod("surface")?,
+                group_surfels: self.pod("surface")?,
+                near_ranges: self.pod("surface")?,
+                near: self.pod("surface")?,
+            },
         })
     }
 
@@ -261,6 +281,26 @@ mod tests {
                 triangles: vec![Triangle::default(); 2],
             },
             lights: Vec::new(),
+            surface: crate::surface::SurfaceTerms {
+                header: crate::surface::SurfelTermsHeader {
+                    brick_size: 0.5,
+                    rays: 64,
+                    ..Default::default()
+                },
+                slots: vec![crate::surface::SurfaceSlot {
+                    key: [1, -2, 3],
+                    value: 7,
+                }],
+                cells: vec![0x0302_0100; 16],
+                surfels: vec![crate::surface::SurfelTerms {
+                    mask: 0x8000_0001,
+                    ..Default::default()
+                }],
+                groups: vec![0],
+                group_surfels: vec![[0, 1]],
+                near_ranges: vec![[0, 1]],
+                near: vec![0x1ff],
+            },
         }
     }
 

@@ -17,6 +17,7 @@ pub mod sample;
 pub mod settings;
 pub mod shadow_rays;
 pub mod sky;
+pub mod surface;
 
 pub use relight::{CpuRelighter, RelightError, RelightStats, Relit};
 pub use rig::{load_rig, load_rig_with_warnings, Lighting, RigLoadError};

@@ -120,6 +120,9 @@ impl std::fmt::Display for RelightStats {
 pub struct Relit {
     /// SH9 of incident radiance per probe (zero for invalid probes).
     pub sh: Vec<ShRgb>,
+    /// Per surfel, the irradiance of the last bounce (direct, plus the volume's beyond the
+    /// first): what the surface lookup's near field is lit by (`crate::surface`).
+    pub surfel_irradiance: Vec<[f32; 3]>,
     pub stats: RelightStats,
 }
 
@@ -175,15 +178,14 @@ impl<'a> CpuRelighter<'a> {
             .into_par_iter()
             .map(|p| lighting.sky.probe_sky(self.asset, p, &lattice))
             .collect();
-        let mut sh = Vec::new();
+        let (mut sh, mut surfel_irradiance) = (Vec::new(), Vec::new());
         for bounce in 0..bounces {
-            let radiance = if bounce == 0 {
-                self.brick_radiance(&direct)
+            let irradiance = if bounce == 0 {
+                direct.clone()
             } else {
                 // The previous bounce's volume at the surfel, through the engine's lookup.
                 let volume = VolumeSampler::for_asset(self.asset, &sh, lookup);
-                let irradiance: Vec<[f32; 3]> = self
-                    .asset
+                self.asset
                     .surfels
                     .par_iter()
                     .zip(&direct)
@@ -191,17 +193,22 @@ impl<'a> CpuRelighter<'a> {
                         let ind = volume.sample(s.position, s.normal).irradiance;
                         std::array::from_fn(|c| e[c] + ind[c])
                     })
-                    .collect();
-                self.brick_radiance(&irradiance)
+                    .collect()
             };
+            let radiance = self.brick_radiance(&irradiance);
             let (g, gather_stats) = self.gather(&radiance, &sky);
             sh = g;
+            surfel_irradiance = irradiance;
             if bounce + 1 == bounces {
                 stats = stats + gather_stats;
             }
         }
         check_finite(&sh, lighting)?;
-        Ok(Relit { sh, stats })
+        Ok(Relit {
+            sh,
+            surfel_irradiance,
+            stats,
+        })
     }
 
     /// Step 1: direct irradiance at every surfel (zero on back-face bricks).

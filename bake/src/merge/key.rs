@@ -6,17 +6,10 @@ use prt_format::BRICK_BACKFACE;
 
 use crate::trace::Hit;
 
-/// Dominant axis of a normal: 0..6 for +X, -X, +Y, -Y, +Z, -Z.
+/// Dominant axis of a normal: 0..6 for +X, -X, +Y, -Y, +Z, -Z
+/// ([`prt_format::surface::dominant_axis`], which the lookup shares).
 pub fn dominant_axis(n: Vec3) -> u32 {
-    let a = n.abs();
-    let (axis, v) = if a.x >= a.y && a.x >= a.z {
-        (0, n.x)
-    } else if a.y >= a.z {
-        (1, n.y)
-    } else {
-        (2, n.z)
-    };
-    2 * axis + u32::from(v < 0.0)
+    prt_format::surface::dominant_axis(n.to_array())
 }
 
 /// Brick cell (x, y, z) and flags (dominant axis | backface).

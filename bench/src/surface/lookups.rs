@@ -19,6 +19,8 @@ pub enum Kind {
     Rays(RaySettings),
     /// `crate::surfel_lookup::SurfelLookup`: `rays_light`'s terms traced from the point's surfel.
     Surfels,
+    /// `prt_runtime::surface::SurfaceSampler`: the bake's surfel terms.
+    Surface,
 }
 
 /// A lookup's name and how to make it.
@@ -33,7 +35,7 @@ fn trilinear() -> LookupSettings {
 }
 
 /// Every lookup `--lookup` knows, by name, in table order.
-const LOOKUPS: [Variant; 5] = [
+const LOOKUPS: [Variant; 6] = [
     // Hardware trilinear over the probes' validity only: what depth moments are measured against.
     ("trilinear", || (trilinear(), Kind::Runtime)),
     // The runtime's: depth moments (DDGI's Chebyshev test), normal bias 0.2 spacings.
@@ -47,6 +49,9 @@ const LOOKUPS: [Variant; 5] = [
     // rays_light's terms decided per surfel, as a bake would store them; points without a
     // surfel fall back to the default lookup.
     ("surfels", || (LookupSettings::default(), Kind::Surfels)),
+    // The bake's surfel terms (prt_format::surface): visibility mask and near field per
+    // surfel, near light per brick; the default lookup where the point has no surfel.
+    ("surface", || (LookupSettings::default(), Kind::Surface)),
 ];
 
 /// A named lookup.
@@ -91,6 +96,12 @@ impl Lookup {
                  default lookup), normal bias {bias} spacings (bench/src/surfel_lookup.rs)",
                 self.name
             ),
+            Kind::Surface => format!(
+                "{}: the bake's surfel terms (probe visibility mask, near-field transfer, near \
+                 light per brick; prt_runtime::surface), found by brick key; none: the default \
+                 lookup, normal bias {bias} spacings",
+                self.name
+            ),
         }
     }
 
@@ -100,6 +111,7 @@ impl Lookup {
             Kind::Runtime => false,
             Kind::Rays(r) => r.near_light,
             Kind::Surfels => true,
+            Kind::Surface => false,
         }
     }
 }
@@ -133,8 +145,15 @@ impl Lookups {
             Some(chosen) => chosen.clone(),
             None => {
                 let names: &[&str] = match set {
-                    Set::Bundled => &["trilinear", "default", "rays", "rays_light", "surfels"],
-                    _ => &["default", "rays", "rays_light", "surfels"],
+                    Set::Bundled => &[
+                        "trilinear",
+                        "default",
+                        "rays",
+                        "rays_light",
+                        "surfels",
+                        "surface",
+                    ],
+                    _ => &["default", "rays", "rays_light", "surfels", "surface"],
                 };
                 let picked = LOOKUPS.iter().filter(|(n, _)| names.contains(n));
                 picked.map(lookup).collect()
@@ -184,11 +203,18 @@ mod tests {
         let names = |ls: Vec<Lookup>| ls.iter().map(|l| l.name).collect::<Vec<_>>();
         assert_eq!(
             names(none.for_set(Set::Bundled)),
-            ["trilinear", "default", "rays", "rays_light", "surfels"]
+            [
+                "trilinear",
+                "default",
+                "rays",
+                "rays_light",
+                "surfels",
+                "surface"
+            ]
         );
         assert_eq!(
             names(none.for_set(Set::HeldOut)),
-            ["default", "rays", "rays_light", "surfels"]
+            ["default", "rays", "rays_light", "surfels", "surface"]
         );
         assert!(matches!(none.for_set(Set::HeldOut)[1].kind, Kind::Rays(_)));
         assert_eq!(
@@ -202,7 +228,7 @@ mod tests {
         let err = Lookups::parse(&["moments".into()], None).err().unwrap();
         assert!(
             err.to_string()
-                .contains("known: trilinear, default, rays, rays_light, surfels"),
+                .contains("known: trilinear, default, rays, rays_light, surfels, surface"),
             "{err}"
         );
     }

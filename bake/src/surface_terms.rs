@@ -1,0 +1,447 @@
+//! # Surface terms: which probes each surfel sees, and its near field (issue 31)
+//!
+//! The lookup's leaks come from what probes a spacing away cannot know about the surface a
+//! point lies on (`prt_format::surface` says what is stored and how the lookup uses it). This
+//! stage traces it from every front-face surfel, after the bricks are final:
+//!
+//! 1. **The brick table**: each front-face brick under its key (lattice cell of its centroid,
+//!    dominant axis) in an open-addressed hash table, and per brick the nearest surfel of each
+//!    of its 4x4x4 cells.
+//! 2. **Probe visibility**: a ray from the surfel to each of the 27 probes around its nearest
+//!    one (to where the probe's rays started), through the scene's BVH.
+//! 3. **Near field**: [`RAYS`] cosine-distributed rays (a Fibonacci spiral about the normal)
+//!    no longer than [`REACH`] spacings. An escaping ray adds its SH9 basis values to the
+//!    surfel's `open`; a ray that hits finds the brick of the surface it hits (its key, facing
+//!    axis; else the nearest centroid of that axis among the 26 neighbouring keys) and adds one
+//!    hit there to its near group's field ([`brick_terms`] says why groups).
+//!
+//! [`RAYS`] and [`REACH`] were chosen on the level family's tuning seeds with `prt-bench
+//! surface` (`docs/results/surface_candidates.md`): 64 rays measure as 256 do (median level
+//! 10.0% against 10.0%, worst 18.1% against 17.8%), and a reach of one spacing was the best of
+//! 0.5 / 0.75 / 1.0 / 1.5 / 3.0 once hits bring their surface's light.
+//!
+//! Deterministic: bricks are processed in parallel but each one's terms depend only on the
+//! asset and fixed ray sets, and are put together in brick order.
+
+use std::collections::BTreeMap;
+
+use glam::Vec3;
+use prt_format::sh::SH_COUNT;
+use prt_format::surface::{
+    centre_probe, encode_normal, mask_bit, slot_hash, SurfaceSlot, SurfaceTerms, SurfelTerms,
+    SurfelTermsHeader, CELL_WORDS, MAX_GROUPS, MAX_TABLE_BRICKS, NEAR_WEIGHT_BITS, NO_SURFEL,
+    SLOT_AXIS_SHIFT, TERMS_TRACED,
+};
+use prt_format::{f32_to_f16, Brick, Grid, Surfel, BRICK_AXIS_MASK, BRICK_BACKFACE};
+use rayon::prelude::*;
+
+use crate::accel::bvh::SceneBvh;
+use crate::accel::bvh8::PACKET;
+use crate::merge::key::dominant_axis;
+
+/// Near-field rays per surfel.
+pub const RAYS: u32 = 64;
+
+/// Reach of the near-field rays, in probe spacings.
+pub const REACH: f32 = 1.0;
+
+/// Where a surfel's rays start: this many spacings along its normal (1 cm on a 1 m grid), or
+/// [`START_MAGNITUDE`] of its coordinates' magnitude if more (float steps far from the origin).
+const START: f32 = 0.01;
+const START_MAGNITUDE: f32 = 1e-6;
+
+/// What the stage reads.
+pub struct Inputs<'a> {
+    pub bricks: &'a [Brick],
+    pub grid: &'a Grid,
+    /// Per probe (grid order), where its rays started.
+    pub probes: &'a [Vec3],
+    pub bvh: &'a SceneBvh,
+    /// The scene's triangles, by the BVH's triangle index (the normals of near hits).
+    pub triangles: &'a [[Vec3; 3]],
+    /// Edge of a surfel cell (the bake's merge distance); 0: merging off, no terms.
+    pub cell_size: f32,
+}
+
+/// The surface terms of `input`'s bricks and `surfels` (empty when merging is off or the
+/// bricks or groups overflow the tables). Reorders each brick's surfels so that its near
+/// groups are consecutive.
+pub fn surface_terms(input: &Inputs, surfels: &mut [Surfel]) -> SurfaceTerms {
+    if input.cell_size <= 0.0 || input.bricks.len() > MAX_TABLE_BRICKS as usize {
+        return SurfaceTerms::default();
+    }
+    let brick_size = 4.0 * input.cell_size;
+    // The bake's brick lattice: half a cell off the origin (`merge::fold::BrickFolder::new`).
+    let anchor = Vec3::splat(-0.5 * input.cell_size);
+    let mut terms = SurfaceTerms {
+        header: SurfelTermsHeader {
+            anchor: anchor.to_array(),
+            brick_size,
+            max_probe: 0,
+            rays: RAYS,
+            reach: REACH,
+        },
+        ..SurfaceTerms::default()
+    };
+    table(&mut terms, input.bricks);
+    let grouped = group_surfels(&mut terms, input, surfels);
+    if terms.group_surfels.len() > MAX_GROUPS as usize {
+        return SurfaceTerms::default();
+    }
+    terms.cells = input
+        .bricks
+        .par_iter()
+        .flat_map_iter(|b| cells(&terms, b, surfels))
+        .collect();
+    let surfels = &*surfels;
+    let traced: Vec<(SurfelTerms, Vec<NearHit>)> = (0..surfels.len())
+        .into_par_iter()
+        .map(|i| near_field(input, &surfels[i], grouped.masks[i], grouped.group[i]))
+        .collect();
+    let fields: Vec<Vec<u32>> = terms
+        .group_surfels
+        .par_iter()
+        .map(|&[first, n]| {
+            let hits = traced[first as usize..(first + n) as usize].iter();
+            field(&terms, input.bricks, &grouped.group, hits.map(|t| &t.1))
+        })
+        .collect();
+    terms.surfels = traced.into_iter().map(|(t, _)| t).collect();
+    for field in fields {
+        let first = terms.near.len() as u32;
+        terms.near_ranges.push([first, field.len() as u32]);
+        terms.near.extend(field);
+    }
+    terms
+}
+
+/// A near hit: where, and the dominant axis of the side of the surface that faces the ray.
+type NearHit = (Vec3, u32);
+
+/// Per surfel (in their new order), its probe mask and its group: within its brick, and
+/// absolute.
+struct Grouped {
+    masks: Vec<u32>,
+    group: Vec<(u8, u32)>,
+}
+
+/// Traces each surfel's probe mask, groups each brick's surfels by mask and reorders them
+/// group by group. Surfels that see the same probes are on the same side of whatever stands
+/// on their brick: the floor on both sides of a thin wall is one brick, and one near field per
+/// brick brought the lit side's light to the dark side (fixtures/two_rooms at half spacing:
+/// 9.0% against 6.3% per surfel). Groups in order of first appearance, at most 256 per brick
+/// (further masks join the last). Fills `groups` and `group_surfels`.
+fn group_surfels(terms: &mut SurfaceTerms, input: &Inputs, surfels: &mut [Surfel]) -> Grouped {
+    // Per brick: masks and group (within the brick) of its surfels, in their old order.
+    let per_brick: Vec<(Vec<u32>, Vec<u8>)> = input
+        .bricks
+        .par_iter()
+        .map(|b| {
+            let range = b.first_surfel as usize..(b.first_surfel + b.surfel_count) as usize;
+            if b.flags & BRICK_BACKFACE != 0 {
+                return (vec![0; range.len()], vec![0; range.len()]);
+            }
+            let masks: Vec<u32> = surfels[range]
+                .iter()
+                .map(|s| probe_mask(input, s))
+                .collect();
+            let mut distinct: Vec<u32> = Vec::new();
+            let group = masks
+                .iter()
+                .map(|m| match distinct.iter().position(|d| d == m) {
+                    Some(g) => g as u8,
+                    None if distinct.len() < 256 => {
+                        distinct.push(*m);
+                        (distinct.len() - 1) as u8
+                    }
+                    None => 255,
+                })
+                .collect();
+            (masks, group)
+        })
+        .collect();
+    let mut out = Grouped {
+        masks: Vec::with_capacity(surfels.len()),
+        group: Vec::with_capacity(surfels.len()),
+    };
+    for (b, (masks, group)) in input.bricks.iter().zip(per_brick) {
+        let first = b.first_surfel as usize;
+        let mut order: Vec<usize> = (0..masks.len()).collect();
+        order.sort_by_key(|&i| group[i]);
+        let moved: Vec<Surfel> = order.iter().map(|&i| surfels[first + i]).collect();
+        surfels[first..first + moved.len()].copy_from_slice(&moved);
+        let first_group = terms.group_surfels.len() as u32;
+        terms.groups.push(first_group);
+        for (k, &i) in order.iter().enumerate() {
+            let g = group[i];
+            if k == 0 || group[order[k - 1]] != g {
+                terms.group_surfels.push([(first + k) as u32, 0]);
+            }
+            terms.group_surfels.last_mut().expect("pushed")[1] += 1;
+            out.masks.push(masks[i]);
+            out.group.push((g, terms.group_surfels.len() as u32 - 1));
+        }
+        debug_assert!(first_group < terms.group_surfels.len() as u32);
+    }
+    out
+}
+
+/// A group's near field from its surfels' near hits: per group hit, its share of all the
+/// hits (those that find no brick bring nothing) in 255ths, rounded so that the shares keep
+/// their sum (largest remainders); groups whose share rounds to nothing are left out.
+fn field<'a>(
+    terms: &SurfaceTerms,
+    bricks: &[Brick],
+    group: &[(u8, u32)],
+    hits: impl Iterator<Item = &'a Vec<NearHit>>,
+) -> Vec<u32> {
+    let mut counts: BTreeMap<u32, u32> = BTreeMap::new();
+    let mut total = 0u32;
+    for &(h, axis) in hits.flatten() {
+        total += 1;
+        let Some(j) = brick_at(terms, bricks, h, axis) else {
+            continue;
+        };
+        let b = &bricks[j as usize];
+        let key = terms.key_of(b.centroid);
+        if let Some(within) = terms.surfel_in(j, key, h.to_array()) {
+            *counts
+                .entry(group[(b.first_surfel + within) as usize].1)
+                .or_default() += 1;
+        }
+    }
+    let unit = ((1u32 << NEAR_WEIGHT_BITS) - 1) as f64;
+    let resolved: u32 = counts.values().sum();
+    let target = (unit * f64::from(resolved) / f64::from(total.max(1))).round() as u32;
+    let quota = |n: u32| unit * f64::from(n) / f64::from(total);
+    let mut shares: Vec<(u32, u32, f64)> = counts
+        .iter()
+        .map(|(&g, &n)| (g, quota(n).floor() as u32, quota(n).fract()))
+        .collect();
+    let given: u32 = shares.iter().map(|s| s.1).sum();
+    let mut by_remainder: Vec<usize> = (0..shares.len()).collect();
+    by_remainder.sort_by(|&a, &b| shares[b].2.total_cmp(&shares[a].2).then(a.cmp(&b)));
+    for &i in by_remainder
+        .iter()
+        .take(target.saturating_sub(given) as usize)
+    {
+        shares[i].1 += 1;
+    }
+    shares
+        .into_iter()
+        .filter(|s| s.1 > 0)
+        .map(|(g, w, _)| g << NEAR_WEIGHT_BITS | w)
+        .collect()
+}
+
+/// Fills the hash table with the front-face bricks (a second brick under a key already
+/// taken, which float rounding of a centroid on a lattice plane could make, is left out).
+fn table(terms: &mut SurfaceTerms, bricks: &[Brick]) {
+    let front = bricks.iter().filter(|b| b.flags & BRICK_BACKFACE == 0);
+    let len = (2 * front.count()).next_power_of_two().max(1);
+    let mut slots = vec![SurfaceSlot::default(); len];
+    let mask = len as u32 - 1;
+    let mut max_probe = 0;
+    for (i, b) in bricks.iter().enumerate() {
+        if b.flags & BRICK_BACKFACE != 0 {
+            continue;
+        }
+        let key = terms.key_of(b.centroid);
+        let axis = b.flags & BRICK_AXIS_MASK;
+        let start = slot_hash(key, axis);
+        for probe in 0..len as u32 {
+            let s = &mut slots[(start.wrapping_add(probe) & mask) as usize];
+            if s.value == 0 {
+                *s = SurfaceSlot {
+                    key,
+                    value: axis << SLOT_AXIS_SHIFT | (i as u32 + 1),
+                };
+                max_probe = max_probe.max(probe);
+                break;
+            }
+            if s.key == key && s.value >> SLOT_AXIS_SHIFT == axis {
+                break;
+            }
+        }
+    }
+    terms.slots = slots;
+    terms.header.max_probe = max_probe;
+}
+
+/// The [`CELL_WORDS`] words of brick `b`: per cell, its surfel nearest the cell's centre
+/// (among its first 255).
+fn cells(terms: &SurfaceTerms, b: &Brick, surfels: &[Surfel]) -> [u32; CELL_WORDS] {
+    let mut words = [0u32; CELL_WORDS];
+    let h = &terms.header;
+    let key = terms.key_of(b.centroid);
+    let origin = Vec3::from(h.anchor) + Vec3::from(key.map(|k| k as f32)) * h.brick_size;
+    let cell = h.brick_size / 4.0;
+    let first = b.first_surfel as usize;
+    let own = &surfels[first..first + (b.surfel_count as usize).min(255)];
+    for c in 0..64u32 {
+        let centre =
+            origin + (Vec3::new((c % 4) as f32, (c / 4 % 4) as f32, (c / 16) as f32) + 0.5) * cell;
+        let nearest = own
+            .iter()
+            .enumerate()
+            .min_by(|(_, a), (_, b)| {
+                let d = |s: &Surfel| Vec3::from(s.position).distance_squared(centre);
+                d(a).total_cmp(&d(b))
+            })
+            .map_or(NO_SURFEL, |(i, _)| i as u8);
+        words[c as usize / 4] |= u32::from(nearest) << (8 * (c % 4));
+    }
+    words
+}
+
+/// A surfel's terms (with `mask` and its `group` within its brick) and its near hits.
+fn near_field(
+    input: &Inputs,
+    s: &Surfel,
+    mask: u32,
+    group: (u8, u32),
+) -> (SurfelTerms, Vec<NearHit>) {
+    let g = input.grid;
+    let [i, j, k] = centre_probe(g.origin, g.step, g.counts, s.position).map(|v| v as u32);
+    let mut t = SurfelTerms {
+        mask,
+        group: group.0,
+        centre: g.index(i, j, k) as u32,
+        normal: encode_normal(s.normal),
+        ..SurfelTerms::default()
+    };
+    if mask & TERMS_TRACED == 0 {
+        return (t, Vec::new());
+    }
+    let (o, n) = start(input, s);
+    let reach = REACH * input.grid.spacing;
+    let (tx, ty) = n.any_orthonormal_pair();
+    let dirs: [Vec3; RAYS as usize] = std::array::from_fn(|k| cosine_spiral(k as u32, tx, ty, n));
+    let mut open = [0.0f32; SH_COUNT];
+    let mut hits = Vec::new();
+    for packet in dirs.chunks(PACKET) {
+        let traced = input.bvh.closest_hits(o, packet, reach);
+        for (&d, hit) in packet.iter().zip(traced) {
+            let Some(hit) = hit else {
+                let y = prt_format::sh::basis(d.to_array());
+                (0..SH_COUNT).for_each(|i| open[i] += y[i]);
+                continue;
+            };
+            let [v0, v1, v2] = input.triangles[hit.triangle as usize];
+            let normal = (v1 - v0).cross(v2 - v0);
+            let facing = if normal.dot(d) > 0.0 { -normal } else { normal };
+            hits.push((o + d * hit.t, dominant_axis(facing)));
+        }
+    }
+    t.open = open.map(|v| f32_to_f16(v / RAYS as f32));
+    t.hits = hits.len() as u8;
+    (t, hits)
+}
+
+/// Where a surfel's rays start, and its normal.
+fn start(input: &Inputs, s: &Surfel) -> (Vec3, Vec3) {
+    let (p, n) = (Vec3::from(s.position), Vec3::from(s.normal));
+    let spacing = input.grid.spacing;
+    (
+        p + n * (START * spacing).max(START_MAGNITUDE * p.abs().max_element()),
+        n,
+    )
+}
+
+/// A front-face surfel's [`SurfelTerms::mask`], with [`TERMS_TRACED`].
+fn probe_mask(input: &Inputs, s: &Surfel) -> u32 {
+    TERMS_TRACED | visible_probes(input, start(input, s).0, s.position)
+}
+
+/// Mask bits of the 27 probes around the surfel at `p` that a ray from `o` reaches (probes
+/// outside the grid, or at `o`, count as seen: no lookup reads the former). One packet: the
+/// rays run to the probes themselves (directions of their length, `tmax` 1).
+fn visible_probes(input: &Inputs, o: Vec3, p: [f32; 3]) -> u32 {
+    let g = input.grid;
+    let centre = centre_probe(g.origin, g.step, g.counts, p);
+    let mut mask = 0;
+    let (mut bits, mut dirs) = (Vec::with_capacity(27), Vec::with_capacity(27));
+    for bit in 0..27 {
+        let d = [bit % 3, bit / 3 % 3, bit / 9].map(|v| v as i32 - 1);
+        let ijk: [i32; 3] = std::array::from_fn(|a| centre[a] + d[a]);
+        debug_assert_eq!(mask_bit(centre, ijk), Some(bit));
+        let inside = (0..3).all(|a| ijk[a] >= 0 && (ijk[a] as u32) < g.counts[a]);
+        let to = match inside {
+            true => input.probes[g.index(ijk[0] as u32, ijk[1] as u32, ijk[2] as u32)] - o,
+            false => Vec3::ZERO,
+        };
+        if to.length_squared() > 0.0 {
+            bits.push(bit);
+            dirs.push(to);
+        } else {
+            mask |= 1 << bit;
+        }
+    }
+    let traced = input.bvh.closest_hits(o, &dirs, 1.0);
+    for (bit, hit) in bits.into_iter().zip(traced) {
+        if hit.is_none() {
+            mask |= 1 << bit;
+        }
+    }
+    mask
+}
+
+/// The front-face brick of axis `axis` at `h`: the one under `h`'s key, else the one of that
+/// axis with the nearest centroid among the 26 neighbouring keys.
+fn brick_at(terms: &SurfaceTerms, bricks: &[Brick], h: Vec3, axis: u32) -> Option<u32> {
+    let key = terms.key_of(h.to_array());
+    if let Some(b) = terms.find(key, axis) {
+        return Some(b);
+    }
+    let mut best: Option<(f32, u32)> = None;
+    for dz in -1..=1 {
+        for dy in -1..=1 {
+            for dx in -1..=1 {
+                let Some(b) = terms.find([key[0] + dx, key[1] + dy, key[2] + dz], axis) else {
+                    continue;
+                };
+                let d = Vec3::from(bricks[b as usize].centroid).distance_squared(h);
+                if best.is_none_or(|(bd, _)| d < bd) {
+                    best = Some((d, b));
+                }
+            }
+        }
+    }
+    best.map(|(_, b)| b)
+}
+
+/// Direction `k` of [`RAYS`] cosine-distributed ones about `n` (tangents `t`, `b`): a
+/// Fibonacci spiral, uniform in the projected disc.
+fn cosine_spiral(k: u32, t: Vec3, b: Vec3, n: Vec3) -> Vec3 {
+    const GOLDEN_ANGLE: f32 = 2.399_963;
+    let u = (k as f32 + 0.5) / RAYS as f32;
+    let phi = k as f32 * GOLDEN_ANGLE;
+    let (sin_t, cos_t) = (u.sqrt(), (1.0 - u).sqrt());
+    t * (sin_t * phi.cos()) + b * (sin_t * phi.sin()) + n * cos_t
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The spiral's mean `Y_k` is the cosine transfer (what `open` is when nothing is near).
+    #[test]
+    fn the_spiral_is_cosine_distributed() {
+        let n = Vec3::new(0.3, -0.5, 0.8).normalize();
+        let (t, b) = n.any_orthonormal_pair();
+        let mut mean = [0.0f32; SH_COUNT];
+        for k in 0..RAYS {
+            let y = prt_format::sh::basis(cosine_spiral(k, t, b, n).to_array());
+            (0..SH_COUNT).for_each(|i| mean[i] += y[i] / RAYS as f32);
+        }
+        let want = prt_format::surface::cosine_transfer(n.to_array());
+        for i in 0..SH_COUNT {
+            assert!(
+                (mean[i] - want[i]).abs() < 0.01,
+                "{i}: {} vs {}",
+                mean[i],
+                want[i]
+            );
+        }
+    }
+}

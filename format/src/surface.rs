@@ -1,0 +1,369 @@
+//! # Surface terms: what the lookup knows about the surface a point lies on (issue 31)
+//!
+//! Probes a spacing apart cannot tell a floor under a gallery from the sunlit floor beside
+//! it, nor the two sides of a thin wall between layers: interpolating them leaks light across
+//! occluders. The bake knows better at its surfels, so it stores per surfel what a ray tracer
+//! would see there (`prt-bench surface` chose these terms on the level family's tuning seeds,
+//! `docs/results/surface_candidates.md`):
+//!
+//! - **which probes it sees** ([`SurfelTerms::mask`]): one bit per probe of the 3x3x3 around
+//!   the surfel's nearest probe, set when a ray from the surfel reaches it. The lookup weights
+//!   a probe the surfel cannot see by [`BLOCKED_WEIGHT`] only (exact visibility from the bake,
+//!   not the depth moments' estimate);
+//! - **its near field** ([`SurfelTerms::open`], [`SurfelTerms::near_share`]): of
+//!   [`SurfelTermsHeader::rays`] cosine-distributed rays over its hemisphere, those that escape
+//!   within [`SurfelTermsHeader::reach`] spacings carry the probes' radiance (`open` is the
+//!   mean of their SH9 basis values: a precomputed radiance transfer vector, Sloan et al. 2002),
+//!   the others the relit radiance of the surfaces they hit (`near_share` of the rays; what
+//!   they bring is the mean over the surfel's brick, [`NearEntry`], which keeps the bytes per
+//!   surfel small: per-surfel hits cost 0.5 points of median error on the tuning seeds);
+//! - **how a point finds its surfel**: a hash table from brick key (the brick lattice cell and
+//!   the normal's dominant axis) to brick ([`SurfaceSlot`], [`slot_hash`]), then a table of 64
+//!   bytes per brick giving each of its 4x4x4 cells its nearest surfel ([`SurfaceTerms::cells`]).
+//!
+//! The lookup then scales the interpolated irradiance by
+//! `(open . L + near_share * near) / (A(n) . L)` per colour channel, with `L` the interpolated
+//! radiance SH and `A(n)` the clamped-cosine transfer of the surfel's normal (what `open` is
+//! when every ray escapes). All of it is optional: an asset baked without merging, or a point
+//! whose brick has no entry, is sampled by the default lookup.
+
+use bytemuck::{Pod, Zeroable};
+use serde::{Deserialize, Serialize};
+
+use crate::sh::SH_COUNT;
+
+/// Weight a probe keeps when the surfel cannot see it: small enough that the visible probes
+/// decide, nonzero so that a point whose probes are all hidden still gets their mean.
+pub const BLOCKED_WEIGHT: f32 = 1e-4;
+
+/// [`SurfelTerms::mask`] bit set when the surfel's terms were traced (front-face surfels).
+pub const TERMS_TRACED: u32 = 1 << 31;
+
+/// Bits of [`SurfelTerms::mask`] that say which of the 27 probes the surfel sees.
+pub const PROBE_BITS: u32 = (1 << 27) - 1;
+
+/// [`SurfaceSlot::value`]: the axis sits above the brick index plus one (0: an empty slot).
+pub const SLOT_AXIS_SHIFT: u32 = 29;
+
+/// Most bricks the table can name ([`SLOT_AXIS_SHIFT`] bits, minus the empty value).
+pub const MAX_TABLE_BRICKS: u32 = (1 << SLOT_AXIS_SHIFT) - 2;
+
+/// Words of [`SurfaceTerms::cells`] per brick: 64 cells of one byte.
+pub const CELL_WORDS: usize = 16;
+
+/// [`SurfaceTerms::cells`] byte of a cell with no surfel to name (its brick has over 255).
+pub const NO_SURFEL: u8 = 0xff;
+
+/// The bake's settings for the terms, and the brick lattice.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct SurfelTermsHeader {
+    /// Where the brick lattice starts (world space): brick key `floor((p - anchor) / brick_size)`.
+    pub anchor: [f32; 3],
+    /// Edge of a brick in metres; 0 when the asset has no surface terms.
+    pub brick_size: f32,
+    /// Longest run of slots a search walks before it finds its key or an empty slot.
+    pub max_probe: u32,
+    /// Near-field rays per surfel (at most 255: [`SurfelTerms::hits`] is a byte).
+    pub rays: u32,
+    /// Reach of the near-field rays in probe spacings.
+    pub reach: f32,
+}
+
+/// One slot of the brick table: a brick key and `(axis << SLOT_AXIS_SHIFT) | (brick + 1)`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable, Serialize, Deserialize)]
+#[repr(C)]
+pub struct SurfaceSlot {
+    pub key: [i32; 3],
+    pub value: u32,
+}
+const _: () = assert!(std::mem::size_of::<SurfaceSlot>() == 16);
+
+/// A surfel's terms (module docs). 32 bytes; as eight words in WGSL: `mask`, `open` two halves
+/// a word, then the last half with `hits` and `group` above it, `centre`, `normal`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable, Serialize, Deserialize)]
+#[repr(C)]
+pub struct SurfelTerms {
+    /// Bit `(dx + 1) + 3 (dy + 1) + 9 (dz + 1)`: the surfel sees the probe at grid position
+    /// `centre + (dx, dy, dz)`; and [`TERMS_TRACED`].
+    pub mask: u32,
+    /// Mean over the near-field rays of `Y_k(w)` for those that escape, as IEEE halves.
+    pub open: [u16; SH_COUNT],
+    /// Near-field rays that hit a surface within reach (of [`SurfelTermsHeader::rays`]).
+    pub hits: u8,
+    /// The surfel's near group within its brick ([`SurfaceTerms::groups`]).
+    pub group: u8,
+    /// Grid index of the surfel's nearest probe, the centre of `mask` ([`centre_probe`]).
+    pub centre: u32,
+    /// The surfel's unit normal, octahedral, two snorm16 ([`encode_normal`]): `A(n)` is taken
+    /// at it (the point's own normal measured worse on curved shells: the tuning seeds' worst
+    /// image 17.0% against 15.1%).
+    pub normal: u32,
+}
+const _: () = assert!(std::mem::size_of::<SurfelTerms>() == 32);
+
+/// [`SurfaceTerms::near`] entry: bits 8.. the near group hit, bits 0..8 its weight in 255ths
+/// of the group's near hits.
+pub const NEAR_WEIGHT_BITS: u32 = 8;
+
+/// Most near groups an asset can have (the entries' group bits).
+pub const MAX_GROUPS: u32 = 1 << (32 - NEAR_WEIGHT_BITS);
+
+/// A near entry's group and weight (the weight in (0, 1]).
+pub fn near_entry(entry: u32) -> (u32, f32) {
+    let mask = (1 << NEAR_WEIGHT_BITS) - 1;
+    (
+        entry >> NEAR_WEIGHT_BITS,
+        (entry & mask) as f32 / mask as f32,
+    )
+}
+
+/// Everything the surface lookup reads (module docs). Empty vectors and a zero
+/// `header.brick_size`: none.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct SurfaceTerms {
+    pub header: SurfelTermsHeader,
+    /// Open-addressed hash table of the front-face bricks, a power of two long.
+    pub slots: Vec<SurfaceSlot>,
+    /// Per brick, [`CELL_WORDS`] words: byte `x + 4 (y + 4 z)` is the index (within the brick)
+    /// of the surfel nearest the centre of cell (x, y, z), or [`NO_SURFEL`].
+    pub cells: Vec<u32>,
+    /// One per surfel.
+    pub surfels: Vec<SurfelTerms>,
+    /// Per brick, its first near group; its surfels' `group` counts from there.
+    pub groups: Vec<u32>,
+    /// Per near group, its surfels (`first, count`: consecutive, within one brick).
+    pub group_surfels: Vec<[u32; 2]>,
+    /// Per near group, its field: `near[first..first + count]`.
+    pub near_ranges: Vec<[u32; 2]>,
+    /// The groups the near-field rays hit and their shares ([`near_entry`]).
+    pub near: Vec<u32>,
+}
+
+impl SurfaceTerms {
+    /// Whether the asset carries surface terms.
+    pub fn is_empty(&self) -> bool {
+        self.header.brick_size <= 0.0 || self.slots.is_empty()
+    }
+
+    /// The brick key of `p`.
+    pub fn key_of(&self, p: [f32; 3]) -> [i32; 3] {
+        let h = &self.header;
+        std::array::from_fn(|a| ((p[a] - h.anchor[a]) / h.brick_size).floor() as i32)
+    }
+
+    /// The brick of key `key` and dominant normal axis `axis` (0..6), if the table has it.
+    pub fn find(&self, key: [i32; 3], axis: u32) -> Option<u32> {
+        if self.slots.is_empty() {
+            return None;
+        }
+        let mask = self.slots.len() as u32 - 1;
+        let start = slot_hash(key, axis);
+        for i in 0..=self.header.max_probe {
+            let s = &self.slots[(start.wrapping_add(i) & mask) as usize];
+            if s.value == 0 {
+                return None;
+            }
+            if s.key == key && s.value >> SLOT_AXIS_SHIFT == axis {
+                return Some((s.value & ((1 << SLOT_AXIS_SHIFT) - 1)) - 1);
+            }
+        }
+        None
+    }
+
+    /// Index in the brick of the surfel of `p`'s cell in brick `brick` of key `key`, if any.
+    pub fn surfel_in(&self, brick: u32, key: [i32; 3], p: [f32; 3]) -> Option<u32> {
+        let h = &self.header;
+        let cell = h.brick_size / 4.0;
+        let c: [u32; 3] = std::array::from_fn(|a| {
+            let origin = h.anchor[a] + key[a] as f32 * h.brick_size;
+            (((p[a] - origin) / cell).floor()).clamp(0.0, 3.0) as u32
+        });
+        let byte = (c[0] + 4 * (c[1] + 4 * c[2])) as usize;
+        let word = self.cells.get(brick as usize * CELL_WORDS + byte / 4)?;
+        let s = (word >> (8 * (byte % 4))) as u8;
+        (s != NO_SURFEL).then_some(u32::from(s))
+    }
+}
+
+/// Dominant axis of a normal: 0..6 for +X, -X, +Y, -Y, +Z, -Z (ties to the lower axis). The
+/// bake keys its bricks by it; the lookup finds a point's brick by it.
+pub fn dominant_axis(n: [f32; 3]) -> u32 {
+    let a = n.map(f32::abs);
+    let (axis, v) = if a[0] >= a[1] && a[0] >= a[2] {
+        (0, n[0])
+    } else if a[1] >= a[2] {
+        (1, n[1])
+    } else {
+        (2, n[2])
+    };
+    2 * axis + u32::from(v < 0.0)
+}
+
+/// A unit normal as two snorm16 of its octahedral projection (WGSL's `pack2x16snorm` layout:
+/// x in the low half).
+pub fn encode_normal(n: [f32; 3]) -> u32 {
+    let l1 = n[0].abs() + n[1].abs() + n[2].abs();
+    let (mut x, mut y) = (n[0] / l1, n[1] / l1);
+    if n[2] < 0.0 {
+        let sign = |v: f32| if v >= 0.0 { 1.0 } else { -1.0 };
+        (x, y) = ((1.0 - y.abs()) * sign(x), (1.0 - x.abs()) * sign(y));
+    }
+    let q = |v: f32| u32::from((v.clamp(-1.0, 1.0) * 32767.0).round() as i16 as u16);
+    q(x) | q(y) << 16
+}
+
+/// The unit normal of [`encode_normal`]'s bits, computed as the WGSL snippet does.
+pub fn decode_normal(bits: u32) -> [f32; 3] {
+    let f = |h: u32| (f32::from(h as u16 as i16) / 32767.0).max(-1.0);
+    let (x, y) = (f(bits & 0xffff), f(bits >> 16));
+    let z = 1.0 - x.abs() - y.abs();
+    let t = (-z).max(0.0);
+    let x = x + if x >= 0.0 { -t } else { t };
+    let y = y + if y >= 0.0 { -t } else { t };
+    let len = (x * x + y * y + z * z).sqrt();
+    [x / len, y / len, z / len]
+}
+
+/// Where the search for a brick key starts in the table (before masking by its length); the
+/// WGSL snippet computes the same (`shaders/sample_irradiance.wgsl`).
+pub fn slot_hash(key: [i32; 3], axis: u32) -> u32 {
+    let mut h = (key[0] as u32).wrapping_mul(0x8da6_b343);
+    h ^= (key[1] as u32).wrapping_mul(0xd816_3841);
+    h ^= (key[2] as u32).wrapping_mul(0xcb1a_b31f);
+    h ^= axis.wrapping_mul(0x9e37_79b9);
+    h ^= h >> 16;
+    h = h.wrapping_mul(0x7feb_352d);
+    h ^ (h >> 15)
+}
+
+/// Grid index (i, j, k) of the probe nearest `p` in a grid of `origin`, `step` and `counts`:
+/// the centre of a surfel's [`SurfelTerms::mask`].
+pub fn centre_probe(origin: [f32; 3], step: [f32; 3], counts: [u32; 3], p: [f32; 3]) -> [i32; 3] {
+    std::array::from_fn(|a| {
+        let last = counts[a].saturating_sub(1) as f32;
+        ((p[a] - origin[a]) / step[a]).round().clamp(0.0, last) as i32
+    })
+}
+
+/// The bit of [`SurfelTerms::mask`] for probe `probe` around centre `centre`, or `None`
+/// when it is not among the 27.
+pub fn mask_bit(centre: [i32; 3], probe: [i32; 3]) -> Option<u32> {
+    let d: [i32; 3] = std::array::from_fn(|a| probe[a] - centre[a]);
+    d.iter()
+        .all(|v| (-1..=1).contains(v))
+        .then(|| ((d[0] + 1) + 3 * (d[1] + 1) + 9 * (d[2] + 1)) as u32)
+}
+
+/// `A(n)`: the mean of `Y_k(w)` over cosine-distributed directions `w` about unit `n`, the
+/// [`SurfelTerms::open`] of a surfel whose rays all escape (`A_l / pi * Y_k(n)` with the
+/// clamped cosine's `A_l` = pi, 2pi/3, pi/4).
+pub fn cosine_transfer(n: [f32; 3]) -> [f32; SH_COUNT] {
+    let y = crate::sh::basis(n);
+    const A: [f32; SH_COUNT] = [
+        1.0,
+        2.0 / 3.0,
+        2.0 / 3.0,
+        2.0 / 3.0,
+        0.25,
+        0.25,
+        0.25,
+        0.25,
+        0.25,
+    ];
+    std::array::from_fn(|k| A[k] * y[k])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every inserted key is found, absent keys are not, whatever the table's collisions.
+    #[test]
+    fn the_table_finds_what_it_holds() {
+        let keys: Vec<([i32; 3], u32)> = (0..300)
+            .map(|i| ([i % 7 - 3, i / 7 % 5, -(i / 35)], (i % 6) as u32))
+            .collect();
+        let len = 1024usize;
+        let mut slots = vec![SurfaceSlot::default(); len];
+        let mut max_probe = 0;
+        for (b, &(key, axis)) in keys.iter().enumerate() {
+            let mut i = 0;
+            loop {
+                let at = (slot_hash(key, axis).wrapping_add(i) as usize) & (len - 1);
+                if slots[at].value == 0 {
+                    slots[at] = SurfaceSlot {
+                        key,
+                        value: axis << SLOT_AXIS_SHIFT | (b as u32 + 1),
+                    };
+                    max_probe = max_probe.max(i);
+                    break;
+                }
+                i += 1;
+            }
+        }
+        let t = SurfaceTerms {
+            header: SurfelTermsHeader {
+                brick_size: 1.0,
+                max_probe,
+                ..Default::default()
+            },
+            slots,
+            ..Default::default()
+        };
+        for (b, &(key, axis)) in keys.iter().enumerate() {
+            assert_eq!(t.find(key, axis), Some(b as u32));
+        }
+        assert_eq!(t.find([100, 0, 0], 0), None);
+        assert_eq!(t.find(keys[0].0, 6), None);
+    }
+
+    /// Normals survive the octahedral encoding to within 1e-4, on every octant and the axes.
+    #[test]
+    fn normals_round_trip() {
+        let mut n = vec![
+            [0.0, 0.0, 1.0],
+            [0.0, 0.0, -1.0],
+            [1.0, 0.0, 0.0],
+            [0.0, -1.0, 0.0],
+        ];
+        for i in 0..200 {
+            let (a, b) = (i as f32 * 0.7, i as f32 * 1.3);
+            n.push([a.sin() * b.cos(), a.sin() * b.sin(), a.cos()]);
+        }
+        for v in n {
+            let got = decode_normal(encode_normal(v));
+            let len = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+            for a in 0..3 {
+                assert!((got[a] - v[a] / len).abs() < 1e-4, "{v:?} -> {got:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn mask_bits_cover_the_27_probes_once() {
+        let mut seen = 0u32;
+        for dz in -1..=1 {
+            for dy in -1..=1 {
+                for dx in -1..=1 {
+                    let bit = mask_bit([5, 5, 5], [5 + dx, 5 + dy, 5 + dz]).unwrap();
+                    assert_eq!(seen & 1 << bit, 0);
+                    seen |= 1 << bit;
+                }
+            }
+        }
+        assert_eq!(seen, PROBE_BITS);
+        assert_eq!(mask_bit([5, 5, 5], [7, 5, 5]), None);
+    }
+
+    /// `A(n) . L` is the clamped-cosine irradiance over pi: a constant radiance 1 gives 1.
+    #[test]
+    fn the_cosine_transfer_of_a_constant_sky_is_one() {
+        let mut l = [0.0f32; SH_COUNT];
+        l[0] = 1.0 / crate::sh::basis([0.0, 0.0, 1.0])[0];
+        for n in [[0.0, 0.0, 1.0], [0.6, 0.0, -0.8], [0.0, -1.0, 0.0]] {
+            let a = cosine_transfer(n);
+            let dot: f32 = (0..SH_COUNT).map(|k| a[k] * l[k]).sum();
+            assert!((dot - 1.0).abs() < 1e-6, "{dot}");
+        }
+    }
+}

@@ -1,0 +1,157 @@
+//! # The surface lookup: probe visibility and near field from the bake's surfel terms
+//!
+//! [`crate::sample::VolumeSampler`] interpolates the eight probes around a point, weighted by
+//! what their depth moments guess about visibility. On levels with hard sun and thin occluders
+//! that guess leaks: probes a spacing away see past a gallery's floor, a balcony, a thin
+//! wall between layers (issue 31, `docs/surfaces.md`). [`SurfaceSampler`] reads instead what
+//! the bake traced at the point's surfel (`prt_format::surface`):
+//!
+//! 1. **Find the surfel**: the point's brick by key (brick lattice cell, the normal's dominant
+//!    axis) in the hash table, then the surfel named for the point's cell of that brick. No
+//!    entry (a surface the probes never saw, an asset baked without merging, a normal at 45
+//!    degrees whose axis differs from the surfel's): the default lookup.
+//! 2. **Weight the probes** trilinearly, a probe the surfel cannot see by
+//!    `prt_format::surface::BLOCKED_WEIGHT` (no depth moments: the mask is exact). A surfel
+//!    that sees none of them leaves the point to the default lookup.
+//! 3. **Near field**: scale the irradiance, per colour channel, by
+//!    `(open . L + hits / rays * near_G) / (A(n) . L)`, `L` the interpolated radiance SH, `A`
+//!    the cosine transfer of the surfel's normal, `near_G` the mean radiance per near hit of
+//!    the surfel's near group (the surfels of its brick that see the same probes;
+//!    [`near_radiance`], one value per group per relight).
+//!
+//! The figures that chose it (the family's tuning seeds, and the held-out seeds it was then
+//! scored on) are in `docs/results/surface.md` (`prt-bench surface --lookup surface`).
+
+use prt_format::sh::{ShRgb, SH_COUNT};
+use prt_format::surface::{
+    cosine_transfer, decode_normal, dominant_axis, mask_bit, near_entry, SurfaceTerms,
+    BLOCKED_WEIGHT, TERMS_TRACED,
+};
+use prt_format::{f16_to_f32, Asset};
+use rayon::prelude::*;
+
+use std::f32::consts::FRAC_1_PI;
+
+use crate::sample::{Sample, VolumeSampler};
+use crate::settings::LookupSettings;
+
+/// Per near group, the mean radiance its surfels' near-field hits bring (the entries'
+/// weighted [`group_radiance`]).
+pub fn near_radiance(terms: &SurfaceTerms, group_radiance: &[[f32; 3]]) -> Vec<[f32; 3]> {
+    terms
+        .near_ranges
+        .par_iter()
+        .map(|&[first, count]| {
+            let mut sum = [0.0f32; 3];
+            for &e in &terms.near[first as usize..(first + count) as usize] {
+                let (g, w) = near_entry(e);
+                let l = group_radiance[g as usize];
+                (0..3).for_each(|c| sum[c] += w * l[c]);
+            }
+            sum
+        })
+        .collect()
+}
+
+/// Per near group, the weighted mean radiance `emission + albedo / pi * E` of its surfels,
+/// `E` their irradiance (`irradiance`, per surfel): a brick's mean, side by side.
+pub fn group_radiance(asset: &Asset, irradiance: &[[f32; 3]]) -> Vec<[f32; 3]> {
+    asset
+        .surface
+        .group_surfels
+        .par_iter()
+        .map(|&[first, count]| {
+            let range = first as usize..(first + count) as usize;
+            let (mut sum, mut weight) = ([0.0f32; 3], 0.0f32);
+            for (s, e) in asset.surfels[range.clone()].iter().zip(&irradiance[range]) {
+                for c in 0..3 {
+                    sum[c] += s.weight * (s.emission[c] + s.albedo[c] * FRAC_1_PI * e[c]);
+                }
+                weight += s.weight;
+            }
+            sum.map(|v| v / weight)
+        })
+        .collect()
+}
+
+/// The surface lookup of an asset relit to probe SH `sh` and brick radiance `bricks`.
+pub struct SurfaceSampler<'a> {
+    asset: &'a Asset,
+    trilinear: VolumeSampler<'a>,
+    fallback: VolumeSampler<'a>,
+    near: Vec<[f32; 3]>,
+}
+
+impl<'a> SurfaceSampler<'a> {
+    /// The lookup of `asset` relit to `sh` (per probe) and surfel irradiance `irradiance`
+    /// (`crate::Relit::surfel_irradiance`); the trilinear weights take `lookup`'s normal bias,
+    /// and the fallback is `lookup` itself.
+    pub fn new(
+        asset: &'a Asset,
+        sh: &'a [ShRgb],
+        irradiance: &[[f32; 3]],
+        lookup: &LookupSettings,
+    ) -> Self {
+        let trilinear = LookupSettings {
+            depth_moments: false,
+            ..*lookup
+        };
+        SurfaceSampler {
+            asset,
+            trilinear: VolumeSampler::for_asset(asset, sh, &trilinear),
+            fallback: VolumeSampler::for_asset(asset, sh, lookup),
+            near: near_radiance(&asset.surface, &group_radiance(asset, irradiance)),
+        }
+    }
+
+    /// The sample at `position` for a surface with unit normal `normal`.
+    pub fn sample(&self, position: [f32; 3], normal: [f32; 3]) -> Sample {
+        let Some((brick, surfel)) = self.surfel_of(position, normal) else {
+            return self.fallback.sample(position, normal);
+        };
+        let terms = &self.asset.surface.surfels[surfel];
+        let [nx, ny, _] = self.asset.header.grid.counts.map(|c| c as usize);
+        let ijk = |i: usize| [i % nx, i / nx % ny, i / (nx * ny)].map(|v| v as i32);
+        let centre = ijk(terms.centre as usize);
+        let seen = std::cell::Cell::new(false);
+        let mut out = self.trilinear.sample_weighted(position, normal, |i, _| {
+            let visible = mask_bit(centre, ijk(i)).is_none_or(|b| terms.mask >> b & 1 != 0);
+            seen.set(seen.get() || visible);
+            if visible {
+                1.0
+            } else {
+                BLOCKED_WEIGHT
+            }
+        });
+        if !seen.get() {
+            out = self.fallback.sample(position, normal);
+        }
+        let open = terms.open.map(f16_to_f32);
+        let all = cosine_transfer(decode_normal(terms.normal));
+        let share = f32::from(terms.hits) / self.asset.surface.header.rays as f32;
+        let group = self.asset.surface.groups[brick] + u32::from(terms.group);
+        let near = self.near[group as usize];
+        for (ch, e) in out.irradiance.iter_mut().enumerate() {
+            let dot =
+                |t: &[f32; SH_COUNT]| (0..SH_COUNT).map(|k| out.sh[k][ch] * t[k]).sum::<f32>();
+            let total = dot(&all);
+            if total > 0.0 {
+                *e *= ((dot(&open) + share * near[ch]) / total).max(0.0);
+            }
+        }
+        out
+    }
+
+    /// The brick and surfel (asset indices) whose terms stand for the point, if any.
+    fn surfel_of(&self, position: [f32; 3], normal: [f32; 3]) -> Option<(usize, usize)> {
+        let t = &self.asset.surface;
+        if t.is_empty() {
+            return None;
+        }
+        let key = t.key_of(position);
+        let brick = t.find(key, dominant_axis(normal))?;
+        let within = t.surfel_in(brick, key, position)?;
+        let surfel = (self.asset.bricks[brick as usize].first_surfel + within) as usize;
+        (t.surfels[surfel].mask & TERMS_TRACED != 0).then_some((brick as usize, surfel))
+    }
+}
