@@ -1,8 +1,10 @@
 // Engines include this snippet in their shaders to shade with prt's indirect diffuse light.
 // Bind the runtime's bindings at the group given by PRT_GROUP (PrtRuntime::wgsl_snippet injects
 // it; PrtRuntime::volume_bind_group makes the group): seven volume textures, a sampler, the
-// PrtVolumeInfo uniform and the probes' depth moments. sample_irradiance returns irradiance E
-// (W/m^2, not divided by pi): diffuse exitance is albedo / pi * E. Twin: prt_runtime::sample.
+// PrtVolumeInfo uniform, the probes' depth moments and positions, the surface lookup's tables
+// and its near radiance (four storage buffers). sample_irradiance returns irradiance E
+// (W/m^2, not divided by pi): diffuse exitance is albedo / pi * E. Twins:
+// prt_runtime::surface (sample_irradiance) and prt_runtime::sample (prt_sample_sh).
 //
 // The textures hold SH premultiplied by each probe's validity (texture 0's alpha: 1 for a valid
 // or dilated probe, 0 for an invalid one).
@@ -224,10 +226,6 @@ fn prt_irradiance(c: array<vec3<f32>, 9>, n: vec3<f32>) -> vec3<f32> {
     return max(e, vec3<f32>(0.0));
 }
 
-// Irradiance of the probe volume alone at world_pos (prt_sample_sh): what bounces feed back.
-fn prt_volume_irradiance(world_pos: vec3<f32>, normal: vec3<f32>) -> vec3<f32> {
-    return prt_irradiance(prt_sample_sh(world_pos, normal).sh, normal);
-}
 
 // ---- The surface lookup (twin: prt_runtime::surface::SurfaceSampler) ----
 //

@@ -86,6 +86,15 @@ pub(crate) fn bake_in_pool(
         cell_size,
     };
     let surface = surface_terms::surface_terms(&inputs, &mut bricked.surfels);
+    if cell_size > 0.0 && surface.is_empty() && !bricked.bricks.is_empty() {
+        report.warnings.push(format!(
+            "no surface terms: {} bricks and their near groups overflow the lookup's tables \
+             (at most {} bricks, {} groups); surfaces are sampled from the probe volume alone",
+            bricked.bricks.len(),
+            prt_format::surface::MAX_TABLE_BRICKS,
+            prt_format::surface::MAX_GROUPS
+        ));
+    }
     lap(&mut report, "surface", Some("assemble"));
 
     let Assembled {

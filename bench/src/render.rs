@@ -225,8 +225,9 @@ fn render(b: &RenderBench) -> Result<String> {
     report(b, &info.name, &rows, sampling)
 }
 
-/// Shading cost of the indirect lookup: the indirect view with the visibility-aware lookup, with
-/// plain trilinear, and with an empty volume (the pass without any lookup work).
+/// Shading cost of the indirect lookup: the indirect view with the default lookup (surface
+/// terms, depth moments elsewhere), with depth moments alone, with plain trilinear, and with an
+/// empty volume (the pass without any lookup work).
 fn sampling_cost(
     device: &wgpu::Device,
     queue: &wgpu::Queue,
@@ -234,7 +235,7 @@ fn sampling_cost(
     asset: &prt_format::Asset,
     camera: &Camera,
     b: &RenderBench,
-) -> Result<[f64; 3]> {
+) -> Result<[f64; 4]> {
     let settings = RenderSettings {
         width: b.size.0,
         height: b.size.1,
@@ -250,11 +251,13 @@ fn sampling_cost(
         },
         sky: prt_runtime::SkyModel::Constant([1.0; 3]),
     };
-    let mut out = [0.0; 3];
-    for (k, depth_moments) in [true, false].into_iter().enumerate() {
+    let mut out = [0.0; 4];
+    let lookups = [(true, true), (false, true), (false, false)];
+    for (k, (surface_terms, depth_moments)) in lookups.into_iter().enumerate() {
         let runtime = RuntimeSettings {
             lookup: prt_runtime::LookupSettings {
                 depth_moments,
+                surface_terms,
                 ..Default::default()
             },
             ..RuntimeSettings::default()
@@ -269,13 +272,13 @@ fn sampling_cost(
             submit_wait(device, queue, |e| r.record_shade(e, Some(&volume)))
         })?;
     }
-    out[2] = median(b.frames, || {
+    out[3] = median(b.frames, || {
         submit_wait(device, queue, |e| r.record_shade(e, None))
     })?;
     Ok(out)
 }
 
-fn report(b: &RenderBench, adapter: &str, rows: &[Row], sampling: [f64; 3]) -> Result<String> {
+fn report(b: &RenderBench, adapter: &str, rows: &[Row], sampling: [f64; 4]) -> Result<String> {
     let mut md = String::new();
     writeln!(
         md,
@@ -307,10 +310,13 @@ fn report(b: &RenderBench, adapter: &str, rows: &[Row], sampling: [f64; 3]) -> R
     }
     writeln!(
         md,
-        "\nIndirect lookup, shading pass of the indirect view: {:.2} ms visibility-aware (8 probes, \
-         56 texel loads, 8 visibility words per pixel), {:.2} ms plain trilinear (7 filtered \
-         fetches), {:.2} ms with an empty volume (no lookup work).",
-        sampling[0], sampling[1], sampling[2]
+        "\nIndirect lookup, shading pass of the indirect view: {:.2} ms default (surface terms \
+         where a pixel has a surfel: a hash search of one or two 4-word slots, a cell word, 10 \
+         words of terms, 8 probes with 56 texel loads and one near value; depth moments \
+         elsewhere), {:.2} ms depth moments alone (8 \
+         probes, 56 texel loads, 8 visibility words per pixel), {:.2} ms plain trilinear (7 \
+         filtered fetches), {:.2} ms with an empty volume (no lookup work).",
+        sampling[0], sampling[1], sampling[2], sampling[3]
     )?;
     Ok(md)
 }

@@ -43,7 +43,7 @@ use anyhow::{Context, Result};
 use prt_bake::{BakeSettings, NoProgress};
 use prt_format::sh::ShRgb;
 use prt_format::{Asset, Summary};
-use prt_runtime::{Lighting, Sample, VolumeSampler};
+use prt_runtime::{Lighting, Sample};
 use rayon::prelude::*;
 
 use crate::ray_lookup::{NearLight, RayLookup};
@@ -213,10 +213,9 @@ fn bake(case: &Case, settings: &BakeSettings, lighting: &Lighting, bricks: bool)
 
 /// The sampler of one lookup over one bake.
 enum Sampler<'a> {
-    Runtime(VolumeSampler<'a>),
+    Runtime(SurfaceSampler<'a>),
     Rays(RayLookup<'a>),
     Surfels(SurfelLookup<'a>),
-    Surface(SurfaceSampler<'a>),
 }
 
 impl<'a> Sampler<'a> {
@@ -229,7 +228,9 @@ impl<'a> Sampler<'a> {
                 .context("the relit bricks were not kept")
         };
         Ok(match lookup.kind {
-            Kind::Runtime => Sampler::Runtime(VolumeSampler::for_asset(asset, sh, settings)),
+            Kind::Runtime => {
+                Sampler::Runtime(SurfaceSampler::new(asset, sh, &baked.irradiance, settings))
+            }
             Kind::Rays(r) => {
                 let rays = RayLookup::for_asset(asset, sh, settings.normal_bias, r);
                 Sampler::Rays(match r.near_light {
@@ -238,9 +239,6 @@ impl<'a> Sampler<'a> {
                 })
             }
             Kind::Surfels => Sampler::Surfels(SurfelLookup::new(asset, sh, near()?, settings)),
-            Kind::Surface => {
-                Sampler::Surface(SurfaceSampler::new(asset, sh, &baked.irradiance, settings))
-            }
         })
     }
 
@@ -249,7 +247,6 @@ impl<'a> Sampler<'a> {
             Sampler::Runtime(s) => s.sample(p, n),
             Sampler::Rays(s) => s.sample(p, n),
             Sampler::Surfels(s) => s.sample(p, n),
-            Sampler::Surface(s) => s.sample(p, n),
         }
     }
 }
@@ -314,8 +311,8 @@ fn sample(
 /// The asset's bytes an engine keeps at runtime: every array section of `prt_format::Summary`
 /// (the in-memory sizes `prt inspect` prints), since the GPU runtime uploads them all (probes,
 /// sky mask and transfer, visibility maps and factors for the gather; bricks and surfels for
-/// the direct light; BVH and triangles for its shadow rays). The file adds a header and a few
-/// bytes of lengths per section.
+/// the direct light; BVH and triangles for its shadow rays; the surface lookup's terms). The
+/// file adds a header and a few bytes of lengths per section.
 fn runtime_bytes(summary: &Summary) -> u64 {
     let s = &summary.section_bytes;
     s.probes
@@ -327,4 +324,5 @@ fn runtime_bytes(summary: &Summary) -> u64 {
         + s.surfels
         + s.bvh_nodes
         + s.triangles
+        + s.surface
 }

@@ -88,6 +88,10 @@ pub struct RenderArgs {
     /// probes' depth moments that keeps light from leaking through walls (to compare).
     #[arg(long, alias = "no-visibility")]
     no_depth_moments: bool,
+    /// Indirect light from the probe volume alone, without the asset's surface terms (which
+    /// probes each surfel sees, its near field; to compare).
+    #[arg(long)]
+    no_surface_terms: bool,
     /// Render even if the asset was baked from another scene file.
     #[arg(long)]
     force: bool,
@@ -119,6 +123,7 @@ fn job_of(args: RenderArgs) -> Result<RenderJob> {
         lookup: prt_runtime::LookupSettings {
             normal_bias: normal_bias(args.normal_bias)?,
             depth_moments: !args.no_depth_moments,
+            surface_terms: !args.no_surface_terms,
         },
         bounces: prt_runtime::gpu::Bounces::Fixed(args.bounces),
         ..RuntimeSettings::default()

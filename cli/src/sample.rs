@@ -1,13 +1,13 @@
 //! `prt sample` (docs/conventions.md section 6): relights an asset once and returns, at given surface
 //! points, what the engine-side `sample_irradiance` returns there (SH, irradiance, validity), on
-//! the CPU twin (`VolumeSampler`) or the real snippet on the GPU (`sample_points`).
+//! the CPU twin (`SurfaceSampler`) or the real snippet on the GPU (`sample_points`).
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use prt_format::sh::ShRgb;
 use prt_runtime::gpu::{PrtRuntime, RuntimeSettings};
-use prt_runtime::{LookupSettings, Sample, VolumeSampler};
+use prt_runtime::surface::SurfaceSampler;
+use prt_runtime::{LookupSettings, Sample};
 use serde_json::{json, Value};
 
 use prt_cli::options::normal_bias;
@@ -35,6 +35,10 @@ pub struct SampleArgs {
     /// Plain trilinear interpolation: no Chebyshev test against the probes' depth moments.
     #[arg(long, alias = "no-visibility")]
     no_depth_moments: bool,
+    /// The probe volume alone: without the asset's surface terms (which probes each surfel
+    /// sees, its near field).
+    #[arg(long)]
+    no_surface_terms: bool,
 }
 
 /// A surface point: position and unit normal.
@@ -46,6 +50,7 @@ pub fn run(args: SampleArgs) -> Result<()> {
         lookup: LookupSettings {
             normal_bias,
             depth_moments: !args.no_depth_moments,
+            surface_terms: !args.no_surface_terms,
         },
         ..RuntimeSettings::default()
     };
@@ -57,10 +62,8 @@ pub fn run(args: SampleArgs) -> Result<()> {
     let start = std::time::Instant::now();
     let (samples, name) = match args.backend {
         Backend::Cpu => {
-            let sh = prt_runtime::CpuRelighter::new(&asset)?
-                .relight(&lighting, 1)?
-                .sh;
-            (sample_cpu(&asset, &sh, &settings, &points), "cpu")
+            let relit = prt_runtime::CpuRelighter::new(&asset)?.relight(&lighting, 1)?;
+            (sample_cpu(&asset, &relit, &settings, &points), "cpu")
         }
         Backend::Gpu => (sample_gpu(&asset, &lighting, settings, &points)?, "gpu"),
     };
@@ -77,14 +80,15 @@ pub fn run(args: SampleArgs) -> Result<()> {
     Ok(())
 }
 
-/// The CPU twin of the snippet over the CPU relight's SH.
+/// The CPU twin of the snippet over the CPU relight.
 fn sample_cpu(
     asset: &prt_format::Asset,
-    sh: &[ShRgb],
+    relit: &prt_runtime::Relit,
     settings: &RuntimeSettings,
     points: &[Point],
 ) -> Vec<Sample> {
-    let sampler = VolumeSampler::for_asset(asset, sh, &settings.lookup);
+    let irradiance = &relit.surfel_irradiance;
+    let sampler = SurfaceSampler::new(asset, &relit.sh, irradiance, &settings.lookup);
     points.iter().map(|(p, n)| sampler.sample(*p, *n)).collect()
 }
 

@@ -378,7 +378,7 @@ mod tests {
             matches!(
                 e,
                 FormatError::Decode {
-                    section: "lights",
+                    section: "surface",
                     ..
                 }
             ),

@@ -51,6 +51,8 @@ pub struct SectionBytes {
     pub surfels: u64,
     pub bvh_nodes: u64,
     pub triangles: u64,
+    /// The surface lookup's tables and terms (`crate::surface`).
+    pub surface: u64,
 }
 
 fn bytes<T>(v: &[T]) -> u64 {
@@ -71,6 +73,7 @@ impl Summary {
             surfels: bytes(&asset.surfels),
             bvh_nodes: bytes(&asset.geometry.nodes),
             triangles: bytes(&asset.geometry.triangles),
+            surface: surface_bytes(&asset.surface),
         };
         let per_probe = |b: u64| {
             if probes == 0 {
@@ -116,6 +119,17 @@ impl Summary {
     }
 }
 
+/// In-memory bytes of the surface terms' arrays.
+fn surface_bytes(t: &crate::surface::SurfaceTerms) -> u64 {
+    bytes(&t.slots)
+        + bytes(&t.cells)
+        + bytes(&t.surfels)
+        + bytes(&t.groups)
+        + bytes(&t.group_surfels)
+        + bytes(&t.near_ranges)
+        + bytes(&t.near)
+}
+
 impl std::fmt::Display for Summary {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let g = &self.grid;
@@ -159,8 +173,8 @@ impl std::fmt::Display for Summary {
         let s = &self.section_bytes;
         writeln!(
             f,
-            "section bytes    probes {} | sky mask {} | sky transfer {} | visibility {} | factors {} | bricks {} | surfels {} | bvh {} | triangles {}",
-            s.probes, s.sky_mask, s.sky_transfer, s.probe_depth, s.factors, s.bricks, s.surfels, s.bvh_nodes, s.triangles
+            "section bytes    probes {} | sky mask {} | sky transfer {} | visibility {} | factors {} | bricks {} | surfels {} | bvh {} | triangles {} | surface {}",
+            s.probes, s.sky_mask, s.sky_transfer, s.probe_depth, s.factors, s.bricks, s.surfels, s.bvh_nodes, s.triangles, s.surface
         )?;
         write!(
             f,

@@ -10,19 +10,20 @@
 //!   the surfel's nearest probe, set when a ray from the surfel reaches it. The lookup weights
 //!   a probe the surfel cannot see by [`BLOCKED_WEIGHT`] only (exact visibility from the bake,
 //!   not the depth moments' estimate);
-//! - **its near field** ([`SurfelTerms::open`], [`SurfelTerms::near_share`]): of
+//! - **its near field** ([`SurfelTerms::open`], [`SurfelTerms::hits`]): of
 //!   [`SurfelTermsHeader::rays`] cosine-distributed rays over its hemisphere, those that escape
 //!   within [`SurfelTermsHeader::reach`] spacings carry the probes' radiance (`open` is the
 //!   mean of their SH9 basis values: a precomputed radiance transfer vector, Sloan et al. 2002),
-//!   the others the relit radiance of the surfaces they hit (`near_share` of the rays; what
-//!   they bring is the mean over the surfel's brick, [`NearEntry`], which keeps the bytes per
-//!   surfel small: per-surfel hits cost 0.5 points of median error on the tuning seeds);
+//!   the others (`hits` of them) the relit radiance of the surfaces they hit. What those bring
+//!   is kept per **near group** (the surfels of a brick that see the same probes: one side of
+//!   whatever stands on the brick), as the groups its rays hit and their shares
+//!   ([`SurfaceTerms::near`], [`near_entry`]): a few bytes per surfel instead of a list each;
 //! - **how a point finds its surfel**: a hash table from brick key (the brick lattice cell and
 //!   the normal's dominant axis) to brick ([`SurfaceSlot`], [`slot_hash`]), then a table of 64
 //!   bytes per brick giving each of its 4x4x4 cells its nearest surfel ([`SurfaceTerms::cells`]).
 //!
 //! The lookup then scales the interpolated irradiance by
-//! `(open . L + near_share * near) / (A(n) . L)` per colour channel, with `L` the interpolated
+//! `(open . L + hits / rays * near) / (A(n) . L)` per colour channel, with `L` the interpolated
 //! radiance SH and `A(n)` the clamped-cosine transfer of the surfel's normal (what `open` is
 //! when every ray escapes). All of it is optional: an asset baked without merging, or a point
 //! whose brick has no entry, is sampled by the default lookup.
@@ -33,7 +34,8 @@ use serde::{Deserialize, Serialize};
 use crate::sh::SH_COUNT;
 
 /// Weight a probe keeps when the surfel cannot see it: small enough that the visible probes
-/// decide, nonzero so that a point whose probes are all hidden still gets their mean.
+/// decide. (A surfel that sees none of the point's probes leaves their weights to the default
+/// lookup.)
 pub const BLOCKED_WEIGHT: f32 = 1e-4;
 
 /// [`SurfelTerms::mask`] bit set when the surfel's terms were traced (front-face surfels).

@@ -5,7 +5,8 @@
 
 use crate::asset::*;
 use crate::error::FormatError;
-use crate::surface::{near_entry, SurfaceTerms, CELL_WORDS, NO_SURFEL, SLOT_AXIS_SHIFT};
+
+mod surface;
 
 /// Largest ray count a bake may use (bit masks and tables are sized by it).
 pub const MAX_RAYS: u32 = 1 << 20;
@@ -55,7 +56,7 @@ pub fn validate(asset: &Asset) -> Result<(), FormatError> {
     bricks(asset)?;
     surfels(&asset.surfels)?;
     geometry(&asset.geometry)?;
-    surface_terms(&asset.surface, &asset.bricks, asset.surfels.len())?;
+    surface::surface_terms(asset)?;
     for (i, l) in asset.lights.iter().enumerate() {
         l.validate(i)
             .map_err(|e| FormatError::invalid("lights", i, e.to_string()))?;
@@ -301,106 +302,6 @@ fn surfels(surfels: &[Surfel]) -> Result<(), FormatError> {
         }
     }
     Ok(())
-}
-
-/// The surface terms (a runtime indexes all of it unchecked): none at all, or a header of
-/// finite positive sizes, a power-of-two table naming bricks that exist, a cell table per
-/// brick naming its surfels, terms per surfel and near groups in range, every half finite.
-fn surface_terms(st: &SurfaceTerms, bricks: &[Brick], surfels: usize) -> Result<(), FormatError> {
-    {
-        let h = &st.header;
-        let all_empty = st.slots.is_empty()
-            && st.cells.is_empty()
-            && st.surfels.is_empty()
-            && st.groups.is_empty()
-            && st.group_surfels.is_empty()
-            && st.near_ranges.is_empty()
-            && st.near.is_empty();
-        if h.brick_size == 0.0 && all_empty {
-            return Ok(());
-        }
-        let bad = |index: usize, what: String| Err(FormatError::invalid("surface", index, what));
-        let sizes_ok = h.anchor.iter().all(|v| v.is_finite())
-            && h.brick_size.is_finite()
-            && h.brick_size > 0.0
-            && h.reach.is_finite()
-            && h.reach >= 0.0
-            && (1..=u32::from(u8::MAX)).contains(&h.rays);
-        if !sizes_ok {
-            return bad(0, format!("header {h:?}"));
-        }
-        let len = st.slots.len();
-        if !len.is_power_of_two() || h.max_probe as usize >= len {
-            return bad(0, format!("{len} slots, longest search {}", h.max_probe));
-        }
-        for (i, s) in st.slots.iter().enumerate() {
-            let brick = (s.value & ((1 << SLOT_AXIS_SHIFT) - 1)) as usize;
-            if s.value != 0
-                && (brick == 0 || brick > bricks.len() || s.value >> SLOT_AXIS_SHIFT >= 6)
-            {
-                return bad(
-                    i,
-                    format!("slot value {:#x} (bricks: {})", s.value, bricks.len()),
-                );
-            }
-        }
-        count("surface", st.cells.len(), bricks.len() * CELL_WORDS)?;
-        for (b, brick) in bricks.iter().enumerate() {
-            let words = &st.cells[b * CELL_WORDS..(b + 1) * CELL_WORDS];
-            let bytes = words.iter().flat_map(|w| w.to_le_bytes());
-            if let Some(s) = bytes
-                .filter(|&s| s != NO_SURFEL)
-                .find(|&s| u32::from(s) >= brick.surfel_count)
-            {
-                return bad(
-                    b,
-                    format!("cell names surfel {s} of {}", brick.surfel_count),
-                );
-            }
-        }
-        count("surface", st.groups.len(), bricks.len())?;
-        let groups = st.near_ranges.len() as u64;
-        count("surface", st.surfels.len(), surfels)?;
-        for (b, brick) in bricks.iter().enumerate() {
-            let range =
-                brick.first_surfel as usize..(brick.first_surfel + brick.surfel_count) as usize;
-            for (i, t) in st.surfels[range.clone()].iter().enumerate() {
-                let group = u64::from(st.groups[b]) + u64::from(t.group);
-                let ok = t.open.iter().all(|&v| f16_to_f32(v).is_finite())
-                    && u32::from(t.hits) <= h.rays
-                    && group < groups;
-                if !ok {
-                    return bad(
-                        range.start + i,
-                        format!("surfel terms {t:?} (near groups: {groups})"),
-                    );
-                }
-            }
-        }
-        count("surface", st.group_surfels.len(), groups as usize)?;
-        for (g, &[first, n]) in st.group_surfels.iter().enumerate() {
-            if u64::from(first) + u64::from(n) > surfels as u64 || n == 0 {
-                return bad(g, format!("group surfels {first}+{n} (surfels: {surfels})"));
-            }
-        }
-        for (g, &[first, n]) in st.near_ranges.iter().enumerate() {
-            if u64::from(first) + u64::from(n) > st.near.len() as u64 {
-                return bad(
-                    g,
-                    format!("near field {first}+{n} (entries: {})", st.near.len()),
-                );
-            }
-        }
-        if let Some(i) = st
-            .near
-            .iter()
-            .position(|&e| u64::from(near_entry(e).0) >= groups)
-        {
-            let g = near_entry(st.near[i]).0;
-            return bad(i, format!("near entry names group {g} of {groups}"));
-        }
-        Ok(())
-    }
 }
 
 /// The BVH: nodes and triangles together or neither, finite boxes, children after their

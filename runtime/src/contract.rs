@@ -11,6 +11,7 @@
 
 use bytemuck::{Pod, Zeroable};
 use prt_format::depth::{MAX_DEPTH, MAX_DEVIATION};
+use prt_format::surface::{BLOCKED_WEIGHT, NO_SURFEL, SLOT_AXIS_SHIFT, TERMS_TRACED};
 use prt_format::{
     LightKind, TransferPrecision, BRICK_BACKFACE, DEPTH_MAP_SIDE, DEPTH_WORDS, PROBE_VALID,
     U8_SH_RANGE,
@@ -209,13 +210,66 @@ pub struct VolumeInfo {
     pub step: [f32; 3],
     /// [`VOLUME_DEPTH_MOMENTS`]: weight each of the eight probes by its depth moments (whether
     /// the point is visible from it; eight manual fetches); without it, one hardware trilinear
-    /// fetch per texture.
+    /// fetch per texture. [`VOLUME_SURFACE`]: the surface lookup decides where it can.
     pub flags: u32,
+    /// The surface lookup's brick lattice (`prt_format::surface::SurfelTermsHeader`).
+    pub surface_anchor: [f32; 3],
+    pub brick_size: f32,
+    /// Slots of the brick table minus one, and its longest search.
+    pub slot_mask: u32,
+    pub max_probe: u32,
+    /// Word offsets in the snippet's `prt_surface` array ([`SurfaceLayout`]).
+    pub cells_at: u32,
+    pub terms_at: u32,
+    pub bricks_at: u32,
+    /// Near-field rays per surfel.
+    pub near_rays: f32,
+    pub _pad: [u32; 2],
 }
-const _: () = assert!(std::mem::size_of::<VolumeInfo>() == 48);
+const _: () = assert!(std::mem::size_of::<VolumeInfo>() == 96);
 
 /// `VolumeInfo::flags`: weight probes by their depth moments (`LookupSettings::depth_moments`).
 pub const VOLUME_DEPTH_MOMENTS: u32 = 1;
+/// `VolumeInfo::flags`: the surface lookup (`LookupSettings::surface_terms`, and the asset has
+/// surface terms).
+pub const VOLUME_SURFACE: u32 = 2;
+
+/// Where each table of the surface lookup starts in the snippet's one array of words
+/// (`prt_surface`): the brick table's slots (4 words each), the cells (16 words a brick), the
+/// surfel terms (8 words each), then per brick its first surfel and first near group.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SurfaceLayout {
+    pub cells_at: u32,
+    pub terms_at: u32,
+    pub bricks_at: u32,
+}
+
+impl SurfaceLayout {
+    /// The layout for `asset`'s terms.
+    pub fn of(asset: &prt_format::Asset) -> SurfaceLayout {
+        let t = &asset.surface;
+        let slots = 4 * t.slots.len() as u64;
+        let cells = t.cells.len() as u64;
+        let terms = 8 * t.surfels.len() as u64;
+        SurfaceLayout {
+            cells_at: slots as u32,
+            terms_at: (slots + cells) as u32,
+            bricks_at: (slots + cells + terms) as u32,
+        }
+    }
+
+    /// The words themselves.
+    pub fn words(asset: &prt_format::Asset) -> Vec<u32> {
+        let t = &asset.surface;
+        let mut w: Vec<u32> = bytemuck::cast_slice(&t.slots).to_vec();
+        w.extend_from_slice(&t.cells);
+        w.extend_from_slice(bytemuck::cast_slice(&t.surfels));
+        for (b, g) in asset.bricks.iter().zip(&t.groups) {
+            w.extend([b.first_surfel, *g]);
+        }
+        w
+    }
+}
 
 impl From<&prt_format::Grid> for VolumeInfo {
     fn from(g: &prt_format::Grid) -> Self {
@@ -226,6 +280,15 @@ impl From<&prt_format::Grid> for VolumeInfo {
             normal_bias: 0.0,
             step: g.step,
             flags: 0,
+            surface_anchor: [0.0; 3],
+            brick_size: 0.0,
+            slot_mask: 0,
+            max_probe: 0,
+            cells_at: 0,
+            terms_at: 0,
+            bricks_at: 0,
+            near_rays: 1.0,
+            _pad: [0; 2],
         }
     }
 }
@@ -259,6 +322,10 @@ pub fn wgsl_constants() -> Vec<(&'static str, String)> {
         ),
         ("MIN_DISTANCE_SQ", format!("{MIN_DISTANCE_SQ:e}")),
         ("BRICK_BACKFACE", format!("{BRICK_BACKFACE}u")),
+        (
+            "NEAR_WEIGHT_BITS",
+            format!("{}u", prt_format::surface::NEAR_WEIGHT_BITS),
+        ),
         ("PROBE_VALID", format!("{PROBE_VALID}u")),
         ("PROBE_NONE", format!("{}u", u32::MAX)),
         ("SKY_BLACK", format!("{SKY_BLACK}u")),
@@ -338,7 +405,7 @@ pub const MIN_DISTANCE: f32 = 1e-4;
 pub const CRUSH_THRESHOLD: f32 = 0.2;
 
 /// `(name, value)` of the constants the engine-side sampling snippet shares with its CPU twin
-/// ([`crate::sample::VolumeSampler`]), as WGSL source text.
+/// ([`crate::surface::SurfaceSampler`], [`crate::sample::VolumeSampler`]), as WGSL source text.
 pub fn snippet_constants() -> Vec<(&'static str, String)> {
     vec![
         ("PRT_MIN_VALIDITY", format!("{MIN_VALIDITY:e}")),
@@ -353,5 +420,11 @@ pub fn snippet_constants() -> Vec<(&'static str, String)> {
         ("PRT_MAX_DEPTH", format!("{MAX_DEPTH:?}")),
         ("PRT_MAX_DEVIATION", format!("{MAX_DEVIATION:?}")),
         ("PRT_FLAG_DEPTH_MOMENTS", format!("{VOLUME_DEPTH_MOMENTS}u")),
+        ("PRT_FLAG_SURFACE", format!("{VOLUME_SURFACE}u")),
+        ("PRT_NONE", format!("{}u", u32::MAX)),
+        ("PRT_SLOT_AXIS_SHIFT", format!("{SLOT_AXIS_SHIFT}u")),
+        ("PRT_TERMS_TRACED", format!("{TERMS_TRACED}u")),
+        ("PRT_NO_SURFEL", format!("{NO_SURFEL}u")),
+        ("PRT_BLOCKED_WEIGHT", format!("{BLOCKED_WEIGHT:e}")),
     ]
 }

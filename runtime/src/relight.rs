@@ -22,9 +22,9 @@ use rayon::prelude::*;
 use crate::contract::MAX_STACK;
 use crate::lights::{brick_normal_bounds, CullReason, NormalBounds, PreparedLight};
 use crate::rig::Lighting;
-use crate::sample::VolumeSampler;
 use crate::settings::{LookupSettings, MAX_BOUNCES};
 use crate::shadow_rays::{occluded, ray_offset};
+use crate::surface::SurfaceSampler;
 
 /// Why an asset cannot be relit.
 #[derive(Debug, thiserror::Error)]
@@ -155,7 +155,7 @@ impl<'a> CpuRelighter<'a> {
 
     /// [`CpuRelighter::relight`], with bounces beyond the first sampling the volume through
     /// the engine's lookup with `lookup` (`sample_irradiance`, twin
-    /// [`VolumeSampler::for_asset`]), as the GPU runtime does with the same settings.
+    /// [`SurfaceSampler`]), as the GPU runtime does with the same settings.
     pub fn relight_with(
         &self,
         lighting: &Lighting,
@@ -183,8 +183,8 @@ impl<'a> CpuRelighter<'a> {
             let irradiance = if bounce == 0 {
                 direct.clone()
             } else {
-                // The previous bounce's volume at the surfel, through the engine's lookup.
-                let volume = VolumeSampler::for_asset(self.asset, &sh, lookup);
+                // The previous bounce's light at the surfel, through the engine's lookup.
+                let volume = SurfaceSampler::new(self.asset, &sh, &surfel_irradiance, lookup);
                 self.asset
                     .surfels
                     .par_iter()

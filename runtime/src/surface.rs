@@ -12,7 +12,8 @@
 //!    degrees whose axis differs from the surfel's): the default lookup.
 //! 2. **Weight the probes** trilinearly, a probe the surfel cannot see by
 //!    `prt_format::surface::BLOCKED_WEIGHT` (no depth moments: the mask is exact). A surfel
-//!    that sees none of them leaves the point to the default lookup.
+//!    that sees none of them leaves the weights to the default lookup (its near field still
+//!    applies).
 //! 3. **Near field**: scale the irradiance, per colour channel, by
 //!    `(open . L + hits / rays * near_G) / (A(n) . L)`, `L` the interpolated radiance SH, `A`
 //!    the cosine transfer of the surfel's normal, `near_G` the mean radiance per near hit of
@@ -80,6 +81,8 @@ pub struct SurfaceSampler<'a> {
     trilinear: VolumeSampler<'a>,
     fallback: VolumeSampler<'a>,
     near: Vec<[f32; 3]>,
+    /// `LookupSettings::surface_terms`.
+    enabled: bool,
 }
 
 impl<'a> SurfaceSampler<'a> {
@@ -101,6 +104,7 @@ impl<'a> SurfaceSampler<'a> {
             trilinear: VolumeSampler::for_asset(asset, sh, &trilinear),
             fallback: VolumeSampler::for_asset(asset, sh, lookup),
             near: near_radiance(&asset.surface, &group_radiance(asset, irradiance)),
+            enabled: lookup.surface_terms,
         }
     }
 
@@ -142,10 +146,16 @@ impl<'a> SurfaceSampler<'a> {
         out
     }
 
+    /// The surfel (asset index) whose terms stand for the point, if any: where it is `None`,
+    /// [`Self::sample`] is the probe volume's lookup.
+    pub fn surfel(&self, position: [f32; 3], normal: [f32; 3]) -> Option<usize> {
+        self.surfel_of(position, normal).map(|(_, s)| s)
+    }
+
     /// The brick and surfel (asset indices) whose terms stand for the point, if any.
     fn surfel_of(&self, position: [f32; 3], normal: [f32; 3]) -> Option<(usize, usize)> {
         let t = &self.asset.surface;
-        if t.is_empty() {
+        if !self.enabled || t.is_empty() {
             return None;
         }
         let key = t.key_of(position);

@@ -9,7 +9,8 @@ use prt_format::{Asset, Light, LightKind, LightRig, Sky};
 use prt_runtime::gpu::{
     sample_points, sh_from_texels, wgpu, PrtRuntime, RuntimeSettings, VolumeFormat,
 };
-use prt_runtime::{load_rig, CpuRelighter, Lighting, LookupSettings, SkyModel, VolumeSampler};
+use prt_runtime::surface::SurfaceSampler;
+use prt_runtime::{load_rig, CpuRelighter, Lighting, LookupSettings, SkyModel};
 use prt_tests::{bake_ok as bake, fixture, gpu_device};
 
 fn cpu(asset: &Asset, lighting: &Lighting) -> Vec<ShRgb> {
@@ -505,9 +506,12 @@ fn sample_irradiance_snippet_matches_the_cpu() {
         },
     );
     let lighting = load_rig(&fixture("cornell/rig.json")).unwrap();
+    // The probe volume alone: the surface terms are compared in
+    // `sample_points_matches_the_cpu_sampler`.
     let settings = RuntimeSettings {
         lookup: LookupSettings {
             normal_bias: 0.0,
+            surface_terms: false,
             ..LookupSettings::default()
         },
         ..RuntimeSettings::default()
@@ -618,9 +622,10 @@ fn sample_queries(asset: &Asset, count: usize) -> Vec<([f32; 3], [f32; 3])> {
     out
 }
 
-/// `sample_points` (the real snippet on the GPU, default normal bias) equals the CPU
-/// `VolumeSampler` over the same probe SH at a few hundred points of the Cornell reference bake,
-/// including points between valid and invalid probes. The volume is half-float (relative
+/// `sample_points` (the real snippet on the GPU, default normal bias) equals its CPU twin
+/// `SurfaceSampler` over the same probe SH at a few hundred points of the Cornell reference bake,
+/// including points between valid and invalid probes, and at a few hundred surfels (where the
+/// surface terms decide; near fields lit by the CPU relight). The volume is half-float (relative
 /// rounding 2^-11 per texel) and the filter weights are the hardware's, so the tolerance is
 /// relative to the point's brightness: see the constants.
 #[test]
@@ -661,9 +666,31 @@ fn compare_samplers(
     let (device, queue) = (device.clone(), queue.clone());
     let mut runtime = PrtRuntime::new(&device, &queue, asset, settings).unwrap();
     let sh = gpu_update(&device, &queue, &mut runtime, lighting, None);
-    let cpu = VolumeSampler::for_asset(asset, &sh, &settings.lookup);
-    let points = sample_queries(asset, 384);
+    let relit = CpuRelighter::new(asset)
+        .unwrap()
+        .relight(lighting, 1)
+        .unwrap();
+    let cpu = SurfaceSampler::new(asset, &sh, &relit.surfel_irradiance, &settings.lookup);
+    let mut points = sample_queries(asset, 384);
     let mixed = points.len() - 384;
+    let step = (asset.surfels.len() / 300).max(1);
+    points.extend(
+        asset
+            .surfels
+            .iter()
+            .step_by(step)
+            .map(|s| (s.position, s.normal)),
+    );
+    let on_surfels = points
+        .iter()
+        .filter(|(p, n)| cpu.surfel(*p, *n).is_some())
+        .count();
+    if settings.lookup.surface_terms {
+        assert!(
+            on_surfels > 150,
+            "{on_surfels} points take the surface lookup"
+        );
+    }
     let gpu = sample_points(&device, &queue, &runtime, &points).unwrap();
     assert_eq!(gpu.len(), points.len());
     let (mut worst_sh, mut worst_e, mut worst_v) = (0.0f32, 0.0f32, 0.0f32);
@@ -703,7 +730,7 @@ fn compare_samplers(
         }
     }
     eprintln!(
-        "depth moments {}: {} points ({mixed} beside probes inside geometry): worst |dSH|/SH0 {worst_sh:.2e}, |dE|/E0 {worst_e:.2e}, |dvalidity| {worst_v:.2e}",
+        "depth moments {}: {} points ({mixed} beside probes inside geometry, {on_surfels} on surfels): worst |dSH|/SH0 {worst_sh:.2e}, |dE|/E0 {worst_e:.2e}, |dvalidity| {worst_v:.2e}",
         settings.lookup.depth_moments,
         points.len()
     );

@@ -269,8 +269,8 @@ fn asset_grid_counts_overflow() {
     assert!(e.to_string().contains("counts"), "{e}");
 }
 
-/// A payload cut short (length and checksum fixed up) names the section it ends in instead of
-/// printing `UnexpectedEnd { additional: 2 }`.
+/// A payload cut short (length and checksum fixed up) names the section it ends in and what
+/// is missing, instead of printing `UnexpectedEnd { additional: 2 }`.
 #[test]
 fn decode_errors_name_the_section() {
     let bytes = encode(&small_cornell()).unwrap();
@@ -283,7 +283,7 @@ fn decode_errors_name_the_section() {
     let e = decode(&short).map(|_| ()).expect_err("refused");
     let msg = e.to_string();
     assert!(
-        msg.contains("section lights") && msg.contains("too early"),
+        msg.contains("section surface") && msg.contains("bytes of payload left"),
         "{msg}"
     );
 }

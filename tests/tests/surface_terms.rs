@@ -144,7 +144,9 @@ fn an_unmerged_bake_samples_as_the_default_lookup() {
 }
 
 /// A slot naming a brick that does not exist, a near entry naming a group that does not, a
-/// cell naming a surfel its brick does not have: each refused, naming the surface section.
+/// cell naming a surfel its brick does not have, groups out of order, a centre probe beyond
+/// the grid, a search bound longer than the table needs, a surfel naming another brick's group:
+/// each refused, naming the surface section.
 #[test]
 fn damaged_terms_are_refused() {
     let settings = BakeSettings {
@@ -154,7 +156,7 @@ fn damaged_terms_are_refused() {
     };
     let asset = bake_ok(&fixture("two_rooms.gltf"), &settings);
     decode(&encode(&asset).unwrap()).expect("the undamaged asset loads");
-    let damages: [fn(&mut Asset); 4] = [
+    let damages: [fn(&mut Asset); 8] = [
         |a| {
             let s = a.surface.slots.iter_mut().find(|s| s.value != 0).unwrap();
             s.value = (s.value & !0x1fff_ffff) | (a.bricks.len() as u32 + 1);
@@ -162,6 +164,14 @@ fn damaged_terms_are_refused() {
         |a| a.surface.near[0] = (a.surface.near_ranges.len() as u32) << 8 | 255,
         |a| a.surface.cells[0] = 0xfefe_fefe,
         |a| a.surface.header.rays = 0,
+        // Groups out of order: the GPU's per-brick loop would run to 2^32.
+        |a| a.surface.groups.swap(1, 2),
+        // A centre probe beyond the grid.
+        |a| a.surface.surfels[0].centre = u32::MAX,
+        // A search bound larger than the slots need: every miss would walk the table.
+        |a| a.surface.header.max_probe = a.surface.slots.len() as u32 - 1,
+        // A surfel naming a group beyond its brick's.
+        |a| a.surface.surfels[0].group = 255,
     ];
     for (i, damage) in damages.iter().enumerate() {
         let mut bad = asset.clone();

@@ -13,32 +13,41 @@ use crate::ray_lookup::RaySettings;
 /// issue 31 that traces rays (its trilinear weights take `Lookup::settings`' normal bias).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Kind {
-    /// `prt_runtime::VolumeSampler`: what `prt render` shows.
+    /// `prt_runtime::surface::SurfaceSampler` (the volume's `VolumeSampler` where the surface
+    /// terms are off or the point has none): what `prt render` shows.
     Runtime,
     /// `crate::ray_lookup::RayLookup`: the ray terms traced from the point.
     Rays(RaySettings),
     /// `crate::surfel_lookup::SurfelLookup`: `rays_light`'s terms traced from the point's surfel.
     Surfels,
-    /// `prt_runtime::surface::SurfaceSampler`: the bake's surfel terms.
-    Surface,
 }
 
 /// A lookup's name and how to make it.
 type Variant = (&'static str, fn() -> (LookupSettings, Kind));
 
-/// Trilinear over the probes' validity only, at the runtime's normal bias.
-fn trilinear() -> LookupSettings {
+/// The probe volume alone, depth moments or not, at the runtime's normal bias.
+fn volume(depth_moments: bool) -> LookupSettings {
     LookupSettings {
-        depth_moments: false,
+        depth_moments,
+        surface_terms: false,
         ..LookupSettings::default()
     }
+}
+
+/// Trilinear over the probes' validity only, at the runtime's normal bias.
+fn trilinear() -> LookupSettings {
+    volume(false)
 }
 
 /// Every lookup `--lookup` knows, by name, in table order.
 const LOOKUPS: [Variant; 6] = [
     // Hardware trilinear over the probes' validity only: what depth moments are measured against.
     ("trilinear", || (trilinear(), Kind::Runtime)),
-    // The runtime's: depth moments (DDGI's Chebyshev test), normal bias 0.2 spacings.
+    // The probe volume with depth moments (DDGI's Chebyshev test), normal bias 0.2 spacings:
+    // the runtime's lookup before the surface terms.
+    ("moments", || (volume(true), Kind::Runtime)),
+    // The runtime's: the bake's surface terms (prt_format::surface: which probes the point's
+    // surfel sees, its near field) where the point has a surfel, `moments` elsewhere.
     ("default", || (LookupSettings::default(), Kind::Runtime)),
     // Rays through the asset's BVH from the point: exact probe visibility and a dark near field.
     ("rays", || (trilinear(), Kind::Rays(RaySettings::default()))),
@@ -46,12 +55,9 @@ const LOOKUPS: [Variant; 6] = [
     ("rays_light", || {
         (trilinear(), Kind::Rays(RaySettings::with_near_light()))
     }),
-    // rays_light's terms decided per surfel, as a bake would store them; points without a
-    // surfel fall back to the default lookup.
-    ("surfels", || (LookupSettings::default(), Kind::Surfels)),
-    // The bake's surfel terms (prt_format::surface): visibility mask and near field per
-    // surfel, near light per brick; the default lookup where the point has no surfel.
-    ("surface", || (LookupSettings::default(), Kind::Surface)),
+    // rays_light's terms decided per surfel, traced at lookup time (the bound the bake's
+    // terms were designed against); points without a surfel fall back to `moments`.
+    ("surfels", || (volume(true), Kind::Surfels)),
 ];
 
 /// A named lookup.
@@ -68,6 +74,12 @@ impl Lookup {
         let s = &self.settings;
         let bias = s.normal_bias;
         match self.kind {
+            Kind::Runtime if s.surface_terms => format!(
+                "{}: the bake's surface terms where the point has a surfel (which probes it \
+                 sees, its near field; prt_runtime::surface), depth moments elsewhere, normal \
+                 bias {bias} spacings",
+                self.name
+            ),
             Kind::Runtime if s.depth_moments => format!(
                 "{}: depth moments (Chebyshev) and facing weights, normal bias {bias} spacings",
                 self.name
@@ -96,12 +108,6 @@ impl Lookup {
                  default lookup), normal bias {bias} spacings (bench/src/surfel_lookup.rs)",
                 self.name
             ),
-            Kind::Surface => format!(
-                "{}: the bake's surfel terms (probe visibility mask, near-field transfer, near \
-                 light per brick; prt_runtime::surface), found by brick key; none: the default \
-                 lookup, normal bias {bias} spacings",
-                self.name
-            ),
         }
     }
 
@@ -111,7 +117,6 @@ impl Lookup {
             Kind::Runtime => false,
             Kind::Rays(r) => r.near_light,
             Kind::Surfels => true,
-            Kind::Surface => false,
         }
     }
 }
@@ -147,13 +152,13 @@ impl Lookups {
                 let names: &[&str] = match set {
                     Set::Bundled => &[
                         "trilinear",
+                        "moments",
                         "default",
                         "rays",
                         "rays_light",
                         "surfels",
-                        "surface",
                     ],
-                    _ => &["default", "rays", "rays_light", "surfels", "surface"],
+                    _ => &["moments", "default", "rays", "rays_light", "surfels"],
                 };
                 let picked = LOOKUPS.iter().filter(|(n, _)| names.contains(n));
                 picked.map(lookup).collect()
@@ -205,30 +210,31 @@ mod tests {
             names(none.for_set(Set::Bundled)),
             [
                 "trilinear",
+                "moments",
                 "default",
                 "rays",
                 "rays_light",
-                "surfels",
-                "surface"
+                "surfels"
             ]
         );
         assert_eq!(
             names(none.for_set(Set::HeldOut)),
-            ["default", "rays", "rays_light", "surfels", "surface"]
+            ["moments", "default", "rays", "rays_light", "surfels"]
         );
-        assert!(matches!(none.for_set(Set::HeldOut)[1].kind, Kind::Rays(_)));
+        assert!(matches!(none.for_set(Set::HeldOut)[2].kind, Kind::Rays(_)));
         assert_eq!(
-            none.for_set(Set::Tuning)[0].settings,
+            none.for_set(Set::Tuning)[1].settings,
             LookupSettings::default()
         );
+        assert!(!none.for_set(Set::Tuning)[0].settings.surface_terms);
         let picked = Lookups::parse(&["trilinear".into()], Some(0.1)).unwrap();
         let l = picked.for_set(Set::Tuning);
         assert_eq!((l[0].name, l[0].settings.normal_bias), ("trilinear", 0.1));
         assert!(!l[0].settings.depth_moments);
-        let err = Lookups::parse(&["moments".into()], None).err().unwrap();
+        let err = Lookups::parse(&["nearest".into()], None).err().unwrap();
         assert!(
             err.to_string()
-                .contains("known: trilinear, default, rays, rays_light, surfels, surface"),
+                .contains("known: trilinear, moments, default, rays, rays_light, surfels"),
             "{err}"
         );
     }

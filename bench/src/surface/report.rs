@@ -130,7 +130,8 @@ fn definitions(md: &mut String, rows: &[Row]) -> Result<()> {
          of E_sh; over-lit pixels: hit pixels lit over 1.5x their truth and by over 5% of the \
          median hit pixel's truth.\n\
          - Runtime MB: the asset's sections an engine keeps and uploads (probes, sky mask and \
-         transfer, visibility maps, factors, bricks, surfels, BVH and triangles), 10^6 bytes.\n\
+         transfer, visibility maps, factors, bricks, surfels, BVH and triangles, surface terms), \
+         10^6 bytes.\n\
          - Black: below 1% of the case's mean truth where the truth is above 5% of it; holes: \
          no valid probe among the eight (all points).\n\nLookups:\n"
     )?;

@@ -58,6 +58,14 @@ pub(super) enum Binding {
     VolumeInfo,
     DepthMoments,
     ProbePositions,
+    /// The surface lookup's tables (`prt_surface`).
+    Surface,
+    /// Per near group, what its near field brings: written as `near_radiance`, read by the
+    /// snippet as `prt_near`.
+    NearRadiance,
+    SurfaceGroups,
+    SurfaceNear,
+    GroupRadiance,
 }
 
 impl Binding {
@@ -103,6 +111,11 @@ impl Binding {
             "prt_volume" => Binding::VolumeInfo,
             "prt_depth_moments" => Binding::DepthMoments,
             "prt_probe_positions" => Binding::ProbePositions,
+            "prt_surface" => Binding::Surface,
+            "prt_near" | "near_radiance" => Binding::NearRadiance,
+            "surface_groups" => Binding::SurfaceGroups,
+            "surface_near" => Binding::SurfaceNear,
+            "group_radiance" => Binding::GroupRadiance,
             _ => return None,
         })
     }
@@ -150,6 +163,11 @@ impl Binding {
             Binding::VolumeInfo => b(&r.volume_info),
             Binding::DepthMoments => b(&r.asset.depth_moments),
             Binding::ProbePositions => b(&r.asset.probe_positions),
+            Binding::Surface => b(&r.asset.surface),
+            Binding::NearRadiance => b(&r.state.near_radiance),
+            Binding::SurfaceGroups => b(&r.asset.surface_groups),
+            Binding::SurfaceNear => b(&r.asset.surface_near),
+            Binding::GroupRadiance => b(&r.state.group_radiance),
         }
     }
 
@@ -169,9 +187,10 @@ impl Binding {
             },
             Binding::Sampler => wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
             Binding::VolumeInfo => buffer(wgpu::BufferBindingType::Uniform),
-            Binding::DepthMoments | Binding::ProbePositions => {
-                buffer(wgpu::BufferBindingType::Storage { read_only: true })
-            }
+            Binding::DepthMoments
+            | Binding::ProbePositions
+            | Binding::Surface
+            | Binding::NearRadiance => buffer(wgpu::BufferBindingType::Storage { read_only: true }),
             _ => return None,
         })
     }

@@ -36,8 +36,9 @@ pub struct Resources {
     /// Views of `textures` (storage in the gather, sampled by the snippet).
     pub views: Vec<wgpu::TextureView>,
     pub sampler: wgpu::Sampler,
-    /// The sampling snippet's uniform (`PrtVolumeInfo`).
+    /// The sampling snippet's uniform (`PrtVolumeInfo`) and its contents.
     pub volume_info: wgpu::Buffer,
+    pub info: VolumeInfo,
     /// Words per brick light mask, `ceil(max_lights / 32)`.
     pub mask_stride: u32,
 }
@@ -55,6 +56,14 @@ pub struct AssetBuffers {
     pub depth_moments: wgpu::Buffer,
     /// Where each probe's rays started (xyz, w unused).
     pub probe_positions: wgpu::Buffer,
+    /// The surface lookup's tables, one array of words ([`SurfaceLayout`]).
+    pub surface: wgpu::Buffer,
+    /// Brick count, then per brick its first near group and group count, then per group its
+    /// first surfel and surfel count (`brick_radiance` computes each group's radiance).
+    pub surface_groups: wgpu::Buffer,
+    /// Group count, then per group its near field (first entry, count), then the entries
+    /// (`prt_format::surface::near_entry`).
+    pub surface_near: wgpu::Buffer,
 }
 
 /// What the stages write and read back between updates, and the per-update uploads.
@@ -71,6 +80,9 @@ pub struct StateBuffers {
     /// Per update: the moved lights' bitset, then the changed lights' indices.
     pub light_changes: wgpu::Buffer,
     pub brick_radiance: wgpu::Buffer,
+    /// Per near group: the mean radiance of its surfels (xyz), and what its near field brings.
+    pub group_radiance: wgpu::Buffer,
+    pub near_radiance: wgpu::Buffer,
     pub probe_dirty: wgpu::Buffer,
     pub probe_sh: wgpu::Buffer,
     pub counters: wgpu::Buffer,
@@ -100,7 +112,8 @@ impl Resources {
         let asset_buffers = AssetBuffers::new(&alloc, asset)?;
         let state = StateBuffers::new(&alloc, asset, settings, mask_stride)?;
         let (textures, views, sampler) = volume(device, &g, settings);
-        let volume_info = alloc.uniform("prt volume info", &volume_info(&g, settings));
+        let info = volume_info(asset, settings);
+        let volume_info = alloc.uniform("prt volume info", &info);
         Ok(Resources {
             asset: asset_buffers,
             chunks,
@@ -113,6 +126,7 @@ impl Resources {
             views,
             sampler,
             volume_info,
+            info,
             mask_stride,
         })
     }
@@ -161,6 +175,18 @@ impl AssetBuffers {
                 bytemuck::cast_slice(&asset.probe_depth),
             )?,
             probe_positions: upload("prt probe positions", bytemuck::cast_slice(&positions))?,
+            surface: upload(
+                "prt surface",
+                bytemuck::cast_slice(&SurfaceLayout::words(asset)),
+            )?,
+            surface_groups: upload(
+                "prt surface groups",
+                bytemuck::cast_slice(&surface_groups(asset)),
+            )?,
+            surface_near: upload(
+                "prt surface near",
+                bytemuck::cast_slice(&surface_near(asset)),
+            )?,
         })
     }
 }
@@ -177,6 +203,7 @@ impl StateBuffers {
         let none = wgpu::BufferUsages::empty();
         let n_bricks = asset.bricks.len() as u64;
         let n_probes = asset.probes.len() as u64;
+        let n_groups = asset.surface.group_surfels.len() as u64;
         let stride = u64::from(mask_stride);
         let cache_capacity = settings
             .shadow_cache_words
@@ -200,6 +227,8 @@ impl StateBuffers {
                 wgpu::BufferUsages::COPY_DST,
             )?,
             brick_radiance: alloc.zeroed("prt brick radiance", 64 * n_bricks, none)?,
+            group_radiance: alloc.zeroed("prt group radiance", 16 * n_groups, none)?,
+            near_radiance: alloc.zeroed("prt near radiance", 16 * n_groups, none)?,
             probe_dirty: alloc.zeroed("prt probe dirty", 4 * n_probes, none)?,
             probe_sh: alloc.zeroed("prt probe sh", 16 * 9 * n_probes, copy_src)?,
             counters: alloc.zeroed("prt counters", size_of::<Counters>() as u64, copy_src)?,
@@ -378,16 +407,56 @@ fn volume(
 }
 
 /// The sampling snippet's uniform for `grid` and `settings`.
-pub fn volume_info(grid: &prt_format::Grid, settings: &RuntimeSettings) -> VolumeInfo {
+pub fn volume_info(asset: &Asset, settings: &RuntimeSettings) -> VolumeInfo {
+    let grid = &asset.header.grid;
+    let t = &asset.surface;
+    let surface = settings.lookup.surface_terms && !t.is_empty();
+    let layout = SurfaceLayout::of(asset);
+    let flags = (if settings.lookup.depth_moments {
+        VOLUME_DEPTH_MOMENTS
+    } else {
+        0
+    }) | if surface { VOLUME_SURFACE } else { 0 };
     VolumeInfo {
         normal_bias: settings.lookup.normal_bias * grid.spacing,
-        flags: if settings.lookup.depth_moments {
-            VOLUME_DEPTH_MOMENTS
-        } else {
-            0
-        },
+        flags,
+        surface_anchor: t.header.anchor,
+        brick_size: t.header.brick_size,
+        slot_mask: (t.slots.len() as u32).saturating_sub(1),
+        max_probe: t.header.max_probe,
+        cells_at: layout.cells_at,
+        terms_at: layout.terms_at,
+        bricks_at: layout.bricks_at,
+        near_rays: t.header.rays.max(1) as f32,
         ..VolumeInfo::from(grid)
     }
+}
+
+/// The `surface_groups` words of `asset` ([`AssetBuffers::surface_groups`]).
+fn surface_groups(asset: &Asset) -> Vec<u32> {
+    let t = &asset.surface;
+    let groups = t.group_surfels.len() as u32;
+    let mut w = vec![t.groups.len() as u32];
+    for (b, &first) in t.groups.iter().enumerate() {
+        let next = t.groups.get(b + 1).copied().unwrap_or(groups);
+        w.extend([first, next - first]);
+    }
+    w.extend(t.group_surfels.iter().flatten());
+    w
+}
+
+/// The `surface_near` words of `asset` ([`AssetBuffers::surface_near`]).
+fn surface_near(asset: &Asset) -> Vec<u32> {
+    let t = &asset.surface;
+    let mut w = vec![t.near_ranges.len() as u32];
+    let head = 1 + 2 * t.near_ranges.len() as u32;
+    w.extend(
+        t.near_ranges
+            .iter()
+            .flat_map(|&[first, n]| [head + first, n]),
+    );
+    w.extend(&t.near);
+    w
 }
 
 /// Smallest buffer the runtime creates: larger than every element type it binds.

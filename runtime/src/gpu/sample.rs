@@ -1,6 +1,6 @@
 //! Runs the engine-side snippet (`PrtRuntime::wgsl_snippet`) for real, in a compute shader, at
 //! arbitrary points: what `prt sample --backend gpu` and the tests use to see exactly what an
-//! engine's shader would get from the volume ([`crate::sample::VolumeSampler`] is its CPU twin).
+//! engine's shader would get from the volume ([`crate::surface::SurfaceSampler`] is its CPU twin).
 
 use wgpu::util::DeviceExt;
 
@@ -29,11 +29,11 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) g
     }
     let p = points[2u * i].xyz;
     let n = points[2u * i + 1u].xyz;
-    let s = prt_sample_sh(p, n);
+    let s = prt_sample_surface(p, n);
     for (var k = 0u; k < 9u; k++) {
         results[SAMPLE_WORDS * i + k] = vec4<f32>(s.sh[k], 0.0);
     }
-    results[SAMPLE_WORDS * i + 9u] = vec4<f32>(sample_irradiance(p, n), s.validity);
+    results[SAMPLE_WORDS * i + 9u] = vec4<f32>(s.irradiance, s.validity);
 }
 ";
     format!(
@@ -43,8 +43,9 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) g
 }
 
 /// Samples `runtime`'s volume as last updated (submit the update first) at each
-/// `(position, unit normal)` with the real snippet: SH and validity from `prt_sample_sh`,
-/// irradiance from `sample_irradiance`, with the runtime's normal bias. Blocks until done.
+/// `(position, unit normal)` with the real snippet (`prt_sample_surface`, what
+/// `sample_irradiance` returns the irradiance of): SH, validity and irradiance, with the
+/// runtime's lookup settings. Blocks until done.
 pub fn sample_points(
     device: &wgpu::Device,
     queue: &wgpu::Queue,

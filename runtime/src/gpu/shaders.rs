@@ -314,6 +314,17 @@ pub(crate) mod tests {
                     ("normal_bias", offset_of!(contract::VolumeInfo, normal_bias)),
                     ("step", offset_of!(contract::VolumeInfo, step)),
                     ("flags", offset_of!(contract::VolumeInfo, flags)),
+                    (
+                        "surface_anchor",
+                        offset_of!(contract::VolumeInfo, surface_anchor),
+                    ),
+                    ("brick_size", offset_of!(contract::VolumeInfo, brick_size)),
+                    ("slot_mask", offset_of!(contract::VolumeInfo, slot_mask)),
+                    ("max_probe", offset_of!(contract::VolumeInfo, max_probe)),
+                    ("cells_at", offset_of!(contract::VolumeInfo, cells_at)),
+                    ("terms_at", offset_of!(contract::VolumeInfo, terms_at)),
+                    ("bricks_at", offset_of!(contract::VolumeInfo, bricks_at)),
+                    ("near_rays", offset_of!(contract::VolumeInfo, near_rays)),
                 ],
             ),
             (

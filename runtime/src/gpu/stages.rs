@@ -6,7 +6,7 @@
 
 use prt_shaders::{
     BOUNCE_SURFELS, BRICK_RADIANCE, CULL_LIGHTS, GATHER, GATHER_SUBGROUP, GATHER_TREE,
-    LIGHT_SAMPLE, MARK_PROBES, RELIGHT_SURFELS, SHADOW_RAYS, TYPES,
+    LIGHT_SAMPLE, MARK_PROBES, NEAR_RADIANCE, RELIGHT_SURFELS, SHADOW_RAYS, TYPES,
 };
 
 use super::bindings::{bind_groups, declared_bindings, Set};
@@ -34,6 +34,8 @@ pub(super) enum Part {
 pub(super) enum Dispatch {
     /// A thread per brick, every brick in one dispatch.
     Bricks,
+    /// A thread per near group of the surface lookup, every group in one dispatch.
+    Groups,
     /// A thread per brick, one dispatch per surfel chunk (its bricks).
     ChunkBricks,
     /// A thread per surfel, one dispatch per surfel chunk (its surfels).
@@ -75,7 +77,7 @@ impl Stage {
 }
 
 /// Every stage, in dispatch order (the module docs of [`super`] say what each computes).
-pub(super) const STAGES: [Stage; 6] = [
+pub(super) const STAGES: [Stage; 7] = [
     // 1. Per brick: light masks of the changed lights, dirty bricks, shadow-ray cache room.
     Stage {
         label: "prt cull_lights",
@@ -112,7 +114,15 @@ pub(super) const STAGES: [Stage; 6] = [
         runs: |plan| plan.relight() || plan.bounce || plan.fixed_restart,
         bounces_only: false,
     },
-    // 5. Per probe: flag the probes to gather.
+    // 5. Per near group of the surface lookup: what its near-field rays bring.
+    Stage {
+        label: "prt near_radiance",
+        wgsl: &[Part::File(NEAR_RADIANCE)],
+        dispatch: Dispatch::Groups,
+        runs: |plan| plan.relight() || plan.bounce || plan.fixed_restart,
+        bounces_only: false,
+    },
+    // 6. Per probe: flag the probes to gather.
     Stage {
         label: "prt mark_probes",
         wgsl: &[Part::File(MARK_PROBES)],
@@ -120,7 +130,7 @@ pub(super) const STAGES: [Stage; 6] = [
         runs: |plan| plan.lights_changed || plan.sky_changed || plan.bounce,
         bounces_only: false,
     },
-    // 6. A workgroup per probe of the window: SH9 RGB into the volume textures.
+    // 7. A workgroup per probe of the window: SH9 RGB into the volume textures.
     Stage {
         label: "prt gather",
         wgsl: &[Part::File(GATHER), Part::Reduction],
@@ -135,6 +145,8 @@ pub(super) const STAGES: [Stage; 6] = [
 pub(super) struct Counts {
     pub(super) bricks: u32,
     pub(super) probes: u32,
+    /// Near groups of the surface lookup.
+    pub(super) groups: u32,
 }
 
 /// A stage's pipeline and its bind-group sets.
@@ -220,6 +232,7 @@ fn sets(dispatch: Dispatch, r: &Resources, counts: Counts) -> Vec<(Set, u32)> {
     };
     match dispatch {
         Dispatch::Bricks => vec![(Set::Whole, counts.bricks)],
+        Dispatch::Groups => vec![(Set::Whole, counts.groups)],
         Dispatch::ChunkBricks => surfel_chunks(|s| s.brick_end - s.brick_begin),
         Dispatch::ChunkSurfels => surfel_chunks(|s| s.surfel_end - s.surfel_begin),
         Dispatch::ChunkProbes => factor_chunks(counts.probes),

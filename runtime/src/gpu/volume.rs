@@ -5,7 +5,7 @@
 use prt_format::sh::{ShRgb, SH_COUNT};
 
 use super::bindings::{snippet_bindings, Set};
-use super::{resources, shaders, GpuError, PrtRuntime, RuntimeSettings, VolumeFormat};
+use super::{shaders, GpuError, PrtRuntime, RuntimeSettings, VolumeFormat};
 use crate::contract::{Counters, VolumeInfo};
 
 impl PrtRuntime {
@@ -26,7 +26,7 @@ impl PrtRuntime {
 
     /// The contents of the sampling snippet's `PrtVolumeInfo` uniform (binding 8 of its group).
     pub fn volume_info(&self) -> VolumeInfo {
-        resources::volume_info(&self.grid, &self.settings)
+        self.res.info
     }
 
     /// The settings the runtime was created with.
@@ -36,8 +36,9 @@ impl PrtRuntime {
 
     /// The bind group layout entries of the sampling snippet (`wgsl_snippet`), visible to
     /// `stages`, numbered as `shaders/sample_irradiance.wgsl` declares them: seven volume
-    /// textures, the sampler, the `PrtVolumeInfo` uniform, the depth moments and the probe
-    /// positions. The textures are declared filterable: a [`VolumeFormat::F32`] volume needs a
+    /// textures, the sampler, the `PrtVolumeInfo` uniform, the depth moments, the probe
+    /// positions, the surface lookup's tables and its near radiance (four storage buffers in
+    /// all). The textures are declared filterable: a [`VolumeFormat::F32`] volume needs a
     /// device with `Features::FLOAT32_FILTERABLE` (as its trilinear sampler does anyway).
     pub fn volume_layout_entries(stages: wgpu::ShaderStages) -> Vec<wgpu::BindGroupLayoutEntry> {
         snippet_bindings()

@@ -1,0 +1,185 @@
+//! Validation of the surface terms ([`crate::surface`]): the runtime indexes every table
+//! unchecked, on the CPU and in WGSL, so an asset is refused unless every index, range and
+//! search bound holds.
+
+use crate::asset::{f16_to_f32, Asset};
+use crate::error::FormatError;
+use crate::surface::{
+    near_entry, slot_hash, SurfaceTerms, CELL_WORDS, NO_SURFEL, PROBE_BITS, SLOT_AXIS_SHIFT,
+    TERMS_TRACED,
+};
+
+fn bad(index: usize, what: String) -> Result<(), FormatError> {
+    Err(FormatError::invalid("surface", index, what))
+}
+
+fn count(found: usize, expected: usize) -> Result<(), FormatError> {
+    if found == expected {
+        Ok(())
+    } else {
+        Err(FormatError::Count {
+            section: "surface",
+            found,
+            expected,
+        })
+    }
+}
+
+/// None at all, or: a header of finite positive sizes; a power-of-two table naming bricks that
+/// exist, whose longest search is what its slots need; a cell table per brick naming its own
+/// surfels; per brick, near groups that tile its surfels in order; per surfel, terms whose mask,
+/// centre probe, hit count and group are in range and whose halves are finite; near fields in
+/// range naming groups that exist.
+pub(super) fn surface_terms(asset: &Asset) -> Result<(), FormatError> {
+    let st = &asset.surface;
+    let empty = st.slots.is_empty()
+        && st.cells.is_empty()
+        && st.surfels.is_empty()
+        && st.groups.is_empty()
+        && st.group_surfels.is_empty()
+        && st.near_ranges.is_empty()
+        && st.near.is_empty();
+    if st.header.brick_size == 0.0 && empty {
+        return Ok(());
+    }
+    header_and_table(st, asset.bricks.len())?;
+    cells(asset)?;
+    groups(asset)?;
+    surfels(asset)?;
+    near(st)
+}
+
+fn header_and_table(st: &SurfaceTerms, bricks: usize) -> Result<(), FormatError> {
+    let h = &st.header;
+    let sizes_ok = h.anchor.iter().all(|v| v.is_finite())
+        && h.brick_size.is_finite()
+        && h.brick_size > 0.0
+        && h.reach.is_finite()
+        && h.reach >= 0.0
+        && (1..=u32::from(u8::MAX)).contains(&h.rays);
+    if !sizes_ok {
+        return bad(0, format!("header {h:?}"));
+    }
+    let len = st.slots.len();
+    if !len.is_power_of_two() {
+        return bad(0, format!("{len} slots: not a power of two"));
+    }
+    // The longest search the slots need: a larger bound lets every miss walk the table.
+    let mut longest = 0u32;
+    for (i, s) in st.slots.iter().enumerate() {
+        if s.value == 0 {
+            continue;
+        }
+        let brick = (s.value & ((1 << SLOT_AXIS_SHIFT) - 1)) as usize;
+        let axis = s.value >> SLOT_AXIS_SHIFT;
+        if brick == 0 || brick > bricks || axis >= 6 {
+            return bad(i, format!("slot value {:#x} (bricks: {bricks})", s.value));
+        }
+        let home = slot_hash(s.key, axis) as usize & (len - 1);
+        longest = longest.max(((i + len - home) & (len - 1)) as u32);
+    }
+    if h.max_probe != longest {
+        return bad(
+            0,
+            format!("longest search {} (the slots need {longest})", h.max_probe),
+        );
+    }
+    Ok(())
+}
+
+fn cells(asset: &Asset) -> Result<(), FormatError> {
+    let st = &asset.surface;
+    count(st.cells.len(), asset.bricks.len() * CELL_WORDS)?;
+    for (b, brick) in asset.bricks.iter().enumerate() {
+        let words = &st.cells[b * CELL_WORDS..(b + 1) * CELL_WORDS];
+        let bytes = words.iter().flat_map(|w| w.to_le_bytes());
+        let mut named = bytes.filter(|&s| s != NO_SURFEL);
+        if let Some(s) = named.find(|&s| u32::from(s) >= brick.surfel_count) {
+            return bad(
+                b,
+                format!("cell names surfel {s} of {}", brick.surfel_count),
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Per brick, its groups `groups[b]..groups[b + 1]` (the last brick's up to the group count)
+/// tile its surfels in order, each group non-empty.
+fn groups(asset: &Asset) -> Result<(), FormatError> {
+    let st = &asset.surface;
+    let total = st.group_surfels.len();
+    count(st.groups.len(), asset.bricks.len())?;
+    count(st.near_ranges.len(), total)?;
+    for (b, brick) in asset.bricks.iter().enumerate() {
+        let first = st.groups[b] as usize;
+        let next = st.groups.get(b + 1).map_or(total, |&g| g as usize);
+        if (b == 0 && first != 0) || first >= next || next > total {
+            return bad(b, format!("near groups {first}..{next} (groups: {total})"));
+        }
+        let mut at = u64::from(brick.first_surfel);
+        for (g, &[start, n]) in st.group_surfels[first..next].iter().enumerate() {
+            if u64::from(start) != at || n == 0 {
+                return bad(
+                    first + g,
+                    format!("group surfels {start}+{n}, expected from {at}"),
+                );
+            }
+            at += u64::from(n);
+        }
+        if at != u64::from(brick.first_surfel) + u64::from(brick.surfel_count) {
+            return bad(b, format!("near groups end at surfel {at}"));
+        }
+    }
+    Ok(())
+}
+
+fn surfels(asset: &Asset) -> Result<(), FormatError> {
+    let st = &asset.surface;
+    let h = &st.header;
+    let probes = asset.probes.len() as u64;
+    count(st.surfels.len(), asset.surfels.len())?;
+    for (b, brick) in asset.bricks.iter().enumerate() {
+        let first = st.groups[b] as usize;
+        let next = st
+            .groups
+            .get(b + 1)
+            .map_or(st.group_surfels.len(), |&g| g as usize);
+        let range = brick.first_surfel as usize..(brick.first_surfel + brick.surfel_count) as usize;
+        for (i, t) in st.surfels[range.clone()].iter().enumerate() {
+            let ok = t.open.iter().all(|&v| f16_to_f32(v).is_finite())
+                && u32::from(t.hits) <= h.rays
+                && usize::from(t.group) < next - first
+                && u64::from(t.centre) < probes
+                && t.mask & !(PROBE_BITS | TERMS_TRACED) == 0;
+            if !ok {
+                return bad(
+                    range.start + i,
+                    format!("surfel terms {t:?} (probes: {probes})"),
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
+fn near(st: &SurfaceTerms) -> Result<(), FormatError> {
+    for (g, &[first, n]) in st.near_ranges.iter().enumerate() {
+        if u64::from(first) + u64::from(n) > st.near.len() as u64 {
+            return bad(
+                g,
+                format!("near field {first}+{n} (entries: {})", st.near.len()),
+            );
+        }
+    }
+    let groups = st.group_surfels.len() as u64;
+    if let Some(i) = st
+        .near
+        .iter()
+        .position(|&e| u64::from(near_entry(e).0) >= groups)
+    {
+        let g = near_entry(st.near[i]).0;
+        return bad(i, format!("near entry names group {g} of {groups}"));
+    }
+    Ok(())
+}
