@@ -45,6 +45,13 @@ pub const RAYS: u32 = 64;
 /// Reach of the near-field rays, in probe spacings.
 pub const REACH: f32 = 1.0;
 
+/// A cell names its brick's nearest surfel only within this many cells of it: a point farther
+/// from every surfel (a part of the surface no probe ray hit) gets the probe volume's lookup
+/// rather than terms traced elsewhere. Tuning seeds: half spacing 6.6% -> 6.2% median, leaks
+/// 1.0% -> 0.7% (default spacing unchanged); 0.5 cells raised the default spacing's median to
+/// 11.1%.
+const CELL_GAP: f32 = 1.0;
+
 /// Where a surfel's rays start: this many spacings along its normal (1 cm on a 1 m grid), or
 /// [`START_MAGNITUDE`] of its coordinates' magnitude if more (float steps far from the origin).
 const START: f32 = 0.01;
@@ -269,7 +276,7 @@ fn table(terms: &mut SurfaceTerms, bricks: &[Brick]) {
 }
 
 /// The [`CELL_WORDS`] words of brick `b`: per cell, its surfel nearest the cell's centre
-/// (among its first 255).
+/// (among its first 255) within [`CELL_GAP`] cells of the cell, or [`NO_SURFEL`].
 fn cells(terms: &SurfaceTerms, b: &Brick, surfels: &[Surfel]) -> [u32; CELL_WORDS] {
     let mut words = [0u32; CELL_WORDS];
     let h = &terms.header;
@@ -281,9 +288,15 @@ fn cells(terms: &SurfaceTerms, b: &Brick, surfels: &[Surfel]) -> [u32; CELL_WORD
     for c in 0..64u32 {
         let centre =
             origin + (Vec3::new((c % 4) as f32, (c / 4 % 4) as f32, (c / 16) as f32) + 0.5) * cell;
+        let lo = centre - Vec3::splat(0.5 * cell);
+        let hi = centre + Vec3::splat(0.5 * cell);
         let nearest = own
             .iter()
             .enumerate()
+            .filter(|(_, s)| {
+                let p = Vec3::from(s.position);
+                (p.clamp(lo, hi) - p).length() <= CELL_GAP * cell
+            })
             .min_by(|(_, a), (_, b)| {
                 let d = |s: &Surfel| Vec3::from(s.position).distance_squared(centre);
                 d(a).total_cmp(&d(b))

@@ -70,7 +70,7 @@ pub struct LookupSettings {
     /// Where the asset has surface terms for the point (`prt_format::surface`), weight the
     /// probes by which ones the point's surfel sees and scale by its near field (bake-time
     /// rays; [`crate::surface`]). Held-out levels of the family at the default spacing:
-    /// median level 10.1% against 15.4%, worst 18.7% against 30.4%, over-lit pixels at most
+    /// median level 10.1% against 15.4%, worst 18.6% against 30.4%, over-lit pixels at most
     /// 7.1% against 10.2% (`docs/results/surface.md`). Off, or an asset without terms: the
     /// probe volume alone.
     pub surface_terms: bool,
