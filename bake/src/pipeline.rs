@@ -83,10 +83,16 @@ pub(crate) fn bake_in_pool(
         probes: &probe_positions,
         bvh: &built.bvh,
         triangles: &scene.triangles,
-        cell_size,
+        // No cells: no terms (`surface_terms::surface_terms`).
+        cell_size: if settings.surface_terms {
+            cell_size
+        } else {
+            0.0
+        },
     };
     let surface = surface_terms::surface_terms(&inputs, &mut bricked.surfels);
-    if cell_size > 0.0 && surface.is_empty() && !bricked.bricks.is_empty() {
+    if settings.surface_terms && cell_size > 0.0 && surface.is_empty() && !bricked.bricks.is_empty()
+    {
         report.warnings.push(format!(
             "no surface terms: {} bricks and their near groups overflow the lookup's tables \
              (at most {} bricks, {} groups); surfaces are sampled from the probe volume alone",

@@ -88,6 +88,10 @@ pub struct BakeArgs {
     /// of a spacing off it).
     #[arg(long)]
     no_surface_offset: bool,
+    /// Skip the surface terms (which probes each surfel sees, its near field): a faster bake
+    /// whose surfaces are sampled from the probe volume alone.
+    #[arg(long)]
+    no_surface_terms: bool,
     /// Storage precision of factor transfers.
     #[arg(long, value_enum, default_value = "u8")]
     precision: Precision,
@@ -120,6 +124,7 @@ pub fn run(args: BakeArgs) -> Result<()> {
         inside_facing_away_fraction,
         no_dilation,
         no_surface_offset,
+        no_surface_terms,
         precision,
         row_memory,
         allow_path,
@@ -139,6 +144,7 @@ pub fn run(args: BakeArgs) -> Result<()> {
         invalid_backface_fraction,
         inside_facing_away_fraction,
         dilate: !no_dilation,
+        surface_terms: !no_surface_terms,
         surface_offset: !no_surface_offset,
         transfer_precision: match precision {
             Precision::F16 => TransferPrecision::F16,

@@ -1,8 +1,9 @@
 //! The bake's surface terms and the surface lookup (`prt_format::surface`,
 //! `prt_runtime::surface`): every front-face surfel is found again by its own position and
 //! normal, the lookup keeps the dark room of `fixtures/two_rooms.gltf` dark at both grid
-//! phases (the shared wall and the floor that runs under it), an unmerged bake carries no
-//! terms and samples as the default lookup, and damaged terms are refused by name.
+//! phases (the shared wall and the floor that runs under it) and a sunlit atrium's galleries
+//! dark, a bake without terms (unmerged, or told to skip them) samples as the volume lookup,
+//! and damaged terms are refused by name.
 
 use prt_bake::BakeSettings;
 use prt_format::surface::dominant_axis;
@@ -122,24 +123,31 @@ fn grid(f: impl Fn(f32, f32) -> ([f32; 3], [f32; 3])) -> Vec<([f32; 3], [f32; 3]
         .collect()
 }
 
-/// Without merging there are no bricks to key: the asset carries no terms, and the surface
-/// lookup is the default one.
+/// Without merging there are no bricks to key, and `surface_terms: false` (`prt bake
+/// --no-surface-terms`) skips them: the asset carries no terms, and the surface lookup is the
+/// default one.
 #[test]
-fn an_unmerged_bake_samples_as_the_default_lookup() {
-    let settings = BakeSettings {
+fn without_terms_the_lookup_is_the_volume_lookup() {
+    let unmerged = BakeSettings {
         cell_size: Some(0.0),
         rays: 64,
         spacing: Some(1.0),
         ..BakeSettings::default()
     };
-    let asset = bake_ok(&fixture("two_rooms.gltf"), &settings);
-    assert!(asset.surface.is_empty());
-    let relit = relit(&asset);
-    let lookup = LookupSettings::default();
-    let s = SurfaceSampler::new(&asset, &relit.sh, &relit.surfel_irradiance, &lookup);
-    let plain = VolumeSampler::for_asset(&asset, &relit.sh, &lookup);
-    for (p, n) in wall_points(1.0).into_iter().chain(floor_points(-1.0)) {
-        assert_eq!(s.sample(p, n), plain.sample(p, n));
+    let skipped = BakeSettings {
+        surface_terms: false,
+        ..BakeSettings::default()
+    };
+    for settings in [unmerged, skipped] {
+        let asset = bake_ok(&fixture("two_rooms.gltf"), &settings);
+        assert!(asset.surface.is_empty());
+        let relit = relit(&asset);
+        let lookup = LookupSettings::default();
+        let s = SurfaceSampler::new(&asset, &relit.sh, &relit.surfel_irradiance, &lookup);
+        let plain = VolumeSampler::for_asset(&asset, &relit.sh, &lookup);
+        for (p, n) in wall_points(1.0).into_iter().chain(floor_points(-1.0)) {
+            assert_eq!(s.sample(p, n), plain.sample(p, n));
+        }
     }
 }
 
