@@ -167,8 +167,11 @@ fn prt_depth_weight(index: u32, probe: vec3<f32>, surface: vec3<f32>, x: vec3<f3
 }
 
 // The eight probes around p (the surface point `surface` moved along its normal n) read one by
-// one, weighted by their depth moments.
-fn prt_sample_depth_weighted(surface: vec3<f32>, p: vec3<f32>, n: vec3<f32>) -> PrtSample {
+// one (twin: VolumeSampler::sample_weighted), each weighted by its trilinear weight and
+// validity times, with `masked`, whether the point's surfel sees it (its terms' `mask` around the
+// probe at grid position `centre`; PRT_BLOCKED_WEIGHT when not), else its depth moments.
+// validity < 0: masked, and the surfel sees none of them.
+fn prt_sample_probes(surface: vec3<f32>, p: vec3<f32>, n: vec3<f32>, masked: bool, mask: u32, centre: vec3<i32>) -> PrtSample {
     var s: PrtSample;
     let last = prt_volume.counts - 1.0;
     let g = clamp((p - prt_volume.origin) / prt_volume.step, vec3<f32>(0.0), last);
@@ -177,6 +180,7 @@ fn prt_sample_depth_weighted(surface: vec3<f32>, p: vec3<f32>, n: vec3<f32>) -> 
     let counts = vec3<u32>(prt_volume.counts);
     var acc: array<vec4<f32>, 7>;
     var total = 0.0;
+    var seen = false;
     for (var c = 0u; c < 8u; c = c + 1u) {
         let o = vec3<f32>(f32(c & 1u), f32((c >> 1u) & 1u), f32((c >> 2u) & 1u));
         let tri = mix(1.0 - f, f, o);
@@ -188,8 +192,20 @@ fn prt_sample_depth_weighted(surface: vec3<f32>, p: vec3<f32>, n: vec3<f32>) -> 
             continue;
         }
         s.validity = s.validity + w_tri * t0.w;
-        let index = ijk.x + counts.x * (ijk.y + counts.y * ijk.z);
-        let w = w_tri * prt_depth_weight(index, prt_probe_positions[index].xyz, surface, p, n);
+        var w = w_tri;
+        if masked {
+            let d = at - centre;
+            var visible = true;
+            if all(abs(d) <= vec3<i32>(1)) {
+                let bit = u32((d.x + 1) + 3 * (d.y + 1) + 9 * (d.z + 1));
+                visible = ((mask >> bit) & 1u) != 0u;
+            }
+            seen = seen || visible;
+            w = w * select(PRT_BLOCKED_WEIGHT, 1.0, visible);
+        } else {
+            let index = ijk.x + counts.x * (ijk.y + counts.y * ijk.z);
+            w = w * prt_depth_weight(index, prt_probe_positions[index].xyz, surface, p, n);
+        }
         total = total + w * t0.w;
         acc[0] = acc[0] + w * t0;
         acc[1] = acc[1] + w * textureLoad(prt_volume1, at, 0);
@@ -198,6 +214,10 @@ fn prt_sample_depth_weighted(surface: vec3<f32>, p: vec3<f32>, n: vec3<f32>) -> 
         acc[4] = acc[4] + w * textureLoad(prt_volume4, at, 0);
         acc[5] = acc[5] + w * textureLoad(prt_volume5, at, 0);
         acc[6] = acc[6] + w * textureLoad(prt_volume6, at, 0);
+    }
+    if masked && !seen {
+        s.validity = -1.0;
+        return s;
     }
     if s.validity <= PRT_MIN_VALIDITY || total <= 0.0 {
         s.validity = 0.0;
@@ -210,7 +230,7 @@ fn prt_sample_depth_weighted(surface: vec3<f32>, p: vec3<f32>, n: vec3<f32>) -> 
 fn prt_sample_sh(world_pos: vec3<f32>, normal: vec3<f32>) -> PrtSample {
     let p = world_pos + normal * prt_volume.normal_bias;
     if (prt_volume.flags & PRT_FLAG_DEPTH_MOMENTS) != 0u {
-        return prt_sample_depth_weighted(world_pos, p, normal);
+        return prt_sample_probes(world_pos, p, normal, false, 0u, vec3<i32>(0));
     }
     return prt_sample_trilinear(p);
 }
@@ -307,57 +327,6 @@ fn prt_probe_ijk(index: u32) -> vec3<i32> {
     return vec3<i32>(vec3<u32>(index % c.x, (index / c.x) % c.y, index / (c.x * c.y)));
 }
 
-// The eight probes around p read one by one, trilinear weights times the mask's visibility
-// (centre: the grid position of the mask's middle probe). validity < 0: the surfel sees none.
-fn prt_sample_masked(p: vec3<f32>, mask: u32, centre: vec3<i32>) -> PrtSample {
-    var s: PrtSample;
-    let last = prt_volume.counts - 1.0;
-    let g = clamp((p - prt_volume.origin) / prt_volume.step, vec3<f32>(0.0), last);
-    let base = floor(g);
-    let f = g - base;
-    var acc: array<vec4<f32>, 7>;
-    var total = 0.0;
-    var seen = false;
-    for (var c = 0u; c < 8u; c = c + 1u) {
-        let o = vec3<f32>(f32(c & 1u), f32((c >> 1u) & 1u), f32((c >> 2u) & 1u));
-        let tri = mix(1.0 - f, f, o);
-        let w_tri = tri.x * tri.y * tri.z;
-        let ijk = vec3<u32>(min(base + o, last));
-        let at = vec3<i32>(ijk);
-        let t0 = textureLoad(prt_volume0, at, 0);
-        if w_tri <= 0.0 || t0.w <= 0.0 {
-            continue;
-        }
-        s.validity = s.validity + w_tri * t0.w;
-        let d = at - centre;
-        var visible = true;
-        if all(abs(d) <= vec3<i32>(1)) {
-            let bit = u32((d.x + 1) + 3 * (d.y + 1) + 9 * (d.z + 1));
-            visible = ((mask >> bit) & 1u) != 0u;
-        }
-        seen = seen || visible;
-        let w = w_tri * select(PRT_BLOCKED_WEIGHT, 1.0, visible);
-        total = total + w * t0.w;
-        acc[0] = acc[0] + w * t0;
-        acc[1] = acc[1] + w * textureLoad(prt_volume1, at, 0);
-        acc[2] = acc[2] + w * textureLoad(prt_volume2, at, 0);
-        acc[3] = acc[3] + w * textureLoad(prt_volume3, at, 0);
-        acc[4] = acc[4] + w * textureLoad(prt_volume4, at, 0);
-        acc[5] = acc[5] + w * textureLoad(prt_volume5, at, 0);
-        acc[6] = acc[6] + w * textureLoad(prt_volume6, at, 0);
-    }
-    if !seen {
-        s.validity = -1.0;
-        return s;
-    }
-    if s.validity <= PRT_MIN_VALIDITY || total <= 0.0 {
-        s.validity = 0.0;
-        return s;
-    }
-    s.sh = prt_sh_of_texels(acc, 1.0 / total);
-    return s;
-}
-
 // prt_format::surface::decode_normal.
 fn prt_decode_normal(bits: u32) -> vec3<f32> {
     let e = unpack2x16snorm(bits);
@@ -399,7 +368,7 @@ fn prt_sample_surface(world_pos: vec3<f32>, normal: vec3<f32>) -> PrtSurfaceSamp
     }
     let t = prt_volume.terms_at + 8u * found.x;
     let p = world_pos + normal * prt_volume.normal_bias;
-    var s = prt_sample_masked(p, prt_surface[t], prt_probe_ijk(prt_surface[t + 6u]));
+    var s = prt_sample_probes(world_pos, p, normal, true, prt_surface[t], prt_probe_ijk(prt_surface[t + 6u]));
     if s.validity < 0.0 {
         s = prt_sample_sh(world_pos, normal);
     }

@@ -330,7 +330,8 @@ fn near_field(
     let (o, n) = start(input, s);
     let reach = REACH * input.grid.spacing;
     let (tx, ty) = n.any_orthonormal_pair();
-    let dirs: [Vec3; RAYS as usize] = std::array::from_fn(|k| cosine_spiral(k as u32, tx, ty, n));
+    let dirs: [Vec3; RAYS as usize] =
+        std::array::from_fn(|k| cosine_spiral(k as u32, RAYS, tx, ty, n));
     let mut open = [0.0f32; SH_COUNT];
     let mut hits = Vec::new();
     for packet in dirs.chunks(PACKET) {
@@ -424,11 +425,11 @@ fn brick_at(terms: &SurfaceTerms, bricks: &[Brick], h: Vec3, axis: u32) -> Optio
     best.map(|(_, b)| b)
 }
 
-/// Direction `k` of [`RAYS`] cosine-distributed ones about `n` (tangents `t`, `b`): a
-/// Fibonacci spiral, uniform in the projected disc.
-fn cosine_spiral(k: u32, t: Vec3, b: Vec3, n: Vec3) -> Vec3 {
+/// Direction `k` of `count` cosine-distributed ones about `n` (tangents `t`, `b`): a golden-angle
+/// (Fibonacci) spiral, equal-area rings in the unit disc lifted to the hemisphere.
+pub fn cosine_spiral(k: u32, count: u32, t: Vec3, b: Vec3, n: Vec3) -> Vec3 {
     const GOLDEN_ANGLE: f32 = 2.399_963;
-    let u = (k as f32 + 0.5) / RAYS as f32;
+    let u = (k as f32 + 0.5) / count as f32;
     let phi = k as f32 * GOLDEN_ANGLE;
     let (sin_t, cos_t) = (u.sqrt(), (1.0 - u).sqrt());
     t * (sin_t * phi.cos()) + b * (sin_t * phi.sin()) + n * cos_t
@@ -445,7 +446,7 @@ mod tests {
         let (t, b) = n.any_orthonormal_pair();
         let mut mean = [0.0f32; SH_COUNT];
         for k in 0..RAYS {
-            let y = prt_format::sh::basis(cosine_spiral(k, t, b, n).to_array());
+            let y = prt_format::sh::basis(cosine_spiral(k, RAYS, t, b, n).to_array());
             (0..SH_COUNT).for_each(|i| mean[i] += y[i] / RAYS as f32);
         }
         let want = prt_format::surface::cosine_transfer(n.to_array());

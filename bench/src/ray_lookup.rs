@@ -41,10 +41,10 @@ use prt_runtime::{Sample, VolumeSampler};
 /// 1 m grid), and never less than the shadow rays' own offset.
 pub const RAY_START: f32 = 0.01;
 
-/// Weight kept by a probe the point cannot see: small enough that the visible probes decide
-/// (unless their trilinear weights are below 1e-4 of the blocked ones'), nonzero so that a
-/// point that sees none of its eight still gets their trilinear mean.
-pub const BLOCKED_WEIGHT: f32 = 1e-4;
+/// Weight kept by a probe the point cannot see: the runtime's surface lookup's (small enough that
+/// the visible probes decide, unless their trilinear weights are below 1e-4 of the blocked
+/// ones'; nonzero so that a point that sees none of its eight still gets their trilinear mean).
+pub use prt_format::surface::BLOCKED_WEIGHT;
 
 /// Hemisphere rays of the near-field term (a Fibonacci spiral, cosine-distributed).
 pub const NEAR_FIELD_RAYS: u32 = 256;
@@ -301,14 +301,10 @@ impl<'a> RayLookup<'a> {
     }
 }
 
-/// Direction `k` of [`NEAR_FIELD_RAYS`] on a golden-angle spiral, cosine-distributed over the
-/// hemisphere around `n` (tangents `t`, `b`): equal-area rings in the unit disk lifted to it.
+/// Direction `k` of [`NEAR_FIELD_RAYS`] cosine-distributed ones about `n` (tangents `t`, `b`):
+/// the bake's spiral (`prt_bake::surface_terms::cosine_spiral`) at this lookup's ray count.
 pub(crate) fn cosine_spiral(k: u32, t: Vec3, b: Vec3, n: Vec3) -> Vec3 {
-    const GOLDEN_ANGLE: f32 = 2.399_963;
-    let u = (k as f32 + 0.5) / NEAR_FIELD_RAYS as f32;
-    let phi = k as f32 * GOLDEN_ANGLE;
-    let (sin_t, cos_t) = (u.sqrt(), (1.0 - u).sqrt());
-    t * (sin_t * phi.cos()) + b * (sin_t * phi.sin()) + n * cos_t
+    prt_bake::surface_terms::cosine_spiral(k, NEAR_FIELD_RAYS, t, b, n)
 }
 
 #[cfg(test)]

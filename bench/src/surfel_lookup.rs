@@ -29,6 +29,7 @@ use glam::Vec3;
 use prt_bake::merge::key::dominant_axis;
 use prt_format::sh::{ShRgb, SH_COUNT};
 use prt_format::{Asset, Surfel};
+use prt_runtime::surface::scale_by_near_field;
 use prt_runtime::{LookupSettings, Sample, VolumeSampler};
 
 use crate::ray_lookup::{
@@ -108,13 +109,7 @@ impl<'a> SurfelLookup<'a> {
             s = self.fallback.sample(position, normal);
         }
         let (open, all, near) = self.transfer(surfel);
-        for (ch, (e, near)) in s.irradiance.iter_mut().zip(near).enumerate() {
-            let dot = |t: &[f32; SH_COUNT]| (0..SH_COUNT).map(|i| s.sh[i][ch] * t[i]).sum::<f32>();
-            let total = dot(&all);
-            if total > 0.0 {
-                *e *= ((dot(&open) + near) / total).max(0.0);
-            }
-        }
+        scale_by_near_field(&mut s, &open, &all, near);
         s
     }
 

@@ -75,6 +75,26 @@ pub fn group_radiance(asset: &Asset, irradiance: &[[f32; 3]]) -> Vec<[f32; 3]> {
         .collect()
 }
 
+/// Scales `sample`'s irradiance, per colour channel, by its near field
+/// `(open . L + near) / (all . L)`, `L` the sample's SH, `open` and `all` the SH transfer of
+/// the near-field rays that escape and of all of them, `near` the radiance the others bring
+/// (in the same normalisation), clamped at 0; a channel whose `all . L` is not positive stays
+/// as it is.
+pub fn scale_by_near_field(
+    sample: &mut Sample,
+    open: &[f32; SH_COUNT],
+    all: &[f32; SH_COUNT],
+    near: [f32; 3],
+) {
+    for (ch, e) in sample.irradiance.iter_mut().enumerate() {
+        let dot = |t: &[f32; SH_COUNT]| (0..SH_COUNT).map(|k| sample.sh[k][ch] * t[k]).sum::<f32>();
+        let total = dot(all);
+        if total > 0.0 {
+            *e *= ((dot(open) + near[ch]) / total).max(0.0);
+        }
+    }
+}
+
 /// The surface lookup of an asset relit to probe SH `sh` and brick radiance `bricks`.
 pub struct SurfaceSampler<'a> {
     asset: &'a Asset,
@@ -134,15 +154,8 @@ impl<'a> SurfaceSampler<'a> {
         let all = cosine_transfer(decode_normal(terms.normal));
         let share = f32::from(terms.hits) / self.asset.surface.header.rays as f32;
         let group = self.asset.surface.groups[brick] + u32::from(terms.group);
-        let near = self.near[group as usize];
-        for (ch, e) in out.irradiance.iter_mut().enumerate() {
-            let dot =
-                |t: &[f32; SH_COUNT]| (0..SH_COUNT).map(|k| out.sh[k][ch] * t[k]).sum::<f32>();
-            let total = dot(&all);
-            if total > 0.0 {
-                *e *= ((dot(&open) + share * near[ch]) / total).max(0.0);
-            }
-        }
+        let near = self.near[group as usize].map(|l| share * l);
+        scale_by_near_field(&mut out, &open, &all, near);
         out
     }
 
