@@ -9,6 +9,7 @@ mod bake;
 mod fuzz;
 mod gpu;
 mod lights;
+mod plot;
 mod ray_lookup;
 mod render;
 mod results;
@@ -48,6 +49,9 @@ enum Kind {
     /// Irradiance at surface points against the oracle's surface references (leaks, holes,
     /// error), at the default spacing and half of it.
     Surface(surface::SurfaceArgs),
+    /// Bake seconds and runtime bytes against surface error over probe spacings and ray
+    /// counts, on the level family and Sponza: tables and plots with their fronts.
+    Frontier(surface::frontier::FrontierArgs),
     /// Mutation fuzzing of the glTF path or the asset loader for a fixed time (issue 8).
     Fuzz(fuzz::FuzzArgs),
 }
@@ -64,6 +68,7 @@ fn run(cli: Cli) -> Result<()> {
         Kind::Lights(args) => lights::run(args),
         Kind::Render(args) => render::run(args),
         Kind::Surface(args) => surface::run(args),
+        Kind::Frontier(args) => surface::frontier::run(args),
         Kind::Fuzz(args) => fuzz::run(args),
     }
 }

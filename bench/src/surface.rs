@@ -28,6 +28,7 @@
 //! Image scores: [`image`].
 
 mod cases;
+pub mod frontier;
 mod image;
 mod lookups;
 mod pictures;

@@ -1,0 +1,446 @@
+//! `prt-bench frontier` (issue 32, item 3): what a bake costs against what it buys. Each case
+//! of `prt-bench surface` (the level family and Sponza by default) is baked at several probe
+//! spacings (relative to the case's default) and ray counts, relit on the CPU and sampled with
+//! the runtime's lookup at the oracle's surface points and camera pixels. Per setting: bake
+//! seconds, the runtime bytes an engine uploads and the transport bytes per probe against the
+//! surface error (open points, leaks, over-lit pixels), as tables and as log-log plots with
+//! their Pareto fronts: the settings users pick from. The family's figures are medians over its
+//! levels (and the worst level), so that no level's size dominates.
+//!
+//! Placement is the uniform grid: the bake has no other yet (issue 32, item 2).
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+use anyhow::{bail, Context, Result};
+use prt_bake::BakeSettings;
+use prt_format::Summary;
+
+use super::cases::{self, Set};
+use super::lookups::Lookups;
+use super::refs;
+use super::report::Setting;
+use super::{image, Refs};
+use crate::plot::{self, Panel, Point, Series};
+use crate::results::{self, Out};
+
+#[derive(clap::Args)]
+pub struct FrontierArgs {
+    /// Cases (comma-separated), named as `prt-bench surface --case` names them.
+    #[arg(long = "case", value_delimiter = ',', default_value = "family,sponza")]
+    cases: Vec<String>,
+    /// Probe spacings relative to each case's default (1: the default; 0.5: half, 8x the
+    /// probes), comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "1.26,1,0.79,0.63,0.5")]
+    scales: Vec<f32>,
+    /// Rays per probe, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "256,512")]
+    rays: Vec<u32>,
+    /// Directory the cases' paths are relative to (the repository root).
+    #[arg(long, default_value = ".")]
+    root: PathBuf,
+    /// Also write frontier.md, frontier.svg (the family) and frontier_sponza.svg to DIR.
+    #[command(flatten)]
+    out: Out,
+}
+
+/// One bake of one case, scored.
+struct Row {
+    case: String,
+    set: Set,
+    rays: u32,
+    /// Spacing relative to the case's default.
+    scale: f32,
+    spacing: f32,
+    probes: usize,
+    runtime_bytes: u64,
+    transport_per_probe: f64,
+    bake_s: f64,
+    /// Percent.
+    open_mean: f64,
+    /// Percent of the open points.
+    leaks: f64,
+    /// Percent of the view's hit pixels (cases with a camera view).
+    over_lit: Option<f64>,
+}
+
+/// `prt-bench frontier`: every case at every ray count and spacing, the report printed and with
+/// `--out` written with its plots.
+pub fn run(args: FrontierArgs) -> Result<()> {
+    if args.scales.iter().any(|s| !(s.is_finite() && *s > 0.0)) || args.scales.is_empty() {
+        bail!(
+            "--scales {:?}: every scale must be a positive number",
+            args.scales
+        );
+    }
+    if args.rays.contains(&0) || args.rays.is_empty() {
+        bail!("--rays {:?}: every ray count must be at least 1", args.rays);
+    }
+    let picked = cases::pick(&args.cases, cases::all(&args.root)?)?;
+    let lookup = Lookups::parse(&["default".to_owned()], None)?.for_set(Set::Bundled)[0];
+    let mut rows = Vec::new();
+    for case in &picked {
+        let refs = Refs {
+            points: refs::read_reference(&case.points)?,
+            image: case.image.as_deref().map(image::read_image).transpose()?,
+            pictures: None,
+        };
+        let lighting = prt_runtime::load_rig(&case.rig)
+            .with_context(|| format!("{}: loading the rig {}", case.name, case.rig.display()))?;
+        let mut default_spacing = None;
+        for &rays in &args.rays {
+            for &scale in &args.scales {
+                let settings = |spacing: Option<f32>| BakeSettings {
+                    double_sided: case.double_sided,
+                    rays,
+                    spacing,
+                    ..BakeSettings::default()
+                };
+                let scaled = default_spacing.map(|s: f32| s * scale);
+                let mut baked = super::bake(case, &settings(scaled), &lighting, false)?;
+                if default_spacing.is_none() {
+                    // The first bake learns the case's default spacing; rebake it scaled.
+                    let s = baked.asset.header.grid.spacing;
+                    default_spacing = Some(s);
+                    if scale != 1.0 {
+                        baked = super::bake(case, &settings(Some(s * scale)), &lighting, false)?;
+                    }
+                }
+                let sampled = super::sample(case, &baked, Setting::Default, &refs, &lookup)?;
+                let summary = Summary::of(&baked.asset, 0);
+                let row = Row {
+                    case: case.name.clone(),
+                    set: case.set,
+                    rays,
+                    scale,
+                    spacing: sampled.spacing,
+                    probes: sampled.probes,
+                    runtime_bytes: sampled.runtime_bytes,
+                    transport_per_probe: summary.transport_bytes_per_probe,
+                    bake_s: baked.bake_s,
+                    open_mean: 100.0 * sampled.points.open_mean,
+                    leaks: sampled.points.leak_percent(),
+                    over_lit: sampled.image.as_ref().map(|i| i.over_lit_percent()),
+                };
+                eprintln!("{}", progress(&row));
+                rows.push(row);
+            }
+        }
+    }
+    let md = markdown(&rows, &args);
+    args.out.report("frontier", &md)?;
+    if let Some(dir) = &args.out.out {
+        let family = plot_family(&rows);
+        results::write(dir, "frontier.svg", family.as_bytes())?;
+        if rows.iter().any(|r| r.case == "sponza") {
+            results::write(
+                dir,
+                "frontier_sponza.svg",
+                plot_case(&rows, "sponza").as_bytes(),
+            )?;
+        }
+    }
+    Ok(())
+}
+
+fn progress(r: &Row) -> String {
+    format!(
+        "{} {} rays x{}: {:.3} m, {} probes, {:.1} MB, {:.0} B/probe transport, bake {:.2} s; open mean {:.1}%, leaks {:.1}%, over-lit {}",
+        r.case,
+        r.rays,
+        r.scale,
+        r.spacing,
+        r.probes,
+        r.runtime_bytes as f64 / 1e6,
+        r.transport_per_probe,
+        r.bake_s,
+        r.open_mean,
+        r.leaks,
+        r.over_lit.map_or("-".into(), |o| format!("{o:.1}%"))
+    )
+}
+
+/// The median (the mean of the two middle values for an even count), 0 for none.
+fn median(mut v: Vec<f64>) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+/// One setting's figures over a set of levels.
+struct Aggregate {
+    rays: u32,
+    scale: f32,
+    levels: usize,
+    probes: f64,
+    runtime_mb: f64,
+    transport: f64,
+    bake_s: f64,
+    median_open: f64,
+    worst_open: (f64, String),
+    worst_leaks: f64,
+    worst_over_lit: f64,
+}
+
+/// Per setting (in the order of the arguments), the medians and worsts over `rows` of `sets`.
+fn aggregate(rows: &[Row], keep: impl Fn(&Row) -> bool, args: &FrontierArgs) -> Vec<Aggregate> {
+    let mut out = Vec::new();
+    for &rays in &args.rays {
+        for &scale in &args.scales {
+            let of: Vec<&Row> = rows
+                .iter()
+                .filter(|r| r.rays == rays && r.scale == scale && keep(r))
+                .collect();
+            if of.is_empty() {
+                continue;
+            }
+            let med = |f: fn(&Row) -> f64| median(of.iter().map(|r| f(r)).collect());
+            let max = |f: fn(&Row) -> f64| of.iter().map(|r| f(r)).fold(0.0, f64::max);
+            let worst = of
+                .iter()
+                .max_by(|a, b| a.open_mean.total_cmp(&b.open_mean))
+                .expect("not empty");
+            out.push(Aggregate {
+                rays,
+                scale,
+                levels: of.len(),
+                probes: med(|r| r.probes as f64),
+                runtime_mb: med(|r| r.runtime_bytes as f64 / 1e6),
+                transport: med(|r| r.transport_per_probe),
+                bake_s: med(|r| r.bake_s),
+                median_open: med(|r| r.open_mean),
+                worst_open: (worst.open_mean, worst.case.clone()),
+                worst_leaks: max(|r| r.leaks),
+                worst_over_lit: max(|r| r.over_lit.unwrap_or(0.0)),
+            });
+        }
+    }
+    out
+}
+
+/// Whether no other setting is at most as large on `x` and better on the median error.
+fn on_front(all: &[Aggregate], a: &Aggregate, x: fn(&Aggregate) -> f64) -> bool {
+    !all.iter().any(|b| {
+        (x(b) <= x(a) && b.median_open < a.median_open)
+            || (x(b) < x(a) && b.median_open <= a.median_open)
+    })
+}
+
+fn summary_table(md: &mut String, title: &str, rows: &[Aggregate]) {
+    let _ = writeln!(md, "\n### {title}\n");
+    md.push_str("| rays | spacing | levels | probes (median) | runtime MB (median) | transport B/probe (median) | bake s (median) | open mean, median level | open mean, worst level | open leaks, worst level | over-lit pixels, worst level | front: bytes / bake time |\n|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n");
+    for a in rows {
+        let front = |x: fn(&Aggregate) -> f64| if on_front(rows, a, x) { "yes" } else { "-" };
+        let _ = writeln!(
+            md,
+            "| {} | x{} | {} | {:.0} | {:.1} | {:.0} | {:.2} | {:.1}% | {:.1}% {} | {:.1}% | {:.1}% | {} / {} |",
+            a.rays,
+            a.scale,
+            a.levels,
+            a.probes,
+            a.runtime_mb,
+            a.transport,
+            a.bake_s,
+            a.median_open,
+            a.worst_open.0,
+            a.worst_open.1,
+            a.worst_leaks,
+            a.worst_over_lit,
+            front(|a| a.runtime_mb),
+            front(|a| a.bake_s),
+        );
+    }
+}
+
+fn markdown(rows: &[Row], args: &FrontierArgs) -> String {
+    let mut md = String::from(
+        "Bake seconds and runtime bytes against surface error (`prt-bench frontier`, issue 32 item 3): each case baked at spacings relative to its default (x1) and at several ray counts, on the uniform grid (the only placement so far), relit on the CPU (one bounce) and sampled with the runtime's lookup (`default`, the surface terms) at the oracle's surface points and camera pixels. Scores as in [surface.md](surface.md): open mean is the mean relative error at points that are not pockets, leaks the open points lit over 1.5x their truth, over-lit the camera view's pixels lit over 1.5x. Runtime MB: every array an engine uploads (probes, sky, visibility, factors, bricks, surfels, BVH, triangles, surface terms). Bake seconds on this machine's 2 threads. A setting is on a front when no other setting is as small on that axis and better on the median level's error.\n\n## Summary\n",
+    );
+    let sets: [(&str, Keep); 4] = [
+        ("The level family (seeds 0-15)", in_family),
+        ("Tuning seeds 0-7", |r| r.set == Set::Tuning),
+        ("Held-out seeds 8-15", |r| r.set == Set::HeldOut),
+        (
+            "Sponza (double-sided, fixtures/rigs/sponza_sun_31.json)",
+            |r| r.case == "sponza",
+        ),
+    ];
+    for (title, keep) in sets {
+        let agg = aggregate(rows, keep, args);
+        if !agg.is_empty() {
+            summary_table(&mut md, title, &agg);
+        }
+    }
+    md.push_str("\n## Per case\n\n| case | set | rays | spacing | probes | runtime MB | transport B/probe | bake s | open mean | open leaks | over-lit pixels |\n|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+    for r in rows {
+        let _ = writeln!(
+            md,
+            "| {} | {} | {} | {:.3} m (x{}) | {} | {:.1} | {:.0} | {:.2} | {:.2}% | {:.1}% | {} |",
+            r.case,
+            r.set.label(),
+            r.rays,
+            r.spacing,
+            r.scale,
+            r.probes,
+            r.runtime_bytes as f64 / 1e6,
+            r.transport_per_probe,
+            r.bake_s,
+            r.open_mean,
+            r.leaks,
+            r.over_lit.map_or("-".into(), |o| format!("{o:.2}%"))
+        );
+    }
+    md
+}
+
+/// Colours of the ray counts' series, in argument order.
+const COLORS: [&str; 6] = [
+    "#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b",
+];
+
+/// Which rows a summary table takes.
+type Keep = fn(&Row) -> bool;
+
+/// A level of the level family (seeds 0-15).
+fn in_family(r: &Row) -> bool {
+    matches!(r.set, Set::Tuning | Set::HeldOut)
+}
+
+/// One plotted setting: runtime MB, bake seconds, error (percent), label and tooltip.
+struct Dot {
+    mb: f64,
+    bake_s: f64,
+    error: f64,
+    label: String,
+    title: String,
+}
+
+/// Plotted settings per ray count, in the order first seen.
+#[derive(Default)]
+struct ByRays(Vec<(u32, Vec<Dot>)>);
+
+impl ByRays {
+    fn push(&mut self, rays: u32, dot: Dot) {
+        match self.0.iter_mut().find(|(r, _)| *r == rays) {
+            Some((_, v)) => v.push(dot),
+            None => self.0.push((rays, vec![dot])),
+        }
+    }
+
+    /// Two panels: `what` against runtime MB, and against bake seconds.
+    fn panels(&self, what: &str) -> Vec<Panel> {
+        let make = |x_name: &str, x_unit: &'static str, x: fn(&Dot) -> f64| Panel {
+            title: format!("{what} against {x_name}"),
+            x_name: x_name.to_owned(),
+            x_unit,
+            y_name: what.to_owned(),
+            y_unit: "%",
+            series: self
+                .0
+                .iter()
+                .enumerate()
+                .map(|(i, (rays, dots))| Series {
+                    name: format!("{rays} rays per probe"),
+                    color: COLORS[i % COLORS.len()],
+                    points: dots
+                        .iter()
+                        .map(|d| Point {
+                            x: x(d),
+                            y: d.error,
+                            label: d.label.clone(),
+                            title: d.title.clone(),
+                        })
+                        .collect(),
+                })
+                .collect(),
+        };
+        vec![
+            make("runtime bytes", " MB", |d| d.mb),
+            make("bake time", " s", |d| d.bake_s),
+        ]
+    }
+}
+
+/// The family's plot: per setting, the median level's open mean against the median level's
+/// runtime MB and bake seconds.
+fn plot_family(rows: &[Row]) -> String {
+    let mut settings: Vec<(u32, f32)> = rows
+        .iter()
+        .filter(|r| in_family(r))
+        .map(|r| (r.rays, r.scale))
+        .collect();
+    settings.sort_by(|a, b| a.0.cmp(&b.0).then(b.1.total_cmp(&a.1)));
+    settings.dedup();
+    let mut by_rays = ByRays::default();
+    for (rays, scale) in settings {
+        let of: Vec<&Row> = rows
+            .iter()
+            .filter(|r| in_family(r) && r.rays == rays && r.scale == scale)
+            .collect();
+        let med = |f: fn(&Row) -> f64| median(of.iter().map(|r| f(r)).collect());
+        let (mb, bake_s, error) = (
+            med(|r| r.runtime_bytes as f64 / 1e6),
+            med(|r| r.bake_s),
+            med(|r| r.open_mean),
+        );
+        let title = format!(
+            "{rays} rays, spacing x{scale}: {error:.1}% median level, {mb:.1} MB, {bake_s:.2} s"
+        );
+        let label = format!("x{scale}");
+        by_rays.push(
+            rays,
+            Dot {
+                mb,
+                bake_s,
+                error,
+                label,
+                title,
+            },
+        );
+    }
+    let levels: std::collections::BTreeSet<&str> = rows
+        .iter()
+        .filter(|r| in_family(r))
+        .map(|r| r.case.as_str())
+        .collect();
+    plot::svg(
+        "The level family: surface error against runtime bytes and bake time",
+        &format!(
+            "median of {} levels per setting; labels: spacing relative to each level's default; uniform grid",
+            levels.len()
+        ),
+        &by_rays.panels("open-point error, median level"),
+    )
+}
+
+/// One case's plot: its open mean against its runtime MB and bake seconds.
+fn plot_case(rows: &[Row], case: &str) -> String {
+    let mut by_rays = ByRays::default();
+    for r in rows.iter().filter(|r| r.case == case) {
+        let mb = r.runtime_bytes as f64 / 1e6;
+        let title = format!(
+            "{} rays, {:.2} m ({} probes): {:.1}%, {mb:.1} MB, {:.2} s",
+            r.rays, r.spacing, r.probes, r.open_mean, r.bake_s
+        );
+        let dot = Dot {
+            mb,
+            bake_s: r.bake_s,
+            error: r.open_mean,
+            label: format!("{:.2} m", r.spacing),
+            title,
+        };
+        by_rays.push(r.rays, dot);
+    }
+    plot::svg(
+        &format!("{case}: surface error against runtime bytes and bake time"),
+        "labels: probe spacing; uniform grid",
+        &by_rays.panels("open-point error"),
+    )
+}
