@@ -20,9 +20,17 @@ pub struct Summary {
     pub dilated_probe_count: usize,
     /// Probes moved off a surface they lay on, or out of geometry by the virtual offset.
     pub offset_probe_count: usize,
+    /// Valid probes in a gap narrower than a tenth of the spacing ([`probe_in_gap`]): they see
+    /// little beyond the gap's two sides, and surfaces farther off are lit by their neighbours.
+    pub probes_in_gaps: usize,
     pub ray_count: u32,
     pub surfel_count: usize,
     pub surfels_unmerged: u64,
+    /// Surfels with surface terms (`crate::surface`; 0 without terms).
+    pub surfels_with_terms: usize,
+    /// Of those, the surfels that see none of the 27 probes around them: their points are
+    /// sampled with the probe volume's weights (`SurfaceTerms::traced_and_blind`).
+    pub surfels_seeing_no_probe: usize,
     pub brick_count: usize,
     pub factor_count: usize,
     pub factors_per_probe: f64,
@@ -83,6 +91,10 @@ impl Summary {
             }
         };
         let s = &section_bytes;
+        let (traced, blind) = asset.surface.traced_and_blind();
+        let probes_in_gaps = (0..asset.probes.len())
+            .filter(|&p| asset.probes[p].is_valid() && probe_in_gap(asset, p))
+            .count();
         Summary {
             format_version: FORMAT_VERSION,
             source_name: asset.header.source_name.clone(),
@@ -99,9 +111,12 @@ impl Summary {
                 .iter()
                 .filter(|p| p.flags & PROBE_OFFSET != 0)
                 .count(),
+            probes_in_gaps,
             ray_count: asset.header.ray_count,
             surfel_count: asset.surfels.len(),
             surfels_unmerged: asset.header.stats.surfels_unmerged,
+            surfels_with_terms: traced,
+            surfels_seeing_no_probe: blind,
             brick_count: asset.bricks.len(),
             factor_count: asset.factors.len(),
             factors_per_probe: per_probe(asset.factors.len() as u64),
@@ -118,6 +133,27 @@ impl Summary {
         }
     }
 }
+
+/// Whether probe `p` sits in a gap narrower than a tenth of the spacing: the median over its
+/// visibility map's texels of the mean hit distance is below [`GAP_DEPTH`] spacings (a probe
+/// beside one wall sees the room over half its texels; one between two plates a centimetre
+/// apart sees them everywhere but at grazing angles).
+pub fn probe_in_gap(asset: &Asset, p: usize) -> bool {
+    let Some(words) = asset
+        .probe_depth
+        .get(p * DEPTH_WORDS..(p + 1) * DEPTH_WORDS)
+    else {
+        return false;
+    };
+    let mut means: Vec<f32> = (0..DEPTH_TEXELS)
+        .map(|t| crate::depth::moments(words, t).0)
+        .collect();
+    let (_, median, _) = means.select_nth_unstable_by(DEPTH_TEXELS / 2, f32::total_cmp);
+    *median < GAP_DEPTH
+}
+
+/// Median hit distance (probe spacings) under which [`probe_in_gap`] says a probe is in a gap.
+pub const GAP_DEPTH: f32 = 0.1;
 
 /// In-memory bytes of the surface terms' arrays.
 fn surface_bytes(t: &crate::surface::SurfaceTerms) -> u64 {
@@ -156,10 +192,20 @@ impl std::fmt::Display for Summary {
         )?;
         writeln!(
             f,
+            "probes in gaps   {} (half their rays hit within a tenth of the spacing)",
+            self.probes_in_gaps
+        )?;
+        writeln!(
+            f,
             "surfels          {} ({} ray hits before merging)",
             self.surfel_count, self.surfels_unmerged
         )?;
         writeln!(f, "bricks           {}", self.brick_count)?;
+        writeln!(
+            f,
+            "surface terms    {} surfels, {} of them see none of their probes (sampled from the volume)",
+            self.surfels_with_terms, self.surfels_seeing_no_probe
+        )?;
         writeln!(
             f,
             "factors          {} ({:.1} per probe, {:?} transfer)",

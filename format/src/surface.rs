@@ -147,6 +147,19 @@ impl SurfaceTerms {
         self.header.brick_size <= 0.0 || self.slots.is_empty()
     }
 
+    /// How many surfels the bake traced terms for (front faces), and how many of those reach
+    /// none of the 27 probes around them: a gap or pocket narrower than the probes' spacing, or
+    /// a surface outside the grid. The lookup cannot tell which probes light those: their
+    /// points take the probe volume's weights (their near field still applies).
+    pub fn traced_and_blind(&self) -> (usize, usize) {
+        self.surfels
+            .iter()
+            .filter(|s| s.mask & TERMS_TRACED != 0)
+            .fold((0, 0), |(t, b), s| {
+                (t + 1, b + usize::from(s.mask & PROBE_BITS == 0))
+            })
+    }
+
     /// The brick key of `p`.
     pub fn key_of(&self, p: [f32; 3]) -> [i32; 3] {
         let h = &self.header;
