@@ -51,8 +51,9 @@ pub struct BakeSettings {
     pub surface_offset: bool,
     /// Storage precision of factor transfers.
     pub transfer_precision: TransferPrecision,
-    /// Move probes that are inside geometry out of it (virtual offset): through the nearest back
-    /// face their rays hit, if it is within half a spacing and the probe is valid there.
+    /// Move probes that are inside geometry out of it (virtual offset, on by default): through
+    /// the nearest back side their rays hit (a single-sided back face, or the inside of a
+    /// closed solid), if it is within half a spacing and the probe is valid there.
     pub virtual_offset: bool,
     /// Worker threads; `None` uses all cores.
     pub threads: Option<usize>,
@@ -84,7 +85,7 @@ impl Default for BakeSettings {
             surface_terms: true,
             surface_offset: true,
             transfer_precision: TransferPrecision::U8,
-            virtual_offset: false,
+            virtual_offset: true,
             threads: None,
             row_memory: 256 << 20,
             allowed: prt_scene::Allowed::default(),
@@ -109,12 +110,14 @@ impl BakeSettings {
         }
     }
 
-    /// The exact one-bounce estimate for accuracy tests: no merging, f32 transfers. Largest
-    /// assets and runtime work.
+    /// The exact one-bounce estimate for accuracy tests: no merging, f32 transfers, and probes
+    /// inside geometry left where the grid put them (a reference is computed at given probe
+    /// positions). Largest assets and runtime work.
     pub fn exact() -> Self {
         BakeSettings {
             cell_size: Some(0.0),
             transfer_precision: TransferPrecision::F32,
+            virtual_offset: false,
             ..Self::default()
         }
     }

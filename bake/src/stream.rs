@@ -174,9 +174,14 @@ fn fold_block(block: Block, out: &mut Traced, per_probe: &PerProbe) -> Result<()
     } = *keep;
     let mut brick_of_hit = Vec::new();
     let mut hit_start = Vec::with_capacity(block.len() + 1);
+    // Only probes whose rows are kept make surfels: a probe inside geometry sees faces no
+    // valid probe sees (a double-sided roof's underside within a thick wall), whose surfels the
+    // surface lookup then found for points on the real surface beside them.
     for (_, r, _) in &block {
         hit_start.push(brick_of_hit.len());
-        out.folder.fold(&r.hits, &mut brick_of_hit)?;
+        if (keep.rows_of)(r) {
+            out.folder.fold(&r.hits, &mut brick_of_hit)?;
+        }
     }
     hit_start.push(brick_of_hit.len());
     let finished: Vec<_> = block

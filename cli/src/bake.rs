@@ -70,9 +70,10 @@ pub struct BakeArgs {
     /// Treat every material as double-sided (for files with inconsistent winding).
     #[arg(long)]
     double_sided: bool,
-    /// Move probes inside geometry out through the nearest back face (within half a spacing).
+    /// Leave probes inside geometry where they are (dilated or invalid) instead of moving them
+    /// out through the nearest back side their rays hit, within half a spacing.
     #[arg(long)]
-    virtual_offset: bool,
+    no_virtual_offset: bool,
     /// Probes with more than this fraction of back-face hits are invalid.
     #[arg(long, default_value_t = 0.1)]
     invalid_backface_fraction: f32,
@@ -119,7 +120,7 @@ pub fn run(args: BakeArgs) -> Result<()> {
         cell_size,
         no_merge,
         double_sided,
-        virtual_offset,
+        no_virtual_offset,
         invalid_backface_fraction,
         inside_facing_away_fraction,
         no_dilation,
@@ -140,7 +141,7 @@ pub fn run(args: BakeArgs) -> Result<()> {
         max_probes,
         cell_size: if no_merge { Some(0.0) } else { cell_size },
         double_sided,
-        virtual_offset,
+        virtual_offset: !no_virtual_offset,
         invalid_backface_fraction,
         inside_facing_away_fraction,
         dilate: !no_dilation,

@@ -842,7 +842,8 @@ fn bake_to_file_is_atomic() {
 }
 
 /// Virtual offset: a probe just inside the outward box (0.05 m below its top face) moves through
-/// the nearest back face, is valid there, and says so; one deep inside stays put and invalid.
+/// the nearest back face, is valid there, and says so; one deep inside stays put and invalid;
+/// one just inside a thick wall of double-sided faces moves out into the room.
 #[test]
 fn virtual_offset_moves_probes_out_of_geometry() {
     let scene = fixture("closed_box_outward.gltf");
@@ -856,7 +857,9 @@ fn virtual_offset_moves_probes_out_of_geometry() {
     let p = asset.probes[0];
     assert!(p.is_valid(), "moved probe is valid: {p:?}");
     assert_ne!(p.flags & prt_format::PROBE_OFFSET, 0);
-    assert!(p.position[1] > 1.0 && p.position[1] < 1.01, "{p:?}");
+    // PAST_FACE (0.02) spacings past the face.
+    let past = 1.0 + prt_bake::offset::PAST_FACE;
+    assert!((p.position[1] - past).abs() < 1e-3, "{p:?}");
     let deep = BakeSettings {
         bounds: point_bounds([0.0, 0.0, 0.0]),
         ..near_top
@@ -865,6 +868,30 @@ fn virtual_offset_moves_probes_out_of_geometry() {
     assert!(!asset.probes[0].is_valid());
     assert_eq!(asset.probes[0].flags & prt_format::PROBE_OFFSET, 0);
     assert_eq!(asset.probes[0].position, [0.0, 0.0, 0.0]);
+
+    // A thick wall of double-sided faces (fixtures/thick_walls.gltf, the north wall spans z
+    // -2.3..-2): a probe 1 cm inside it sees only the insides of its faces, and moves out
+    // through the one facing the room; without the offset it stays inside (moved off the face
+    // by the surface offset, the other way), dilated.
+    let walls = fixture("thick_walls.gltf");
+    let in_wall = BakeSettings {
+        spacing: Some(1.0),
+        bounds: point_bounds([0.3, 1.5, -2.01]),
+        ..rays(256)
+    };
+    let asset = bake_ok(&walls, &in_wall);
+    let p = asset.probes[0];
+    assert!(p.is_valid() && !p.is_dilated(), "{p:?}");
+    let past = -2.0 + prt_bake::offset::PAST_FACE;
+    assert!((p.position[2] - past).abs() < 1e-3, "{p:?}");
+    let kept = BakeSettings {
+        virtual_offset: false,
+        ..in_wall
+    };
+    let asset = bake_ok(&walls, &kept);
+    let p = asset.probes[0];
+    assert!(!p.is_valid() || p.is_dilated(), "{p:?}");
+    assert!(p.position[2] < -2.0, "still in the wall: {p:?}");
 }
 
 /// Scene diagnostics: inconsistent winding is reported with the share of edges affected and the

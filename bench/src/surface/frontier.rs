@@ -36,6 +36,10 @@ pub struct FrontierArgs {
     /// Rays per probe, comma-separated.
     #[arg(long, value_delimiter = ',', default_value = "256,512")]
     rays: Vec<u32>,
+    /// Surfel cells per probe spacing (the bake's `cells_per_spacing`; 12 is its default),
+    /// comma-separated: surfels, bricks and surface terms grow with the square of it.
+    #[arg(long, value_delimiter = ',', default_value = "12")]
+    cells: Vec<f32>,
     /// Directory the cases' paths are relative to (the repository root).
     #[arg(long, default_value = ".")]
     root: PathBuf,
@@ -44,11 +48,34 @@ pub struct FrontierArgs {
     out: Out,
 }
 
+/// What a bake traces and merges: rays per probe, surfel cells per spacing.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Knob {
+    rays: u32,
+    cells: f32,
+}
+
+impl Knob {
+    fn label(self) -> String {
+        format!("{} rays, cells spacing/{}", self.rays, self.cells)
+    }
+}
+
+impl FrontierArgs {
+    /// Every ray count with every cell size, in argument order.
+    fn knobs(&self) -> Vec<Knob> {
+        self.rays
+            .iter()
+            .flat_map(|&rays| self.cells.iter().map(move |&cells| Knob { rays, cells }))
+            .collect()
+    }
+}
+
 /// One bake of one case, scored.
 struct Row {
     case: String,
     set: Set,
-    rays: u32,
+    knob: Knob,
     /// Spacing relative to the case's default.
     scale: f32,
     spacing: f32,
@@ -76,6 +103,9 @@ pub fn run(args: FrontierArgs) -> Result<()> {
     if args.rays.contains(&0) || args.rays.is_empty() {
         bail!("--rays {:?}: every ray count must be at least 1", args.rays);
     }
+    if args.cells.iter().any(|c| !(c.is_finite() && *c >= 1.0)) || args.cells.is_empty() {
+        bail!("--cells {:?}: every value must be at least 1", args.cells);
+    }
     let picked = cases::pick(&args.cases, cases::all(&args.root)?)?;
     let lookup = Lookups::parse(&["default".to_owned()], None)?.for_set(Set::Bundled)[0];
     let mut rows = Vec::new();
@@ -88,11 +118,12 @@ pub fn run(args: FrontierArgs) -> Result<()> {
         let lighting = prt_runtime::load_rig(&case.rig)
             .with_context(|| format!("{}: loading the rig {}", case.name, case.rig.display()))?;
         let mut default_spacing = None;
-        for &rays in &args.rays {
+        for knob in args.knobs() {
             for &scale in &args.scales {
                 let settings = |spacing: Option<f32>| BakeSettings {
                     double_sided: case.double_sided,
-                    rays,
+                    rays: knob.rays,
+                    cells_per_spacing: knob.cells,
                     spacing,
                     ..BakeSettings::default()
                 };
@@ -111,7 +142,7 @@ pub fn run(args: FrontierArgs) -> Result<()> {
                 let row = Row {
                     case: case.name.clone(),
                     set: case.set,
-                    rays,
+                    knob,
                     scale,
                     spacing: sampled.spacing,
                     probes: sampled.probes,
@@ -130,7 +161,7 @@ pub fn run(args: FrontierArgs) -> Result<()> {
     let md = markdown(&rows, &args);
     args.out.report("frontier", &md)?;
     if let Some(dir) = &args.out.out {
-        let family = plot_family(&rows);
+        let family = plot_family(&rows, &args);
         results::write(dir, "frontier.svg", family.as_bytes())?;
         if rows.iter().any(|r| r.case == "sponza") {
             results::write(
@@ -145,9 +176,9 @@ pub fn run(args: FrontierArgs) -> Result<()> {
 
 fn progress(r: &Row) -> String {
     format!(
-        "{} {} rays x{}: {:.3} m, {} probes, {:.1} MB, {:.0} B/probe transport, bake {:.2} s; open mean {:.1}%, leaks {:.1}%, over-lit {}",
+        "{} {} x{}: {:.3} m, {} probes, {:.1} MB, {:.0} B/probe transport, bake {:.2} s; open mean {:.1}%, leaks {:.1}%, over-lit {}",
         r.case,
-        r.rays,
+        r.knob.label(),
         r.scale,
         r.spacing,
         r.probes,
@@ -176,7 +207,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 
 /// One setting's figures over a set of levels.
 struct Aggregate {
-    rays: u32,
+    knob: Knob,
     scale: f32,
     levels: usize,
     probes: f64,
@@ -192,11 +223,11 @@ struct Aggregate {
 /// Per setting (in the order of the arguments), the medians and worsts over `rows` of `sets`.
 fn aggregate(rows: &[Row], keep: impl Fn(&Row) -> bool, args: &FrontierArgs) -> Vec<Aggregate> {
     let mut out = Vec::new();
-    for &rays in &args.rays {
+    for knob in args.knobs() {
         for &scale in &args.scales {
             let of: Vec<&Row> = rows
                 .iter()
-                .filter(|r| r.rays == rays && r.scale == scale && keep(r))
+                .filter(|r| r.knob == knob && r.scale == scale && keep(r))
                 .collect();
             if of.is_empty() {
                 continue;
@@ -208,7 +239,7 @@ fn aggregate(rows: &[Row], keep: impl Fn(&Row) -> bool, args: &FrontierArgs) -> 
                 .max_by(|a, b| a.open_mean.total_cmp(&b.open_mean))
                 .expect("not empty");
             out.push(Aggregate {
-                rays,
+                knob,
                 scale,
                 levels: of.len(),
                 probes: med(|r| r.probes as f64),
@@ -235,13 +266,14 @@ fn on_front(all: &[Aggregate], a: &Aggregate, x: fn(&Aggregate) -> f64) -> bool 
 
 fn summary_table(md: &mut String, title: &str, rows: &[Aggregate]) {
     let _ = writeln!(md, "\n### {title}\n");
-    md.push_str("| rays | spacing | levels | probes (median) | runtime MB (median) | transport B/probe (median) | bake s (median) | open mean, median level | open mean, worst level | open leaks, worst level | over-lit pixels, worst level | front: bytes / bake time |\n|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n");
+    md.push_str("| rays | cells | spacing | levels | probes (median) | runtime MB (median) | transport B/probe (median) | bake s (median) | open mean, median level | open mean, worst level | open leaks, worst level | over-lit pixels, worst level | front: bytes / bake time |\n|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n");
     for a in rows {
         let front = |x: fn(&Aggregate) -> f64| if on_front(rows, a, x) { "yes" } else { "-" };
         let _ = writeln!(
             md,
-            "| {} | x{} | {} | {:.0} | {:.1} | {:.0} | {:.2} | {:.1}% | {:.1}% {} | {:.1}% | {:.1}% | {} / {} |",
-            a.rays,
+            "| {} | spacing/{} | x{} | {} | {:.0} | {:.1} | {:.0} | {:.2} | {:.1}% | {:.1}% {} | {:.1}% | {:.1}% | {} / {} |",
+            a.knob.rays,
+            a.knob.cells,
             a.scale,
             a.levels,
             a.probes,
@@ -278,14 +310,15 @@ fn markdown(rows: &[Row], args: &FrontierArgs) -> String {
             summary_table(&mut md, title, &agg);
         }
     }
-    md.push_str("\n## Per case\n\n| case | set | rays | spacing | probes | runtime MB | transport B/probe | bake s | open mean | open leaks | over-lit pixels |\n|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+    md.push_str("\n## Per case\n\n| case | set | rays | cells | spacing | probes | runtime MB | transport B/probe | bake s | open mean | open leaks | over-lit pixels |\n|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
     for r in rows {
         let _ = writeln!(
             md,
-            "| {} | {} | {} | {:.3} m (x{}) | {} | {:.1} | {:.0} | {:.2} | {:.2}% | {:.1}% | {} |",
+            "| {} | {} | {} | spacing/{} | {:.3} m (x{}) | {} | {:.1} | {:.0} | {:.2} | {:.2}% | {:.1}% | {} |",
             r.case,
             r.set.label(),
-            r.rays,
+            r.knob.rays,
+            r.knob.cells,
             r.spacing,
             r.scale,
             r.probes,
@@ -322,15 +355,15 @@ struct Dot {
     title: String,
 }
 
-/// Plotted settings per ray count, in the order first seen.
+/// Plotted settings per knob, in the order first seen.
 #[derive(Default)]
-struct ByRays(Vec<(u32, Vec<Dot>)>);
+struct ByKnob(Vec<(Knob, Vec<Dot>)>);
 
-impl ByRays {
-    fn push(&mut self, rays: u32, dot: Dot) {
-        match self.0.iter_mut().find(|(r, _)| *r == rays) {
+impl ByKnob {
+    fn push(&mut self, knob: Knob, dot: Dot) {
+        match self.0.iter_mut().find(|(k, _)| *k == knob) {
             Some((_, v)) => v.push(dot),
-            None => self.0.push((rays, vec![dot])),
+            None => self.0.push((knob, vec![dot])),
         }
     }
 
@@ -346,8 +379,8 @@ impl ByRays {
                 .0
                 .iter()
                 .enumerate()
-                .map(|(i, (rays, dots))| Series {
-                    name: format!("{rays} rays per probe"),
+                .map(|(i, (knob, dots))| Series {
+                    name: knob.label(),
                     color: COLORS[i % COLORS.len()],
                     points: dots
                         .iter()
@@ -370,40 +403,39 @@ impl ByRays {
 
 /// The family's plot: per setting, the median level's open mean against the median level's
 /// runtime MB and bake seconds.
-fn plot_family(rows: &[Row]) -> String {
-    let mut settings: Vec<(u32, f32)> = rows
-        .iter()
-        .filter(|r| in_family(r))
-        .map(|r| (r.rays, r.scale))
-        .collect();
-    settings.sort_by(|a, b| a.0.cmp(&b.0).then(b.1.total_cmp(&a.1)));
-    settings.dedup();
-    let mut by_rays = ByRays::default();
-    for (rays, scale) in settings {
-        let of: Vec<&Row> = rows
-            .iter()
-            .filter(|r| in_family(r) && r.rays == rays && r.scale == scale)
-            .collect();
-        let med = |f: fn(&Row) -> f64| median(of.iter().map(|r| f(r)).collect());
-        let (mb, bake_s, error) = (
-            med(|r| r.runtime_bytes as f64 / 1e6),
-            med(|r| r.bake_s),
-            med(|r| r.open_mean),
-        );
-        let title = format!(
-            "{rays} rays, spacing x{scale}: {error:.1}% median level, {mb:.1} MB, {bake_s:.2} s"
-        );
-        let label = format!("x{scale}");
-        by_rays.push(
-            rays,
-            Dot {
-                mb,
-                bake_s,
-                error,
-                label,
-                title,
-            },
-        );
+fn plot_family(rows: &[Row], args: &FrontierArgs) -> String {
+    let mut by_knob = ByKnob::default();
+    for knob in args.knobs() {
+        for &scale in &args.scales {
+            let of: Vec<&Row> = rows
+                .iter()
+                .filter(|r| in_family(r) && r.knob == knob && r.scale == scale)
+                .collect();
+            if of.is_empty() {
+                continue;
+            }
+            let med = |f: fn(&Row) -> f64| median(of.iter().map(|r| f(r)).collect());
+            let (mb, bake_s, error) = (
+                med(|r| r.runtime_bytes as f64 / 1e6),
+                med(|r| r.bake_s),
+                med(|r| r.open_mean),
+            );
+            let title = format!(
+                "{}, spacing x{scale}: {error:.1}% median level, {mb:.1} MB, {bake_s:.2} s",
+                knob.label()
+            );
+            let label = format!("x{scale}");
+            by_knob.push(
+                knob,
+                Dot {
+                    mb,
+                    bake_s,
+                    error,
+                    label,
+                    title,
+                },
+            );
+        }
     }
     let levels: std::collections::BTreeSet<&str> = rows
         .iter()
@@ -416,18 +448,22 @@ fn plot_family(rows: &[Row]) -> String {
             "median of {} levels per setting; labels: spacing relative to each level's default; uniform grid",
             levels.len()
         ),
-        &by_rays.panels("open-point error, median level"),
+        &by_knob.panels("open-point error, median level"),
     )
 }
 
 /// One case's plot: its open mean against its runtime MB and bake seconds.
 fn plot_case(rows: &[Row], case: &str) -> String {
-    let mut by_rays = ByRays::default();
+    let mut by_knob = ByKnob::default();
     for r in rows.iter().filter(|r| r.case == case) {
         let mb = r.runtime_bytes as f64 / 1e6;
         let title = format!(
-            "{} rays, {:.2} m ({} probes): {:.1}%, {mb:.1} MB, {:.2} s",
-            r.rays, r.spacing, r.probes, r.open_mean, r.bake_s
+            "{}, {:.2} m ({} probes): {:.1}%, {mb:.1} MB, {:.2} s",
+            r.knob.label(),
+            r.spacing,
+            r.probes,
+            r.open_mean,
+            r.bake_s
         );
         let dot = Dot {
             mb,
@@ -436,11 +472,11 @@ fn plot_case(rows: &[Row], case: &str) -> String {
             label: format!("{:.2} m", r.spacing),
             title,
         };
-        by_rays.push(r.rays, dot);
+        by_knob.push(r.knob, dot);
     }
     plot::svg(
         &format!("{case}: surface error against runtime bytes and bake time"),
         "labels: probe spacing; uniform grid",
-        &by_rays.panels("open-point error"),
+        &by_knob.panels("open-point error"),
     )
 }
