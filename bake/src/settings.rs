@@ -12,7 +12,8 @@ pub struct BakeSettings {
     /// roughly as N^-0.75 on scenes with sharp shadows, at a bake cost linear in N and no runtime
     /// cost once rays are folded into factors.
     pub rays: u32,
-    /// Probe spacing in metres; `None` picks about 1,000 probes over the bounds.
+    /// Probe spacing in metres; `None` picks about 4,000 probes over the bounds
+    /// ([`crate::probes::DEFAULT_PROBES`]).
     pub spacing: Option<f32>,
     /// Bake bounds `[min x, y, z, max x, y, z]`; `None` uses the scene's bounds.
     pub bounds: Option<[f32; 6]>,
@@ -24,7 +25,11 @@ pub struct BakeSettings {
     pub cell_size: Option<f32>,
     /// Surfel cells per probe spacing when `cell_size` is `None`. Larger values mean smaller
     /// bricks: less merging error at the cost of more factors per probe (runtime gather work and
-    /// asset size). 12 keeps the Cornell reference within 25% of the unmerged error.
+    /// asset size), and surfels, bricks and surface terms grow with its square. At the default
+    /// probe count ([`crate::probes::DEFAULT_PROBES`]) 8 measured as 12 on the level family's
+    /// tuning seeds (median level 7.0% against 6.9%, worst 10.0% against 9.9%) at 0.64x the
+    /// runtime bytes; 6 saved a quarter more but cost Sponza's detail (16.0% against 14.5% at
+    /// 8 and 12.5% at 12; `prt-bench frontier --cells 6,8,12`).
     pub cells_per_spacing: f32,
     /// Hits merge into one surfel only when the cosine between their normals is at least this.
     pub merge_normal_cos: f32,
@@ -76,7 +81,7 @@ impl Default for BakeSettings {
             bounds: None,
             max_probes: 1 << 20,
             cell_size: None,
-            cells_per_spacing: 12.0,
+            cells_per_spacing: 8.0,
             merge_normal_cos: 0.9,
             double_sided: false,
             invalid_backface_fraction: 0.1,
@@ -99,7 +104,8 @@ impl BakeSettings {
         self.cell_size.unwrap_or(spacing / self.cells_per_spacing)
     }
 
-    /// Higher accuracy: 8x the rays and half-size bricks. On the Cornell reference (27 probes at
+    /// Higher accuracy: 8x the rays and bricks a third the size (a half of those the default
+    /// had when this was measured). On the Cornell reference (27 probes at
     /// 0.6 m) it brings the mean irradiance error from 4.0% to 0.5% (p95 1.3%), at 5.6x the
     /// factors per probe (runtime gather work and asset size) and 8x the trace time.
     pub fn high_quality() -> Self {

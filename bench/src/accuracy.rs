@@ -27,7 +27,7 @@ pub struct AccuracyArgs {
     /// Reference SH JSON (oracle output: each probe's position and sh).
     #[arg(long)]
     pub reference: PathBuf,
-    /// Probe spacing in metres [default: about 1,000 probes over the bounds].
+    /// Probe spacing in metres [default: about 4,000 probes over the bounds].
     #[arg(long)]
     pub spacing: Option<f32>,
     /// Probe grid bounds MINX,MINY,MINZ,MAXX,MAXY,MAXZ [default: the scene's].
@@ -82,10 +82,11 @@ struct Point {
 }
 
 /// Brick cell sizes of the sweep: name, cell size override, cells per probe spacing.
-const MERGES: [(&str, Option<f32>, f32); 4] = [
+const MERGES: [(&str, Option<f32>, f32); 5] = [
     ("none", Some(0.0), 12.0),
     ("spacing/24", None, 24.0),
-    ("spacing/12 (default)", None, 12.0),
+    ("spacing/12", None, 12.0),
+    ("spacing/8 (default)", None, 8.0),
     ("spacing/6", None, 6.0),
 ];
 
@@ -591,17 +592,19 @@ fn legend(s: &mut String, x: f64, top: f64, previous: bool) {
         let _ = writeln!(
             s,
             "<text x='{x}' y='{}'>{text}</text>",
-            top + 70.0 + 16.0 * i as f64
+            top + 16.0 * (MERGES.len() + 1 + i) as f64
         );
     }
 }
 
 /// The colour of a brick size's points.
 fn merge_color(merge: &str) -> &'static str {
-    match merge {
+    // "spacing/6 (default)": the size without the note.
+    match merge.split(' ').next().unwrap_or(merge) {
         "none" => "#d62728",
         "spacing/24" => "#1f77b4",
         "spacing/6" => "#2ca02c",
+        "spacing/12" => "#9467bd",
         _ => "#ff7f0e",
     }
 }

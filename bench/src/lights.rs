@@ -22,7 +22,7 @@ pub struct LightsArgs {
     /// Light counts, one row each.
     #[arg(long, value_delimiter = ',', default_value = "1,32,256,1024")]
     pub lights: Vec<usize>,
-    /// Probe spacing of the bake [default: about 1,000 probes].
+    /// Probe spacing of the bake [default: about 4,000 probes].
     #[arg(long)]
     pub spacing: Option<f32>,
     #[arg(long, default_value_t = 256)]

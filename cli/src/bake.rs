@@ -43,7 +43,7 @@ pub struct BakeArgs {
     /// Output asset (.prt), written atomically.
     #[arg(short, long)]
     output: PathBuf,
-    /// Probe spacing in metres [default: about 1,000 probes over the bounds].
+    /// Probe spacing in metres [default: about 4,000 probes over the bounds].
     #[arg(long)]
     spacing: Option<f32>,
     /// Bake bounds MINX,MINY,MINZ,MAXX,MAXY,MAXZ [default: the scene's bounds].
@@ -61,7 +61,7 @@ pub struct BakeArgs {
     /// Refuse grids with more probes than this.
     #[arg(long, default_value_t = 1 << 20)]
     max_probes: u64,
-    /// Surfel cell size in metres (bricks are 4x4x4 cells) [default: spacing / 12, or / 24 with --quality high]; 0 = no merging.
+    /// Surfel cell size in metres (bricks are 4x4x4 cells) [default: spacing / 8, or / 24 with --quality high]; 0 = no merging.
     #[arg(long)]
     cell_size: Option<f32>,
     /// Keep every ray hit as its own surfel and brick (same as --cell-size 0).

@@ -857,7 +857,7 @@ fn virtual_offset_moves_probes_out_of_geometry() {
     let p = asset.probes[0];
     assert!(p.is_valid(), "moved probe is valid: {p:?}");
     assert_ne!(p.flags & prt_format::PROBE_OFFSET, 0);
-    // PAST_FACE (0.02) spacings past the face.
+    // PAST_FACE (0.05) spacings past the face.
     let past = 1.0 + prt_bake::offset::PAST_FACE;
     assert!((p.position[1] - past).abs() < 1e-3, "{p:?}");
     let deep = BakeSettings {

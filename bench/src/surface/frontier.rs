@@ -36,9 +36,9 @@ pub struct FrontierArgs {
     /// Rays per probe, comma-separated.
     #[arg(long, value_delimiter = ',', default_value = "256,512")]
     rays: Vec<u32>,
-    /// Surfel cells per probe spacing (the bake's `cells_per_spacing`; 12 is its default),
+    /// Surfel cells per probe spacing (the bake's `cells_per_spacing`; 8 is its default),
     /// comma-separated: surfels, bricks and surface terms grow with the square of it.
-    #[arg(long, value_delimiter = ',', default_value = "12")]
+    #[arg(long, value_delimiter = ',', default_value = "8")]
     cells: Vec<f32>,
     /// Directory the cases' paths are relative to (the repository root).
     #[arg(long, default_value = ".")]

@@ -56,14 +56,14 @@ mod tests {
     }
 
     /// A plane on a one-layer grid uses every probe; a closed box on the grid's outer faces
-    /// uses the probes on its faces (11^3 - 9^3): its surfels lie on those layers, where the
+    /// uses the probes on its faces (17^3 - 15^3): its surfels lie on those layers, where the
     /// next layer in has no trilinear weight, and the bias moves them outwards.
     #[test]
     fn probes_at_surfaces() {
         let quad = bake("textured_quad.gltf");
         assert_eq!(surface_probes(&quad), quad.probes.len());
         let cube = bake("closed_box_outward.gltf");
-        assert_eq!(cube.header.grid.counts, [11, 11, 11]);
-        assert_eq!(surface_probes(&cube), 11 * 11 * 11 - 9 * 9 * 9);
+        assert_eq!(cube.header.grid.counts, [17, 17, 17]);
+        assert_eq!(surface_probes(&cube), 17 * 17 * 17 - 15 * 15 * 15);
     }
 }
