@@ -1,6 +1,7 @@
 //! What is wrong with a scene, told before the user wonders why the light is wrong: inconsistent
-//! triangle winding (the usual reason a scene bakes with most probes invalid) and grids whose
-//! probes are mostly inside geometry.
+//! triangle winding (the usual reason a scene bakes with most probes invalid), grids whose
+//! probes are mostly inside geometry, and what the bake could not classify (probes in gaps far
+//! narrower than the spacing, surfels that see none of their probes).
 
 use glam::Vec3;
 use rayon::prelude::*;
@@ -169,9 +170,76 @@ fn group_equal(keys: &[u64]) -> Vec<u64> {
 /// The seed of [`winding`]'s hashes: any constant, so that counts repeat from run to run.
 const WINDING_SEED: u64 = 0x243f_6a88_85a3_08d3;
 
+/// Share of the surfels with terms that may see none of their probes, or of the valid probes
+/// that may sit in gaps, before the bake warns.
+const WARNING_FRACTION: f64 = 0.1;
+
+/// The warning for a grid whose probes mostly sit in gaps far narrower than the spacing
+/// (`prt_format::summary::probe_in_gap`): they see the gap's two sides and little else, so the
+/// bake cannot tell what lights the surfaces beyond them.
+pub(crate) fn gap_warning(asset: &prt_format::Asset) -> Option<String> {
+    let valid = asset.probes.iter().filter(|p| p.is_valid()).count();
+    let in_gaps = (0..asset.probes.len())
+        .filter(|&p| asset.probes[p].is_valid() && prt_format::summary::probe_in_gap(asset, p))
+        .count();
+    (in_gaps as f64 > WARNING_FRACTION * valid as f64).then(|| {
+        format!(
+            "{in_gaps} of {valid} probes ({:.0}%) sit in gaps narrower than a tenth of the \
+             spacing ({} m): they see little beyond the gap's two sides, and surfaces no probe \
+             sees are sampled from probes that cannot see them; a finer --spacing, or bounds \
+             that leave such gaps out, resolves them",
+            100.0 * in_gaps as f64 / valid.max(1) as f64,
+            asset.header.grid.spacing
+        )
+    })
+}
+
+/// The warning for a bake whose surfels mostly cannot tell which probes light them (gaps or
+/// pockets narrower than the spacing, surfaces outside the grid), with the way out.
+pub(crate) fn blind_warning(terms: &prt_format::surface::SurfaceTerms) -> Option<String> {
+    let (traced, blind) = terms.traced_and_blind();
+    (blind as f64 > WARNING_FRACTION * traced as f64).then(|| {
+        format!(
+            "{blind} of {traced} surfels ({:.0}%) see none of the probes around them (gaps or \
+             pockets narrower than the probe spacing, or surfaces outside the grid): their \
+             points are sampled with the probe volume's weights; a finer --spacing resolves more \
+             of them",
+            100.0 * blind as f64 / traced.max(1) as f64
+        )
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The blind-surfel warning: silent at a tenth of the traced surfels, said (with the count
+    /// and the way out) above it; untraced surfels (back faces) do not count.
+    #[test]
+    fn surfels_that_see_no_probe_are_warned_about_past_a_tenth() {
+        use prt_format::surface::{SurfaceTerms, SurfelTerms, TERMS_TRACED};
+        let surfel = |mask: u32| SurfelTerms {
+            mask,
+            ..SurfelTerms::default()
+        };
+        let terms = |blind: usize| SurfaceTerms {
+            surfels: (0..20)
+                .map(|i| match i {
+                    _ if i < blind => surfel(TERMS_TRACED),
+                    _ if i < 18 => surfel(TERMS_TRACED | 1),
+                    _ => surfel(0),
+                })
+                .collect(),
+            ..SurfaceTerms::default()
+        };
+        assert_eq!(terms(1).traced_and_blind(), (18, 1));
+        assert!(blind_warning(&terms(1)).is_none());
+        let w = blind_warning(&terms(4)).expect("4 of 18 warn");
+        assert!(
+            w.starts_with("4 of 18 surfels") && w.contains("--spacing"),
+            "{w}"
+        );
+    }
 
     /// The winding is counted for the warning only when it is given: never when most probes
     /// are valid.

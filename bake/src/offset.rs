@@ -122,8 +122,9 @@ pub fn surface_offset(
 /// On by default (`BakeSettings::virtual_offset`): a grid layer that falls just inside a thick
 /// wall left the wall's face without probes, its points extrapolated from the next layer in
 /// (fixtures/thick_walls.gltf at 0.298 m: 2,273 of 4,046 probes dilated, surface error 7.7%;
-/// moved out, 108 dilated and 3.3%). Chosen on the level family's tuning seeds (`prt-bench
-/// surface`: median level 10.1% -> 9.4%, worst 17.7% -> 12.2%, worst leaks 1.7% -> 0.7%).
+/// moved out, 42 dilated and 3.5%). Chosen on the level family's tuning seeds at stop 35's
+/// 1,000-probe grid (`prt-bench surface`: median level 10.2% -> 9.5%, worst 17.7% -> 12.2%,
+/// worst leaks 1.7% -> 0.7%).
 pub fn virtual_offset(
     tracer: &trace::Tracer,
     origin: Vec3,

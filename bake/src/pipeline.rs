@@ -101,7 +101,7 @@ pub(crate) fn bake_in_pool(
             prt_format::surface::MAX_GROUPS
         ));
     }
-    if let Some(w) = blind_warning(&surface) {
+    if let Some(w) = diagnostics::blind_warning(&surface) {
         report.warnings.push(w);
     }
     lap(&mut report, "surface", Some("assemble"));
@@ -125,7 +125,7 @@ pub(crate) fn bake_in_pool(
         lights: loaded.scene.lights,
         surface,
     };
-    report.warnings.extend(gap_warning(&asset));
+    report.warnings.extend(diagnostics::gap_warning(&asset));
     lap(&mut report, "assemble", None);
     Ok((asset, report))
 }
@@ -334,7 +334,7 @@ fn header(
         source_hash: loaded.source_hash,
         ray_count: settings.rays,
         settings: settings_record(settings, grid.spacing, cell_size),
-        stats: stats(&loaded.scene, traced, settings.rays),
+        stats: stats(&loaded.scene, traced, settings),
         grid,
     }
 }
@@ -353,17 +353,25 @@ fn settings_record(settings: &BakeSettings, spacing: f32, cell_size: f32) -> Bak
     }
 }
 
-/// The bake's counts for the asset's header: `traced` probes of `n` rays each over `scene`.
-fn stats(scene: &Scene, traced: &[trace::ProbeRays], n: u32) -> BakeStats {
+/// The bake's counts for the asset's header: `traced` probes of `settings.rays` rays each over
+/// `scene`. Hits of probes inside geometry make no surfels (`stream::fold_block`), so the
+/// unmerged surfels are the other probes' hits.
+fn stats(scene: &Scene, traced: &[trace::ProbeRays], settings: &BakeSettings) -> BakeStats {
+    let n = settings.rays;
     // Every ray hits a surface or the sky.
-    let hits: u64 = traced.iter().map(|r| u64::from(n - r.sky_rays)).sum();
+    let hits_of = |r: &trace::ProbeRays| u64::from(n - r.sky_rays);
+    let hits: u64 = traced.iter().map(hits_of).sum();
     BakeStats {
         triangles: scene.triangles.len() as u64,
         degenerate_triangles_skipped: scene.degenerate_skipped,
         rays: traced.len() as u64 * u64::from(n),
         ray_hits: hits,
         backface_hits: traced.iter().map(|r| u64::from(r.backface_rays)).sum(),
-        surfels_unmerged: hits,
+        surfels_unmerged: traced
+            .iter()
+            .filter(|r| !inside(settings, r))
+            .map(hits_of)
+            .sum(),
     }
 }
 
@@ -571,43 +579,4 @@ struct Assembled {
     probes: Vec<Probe>,
     sky_mask: Vec<u32>,
     sky_transfer: Vec<[f32; prt_format::sh::SH_COUNT]>,
-}
-
-/// Share of the surfels with terms that may see none of their probes, or of the valid probes
-/// that may sit in gaps, before the bake warns.
-const WARNING_FRACTION: f64 = 0.1;
-
-/// The warning for a grid whose probes mostly sit in gaps far narrower than the spacing
-/// (`prt_format::summary::probe_in_gap`): they see the gap's two sides and little else, so the
-/// bake cannot tell what lights the surfaces beyond them.
-fn gap_warning(asset: &Asset) -> Option<String> {
-    let valid = asset.probes.iter().filter(|p| p.is_valid()).count();
-    let in_gaps = (0..asset.probes.len())
-        .filter(|&p| asset.probes[p].is_valid() && prt_format::summary::probe_in_gap(asset, p))
-        .count();
-    (in_gaps as f64 > WARNING_FRACTION * valid as f64).then(|| {
-        format!(
-            "{in_gaps} of {valid} probes ({:.0}%) sit in gaps narrower than a tenth of the \
-             spacing ({} m): they see little beyond the gap's two sides, and surfaces no probe \
-             sees are sampled from probes that cannot see them; a finer --spacing, or bounds \
-             that leave such gaps out, resolves them",
-            100.0 * in_gaps as f64 / valid.max(1) as f64,
-            asset.header.grid.spacing
-        )
-    })
-}
-
-/// The warning for a bake whose surfels mostly cannot tell which probes light them (gaps or
-/// pockets narrower than the spacing, surfaces outside the grid), with the way out.
-fn blind_warning(terms: &prt_format::surface::SurfaceTerms) -> Option<String> {
-    let (traced, blind) = terms.traced_and_blind();
-    (blind as f64 > WARNING_FRACTION * traced as f64).then(|| {
-        format!(
-            "{blind} of {traced} surfels ({:.0}%) see none of the probes around them (gaps or \
-             pockets narrower than the probe spacing, or surfaces outside the grid): their \
-             points are sampled with the probe volume's weights; a finer --spacing resolves more \
-             of them",
-            100.0 * blind as f64 / traced.max(1) as f64
-        )
-    })
 }

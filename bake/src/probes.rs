@@ -25,10 +25,11 @@ use crate::error::BakeError;
 /// level family's tuning seeds (docs/results/frontier.md): density, not the lookup, is what
 /// lowers the surface error between probes. At 4,000 probes (0.63x the spacing of 1,000) and
 /// surfel cells of an eighth of the spacing (`BakeSettings::cells_per_spacing`) the median
-/// level measured 7.0% against 9.4% at 1,000 probes and a twelfth, the worst 10.0% against
-/// 12.2%, the worst leaks 0.7% for both, at 2x the runtime bytes (40.4 MB against 20.7 MB, the
-/// median level) and 1.4x the bake time; 2,000 probes measured as 1,000 did at a sixth, but
-/// left fixtures/two_rooms' shared wall halfway between two layers (14.4% against 8.4%).
+/// level measured 6.9% against 9.4% at 1,000 probes and a twelfth, the worst 10.0% against
+/// 11.9%, the worst leaks 0.7% against 1.0%, at 1.9x the runtime bytes (40.5 MB against
+/// 21.7 MB, the median level) and 1.5x the bake time; 2,000 probes measured as 1,000 did at a
+/// sixth, but left fixtures/two_rooms' shared wall halfway between two layers (14.4% against
+/// 8.4%).
 pub const DEFAULT_PROBES: f32 = 4000.0;
 
 /// Default spacing: aims at about [`DEFAULT_PROBES`] probes over the bounds, rounded to two

@@ -599,7 +599,7 @@ fn legend(s: &mut String, x: f64, top: f64, previous: bool) {
 
 /// The colour of a brick size's points.
 fn merge_color(merge: &str) -> &'static str {
-    // "spacing/6 (default)": the size without the note.
+    // "spacing/8 (default)": the size without the note.
     match merge.split(' ').next().unwrap_or(merge) {
         "none" => "#d62728",
         "spacing/24" => "#1f77b4",

@@ -41,7 +41,12 @@ const HEADER: f64 = 48.0;
 /// The points of `points` that no other point beats on both axes (lower is better on each), in
 /// order of x.
 pub fn front<'a>(points: &[&'a Point]) -> Vec<&'a Point> {
-    let mut sorted: Vec<&Point> = points.to_vec();
+    // Log axes: a point at or below zero is not drawn, so it is no part of the front either.
+    let mut sorted: Vec<&Point> = points
+        .iter()
+        .copied()
+        .filter(|p| p.x > 0.0 && p.y > 0.0)
+        .collect();
     sorted.sort_by(|a, b| a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y)));
     let mut out: Vec<&Point> = Vec::new();
     for p in sorted {

@@ -2,7 +2,7 @@
 //!
 //! [`crate::ray_lookup`] traces from the shaded point itself, which no runtime can afford. A
 //! bake can trace from its surfels instead (the merged surface samples, one per
-//! 1/12-spacing cell and normal, grouped in normal-keyed bricks) and store per surfel which
+//! surfel cell and normal, grouped in normal-keyed bricks) and store per surfel which
 //! probes it sees and its near-field transfer. This lookup computes exactly those per-surfel
 //! values at lookup time, so that the design is measured before the asset format carries it:
 //!

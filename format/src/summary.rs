@@ -192,7 +192,7 @@ impl std::fmt::Display for Summary {
         )?;
         writeln!(
             f,
-            "probes in gaps   {} (half their rays hit within a tenth of the spacing)",
+            "probes in gaps   {} (median hit distance over their visibility map under a tenth of the spacing)",
             self.probes_in_gaps
         )?;
         writeln!(

@@ -54,6 +54,7 @@ fn sample_everywhere(
     points: &[([f32; 3], [f32; 3])],
     lit: usize,
 ) {
+    assert!(points.len() > lit, "{} points", points.len());
     let relit = CpuRelighter::new(asset)
         .unwrap()
         .relight(lighting, 1)

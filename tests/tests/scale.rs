@@ -145,7 +145,7 @@ fn relit_sh_far_from_the_origin() {
     };
     let mut report = Vec::new();
     for t in [1e3f32, 1e4, 1e5] {
-        // At 100 km a float step (8 mm) is over PAST_FACE spacings: the virtual offset leaves
+        // At 100 km four float steps (31 mm) pass PAST_FACE spacings (12.5 mm): the offset leaves
         // the probes inside Cornell's boxes where they are, which the origin's bake moves out,
         // so both sides bake without it there.
         let virtual_offset = t < 5e4;

@@ -220,7 +220,8 @@ struct Aggregate {
     worst_over_lit: f64,
 }
 
-/// Per setting (in the order of the arguments), the medians and worsts over `rows` of `sets`.
+/// Per setting (in the order of the arguments), the medians and worsts over the `rows` that
+/// `keep` takes.
 fn aggregate(rows: &[Row], keep: impl Fn(&Row) -> bool, args: &FrontierArgs) -> Vec<Aggregate> {
     let mut out = Vec::new();
     for knob in args.knobs() {
@@ -293,7 +294,7 @@ fn summary_table(md: &mut String, title: &str, rows: &[Aggregate]) {
 
 fn markdown(rows: &[Row], args: &FrontierArgs) -> String {
     let mut md = String::from(
-        "Bake seconds and runtime bytes against surface error (`prt-bench frontier`, issue 32 item 3): each case baked at spacings relative to its default (x1) and at several ray counts, on the uniform grid (the only placement so far), relit on the CPU (one bounce) and sampled with the runtime's lookup (`default`, the surface terms) at the oracle's surface points and camera pixels. Scores as in [surface.md](surface.md): open mean is the mean relative error at points that are not pockets, leaks the open points lit over 1.5x their truth, over-lit the camera view's pixels lit over 1.5x. Runtime MB: every array an engine uploads (probes, sky, visibility, factors, bricks, surfels, BVH, triangles, surface terms). Bake seconds on this machine's 2 threads. A setting is on a front when no other setting is as small on that axis and better on the median level's error.\n\n## Summary\n",
+        "Bake seconds and runtime bytes against surface error (`prt-bench frontier`, issue 32 item 3): each case baked at spacings relative to its default (x1) and at several ray counts, on the uniform grid (the only placement so far), relit on the CPU (one bounce) and sampled with the runtime's lookup (`default`, the surface terms) at the oracle's surface points and camera pixels. Scores as in [surface.md](surface.md): open mean is the mean relative error at points that are not pockets, leaks the open points lit over 1.5x their truth, over-lit the camera view's pixels lit over 1.5x. Runtime MB: every array an engine uploads (probes, sky, visibility, factors, bricks, surfels, BVH, triangles, surface terms). Bake seconds on all of this machine's cores (2 here). A setting is on a front when no other setting is as small on that axis and better on the median level's error.\n\n## Summary\n",
     );
     let sets: [(&str, Keep); 4] = [
         ("The level family (seeds 0-15)", in_family),
