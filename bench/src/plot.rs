@@ -179,7 +179,7 @@ fn draw_panel(s: &mut String, panel: &Panel) {
     }
     for (i, series) in panel.series.iter().enumerate() {
         let y = 0.6 * m + 10.0 + 16.0 * i as f64;
-        let x = w - 2.6 * m;
+        let x = w - 3.6 * m;
         let _ = writeln!(
             s,
             "<circle cx='{x}' cy='{y}' r='4.5' fill='{}'/><text x='{}' y='{}'>{}</text>",
@@ -193,7 +193,7 @@ fn draw_panel(s: &mut String, panel: &Panel) {
     let _ = writeln!(
         s,
         "<text x='{}' y='{}' fill='#444'>dashed: the front</text>",
-        w - 2.6 * m - 5.0,
+        w - 3.6 * m - 5.0,
         y + 4.0
     );
 }
