@@ -17,6 +17,8 @@ use prt_eval::{compare, ErrorStats};
 use prt_format::{Asset, Factors, TransferPrecision};
 use prt_runtime::{CpuRelighter, Lighting};
 
+use crate::plot::escape;
+
 #[derive(clap::Args)]
 pub struct AccuracyArgs {
     /// glTF scene to bake.
@@ -268,19 +270,7 @@ fn table(rows: &[Row]) -> Result<String> {
 /// The Pareto front of `points`: those with less error than every point baked as fast or
 /// faster, by increasing bake time.
 fn front(points: &[Point]) -> Vec<&Point> {
-    let mut sorted: Vec<&Point> = points.iter().collect();
-    sorted.sort_by(|a, b| {
-        a.bake_ms
-            .total_cmp(&b.bake_ms)
-            .then(a.error.total_cmp(&b.error))
-    });
-    let mut best = f64::MAX;
-    sorted.retain(|p| {
-        let keep = p.error < best;
-        best = best.min(p.error);
-        keep
-    });
-    sorted
+    crate::plot::front_by(points, |p| p.bake_ms, |p| p.error)
 }
 
 /// The least error of `front` within `ms` of bake time, if any point is that fast.
@@ -543,7 +533,7 @@ fn plot(new: &[Point], previous: &[Point], caption: &str) -> String {
         s,
         "<text x='{}' y='38' text-anchor='middle' font-size='10' fill='#555'>{}</text>",
         w / 2.0,
-        xml_escape(caption)
+        escape(caption)
     );
     axes.draw(&mut s);
     let shown = |p: &&Point| p.bake_ms > 0.0 && p.error > 0.0;
@@ -554,7 +544,7 @@ fn plot(new: &[Point], previous: &[Point], caption: &str) -> String {
             "stroke='#999' stroke-width='2' stroke-dasharray='6 4'",
         ));
         for p in &previous_front {
-            let _ = writeln!(s, "<rect x='{:.1}' y='{:.1}' width='7' height='7' fill='#999'><title>previous: {}: {:.1} ms, {:.2}%</title></rect>", axes.sx(p.bake_ms) - 3.5, axes.sy(p.error) - 3.5, xml_escape(&p.setting), p.bake_ms, p.error);
+            let _ = writeln!(s, "<rect x='{:.1}' y='{:.1}' width='7' height='7' fill='#999'><title>previous: {}: {:.1} ms, {:.2}%</title></rect>", axes.sx(p.bake_ms) - 3.5, axes.sy(p.error) - 3.5, escape(&p.setting), p.bake_ms, p.error);
         }
     }
     let new_front: Vec<&Point> = front(new).into_iter().filter(shown).collect();
@@ -565,7 +555,7 @@ fn plot(new: &[Point], previous: &[Point], caption: &str) -> String {
         } else {
             "fill"
         };
-        let _ = writeln!(s, "<circle cx='{:.1}' cy='{:.1}' r='4' {shape}='{}'><title>{}: {:.1} ms, {:.2}%</title></circle>", axes.sx(p.bake_ms), axes.sy(p.error), merge_color(&p.merge), xml_escape(&p.setting), p.bake_ms, p.error);
+        let _ = writeln!(s, "<circle cx='{:.1}' cy='{:.1}' r='4' {shape}='{}'><title>{}: {:.1} ms, {:.2}%</title></circle>", axes.sx(p.bake_ms), axes.sy(p.error), merge_color(&p.merge), escape(&p.setting), p.bake_ms, p.error);
     }
     legend(&mut s, w - 200.0, m, !previous_front.is_empty());
     s.push_str("</svg>\n");
@@ -607,14 +597,6 @@ fn merge_color(merge: &str) -> &'static str {
         "spacing/12" => "#9467bd",
         _ => "#ff7f0e",
     }
-}
-
-/// `text` with the characters XML gives a meaning escaped.
-fn xml_escape(text: &str) -> String {
-    text.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-        .replace('\'', "&apos;")
 }
 
 #[cfg(test)]

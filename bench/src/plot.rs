@@ -38,23 +38,29 @@ const PANEL_H: f64 = 420.0;
 const MARGIN: f64 = 64.0;
 const HEADER: f64 = 48.0;
 
-/// The points of `points` that no other point beats on both axes (lower is better on each), in
-/// order of x.
-pub fn front<'a>(points: &[&'a Point]) -> Vec<&'a Point> {
-    // Log axes: a point at or below zero is not drawn, so it is no part of the front either.
-    let mut sorted: Vec<&Point> = points
-        .iter()
-        .copied()
-        .filter(|p| p.x > 0.0 && p.y > 0.0)
-        .collect();
-    sorted.sort_by(|a, b| a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y)));
-    let mut out: Vec<&Point> = Vec::new();
+/// The items that no other item beats on both `x` and `y` (lower is better on each), in order
+/// of `x`: the Pareto front (`prt-bench accuracy`'s error against bake time, and the plots').
+pub fn front_by<'a, T>(
+    items: impl IntoIterator<Item = &'a T>,
+    x: fn(&T) -> f64,
+    y: fn(&T) -> f64,
+) -> Vec<&'a T> {
+    let mut sorted: Vec<&T> = items.into_iter().collect();
+    sorted.sort_by(|a, b| x(a).total_cmp(&x(b)).then(y(a).total_cmp(&y(b))));
+    let mut out: Vec<&T> = Vec::new();
     for p in sorted {
-        if out.last().is_none_or(|q| p.y < q.y) {
+        if out.last().is_none_or(|q| y(p) < y(q)) {
             out.push(p);
         }
     }
     out
+}
+
+/// The front ([`front_by`]) of `points` that a log-log plot can draw: a point at or below zero
+/// is not drawn, so it is no part of the front either.
+pub fn front<'a>(points: &[&'a Point]) -> Vec<&'a Point> {
+    let drawn = points.iter().copied().filter(|p| p.x > 0.0 && p.y > 0.0);
+    front_by(drawn, |p| p.x, |p| p.y)
 }
 
 /// `panels` side by side under `title` and a one-line `caption`.
