@@ -3,7 +3,7 @@
 // vec4 per brick: mean, then the gradient of red, green and blue. A surfel's radiance is its
 // direct radiance (stage 2) plus, with bounces (BOUNCES), its bounce radiance (stage 3). Then
 // the weighted mean radiance of each of the brick's near groups (the surface lookup's, twin of
-// prt_runtime::surface::group_radiance), for stage 5's near fields.
+// prt_runtime::surface::group_radiance), for stage 6's near fields.
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> bricks: array<Brick>;

@@ -1,4 +1,4 @@
-// Stage 7, one workgroup per probe of the update window: the probe's factors (brick radiance
+// Stage 8, one workgroup per probe of the update window: the probe's factors (brick radiance
 // evaluated at the factor's offset, times its SH9 transfer) and its sky term, summed by a
 // parallel reduction (gather_subgroup.wgsl or gather_tree.wgsl, which hold the entry point).
 // Threads stride over the factor table, so a probe with more factors than threads loops and

@@ -1,4 +1,4 @@
-// Stage 7 entry point where the adapter has subgroup operations: subgroupAdd reduces within a
+// Stage 8 entry point where the adapter has subgroup operations: subgroupAdd reduces within a
 // subgroup, one partial per subgroup goes to workgroup memory, thread 0 adds the partials.
 // (Workgroup barriers are slow on lavapipe; subgroup adds are 10-20x faster.)
 

@@ -1,4 +1,4 @@
-// Stage 7 entry point without subgroup operations: a shared-memory tree reduction,
+// Stage 8 entry point without subgroup operations: a shared-memory tree reduction,
 // log2(GATHER_WORKGROUP) barrier steps.
 
 var<workgroup> partials: array<array<vec3<f32>, 9>, GATHER_WORKGROUP>;

@@ -1,7 +1,7 @@
-// Stage 6, one thread per probe: a valid probe must be re-gathered when one of its factors'
+// Stage 7, one thread per probe: a valid probe must be re-gathered when one of its factors'
 // bricks was relit, or when every probe is dirty (sky change, first update, a bounce, a fixed
 // bounce count restarting). The flag persists
-// until the probe's turn in the amortised round robin comes (stage 7 clears it). Dispatched once
+// until the probe's turn in the amortised round robin comes (stage 8 clears it). Dispatched once
 // per factor chunk; each dispatch handles the chunk's probes.
 
 @group(0) @binding(0) var<uniform> params: Params;

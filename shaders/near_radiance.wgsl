@@ -1,4 +1,4 @@
-// Stage 5, one thread per near group of the surface lookup: what its surfels' near-field rays
+// Stage 6, one thread per near group of the surface lookup: what its surfels' near-field rays
 // bring, the weighted sum of the radiance of the groups they hit (stage 4's group radiance;
 // twin of prt_runtime::surface::near_radiance). The sampling snippet reads it as prt_near.
 

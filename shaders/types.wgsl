@@ -21,6 +21,36 @@ struct Brick {
     flags: u32,
 }
 
+// A coarse brick over bricks, for far hits (prt_format::coarse): indexed after the bricks.
+struct CoarseBrick {
+    first_child: u32,
+    child_count: u32,
+    weight: f32,
+    level: u32,
+    centroid: vec3<f32>,
+    pad0: u32,
+    // 2^level (C + eps I)^-1, symmetric: xx, xy, xz, yy, yz, zz.
+    inverse: array<f32, 6>,
+    pad1: u32,
+    pad2: u32,
+}
+
+// A brick's weight and regularised position moment, for the coarse bricks over it.
+struct BrickMoments {
+    weight: f32,
+    moment: array<f32, 6>,
+    pad: u32,
+}
+
+// m x for a symmetric 3x3 matrix stored as xx, xy, xz, yy, yz, zz.
+fn symmetric_times(m: array<f32, 6>, x: vec3<f32>) -> vec3<f32> {
+    return vec3<f32>(
+        m[0] * x.x + m[1] * x.y + m[2] * x.z,
+        m[1] * x.x + m[3] * x.y + m[4] * x.z,
+        m[2] * x.x + m[4] * x.y + m[5] * x.z,
+    );
+}
+
 struct Surfel {
     position: vec3<f32>,
     brick: u32,
@@ -142,8 +172,9 @@ struct Params {
     // This update's half of the shadow-ray cache (0 or 1), and the words in each half.
     cache_parity: u32,
     cache_capacity: u32,
+    // Coarse bricks (prt_format::coarse), numbered after the brick_count bricks.
+    coarse_count: u32,
     pad0: u32,
-    pad1: u32,
 }
 
 const PI: f32 = 3.14159265358979;

@@ -7,6 +7,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use glam::Vec3;
+use prt_format::coarse::CoarseBricks;
 use prt_format::{
     directions, Asset, BakeSettingsRecord, BakeStats, Factors, Header, Probe, TransferPrecision,
     PROBE_DILATED, PROBE_OFFSET, PROBE_VALID, U8_MAX_BRICK,
@@ -15,7 +16,7 @@ use prt_format::{
 use prt_scene::Scene;
 
 use crate::accel::bvh;
-use crate::merge::fold;
+use crate::merge::{coarse, fold};
 use crate::surface_terms;
 use crate::tables::factors;
 use crate::{
@@ -72,8 +73,12 @@ pub(crate) fn bake_in_pool(
         rows: tables,
         depth: probe_depth,
         folder,
+        far_levels,
     } = traced;
-    let (mut bricked, factors) = bricks_and_tables(folder, tables, carried, settings, cell_size)?;
+    let levels = far_field(settings, cell_size).level_at(min.distance(max));
+    let far = (levels, &far_levels[..]);
+    let (mut bricked, coarse, factors) =
+        bricks_and_tables((folder, tables), carried, settings, (cell_size, far))?;
     lap(&mut report, "bricks", Some("surface"));
 
     let probe_positions: Vec<Vec3> = positions.iter().map(|&(p, _)| p).collect();
@@ -120,6 +125,7 @@ pub(crate) fn bake_in_pool(
         probe_depth,
         factors,
         bricks: bricked.bricks,
+        coarse,
         surfels: bricked.surfels,
         geometry: built.bvh.geometry,
         lights: loaded.scene.lights,
@@ -303,6 +309,7 @@ fn trace_stage(
         settings.merge_normal_cos,
         Vec3::splat(-0.5 * cell_size),
     );
+    let far = far_field(settings, cell_size);
     stream::trace_and_fold(
         probe_trace.positions.len(),
         &|index| probe_trace.trace(index),
@@ -313,9 +320,25 @@ fn trace_stage(
             precision: settings.transfer_precision,
             row_memory: settings.row_memory,
             rows_of: &|r| !inside(settings, r),
+            far,
         },
         progress,
     )
+}
+
+/// Where the bake sends far hits ([`coarse::FarField`], origin left for each probe): nowhere
+/// without merging (every hit is its own brick) or with a `far_ratio` of 0.
+fn far_field(settings: &BakeSettings, cell_size: f32) -> coarse::FarField {
+    let brick_size = 4.0 * cell_size;
+    coarse::FarField {
+        origin: Vec3::ZERO,
+        anchor: Vec3::splat(-0.5 * cell_size),
+        brick_size,
+        near: match cell_size > 0.0 {
+            true => settings.far_ratio * brick_size,
+            false => 0.0,
+        },
+    }
 }
 
 /// The asset's header: what was baked (`scene_path`, as `loaded`) on which `grid`, how
@@ -350,6 +373,11 @@ fn settings_record(settings: &BakeSettings, spacing: f32, cell_size: f32) -> Bak
         double_sided_override: settings.double_sided,
         invalid_backface_fraction: settings.invalid_backface_fraction,
         transfer_precision: settings.transfer_precision,
+        far_ratio: if cell_size > 0.0 {
+            settings.far_ratio
+        } else {
+            0.0
+        },
     }
 }
 
@@ -455,24 +483,34 @@ fn load(
 /// tables the probes carry into the asset's table ([`factors::encode_tables`]), freeing the
 /// rows as it goes; fails when u8 factors cannot address the bricks.
 fn bricks_and_tables(
-    folder: fold::BrickFolder,
-    tables: factors::Rows,
+    (folder, tables): (fold::BrickFolder, factors::Rows),
     carried: factors::Carried,
     settings: &BakeSettings,
-    cell_size: f32,
-) -> Result<(fold::Bricked, Factors), BakeError> {
+    (cell_size, (levels, far_levels)): (f32, (u32, &[u8])),
+) -> Result<(fold::Bricked, CoarseBricks, Factors), BakeError> {
     let (bricked, remap) = folder.finish();
+    let mut used = vec![0u8; bricked.bricks.len()];
+    for (&b, &l) in remap.iter().zip(far_levels) {
+        used[b as usize] |= l;
+    }
+    let (coarse, placement) = coarse::build(&bricked.keys, &bricked.fits, (levels, &used));
     let u8_rows = settings.transfer_precision == TransferPrecision::U8;
-    if u8_rows && bricked.bricks.len() > U8_MAX_BRICK as usize + 1 {
+    let all = bricked.bricks.len() + coarse.bricks.len();
+    if u8_rows && all > U8_MAX_BRICK as usize + 1 {
         return Err(BakeError::Setting {
             name: "precision",
-            value: format!("u8 with {} bricks", bricked.bricks.len()),
+            value: format!(
+                "u8 with {} bricks and {} coarse bricks",
+                bricked.bricks.len(),
+                coarse.bricks.len()
+            ),
             reason: "the 8-bit factor encoding addresses at most 16,777,216 bricks; use f16",
         });
     }
     let encoding = (settings.transfer_precision, 4.0 * cell_size);
-    let factors = factors::encode_tables(tables, carried, &remap, &bricked.bricks, encoding)?;
-    Ok((bricked, factors))
+    let numbering = (&remap[..], &bricked.bricks[..], &placement);
+    let factors = factors::encode_tables(tables, carried, numbering, encoding)?;
+    Ok((bricked, coarse, factors))
 }
 
 /// Per probe, whether it is valid (not inside geometry, [`inside`]); warns when most probes

@@ -31,6 +31,10 @@ pub struct BakeSettings {
     /// runtime bytes; 6 saved a quarter more but cost Sponza's detail (16.0% against 14.5% at
     /// 8 and 12.5% at 12; `prt-bench frontier --cells 6,8,12`).
     pub cells_per_spacing: f32,
+    /// Hits at least this many brick sizes from their probe go to coarse bricks, one level
+    /// coarser each time the distance doubles ([`prt_format::coarse`]): a probe's far rays
+    /// share factors instead of taking one each. 0 keeps every hit in its own brick's factor.
+    pub far_ratio: f32,
     /// Hits merge into one surfel only when the cosine between their normals is at least this.
     pub merge_normal_cos: f32,
     /// Treat every material as double-sided (for files with inconsistent winding).
@@ -82,6 +86,7 @@ impl Default for BakeSettings {
             max_probes: 1 << 20,
             cell_size: None,
             cells_per_spacing: 8.0,
+            far_ratio: 0.0,
             merge_normal_cos: 0.9,
             double_sided: false,
             invalid_backface_fraction: 0.1,
@@ -165,6 +170,13 @@ impl BakeSettings {
             if !(c.is_finite() && c >= 0.0) {
                 return bad("cell_size", c.to_string(), "must be >= 0 (0: no merging)");
             }
+        }
+        if !(self.far_ratio.is_finite() && self.far_ratio >= 0.0) {
+            return bad(
+                "far_ratio",
+                self.far_ratio.to_string(),
+                "must be finite and at least 0 (0: no coarse bricks)",
+            );
         }
         if !(self.cells_per_spacing.is_finite() && self.cells_per_spacing > 0.0) {
             return bad(

@@ -16,6 +16,7 @@ use prt_format::{TransferPrecision, DEPTH_WORDS};
 use rayon::prelude::*;
 
 use crate::depth::DepthFilter;
+use crate::merge::coarse::FarField;
 use crate::merge::fold::BrickFolder;
 use crate::tables::factors::{self, RowTable, Rows};
 use crate::trace::{ProbeRays, Tracer};
@@ -52,6 +53,9 @@ pub struct Traced {
     /// Per probe, its packed visibility map ([`DepthFilter::map`]), probe after probe.
     pub depth: Vec<u32>,
     pub folder: BrickFolder,
+    /// Per provisional brick, bit `l` set when some probe has a level-`l` row naming it:
+    /// the coarse bricks to make ([`crate::merge::coarse::build`]).
+    pub far_levels: Vec<u8>,
 }
 
 /// How one probe is traced: from its grid point (its index) to its position and rays.
@@ -72,6 +76,8 @@ pub struct Keep<'a> {
     /// Whether a probe's factor rows are kept: an invalid probe's table is never encoded (a
     /// dilated probe carries its valid source's), so its rows are not even made.
     pub rows_of: &'a (dyn Fn(&ProbeRays) -> bool + Sync),
+    /// Where far hits go ([`crate::merge::coarse`]), but for its origin: each probe's own.
+    pub far: FarField,
 }
 
 /// Traces `probe_count` probes with `trace` and folds their hits into `folder`; fails when the
@@ -93,6 +99,7 @@ pub fn trace_and_fold(
         rows: Rows::new(keep.precision, keep.row_memory),
         depth: Vec::with_capacity(probe_count * DEPTH_WORDS),
         folder,
+        far_levels: Vec::new(),
     };
     let trace_block = |probes: std::ops::Range<usize>| -> Block {
         probes
@@ -191,8 +198,12 @@ fn fold_block(block: Block, out: &mut Traced, per_probe: &PerProbe) -> Result<()
             let ids = &brick_of_hit[hit_start[i]..hit_start[i + 1]];
             let rows = match (keep.rows_of)(&r) {
                 true => tables.with(|table| {
-                    let (basis, weight) = (&tracer.basis, tracer.weight);
-                    factors::probe_rows(&r.hits, ids, basis, weight, precision, table)
+                    let lattice = (&tracer.basis[..], tracer.weight);
+                    let far = FarField {
+                        origin: p,
+                        ..keep.far
+                    };
+                    factors::probe_rows(&r.hits, ids, lattice, &far, precision, table)
                 }),
                 false => factors::ProbeRows::new(precision),
             };
@@ -202,6 +213,12 @@ fn fold_block(block: Block, out: &mut Traced, per_probe: &PerProbe) -> Result<()
         })
         .collect();
     for (position, r, rows, depth) in finished {
+        for (brick, level) in rows.far_rows() {
+            if brick >= out.far_levels.len() {
+                out.far_levels.resize(brick + 1, 0);
+            }
+            out.far_levels[brick] |= 1 << level;
+        }
         out.positions.push(position);
         out.rays.push(r);
         out.rows.push(&rows)?;

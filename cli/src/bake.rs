@@ -67,6 +67,10 @@ pub struct BakeArgs {
     /// Keep every ray hit as its own surfel and brick (same as --cell-size 0).
     #[arg(long)]
     no_merge: bool,
+    /// Hits at least this many brick sizes from their probe share factors of coarse bricks,
+    /// one level coarser each time the distance doubles; 0 gives every brick its own factor.
+    #[arg(long, default_value_t = BakeSettings::default().far_ratio)]
+    far_ratio: f32,
     /// Treat every material as double-sided (for files with inconsistent winding).
     #[arg(long)]
     double_sided: bool,
@@ -119,6 +123,7 @@ pub fn run(args: BakeArgs) -> Result<()> {
         max_probes,
         cell_size,
         no_merge,
+        far_ratio,
         double_sided,
         no_virtual_offset,
         invalid_backface_fraction,
@@ -140,6 +145,7 @@ pub fn run(args: BakeArgs) -> Result<()> {
         bounds,
         max_probes,
         cell_size: if no_merge { Some(0.0) } else { cell_size },
+        far_ratio,
         double_sided,
         virtual_offset: !no_virtual_offset,
         invalid_backface_fraction,

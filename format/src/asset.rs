@@ -29,6 +29,9 @@ pub struct Asset {
     pub factors: Factors,
     /// Normal-keyed bricks of surfels; a brick's radiance is the weighted mean of its surfels'.
     pub bricks: Vec<Brick>,
+    /// Bricks of coarser grids over the bricks, for far hits ([`crate::coarse`]): factors
+    /// index them after `bricks`.
+    pub coarse: crate::coarse::CoarseBricks,
     /// Surfels, grouped by brick (`Brick::first_surfel..+surfel_count`).
     pub surfels: Vec<Surfel>,
     /// The scene's triangles and a BVH2 over them, for light visibility at surfels.
@@ -146,6 +149,9 @@ pub struct BakeSettingsRecord {
     pub double_sided_override: bool,
     pub invalid_backface_fraction: f32,
     pub transfer_precision: TransferPrecision,
+    /// Hits farther than this many brick sizes from their probe went to coarse bricks
+    /// ([`crate::coarse`]); 0: none did.
+    pub far_ratio: f32,
 }
 
 /// Figures of the bake worth keeping with the asset.

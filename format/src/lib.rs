@@ -29,6 +29,7 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod asset;
+pub mod coarse;
 pub mod depth;
 pub mod directions;
 pub mod error;

@@ -15,6 +15,7 @@ use bytemuck::Pod;
 use serde::Serialize;
 
 use crate::asset::{Asset, Factors, Geometry};
+use crate::coarse::CoarseBricks;
 use crate::error::FormatError;
 use crate::surface::SurfaceTerms;
 
@@ -66,6 +67,9 @@ pub(crate) fn write_payload<W: Write>(asset: &Asset, out: &mut W) -> Result<(), 
         }
     }
     pod(out, &asset.bricks)?;
+    pod(out, &asset.coarse.bricks)?;
+    pod(out, &asset.coarse.children)?;
+    pod(out, &asset.coarse.moments)?;
     pod(out, &asset.surfels)?;
     pod(out, &asset.geometry.nodes)?;
     pod(out, &asset.geometry.triangles)?;
@@ -142,6 +146,11 @@ impl Sections<'_> {
             probe_depth: self.pod("probe_depth")?,
             factors: self.factors()?,
             bricks: self.pod("bricks")?,
+            coarse: CoarseBricks {
+                bricks: self.pod("coarse")?,
+                children: self.pod("coarse")?,
+                moments: self.pod("coarse")?,
+            },
             surfels: self.pod("surfels")?,
             geometry: Geometry {
                 nodes: self.pod("geometry")?,
@@ -253,6 +262,7 @@ mod tests {
                     double_sided_override: true,
                     invalid_backface_fraction: 0.1,
                     transfer_precision: TransferPrecision::U8,
+                    far_ratio: 2.0,
                 },
                 stats: BakeStats::default(),
             },
@@ -269,6 +279,18 @@ mod tests {
                 flags: 5,
                 ..Brick::default()
             }],
+            coarse: crate::coarse::CoarseBricks {
+                bricks: vec![crate::coarse::CoarseBrick {
+                    child_count: 2,
+                    level: 3,
+                    ..Default::default()
+                }],
+                children: vec![0, 0],
+                moments: vec![crate::coarse::BrickMoments {
+                    weight: 2.5,
+                    ..Default::default()
+                }],
+            },
             surfels: vec![Surfel {
                 weight: 3.0,
                 ..Surfel::default()

@@ -32,6 +32,8 @@ pub struct Summary {
     /// sampled with the probe volume's weights (`SurfaceTerms::traced_and_blind`).
     pub surfels_seeing_no_probe: usize,
     pub brick_count: usize,
+    /// Coarse bricks over the bricks, for far hits (`crate::coarse`).
+    pub coarse_brick_count: usize,
     pub factor_count: usize,
     pub factors_per_probe: f64,
     pub transfer_precision: TransferPrecision,
@@ -56,6 +58,8 @@ pub struct SectionBytes {
     pub probe_depth: u64,
     pub factors: u64,
     pub bricks: u64,
+    /// Coarse bricks, their children lists and the bricks' moments (`crate::coarse`).
+    pub coarse: u64,
     pub surfels: u64,
     pub bvh_nodes: u64,
     pub triangles: u64,
@@ -78,6 +82,9 @@ impl Summary {
             probe_depth: bytes(&asset.probe_depth),
             factors: (asset.factors.len() * asset.factors.bytes_per_factor()) as u64,
             bricks: bytes(&asset.bricks),
+            coarse: bytes(&asset.coarse.bricks)
+                + bytes(&asset.coarse.children)
+                + bytes(&asset.coarse.moments),
             surfels: bytes(&asset.surfels),
             bvh_nodes: bytes(&asset.geometry.nodes),
             triangles: bytes(&asset.geometry.triangles),
@@ -118,6 +125,7 @@ impl Summary {
             surfels_with_terms: traced,
             surfels_seeing_no_probe: blind,
             brick_count: asset.bricks.len(),
+            coarse_brick_count: asset.coarse.bricks.len(),
             factor_count: asset.factors.len(),
             factors_per_probe: per_probe(asset.factors.len() as u64),
             transfer_precision: asset.factors.precision(),
@@ -200,7 +208,11 @@ impl std::fmt::Display for Summary {
             "surfels          {} ({} ray hits before merging)",
             self.surfel_count, self.surfels_unmerged
         )?;
-        writeln!(f, "bricks           {}", self.brick_count)?;
+        writeln!(
+            f,
+            "bricks           {} (and {} coarse bricks for far hits)",
+            self.brick_count, self.coarse_brick_count
+        )?;
         writeln!(
             f,
             "surface terms    {} surfels, {} of them see none of their probes (sampled from the volume)",
@@ -219,8 +231,8 @@ impl std::fmt::Display for Summary {
         let s = &self.section_bytes;
         writeln!(
             f,
-            "section bytes    probes {} | sky mask {} | sky transfer {} | visibility {} | factors {} | bricks {} | surfels {} | bvh {} | triangles {} | surface {}",
-            s.probes, s.sky_mask, s.sky_transfer, s.probe_depth, s.factors, s.bricks, s.surfels, s.bvh_nodes, s.triangles, s.surface
+            "section bytes    probes {} | sky mask {} | sky transfer {} | visibility {} | factors {} | bricks {} | coarse {} | surfels {} | bvh {} | triangles {} | surface {}",
+            s.probes, s.sky_mask, s.sky_transfer, s.probe_depth, s.factors, s.bricks, s.coarse, s.surfels, s.bvh_nodes, s.triangles, s.surface
         )?;
         write!(
             f,

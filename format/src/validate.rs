@@ -6,6 +6,7 @@
 use crate::asset::*;
 use crate::error::FormatError;
 
+mod coarse;
 mod surface;
 
 /// Largest ray count a bake may use (bit masks and tables are sized by it).
@@ -54,6 +55,7 @@ pub fn validate(asset: &Asset) -> Result<(), FormatError> {
     probe_records(asset)?;
     factor_table(asset)?;
     bricks(asset)?;
+    coarse::coarse_bricks(asset)?;
     surfels(&asset.surfels)?;
     geometry(&asset.geometry)?;
     surface::surface_terms(asset)?;
@@ -192,7 +194,8 @@ fn factor_table(asset: &Asset) -> Result<(), FormatError> {
             ));
         }
     }
-    let bricks = asset.bricks.len();
+    // Bricks, then coarse bricks (`crate::coarse`).
+    let bricks = asset.bricks.len() + asset.coarse.bricks.len();
     // 8-bit factors decode to finite values whatever their bytes (snorm bytes times a finite
     // scale, checked above, and a DC term of at most 255 rays): only f32 and f16 can hold an
     // infinity or a NaN. Decoding every u8 factor to check it took 0.1 s of a 5-million-factor
@@ -204,7 +207,7 @@ fn factor_table(asset: &Asset) -> Result<(), FormatError> {
             return Err(FormatError::invalid(
                 "factors",
                 f,
-                format!("brick {b} out of range (bricks: {bricks})"),
+                format!("brick {b} out of range (bricks and coarse bricks: {bricks})"),
             ));
         }
         if rays == 0 || rays > h.ray_count {

@@ -190,7 +190,9 @@ pub struct Params {
     pub cache_parity: u32,
     /// Words in each half of the shadow-ray cache.
     pub cache_capacity: u32,
-    pub _pad: [u32; 2],
+    /// Coarse bricks (`prt_format::coarse`), numbered after the `brick_count` bricks.
+    pub coarse_count: u32,
+    pub _pad: u32,
 }
 const _: () = assert!(std::mem::size_of::<Params>() == 112);
 

@@ -15,6 +15,7 @@
 //!    docs/conventions.md section 5, exactly when the bake did not merge surfels.
 
 use glam::Vec3;
+use prt_format::coarse::{symmetric_times, CoarseBrick};
 use prt_format::sh::{ShRgb, SH_COUNT};
 use prt_format::{Asset, BRICK_BACKFACE};
 use rayon::prelude::*;
@@ -276,8 +277,21 @@ impl<'a> CpuRelighter<'a> {
         (out, stats)
     }
 
-    /// Steps 2 and 3: brick radiance (mean and gradient) from surfel irradiance.
+    /// Steps 2 and 3: brick radiance (mean and gradient) from surfel irradiance, then the
+    /// coarse bricks' from their bricks' ([`coarse_radiance`]), after them.
     pub fn brick_radiance(&self, irradiance: &[[f32; 3]]) -> Vec<BrickRadiance> {
+        let mut radiance = self.fine_radiance(irradiance);
+        let coarse = &self.asset.coarse;
+        let fine = &radiance[..];
+        let far: Vec<BrickRadiance> = (coarse.bricks.par_iter())
+            .map(|c| coarse_radiance(self.asset, c, fine))
+            .collect();
+        radiance.extend(far);
+        radiance
+    }
+
+    /// Step 3 for the bricks.
+    fn fine_radiance(&self, irradiance: &[[f32; 3]]) -> Vec<BrickRadiance> {
         let asset = self.asset;
         asset
             .bricks
@@ -344,6 +358,31 @@ impl<'a> CpuRelighter<'a> {
             ..RelightStats::default()
         };
         (sh, stats)
+    }
+}
+
+/// A coarse brick's linear model from its bricks' (`prt_format::coarse`): their weighted mean,
+/// and the gradient `M^-1 sum_c (M_c G_c + W_c (mu_c - mu) m_c)` (the stored inverse carries
+/// the `2^level` of its factors' offsets).
+pub fn coarse_radiance(asset: &Asset, c: &CoarseBrick, fine: &[BrickRadiance]) -> BrickRadiance {
+    let mut mean = [0.0f32; 3];
+    let mut b = [[0.0f32; 3]; 3];
+    let run = c.first_child as usize..(c.first_child + c.child_count) as usize;
+    for &child in &asset.coarse.children[run] {
+        let (r, m) = (&fine[child as usize], &asset.coarse.moments[child as usize]);
+        let mu = asset.bricks[child as usize].centroid;
+        let d = std::array::from_fn::<f32, 3, _>(|a| mu[a] - c.centroid[a]);
+        for ch in 0..3 {
+            let mg = symmetric_times(&m.moment, r.gradient[ch]);
+            mean[ch] += m.weight * r.mean[ch];
+            for a in 0..3 {
+                b[ch][a] += mg[a] + m.weight * d[a] * r.mean[ch];
+            }
+        }
+    }
+    BrickRadiance {
+        mean: mean.map(|v| v / c.weight),
+        gradient: b.map(|bc| symmetric_times(&c.inverse, bc)),
     }
 }
 

@@ -9,19 +9,21 @@
 pub const BOUNCE_SURFELS: &str = include_str!("../bounce_surfels.wgsl");
 /// `brick_radiance.wgsl`: Runtime stage 4: brick radiance (mean and gradient) from its surfels.
 pub const BRICK_RADIANCE: &str = include_str!("../brick_radiance.wgsl");
+/// `coarse_radiance.wgsl`: Runtime stage 5: coarse bricks' radiance from their bricks'.
+pub const COARSE_RADIANCE: &str = include_str!("../coarse_radiance.wgsl");
 /// `cull_lights.wgsl`: Runtime stage 1: per-brick light masks, dirty bricks, shadow-ray cache room.
 pub const CULL_LIGHTS: &str = include_str!("../cull_lights.wgsl");
-/// `gather.wgsl`: Runtime stage 7: factors and sky reduced into probe SH, written to the volume.
+/// `gather.wgsl`: Runtime stage 8: factors and sky reduced into probe SH, written to the volume.
 pub const GATHER: &str = include_str!("../gather.wgsl");
-/// `gather_subgroup.wgsl`: Stage 7 entry point with subgroup reductions.
+/// `gather_subgroup.wgsl`: Stage 8 entry point with subgroup reductions.
 pub const GATHER_SUBGROUP: &str = include_str!("../gather_subgroup.wgsl");
-/// `gather_tree.wgsl`: Stage 7 entry point with a shared-memory tree reduction.
+/// `gather_tree.wgsl`: Stage 8 entry point with a shared-memory tree reduction.
 pub const GATHER_TREE: &str = include_str!("../gather_tree.wgsl");
 /// `light_sample.wgsl`: The light model (`light_sample`): a punctual light's unshadowed irradiance.
 pub const LIGHT_SAMPLE: &str = include_str!("../light_sample.wgsl");
-/// `mark_probes.wgsl`: Runtime stage 6: probes whose bricks changed.
+/// `mark_probes.wgsl`: Runtime stage 7: probes whose bricks changed.
 pub const MARK_PROBES: &str = include_str!("../mark_probes.wgsl");
-/// `near_radiance.wgsl`: Runtime stage 5: what each near group's near-field rays bring.
+/// `near_radiance.wgsl`: Runtime stage 6: what each near group's near-field rays bring.
 pub const NEAR_RADIANCE: &str = include_str!("../near_radiance.wgsl");
 /// `relight_surfels.wgsl`: Runtime stage 2: direct irradiance at surfels with cached shadow rays.
 pub const RELIGHT_SURFELS: &str = include_str!("../relight_surfels.wgsl");

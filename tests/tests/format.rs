@@ -495,3 +495,79 @@ fn invalid_asset_messages_name_the_item() {
         "{msg}"
     );
 }
+
+/// A small asset with coarse bricks (far hits from a twice-the-brick distance on).
+fn coarse_asset() -> &'static Asset {
+    static COARSE: OnceLock<Asset> = OnceLock::new();
+    COARSE.get_or_init(|| {
+        let settings = BakeSettings {
+            spacing: Some(0.5),
+            far_ratio: 2.0,
+            ..rays(64)
+        };
+        bake_ok(&cornell(), &settings)
+    })
+}
+
+/// Coarse bricks round-trip, and every index, count and float of theirs is checked on load.
+#[test]
+fn broken_coarse_bricks_are_invalid() {
+    let asset = coarse_asset();
+    let c = &asset.coarse;
+    assert!(c.bricks.len() >= 2 && c.moments.len() == asset.bricks.len());
+    assert!(decode(&encode(asset).expect("encode")).expect("decode") == *asset);
+    let damaged = |damage: &dyn Fn(&mut Asset)| {
+        let mut a = asset.clone();
+        damage(&mut a);
+        decode(&encode(&a).expect("encode damaged asset"))
+    };
+    let invalid = |what: &str, section: &str, damage: &dyn Fn(&mut Asset)| match damaged(damage) {
+        Err(FormatError::Invalid { section: s, .. }) if s == section => {}
+        other => panic!("{what}: expected Invalid in {section}, got {other:?}"),
+    };
+    let all = (asset.bricks.len() + c.bricks.len()) as u32;
+    invalid("factor past the coarse bricks", "factors", &|a| {
+        set_factor_brick(&mut a.factors, 0, all)
+    });
+    invalid("child past the bricks", "coarse", &|a| {
+        a.coarse.children[0] = a.bricks.len() as u32
+    });
+    invalid("one child", "coarse", &|a| {
+        a.coarse.bricks[0].child_count = 1
+    });
+    invalid("children out of order", "coarse", &|a| {
+        a.coarse.bricks[1].first_child += 1
+    });
+    invalid("level 0", "coarse", &|a| a.coarse.bricks[0].level = 0);
+    invalid("NaN inverse", "coarse", &|a| {
+        a.coarse.bricks[0].inverse[2] = f32::NAN
+    });
+    invalid("zero weight", "coarse", &|a| {
+        a.coarse.bricks[1].weight = 0.0
+    });
+    invalid("NaN moment", "coarse.moments", &|a| {
+        a.coarse.moments[0].moment[0] = f32::NAN
+    });
+    invalid("moments without coarse bricks", "coarse", &|a| {
+        a.coarse.bricks.clear();
+        a.coarse.children.clear();
+        for p in &mut a.probes {
+            p.factor_count = 0;
+            p.first_factor = 0;
+        }
+        a.factors = Factors::U8 {
+            factors: Vec::new(),
+            offset_scale: 1.0,
+        };
+    });
+    match damaged(&|a| {
+        a.coarse.moments.pop();
+    }) {
+        Err(FormatError::Count { section, .. }) => assert_eq!(section, "coarse.moments"),
+        other => panic!("short moments: {other:?}"),
+    }
+    match damaged(&|a| a.coarse.children.push(0)) {
+        Err(FormatError::Count { section, .. }) => assert_eq!(section, "coarse.children"),
+        other => panic!("extra child: {other:?}"),
+    }
+}

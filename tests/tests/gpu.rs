@@ -77,9 +77,10 @@ fn volume_sh(runtime: &PrtRuntime) -> Vec<Option<ShRgb>> {
         .collect()
 }
 
-/// GPU equals the CPU reference on the Cornell reference scene (unmerged f32 factors and default
-/// merged f16 factors) with point, spot with range, directional and sky; the f32 volume read
-/// back equals the probe SH exactly, the f16 volume within half-float rounding.
+/// GPU equals the CPU reference on the Cornell reference scene (unmerged f32 factors, default
+/// merged u8 and f16 factors, and far hits in coarse bricks) with point, spot with range,
+/// directional and sky; the f32 volume read back equals the probe SH exactly, the f16 volume
+/// within half-float rounding.
 #[test]
 fn gpu_equals_cpu_on_cornell() {
     let (device, queue) = gpu_device();
@@ -99,8 +100,20 @@ fn gpu_equals_cpu_on_cornell() {
             },
             VolumeFormat::F32,
         ),
+        (
+            BakeSettings {
+                far_ratio: 2.0,
+                ..BakeSettings::default()
+            },
+            VolumeFormat::F32,
+        ),
     ] {
         let asset = bake(&scene, &settings);
+        assert_eq!(
+            asset.coarse.bricks.is_empty(),
+            settings.far_ratio == 0.0,
+            "coarse bricks exactly when far hits go to them"
+        );
         for rig in ["rig.json", "rig_spot.json", "rig_spot_range.json"] {
             let lighting = load_rig(&fixture(&format!("cornell/{rig}"))).unwrap();
             let mut runtime = PrtRuntime::new(

@@ -49,3 +49,28 @@ fn twenty_bakes_and_relights_are_identical() {
         "GPU relights differ between devices"
     );
 }
+
+/// With far hits in coarse bricks, bakes on one or two threads, with factor rows in memory or
+/// spilled to the temporary file, give the same bytes.
+#[test]
+fn coarse_brick_bakes_are_identical_at_any_thread_count() {
+    let scene = fixture("two_rooms.gltf");
+    let bake = |threads: usize, row_memory: usize| {
+        let settings = BakeSettings {
+            threads: Some(threads),
+            spacing: Some(0.8),
+            far_ratio: 2.0,
+            row_memory,
+            ..rays(128)
+        };
+        encode(&bake_ok(&scene, &settings)).unwrap()
+    };
+    let first = bake(1, BakeSettings::default().row_memory);
+    assert!(!prt_format::decode(&first).unwrap().coarse.bricks.is_empty());
+    for (threads, row_memory) in [(2, BakeSettings::default().row_memory), (2, 1), (1, 1)] {
+        assert!(
+            bake(threads, row_memory) == first,
+            "{threads} threads, {row_memory} bytes of rows in memory"
+        );
+    }
+}

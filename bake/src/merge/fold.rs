@@ -31,6 +31,19 @@ use crate::BakeError;
 pub struct Bricked {
     pub bricks: Vec<Brick>,
     pub surfels: Vec<Surfel>,
+    /// Per brick, its key (what the coarse bricks over it are found by).
+    pub keys: Vec<Key>,
+    /// Per brick, the sums of its linear fit (what a coarse brick's fit is made of).
+    pub fits: Vec<BrickFit>,
+}
+
+/// The sums behind a brick's linear radiance fit ([`brick_of`]), in f64: the surfels' weight,
+/// their weighted mean position, and the weighted second moment of their positions about it.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct BrickFit {
+    pub weight: f64,
+    pub centroid: DVec3,
+    pub moment: DMat3,
 }
 
 /// Merges ray hits into bricks as they arrive, so that the bake never holds every hit at once
@@ -314,7 +327,7 @@ impl BrickFolder {
         // writes below, not by a serial fill.
         let mut surfels: Vec<Surfel> = bytemuck::zeroed_vec(counts.iter().sum());
         let runs = split_runs(&mut surfels, &counts);
-        let bricks: Vec<Brick> = order
+        let (bricks, fits): (Vec<Brick>, Vec<BrickFit>) = order
             .par_iter()
             .zip(runs)
             .enumerate()
@@ -332,7 +345,14 @@ impl BrickFolder {
                 brick_of(run, flags, first as u32)
             })
             .collect();
-        (Bricked { bricks, surfels }, remap)
+        let keys = order.iter().map(|&b| self.keys[b as usize]).collect();
+        let bricked = Bricked {
+            bricks,
+            surfels,
+            keys,
+            fits,
+        };
+        (bricked, remap)
     }
 }
 
@@ -344,7 +364,7 @@ impl BrickFolder {
 /// surfel stores `g_s = w_s C^-1 (p_s - centroid)` and the runtime gets `G = sum_s g_s L_s`.
 /// `C` is regularised by a thousandth of its trace: flat bricks get no gradient along their
 /// normal, single-surfel bricks none at all.
-fn brick_of(surfels: &mut [Surfel], flags: u32, first_surfel: u32) -> Brick {
+fn brick_of(surfels: &mut [Surfel], flags: u32, first_surfel: u32) -> (Brick, BrickFit) {
     let mut min = Vec3::INFINITY;
     let mut max = Vec3::NEG_INFINITY;
     let mut sum = DVec3::ZERO;
@@ -364,20 +384,33 @@ fn brick_of(surfels: &mut [Surfel], flags: u32, first_surfel: u32) -> Brick {
     }
     let trace = c.x_axis.x + c.y_axis.y + c.z_axis.z;
     if trace > 0.0 {
-        let inv = (c + DMat3::IDENTITY * (1e-3 * trace)).inverse();
+        let inv = regularised(c).inverse();
         for s in surfels.iter_mut() {
             let d = Vec3::from(s.position).as_dvec3() - centroid;
             s.gradient = (inv * d * f64::from(s.weight)).as_vec3().to_array();
         }
     }
-    Brick {
+    let brick = Brick {
         min: min.to_array(),
         first_surfel,
         max: max.to_array(),
         surfel_count: surfels.len() as u32,
         centroid: centroid.as_vec3().to_array(),
         flags,
-    }
+    };
+    let fit = BrickFit {
+        weight,
+        centroid,
+        moment: c,
+    };
+    (brick, fit)
+}
+
+/// The regularisation of a fit's moment ([`brick_of`]): a thousandth of its trace on the
+/// diagonal.
+pub fn regularised(moment: DMat3) -> DMat3 {
+    let trace = moment.x_axis.x + moment.y_axis.y + moment.z_axis.z;
+    moment + DMat3::IDENTITY * (1e-3 * trace)
 }
 
 /// Running sums of one surfel being merged, in one cache line: merging a hit reads the

@@ -2,6 +2,7 @@
 //! belongs to, `index` finds that brick, [`fold`] merges the hit into its cell's surfels and
 //! numbers the bricks at the end.
 
+pub mod coarse;
 pub mod fold;
 pub(crate) mod index;
 pub mod key;

@@ -17,6 +17,12 @@ use prt_format::{
 use bytemuck::Pod;
 use rayon::prelude::*;
 
+use std::collections::HashMap;
+
+use foldhash::fast::FixedState;
+
+use crate::merge::coarse::{CoarsePlacement, FarField};
+use crate::merge::key::Key;
 use crate::tables::row_store::RowStore;
 use crate::trace::Hit;
 use crate::BakeError;
@@ -32,8 +38,8 @@ use crate::BakeError;
 pub fn probe_rows(
     hits: &[Hit],
     hit_brick: &[u32],
-    basis: &[[f32; SH_COUNT]],
-    weight: f32,
+    (basis, weight): (&[[f32; SH_COUNT]], f32),
+    far: &FarField,
     precision: TransferPrecision,
     table: &mut RowTable,
 ) -> ProbeRows {
@@ -50,14 +56,27 @@ pub fn probe_rows(
         .map_or(0, |&b| (b - low) as usize + 1);
     let probe = table.next_probe(span);
     let mut rows: Vec<FactorRow> = Vec::with_capacity(hits.len().min(256));
+    // Far hits' rows by coarse cell and level; the row names the first hit's brick, which
+    // with the level finds the coarse brick once bricks are numbered (`CoarsePlacement`).
+    let mut coarse: HashMap<(Key, u32), u32, FixedState> = HashMap::default();
     for (ray, &i) in by_ray.iter().enumerate().filter(|&(_, &i)| i != NO_HIT) {
         let (brick, i) = (hit_brick[i as usize], i as usize);
-        let entry = &mut table.rows[(brick - low) as usize];
-        if entry.0 != probe {
-            rows.push((brick, 0, [0.0; SH_COUNT - 1], [0.0; 3]));
-            *entry = (probe, rows.len() as u32 - 1);
-        }
-        let row = &mut rows[entry.1 as usize];
+        let level = far.level(hits[i].position);
+        let at = if level == 0 {
+            let entry = &mut table.rows[(brick - low) as usize];
+            if entry.0 != probe {
+                rows.push((brick, 0, [0.0; SH_COUNT - 1], [0.0; 3]));
+                *entry = (probe, rows.len() as u32 - 1);
+            }
+            entry.1
+        } else {
+            let key = (far.key(&hits[i], level), level);
+            *coarse.entry(key).or_insert_with(|| {
+                rows.push((with_level(brick, level), 0, [0.0; SH_COUNT - 1], [0.0; 3]));
+                rows.len() as u32 - 1
+            })
+        };
+        let row = &mut rows[at as usize];
         let y = &basis[ray];
         row.1 += 1;
         row.3 = (Vec3::from(row.3) + hits[i].position).to_array();
@@ -66,6 +85,22 @@ pub fn probe_rows(
         }
     }
     ProbeRows::of(rows, precision, basis.len() as u32)
+}
+
+/// Where a row of sums keeps its level ([`crate::merge::coarse`]) above its provisional brick
+/// (provisional bricks are below [`crate::merge::index::MAX_BRICKS`], 2^28).
+const LEVEL_SHIFT: u32 = 28;
+const BRICK_BITS: u32 = (1 << LEVEL_SHIFT) - 1;
+
+/// A provisional brick with a row's level.
+fn with_level(brick: u32, level: u32) -> u32 {
+    debug_assert!(brick <= BRICK_BITS && level < 16);
+    brick | level << LEVEL_SHIFT
+}
+
+/// A row's provisional brick and level.
+fn brick_and_level(word: u32) -> (usize, u32) {
+    ((word & BRICK_BITS) as usize, word >> LEVEL_SHIFT)
 }
 
 /// Per provisional brick of the probe being grouped ([`probe_rows`]), counted from the
@@ -126,10 +161,15 @@ pub struct RowU8 {
 const _: () = assert!(std::mem::size_of::<RowU8>() == 28);
 
 impl RowU8 {
-    fn new(brick: u32, factor: FactorU8, mean: Vec3) -> Self {
+    /// `word`: the provisional brick and level ([`with_level`]). The level waits in the
+    /// factor's last byte, which the encoding leaves zero ([`FactorU8`]).
+    fn new(word: u32, factor: FactorU8, mean: Vec3) -> Self {
+        let (brick, level) = brick_and_level(word);
+        let mut packed = factor.packed;
+        packed[2] |= level << 24;
         let factor = FactorU8 {
-            brick_rays: factor.brick_rays | brick << 8,
-            ..factor
+            brick_rays: factor.brick_rays | (brick as u32) << 8,
+            packed,
         };
         RowU8 {
             factor,
@@ -141,9 +181,30 @@ impl RowU8 {
     fn brick(&self) -> usize {
         (self.factor.brick_rays >> 8) as usize
     }
+
+    /// The row's level ([`crate::merge::coarse`]).
+    fn level(&self) -> u32 {
+        self.factor.packed[2] >> 24
+    }
+
+    /// The factor without the level.
+    fn factor(&self) -> FactorU8 {
+        let mut f = self.factor;
+        f.packed[2] &= 0x00ff_ffff;
+        f
+    }
 }
 
 impl ProbeRows {
+    /// The provisional brick and level of each of its far rows (level 1 and up).
+    pub fn far_rows(&self) -> Vec<(usize, u32)> {
+        let all: Vec<(usize, u32)> = match self {
+            ProbeRows::Sums(rows) => rows.iter().map(|r| brick_and_level(r.0)).collect(),
+            ProbeRows::U8(rows) => rows.iter().map(|r| (r.brick(), r.level())).collect(),
+        };
+        all.into_iter().filter(|&(_, level)| level > 0).collect()
+    }
+
     /// No rows yet, kept as `precision` keeps them.
     pub fn new(precision: TransferPrecision) -> Self {
         match precision {
@@ -278,11 +339,29 @@ impl Rows {
 /// finds both in one load, where the renumbering and then the bricks cost two cache misses.
 type Placed = (u32, Vec3);
 
+/// Where rows go once bricks are numbered: level-0 rows to their brick ([`Placed`]), far rows
+/// to the brick or coarse brick over it ([`CoarsePlacement`]).
+#[derive(Clone, Copy)]
+struct Placement<'a> {
+    placed: &'a [Placed],
+    coarse: &'a CoarsePlacement,
+}
+
+impl Placement<'_> {
+    /// The final brick or coarse brick of a row of provisional brick `brick` at `level`, the
+    /// point its offset is measured from and what it is divided by.
+    #[inline]
+    fn locate(&self, brick: usize, level: u32) -> (u32, Vec3, f32) {
+        let (b, centroid) = self.placed[brick];
+        self.coarse.place(b, level).unwrap_or((b, centroid, 1.0))
+    }
+}
+
 /// u8 rows encoded into `out` (one factor each): bricks renumbered, offsets from the bricks'
 /// centroids, sorted by brick (a split row's parts in order).
-fn encode_u8(rows: &[RowU8], out: &mut [FactorU8], placed: &[Placed], offset_scale: f32) {
+fn encode_u8(rows: &[RowU8], out: &mut [FactorU8], at: Placement, offset_scale: f32) {
     debug_assert!(
-        placed.len() <= U8_MAX_BRICK as usize + 1,
+        at.placed.len() <= U8_MAX_BRICK as usize + 1,
         "every provisional brick fits the row's brick field"
     );
     // By brick; a split row's parts (the only factors of one brick) full ones first, as they
@@ -291,23 +370,26 @@ fn encode_u8(rows: &[RowU8], out: &mut [FactorU8], placed: &[Placed], offset_sca
     // row's full parts share a key, and they are equal byte for byte), then placed in that
     // order: cheaper than sorting the 16-byte factors by their key.
     const _: () = assert!(U8_MAX_RAYS == 0xff);
-    prefetch_placed(rows.iter().map(RowU8::brick), placed);
+    prefetch_placed(rows.iter().map(RowU8::brick), at.placed);
+    let located: Vec<(u32, Vec3, f32)> = rows
+        .iter()
+        .map(|r| at.locate(r.brick(), r.level()))
+        .collect();
     let mut order: Vec<u64> = rows
         .iter()
+        .zip(&located)
         .enumerate()
-        .map(|(i, r)| {
-            let b = placed[r.brick()].0;
+        .map(|(i, (r, &(b, _, _)))| {
             let key = (b << 8 | r.factor.brick_rays & U8_MAX_RAYS) ^ U8_MAX_RAYS;
             u64::from(key) << 32 | i as u64
         })
         .collect();
     order.sort_unstable();
     for (f, &o) in out.iter_mut().zip(&order) {
-        let r = &rows[o as u32 as usize];
-        let (b, centroid) = placed[r.brick()];
-        *f = r
-            .factor
-            .place(b, (Vec3::from(r.mean) - centroid).to_array(), offset_scale);
+        let i = o as u32 as usize;
+        let (r, (b, centroid, scale)) = (&rows[i], located[i]);
+        let offset = (Vec3::from(r.mean) - centroid) / scale;
+        *f = r.factor().place(b, offset.to_array(), offset_scale);
     }
 }
 
@@ -327,15 +409,17 @@ pub struct Carried<'a> {
 pub fn encode_tables(
     rows: Rows,
     carried: Carried,
-    remap: &[u32],
-    bricks: &[Brick],
+    (remap, bricks, coarse): (&[u32], &[Brick], &CoarsePlacement),
     (precision, brick_size): (TransferPrecision, f32),
 ) -> Result<Factors, BakeError> {
     let placed: Vec<Placed> = remap
         .par_iter()
         .map(|&b| (b, Vec3::from(bricks[b as usize].centroid)))
         .collect();
-    let placed = &placed;
+    let placed = Placement {
+        placed: &placed,
+        coarse,
+    };
     Ok(match (precision, rows) {
         (TransferPrecision::U8, Rows::U8(rows)) => {
             let offset_scale = u8_offset_scale(brick_size);
@@ -417,10 +501,10 @@ fn prefetch_placed(bricks: impl Iterator<Item = usize>, placed: &[Placed]) {
 }
 
 /// Rows of sums finished ([`finish`]) and encoded into `out` by `of`, one factor each.
-fn encode_sums<T>(rows: &[RowSums], out: &mut [T], placed: &[Placed], of: fn(&FactorRow) -> T) {
-    prefetch_placed(rows.iter().map(|w| w[0] as usize), placed);
+fn encode_sums<T>(rows: &[RowSums], out: &mut [T], at: Placement, of: fn(&FactorRow) -> T) {
+    prefetch_placed(rows.iter().map(|w| brick_and_level(w[0]).0), at.placed);
     let mut rows: Vec<FactorRow> = rows.iter().map(from_words).collect();
-    finish(&mut rows, placed);
+    finish(&mut rows, at);
     for (f, row) in out.iter_mut().zip(&rows) {
         *f = of(row);
     }
@@ -429,11 +513,12 @@ fn encode_sums<T>(rows: &[RowSums], out: &mut [T], placed: &[Placed], of: fn(&Fa
 /// The final rows of one probe, sorted by brick: provisional bricks renumbered ([`Placed`]), hit
 /// sums turned into offsets, the mean of the rays' hit points minus the brick's centroid (see
 /// `prt_format::FactorF32`).
-fn finish(rows: &mut [FactorRow], placed: &[Placed]) {
+fn finish(rows: &mut [FactorRow], at: Placement) {
     for row in rows.iter_mut() {
-        let (b, centroid) = placed[row.0 as usize];
+        let (brick, level) = brick_and_level(row.0);
+        let (b, centroid, scale) = at.locate(brick, level);
         row.0 = b;
-        row.3 = (Vec3::from(row.3) / row.1 as f32 - centroid).to_array();
+        row.3 = ((Vec3::from(row.3) / row.1 as f32 - centroid) / scale).to_array();
     }
     rows.sort_unstable_by_key(|r| r.0);
 }
@@ -441,6 +526,92 @@ fn finish(rows: &mut [FactorRow], placed: &[Placed]) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A placement without coarse bricks.
+    fn no_coarse() -> CoarsePlacement {
+        crate::merge::coarse::build(&[], &[], (0, &[])).1
+    }
+
+    /// Far hits of one coarse cell make one row, which reads the coarse brick over their bricks
+    /// with its offset from the coarse brick's centroid divided by 2^level, in every encoding;
+    /// near hits keep their bricks.
+    #[test]
+    fn far_hits_share_a_coarse_row() {
+        use crate::merge::fold::BrickFit;
+        use glam::{DMat3, DVec3};
+        let n = 64usize;
+        let basis: Vec<[f32; SH_COUNT]> = (0..n)
+            .map(|r| prt_format::sh::basis([0.0, 1.0, 0.0]).map(|y| y * (1.0 + r as f32 * 0.01)))
+            .collect();
+        // Bricks of 1 m from the origin; hits at 0.5, 1.5 (level 0) and 10.5, 11.5 m (level 1
+        // from 8 m: one coarse cell).
+        let xs = [0.5f32, 1.5, 10.5, 11.5];
+        let hits: Vec<Hit> = xs
+            .iter()
+            .enumerate()
+            .map(|(i, &x)| Hit::grey(i as u32 * 3, Vec3::new(x, 0.5, 0.5), Vec3::Y))
+            .collect();
+        let far = FarField {
+            origin: Vec3::new(0.0, 0.5, 0.5),
+            anchor: Vec3::ZERO,
+            brick_size: 1.0,
+            near: 8.0,
+        };
+        let keys: Vec<Key> = xs.iter().map(|&x| (x as i32, 0, 0, 2)).collect();
+        let weights = [1.0, 1.0, 1.0, 3.0];
+        let fits: Vec<BrickFit> = xs
+            .iter()
+            .zip(weights)
+            .map(|(&x, weight)| BrickFit {
+                weight,
+                centroid: DVec3::new(f64::from(x), 0.5, 0.5),
+                moment: DMat3::ZERO,
+            })
+            .collect();
+        let bricks: Vec<Brick> = xs
+            .iter()
+            .map(|&x| Brick {
+                centroid: [x, 0.5, 0.5],
+                ..Brick::default()
+            })
+            .collect();
+        let remap = [0u32, 1, 2, 3];
+        let (coarse, placement) =
+            crate::merge::coarse::build(&keys, &fits, (1, &[0, 0, 1 << 1, 0]));
+        assert_eq!(coarse.children, [2, 3]);
+        let centroid = (10.5 + 3.0 * 11.5) / 4.0;
+        for precision in [TransferPrecision::F32, TransferPrecision::U8] {
+            let probe = probe_rows(
+                &hits,
+                &[0, 1, 2, 3],
+                (&basis, 0.1),
+                &far,
+                precision,
+                &mut RowTable::default(),
+            );
+            assert_eq!(probe.far_rows(), [(2, 1)]);
+            let mut rows = Rows::new(precision, usize::MAX);
+            rows.push(&probe).unwrap();
+            let carried = Carried {
+                from: &[Some(0)],
+                lens: &[rows.len(0)],
+            };
+            let numbering = (&remap[..], &bricks[..], &placement);
+            let factors = encode_tables(rows, carried, numbering, (precision, 1.0)).unwrap();
+            assert_eq!(factors.len(), 3, "{precision:?}");
+            let (b, rays) = factors.brick_and_rays(2);
+            assert_eq!(
+                (b, rays),
+                (4, 2),
+                "{precision:?}: the coarse brick, after the 4"
+            );
+            let offset = factors.offset(2);
+            let want = (11.0 - centroid) / 2.0;
+            assert!((offset[0] - want).abs() < 1e-2, "{precision:?}: {offset:?}");
+            assert_eq!(factors.brick_and_rays(0), (0, 1));
+            assert_eq!(factors.offset(0), [0.0; 3]);
+        }
+    }
 
     /// Rows equal those of the sort by (brick, ray) that grouping by a map replaced, sums bit
     /// for bit: hits in a shuffled ray order, on bricks that recur far apart.
@@ -473,8 +644,8 @@ mod tests {
         let ProbeRows::Sums(mut got) = probe_rows(
             &hits,
             &bricks,
-            &basis,
-            weight,
+            (&basis, weight),
+            &FarField::off(),
             TransferPrecision::F32,
             &mut RowTable::default(),
         ) else {
@@ -549,7 +720,8 @@ mod tests {
             assert_eq!(spilled, budget < 10_000 && sizes.iter().sum::<usize>() > 0);
             let lens: Vec<usize> = from.iter().map(|f| f.map_or(0, |q| rows.len(q))).collect();
             let carried = Carried { from, lens: &lens };
-            encode_tables(rows, carried, &remap, &bricks, (precision, 0.5)).unwrap()
+            let numbering = (&remap[..], &bricks[..], &no_coarse());
+            encode_tables(rows, carried, numbering, (precision, 0.5)).unwrap()
         };
         let bytes = |f: &Factors| -> Vec<u8> {
             match f {
@@ -602,8 +774,8 @@ mod tests {
         let rows = |hits: &[Hit], bricks: &[u32], table: &mut RowTable| match probe_rows(
             hits,
             bricks,
-            &basis,
-            0.2,
+            (&basis, 0.2),
+            &FarField::off(),
             TransferPrecision::F32,
             table,
         ) {
@@ -649,7 +821,12 @@ mod tests {
             .iter()
             .map(|&b| (b, Vec3::from(bricks[b as usize].centroid)))
             .collect();
-        finish(&mut late, &placed);
+        let coarse = no_coarse();
+        let at = Placement {
+            placed: &placed,
+            coarse: &coarse,
+        };
+        finish(&mut late, at);
         let late: Vec<FactorRow> = late.into_iter().flat_map(split_row_for_u8).collect();
         let late = Factors::build(&late, TransferPrecision::U8, n, size);
         let early = ProbeRows::of(rows, TransferPrecision::U8, n);
@@ -660,7 +837,8 @@ mod tests {
             lens: &[rows.len(0)],
         };
         let settings = (TransferPrecision::U8, size);
-        let early = encode_tables(rows, carried, &remap, &bricks, settings).unwrap();
+        let numbering = (&remap[..], &bricks[..], &coarse);
+        let early = encode_tables(rows, carried, numbering, settings).unwrap();
         assert_eq!(early.len(), 7, "600 and 256 rays split in three and two");
         assert_eq!(early, late);
     }

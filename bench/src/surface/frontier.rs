@@ -40,6 +40,10 @@ pub struct FrontierArgs {
     /// comma-separated: surfels, bricks and surface terms grow with the square of it.
     #[arg(long, value_delimiter = ',', default_value = "8")]
     cells: Vec<f32>,
+    /// Far ratios (the bake's `far_ratio`: hits this many brick sizes away and farther share
+    /// coarse bricks; 0: none), comma-separated [default: the bake's].
+    #[arg(long, value_delimiter = ',')]
+    far: Vec<f32>,
     /// Directory the cases' paths are relative to (the repository root).
     #[arg(long, default_value = ".")]
     root: PathBuf,
@@ -48,26 +52,39 @@ pub struct FrontierArgs {
     out: Out,
 }
 
-/// What a bake traces and merges: rays per probe, surfel cells per spacing.
+/// What a bake traces and merges: rays per probe, surfel cells per spacing, far ratio.
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct Knob {
     rays: u32,
     cells: f32,
+    far: f32,
 }
 
 impl Knob {
     fn label(self) -> String {
-        format!("{} rays, cells spacing/{}", self.rays, self.cells)
+        format!(
+            "{} rays, cells spacing/{}, far {}",
+            self.rays, self.cells, self.far
+        )
     }
 }
 
 impl FrontierArgs {
-    /// Every ray count with every cell size, in argument order.
+    /// Every ray count with every cell size and far ratio, in argument order.
     fn knobs(&self) -> Vec<Knob> {
-        self.rays
-            .iter()
-            .flat_map(|&rays| self.cells.iter().map(move |&cells| Knob { rays, cells }))
-            .collect()
+        let far = match self.far.is_empty() {
+            true => vec![BakeSettings::default().far_ratio],
+            false => self.far.clone(),
+        };
+        let mut knobs = Vec::new();
+        for &rays in &self.rays {
+            for &cells in &self.cells {
+                for &far in &far {
+                    knobs.push(Knob { rays, cells, far });
+                }
+            }
+        }
+        knobs
     }
 }
 
@@ -106,6 +123,12 @@ pub fn run(args: FrontierArgs) -> Result<()> {
     if args.cells.iter().any(|c| !(c.is_finite() && *c >= 1.0)) || args.cells.is_empty() {
         bail!("--cells {:?}: every value must be at least 1", args.cells);
     }
+    if args.far.iter().any(|f| !(f.is_finite() && *f >= 0.0)) {
+        bail!(
+            "--far {:?}: every value must be finite and at least 0",
+            args.far
+        );
+    }
     let picked = cases::pick(&args.cases, cases::all(&args.root)?)?;
     let lookup = Lookups::parse(&["default".to_owned()], None)?.for_set(Set::Bundled)[0];
     let mut rows = Vec::new();
@@ -124,6 +147,7 @@ pub fn run(args: FrontierArgs) -> Result<()> {
                     double_sided: case.double_sided,
                     rays: knob.rays,
                     cells_per_spacing: knob.cells,
+                    far_ratio: knob.far,
                     spacing,
                     ..BakeSettings::default()
                 };
@@ -267,14 +291,15 @@ fn on_front(all: &[Aggregate], a: &Aggregate, x: fn(&Aggregate) -> f64) -> bool 
 
 fn summary_table(md: &mut String, title: &str, rows: &[Aggregate]) {
     let _ = writeln!(md, "\n### {title}\n");
-    md.push_str("| rays | cells | spacing | levels | probes (median) | runtime MB (median) | transport B/probe (median) | bake s (median) | open mean, median level | open mean, worst level | open leaks, worst level | over-lit pixels, worst level | front: bytes / bake time |\n|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n");
+    md.push_str("| rays | cells, far ratio | spacing | levels | probes (median) | runtime MB (median) | transport B/probe (median) | bake s (median) | open mean, median level | open mean, worst level | open leaks, worst level | over-lit pixels, worst level | front: bytes / bake time |\n|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n");
     for a in rows {
         let front = |x: fn(&Aggregate) -> f64| if on_front(rows, a, x) { "yes" } else { "-" };
         let _ = writeln!(
             md,
-            "| {} | spacing/{} | x{} | {} | {:.0} | {:.1} | {:.0} | {:.2} | {:.1}% | {:.1}% {} | {:.1}% | {:.1}% | {} / {} |",
+            "| {} | spacing/{}, {} | x{} | {} | {:.0} | {:.1} | {:.0} | {:.2} | {:.1}% | {:.1}% {} | {:.1}% | {:.1}% | {} / {} |",
             a.knob.rays,
             a.knob.cells,
+            a.knob.far,
             a.scale,
             a.levels,
             a.probes,
@@ -311,15 +336,16 @@ fn markdown(rows: &[Row], args: &FrontierArgs) -> String {
             summary_table(&mut md, title, &agg);
         }
     }
-    md.push_str("\n## Per case\n\n| case | set | rays | cells | spacing | probes | runtime MB | transport B/probe | bake s | open mean | open leaks | over-lit pixels |\n|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+    md.push_str("\n## Per case\n\n| case | set | rays | cells, far ratio | spacing | probes | runtime MB | transport B/probe | bake s | open mean | open leaks | over-lit pixels |\n|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
     for r in rows {
         let _ = writeln!(
             md,
-            "| {} | {} | {} | spacing/{} | {:.3} m (x{}) | {} | {:.1} | {:.0} | {:.2} | {:.2}% | {:.1}% | {} |",
+            "| {} | {} | {} | spacing/{}, {} | {:.3} m (x{}) | {} | {:.1} | {:.0} | {:.2} | {:.2}% | {:.1}% | {} |",
             r.case,
             r.set.label(),
             r.knob.rays,
             r.knob.cells,
+            r.knob.far,
             r.spacing,
             r.scale,
             r.probes,

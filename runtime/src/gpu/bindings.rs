@@ -66,6 +66,9 @@ pub(super) enum Binding {
     SurfaceGroups,
     SurfaceNear,
     GroupRadiance,
+    CoarseBricks,
+    CoarseChildren,
+    BrickMoments,
 }
 
 impl Binding {
@@ -116,6 +119,9 @@ impl Binding {
             "surface_groups" => Binding::SurfaceGroups,
             "surface_near" => Binding::SurfaceNear,
             "group_radiance" => Binding::GroupRadiance,
+            "coarse_bricks" => Binding::CoarseBricks,
+            "coarse_children" => Binding::CoarseChildren,
+            "brick_moments" => Binding::BrickMoments,
             _ => return None,
         })
     }
@@ -168,6 +174,9 @@ impl Binding {
             Binding::SurfaceGroups => b(&r.asset.surface_groups),
             Binding::SurfaceNear => b(&r.asset.surface_near),
             Binding::GroupRadiance => b(&r.state.group_radiance),
+            Binding::CoarseBricks => b(&r.asset.coarse_bricks),
+            Binding::CoarseChildren => b(&r.asset.coarse_children),
+            Binding::BrickMoments => b(&r.asset.brick_moments),
         }
     }
 

@@ -234,6 +234,7 @@ pub struct PrtRuntime {
     queue: wgpu::Queue,
     probe_count: u32,
     brick_count: u32,
+    coarse_count: u32,
     ray_count: u32,
     grid: prt_format::Grid,
     offset_scale: f32,
@@ -322,6 +323,7 @@ impl PrtRuntime {
             bricks: asset.bricks.len() as u32,
             probes: asset.probes.len() as u32,
             groups: asset.surface.group_surfels.len() as u32,
+            coarse: asset.coarse.bricks.len() as u32,
         };
         let pipelines = STAGES
             .iter()
@@ -333,6 +335,7 @@ impl PrtRuntime {
             queue: queue.clone(),
             probe_count: asset.probes.len() as u32,
             brick_count: asset.bricks.len() as u32,
+            coarse_count: asset.coarse.bricks.len() as u32,
             ray_count: asset.header.ray_count,
             grid: asset.header.grid,
             offset_scale: match &asset.factors {
@@ -483,7 +486,8 @@ impl PrtRuntime {
                 self.cache_parity
             },
             cache_capacity: self.cache_capacity,
-            _pad: [0; 2],
+            coarse_count: self.coarse_count,
+            _pad: 0,
         }
     }
 

@@ -64,6 +64,10 @@ pub struct AssetBuffers {
     /// Group count, then per group its near field (first entry, count), then the entries
     /// (`prt_format::surface::near_entry`).
     pub surface_near: wgpu::Buffer,
+    /// The coarse bricks, their bricks and the bricks' moments (`prt_format::coarse`).
+    pub coarse_bricks: wgpu::Buffer,
+    pub coarse_children: wgpu::Buffer,
+    pub brick_moments: wgpu::Buffer,
 }
 
 /// What the stages write and read back between updates, and the per-update uploads.
@@ -187,6 +191,18 @@ impl AssetBuffers {
                 "prt surface near",
                 bytemuck::cast_slice(&surface_near(asset)),
             )?,
+            coarse_bricks: upload(
+                "prt coarse bricks",
+                bytemuck::cast_slice(&asset.coarse.bricks),
+            )?,
+            coarse_children: upload(
+                "prt coarse children",
+                bytemuck::cast_slice(&asset.coarse.children),
+            )?,
+            brick_moments: upload(
+                "prt brick moments",
+                bytemuck::cast_slice(&asset.coarse.moments),
+            )?,
         })
     }
 }
@@ -202,6 +218,8 @@ impl StateBuffers {
     ) -> Result<StateBuffers, GpuError> {
         let none = wgpu::BufferUsages::empty();
         let n_bricks = asset.bricks.len() as u64;
+        // Radiance and dirty flags of the coarse bricks follow the bricks'.
+        let n_radiance = n_bricks + asset.coarse.bricks.len() as u64;
         let n_probes = asset.probes.len() as u64;
         let n_groups = asset.surface.group_surfels.len() as u64;
         let stride = u64::from(mask_stride);
@@ -213,7 +231,7 @@ impl StateBuffers {
         let copy_src = wgpu::BufferUsages::COPY_SRC;
         Ok(StateBuffers {
             brick_lights: alloc.zeroed("prt brick light masks", 8 * stride * n_bricks, none)?,
-            brick_dirty: alloc.zeroed("prt brick dirty", 4 * n_bricks, none)?,
+            brick_dirty: alloc.zeroed("prt brick dirty", 4 * n_radiance, none)?,
             brick_cache: alloc.storage(
                 "prt brick shadow-cache offsets",
                 bytemuck::cast_slice(&vec![NO_CACHE; 2 * asset.bricks.len()]),
@@ -226,7 +244,7 @@ impl StateBuffers {
                 4 * (stride + max_lights),
                 wgpu::BufferUsages::COPY_DST,
             )?,
-            brick_radiance: alloc.zeroed("prt brick radiance", 64 * n_bricks, none)?,
+            brick_radiance: alloc.zeroed("prt brick radiance", 64 * n_radiance, none)?,
             group_radiance: alloc.zeroed("prt group radiance", 16 * n_groups, none)?,
             near_radiance: alloc.zeroed("prt near radiance", 16 * n_groups, none)?,
             probe_dirty: alloc.zeroed("prt probe dirty", 4 * n_probes, none)?,

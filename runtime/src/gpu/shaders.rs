@@ -234,6 +234,36 @@ pub(crate) mod tests {
                 ],
             ),
             (
+                "CoarseBrick",
+                size_of::<prt_format::coarse::CoarseBrick>(),
+                vec![
+                    (
+                        "child_count",
+                        offset_of!(prt_format::coarse::CoarseBrick, child_count),
+                    ),
+                    (
+                        "weight",
+                        offset_of!(prt_format::coarse::CoarseBrick, weight),
+                    ),
+                    (
+                        "centroid",
+                        offset_of!(prt_format::coarse::CoarseBrick, centroid),
+                    ),
+                    (
+                        "inverse",
+                        offset_of!(prt_format::coarse::CoarseBrick, inverse),
+                    ),
+                ],
+            ),
+            (
+                "BrickMoments",
+                size_of::<prt_format::coarse::BrickMoments>(),
+                vec![(
+                    "moment",
+                    offset_of!(prt_format::coarse::BrickMoments, moment),
+                )],
+            ),
+            (
                 "BvhNode",
                 size_of::<prt_format::BvhNode>(),
                 vec![
@@ -353,6 +383,7 @@ pub(crate) mod tests {
                         "cache_capacity",
                         offset_of!(contract::Params, cache_capacity),
                     ),
+                    ("coarse_count", offset_of!(contract::Params, coarse_count)),
                 ],
             ),
         ];

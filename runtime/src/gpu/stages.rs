@@ -5,8 +5,8 @@
 //! in `bindings.rs` and its buffer in `resources.rs`.
 
 use prt_shaders::{
-    BOUNCE_SURFELS, BRICK_RADIANCE, CULL_LIGHTS, GATHER, GATHER_SUBGROUP, GATHER_TREE,
-    LIGHT_SAMPLE, MARK_PROBES, NEAR_RADIANCE, RELIGHT_SURFELS, SHADOW_RAYS, TYPES,
+    BOUNCE_SURFELS, BRICK_RADIANCE, COARSE_RADIANCE, CULL_LIGHTS, GATHER, GATHER_SUBGROUP,
+    GATHER_TREE, LIGHT_SAMPLE, MARK_PROBES, NEAR_RADIANCE, RELIGHT_SURFELS, SHADOW_RAYS, TYPES,
 };
 
 use super::bindings::{bind_groups, declared_bindings, Set};
@@ -36,6 +36,8 @@ pub(super) enum Dispatch {
     Bricks,
     /// A thread per near group of the surface lookup, every group in one dispatch.
     Groups,
+    /// A thread per coarse brick, every one in one dispatch.
+    Coarse,
     /// A thread per brick, one dispatch per surfel chunk (its bricks).
     ChunkBricks,
     /// A thread per surfel, one dispatch per surfel chunk (its surfels).
@@ -77,7 +79,7 @@ impl Stage {
 }
 
 /// Every stage, in dispatch order (the module docs of [`super`] say what each computes).
-pub(super) const STAGES: [Stage; 7] = [
+pub(super) const STAGES: [Stage; 8] = [
     // 1. Per brick: light masks of the changed lights, dirty bricks, shadow-ray cache room.
     Stage {
         label: "prt cull_lights",
@@ -114,7 +116,15 @@ pub(super) const STAGES: [Stage; 7] = [
         runs: |plan| plan.relight() || plan.bounce || plan.fixed_restart,
         bounces_only: false,
     },
-    // 5. Per near group of the surface lookup: what its near-field rays bring.
+    // 5. Per coarse brick over a relit brick: its radiance from its bricks'.
+    Stage {
+        label: "prt coarse_radiance",
+        wgsl: &[Part::File(COARSE_RADIANCE)],
+        dispatch: Dispatch::Coarse,
+        runs: |plan| plan.relight() || plan.bounce || plan.fixed_restart,
+        bounces_only: false,
+    },
+    // 6. Per near group of the surface lookup: what its near-field rays bring.
     Stage {
         label: "prt near_radiance",
         wgsl: &[Part::File(NEAR_RADIANCE)],
@@ -122,7 +132,7 @@ pub(super) const STAGES: [Stage; 7] = [
         runs: |plan| plan.relight() || plan.bounce || plan.fixed_restart,
         bounces_only: false,
     },
-    // 6. Per probe: flag the probes to gather.
+    // 7. Per probe: flag the probes to gather.
     Stage {
         label: "prt mark_probes",
         wgsl: &[Part::File(MARK_PROBES)],
@@ -130,7 +140,7 @@ pub(super) const STAGES: [Stage; 7] = [
         runs: |plan| plan.lights_changed || plan.sky_changed || plan.bounce,
         bounces_only: false,
     },
-    // 7. A workgroup per probe of the window: SH9 RGB into the volume textures.
+    // 8. A workgroup per probe of the window: SH9 RGB into the volume textures.
     Stage {
         label: "prt gather",
         wgsl: &[Part::File(GATHER), Part::Reduction],
@@ -147,6 +157,8 @@ pub(super) struct Counts {
     pub(super) probes: u32,
     /// Near groups of the surface lookup.
     pub(super) groups: u32,
+    /// Coarse bricks (`prt_format::coarse`).
+    pub(super) coarse: u32,
 }
 
 /// A stage's pipeline and its bind-group sets.
@@ -233,6 +245,7 @@ fn sets(dispatch: Dispatch, r: &Resources, counts: Counts) -> Vec<(Set, u32)> {
     match dispatch {
         Dispatch::Bricks => vec![(Set::Whole, counts.bricks)],
         Dispatch::Groups => vec![(Set::Whole, counts.groups)],
+        Dispatch::Coarse => vec![(Set::Whole, counts.coarse)],
         Dispatch::ChunkBricks => surfel_chunks(|s| s.brick_end - s.brick_begin),
         Dispatch::ChunkSurfels => surfel_chunks(|s| s.surfel_end - s.surfel_begin),
         Dispatch::ChunkProbes => factor_chunks(counts.probes),
