@@ -3,14 +3,16 @@
 // the Light struct of types.wgsl.
 
 // Unshadowed irradiance of a light at p with normal n, the unit direction towards the light and
-// its distance (INFINITE_DISTANCE for directional lights). Twin of PreparedLight::irradiance.
+// its distance (INFINITE_DISTANCE for directional lights), the inverse square softened to
+// 1 / (d^2 + spread_sq) (0 for a point; a surfel's cell for surfels). Twin of
+// PreparedLight::irradiance_over.
 struct LightSample {
     irradiance: vec3<f32>,
     to_light: vec3<f32>,
     distance: f32,
 }
 
-fn light_sample(light: Light, p: vec3<f32>, n: vec3<f32>) -> LightSample {
+fn light_sample(light: Light, p: vec3<f32>, n: vec3<f32>, spread_sq: f32) -> LightSample {
     var s: LightSample;
     if light.kind == LIGHT_DIRECTIONAL {
         let l = -light.direction;
@@ -29,7 +31,7 @@ fn light_sample(light: Light, p: vec3<f32>, n: vec3<f32>) -> LightSample {
     let cosine = max(dot(n, l), 0.0);
     let x = d2 * light.inv_range_sq;
     let window = clamp(1.0 - x * x, 0.0, 1.0);
-    var e = cosine * window * window / max(d2, MIN_DISTANCE_SQ);
+    var e = cosine * window * window / max(d2 + spread_sq, MIN_DISTANCE_SQ);
     if light.kind == LIGHT_SPOT {
         let c = clamp((dot(light.direction, -l) - light.cos_outer) * light.cone_scale, 0.0, 1.0);
         e = e * c * c;

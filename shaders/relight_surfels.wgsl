@@ -76,7 +76,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
             // The light's slot among the brick's previous lights, if it was one.
             let r_old = rank_old + countOneBits(old_bits & (bit - 1u));
             let cached = (old_bits & bit) != 0u && (moved_bits & bit) == 0u && old_at != NO_CACHE;
-            let ls = light_sample(lights[i], surfel.position, surfel.normal);
+            let ls = light_sample(lights[i], surfel.position, surfel.normal, params.surfel_spread_sq);
             var unshadowed = false;
             if cached {
                 unshadowed = ((shadow_cache[old_first + r_old / 32u] >> (r_old % 32u)) & 1u) != 0u;

@@ -139,7 +139,7 @@ fn uv_of(in: VertexOut, sampler_bits: u32) -> vec2<f32> {
 
 // One light at a surface point, shadowed by an any-hit ray through the BVH.
 fn direct_light(light: Light, p: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
-    let ls = light_sample(light, p, n);
+    let ls = light_sample(light, p, n, 0.0);
     if max(max(ls.irradiance.x, ls.irradiance.y), ls.irradiance.z) <= 0.0 {
         return vec3<f32>(0.0);
     }

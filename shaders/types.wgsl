@@ -174,7 +174,8 @@ struct Params {
     cache_capacity: u32,
     // Coarse bricks (prt_format::coarse), numbered after the brick_count bricks.
     coarse_count: u32,
-    pad0: u32,
+    // What a surfel's inverse square is softened by (prt_runtime::lights::surfel_spread_sq).
+    surfel_spread_sq: f32,
 }
 
 const PI: f32 = 3.14159265358979;

@@ -192,7 +192,8 @@ pub struct Params {
     pub cache_capacity: u32,
     /// Coarse bricks (`prt_format::coarse`), numbered after the `brick_count` bricks.
     pub coarse_count: u32,
-    pub _pad: u32,
+    /// What a surfel's inverse square is softened by (`crate::lights::surfel_spread_sq`).
+    pub surfel_spread_sq: f32,
 }
 const _: () = assert!(std::mem::size_of::<Params>() == 112);
 

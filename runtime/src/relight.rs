@@ -21,7 +21,9 @@ use prt_format::{Asset, BRICK_BACKFACE};
 use rayon::prelude::*;
 
 use crate::contract::MAX_STACK;
-use crate::lights::{brick_normal_bounds, CullReason, NormalBounds, PreparedLight};
+use crate::lights::{
+    brick_normal_bounds, surfel_spread_sq, CullReason, NormalBounds, PreparedLight,
+};
 use crate::rig::Lighting;
 use crate::settings::{LookupSettings, MAX_BOUNCES};
 use crate::shadow_rays::{occluded, ray_offset};
@@ -215,6 +217,7 @@ impl<'a> CpuRelighter<'a> {
     /// Step 1: direct irradiance at every surfel (zero on back-face bricks).
     pub fn direct_irradiance(&self, lights: &[PreparedLight]) -> (Vec<[f32; 3]>, RelightStats) {
         let asset = self.asset;
+        let spread_sq = surfel_spread_sq(asset.header.settings.cell_size);
         let per_brick: Vec<(Vec<[f32; 3]>, RelightStats)> = asset
             .bricks
             .par_iter()
@@ -242,7 +245,7 @@ impl<'a> CpuRelighter<'a> {
                             for (s, out) in surfels.iter().zip(e.iter_mut()) {
                                 let p = Vec3::from(s.position);
                                 let n = Vec3::from(s.normal);
-                                let (el, l, dist) = light.irradiance(p, n);
+                                let (el, l, dist) = light.irradiance_over(p, n, spread_sq);
                                 if el.max_element() <= 0.0 {
                                     continue;
                                 }

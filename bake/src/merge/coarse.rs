@@ -114,12 +114,14 @@ pub fn build(
     let groups = Groups::of(keys, levels.min(MAX_LEVEL));
     // Per level and group, its number once used (a group the same as below is never used:
     // its rows resolve to the group below).
-    let mut numbers: Vec<Vec<u32>> = groups.members.iter().map(|m| vec![NONE; m.len()]).collect();
+    let mut numbers: Vec<Vec<u32>> = (groups.levels.iter())
+        .map(|l| vec![NONE; l.starts.len() - 1])
+        .collect();
     let mut coarse = CoarseBricks::default();
     let mut frames = Vec::new();
     let mut wanted: Vec<(u32, u32)> = Vec::new();
     for (b, &bits) in used.iter().enumerate() {
-        for level in 1..=groups.levels() {
+        for level in 1..=groups.depth() {
             if bits & (1 << level) != 0 {
                 if let Some(at) = groups.resolve(level, b as u32) {
                     wanted.push(at);
@@ -130,7 +132,7 @@ pub fn build(
     wanted.sort_unstable();
     wanted.dedup();
     for (level, g) in wanted {
-        let members = &groups.members[level as usize - 1][g as usize];
+        let members = groups.levels[level as usize - 1].members(g);
         let first_child = coarse.children.len();
         let (brick, frame) = coarse_brick(members, fits, level, first_child);
         coarse.children.extend_from_slice(members);
@@ -141,7 +143,7 @@ pub fn build(
     if !coarse.bricks.is_empty() {
         coarse.moments = fits.iter().map(moments).collect();
     }
-    let targets = (1..=groups.levels())
+    let targets = (1..=groups.depth())
         .map(|level| {
             (0..n)
                 .map(|b| match groups.resolve(level, b) {
@@ -166,23 +168,33 @@ const NONE: u32 = u32::MAX;
 
 /// Per level, the bricks grouped by coarse cell (in order of cell), and each brick's group.
 struct Groups {
-    /// `members[l - 1][g]`: group `g`'s bricks at level `l`, ascending.
-    members: Vec<Vec<Vec<u32>>>,
-    /// `group_of[l - 1][b]`: brick `b`'s group at level `l`.
-    group_of: Vec<Vec<u32>>,
-    /// `same_below[l - 1][g]`: the group has the same bricks as a group of level `l - 1` (or,
-    /// at level 1, is one brick).
-    same_below: Vec<Vec<bool>>,
+    levels: Vec<Level>,
+}
+
+/// One level's groups, as runs of one array (no vector per group: a level of a million bricks
+/// has about as many groups).
+struct Level {
+    /// The bricks in order of cell, then index.
+    order: Vec<u32>,
+    /// Group `g` is `order[starts[g]..starts[g + 1]]`.
+    starts: Vec<u32>,
+    /// Per brick, its group.
+    group_of: Vec<u32>,
+    /// Per group, whether it has the same bricks as a group of the level below (or, at level
+    /// 1, is one brick).
+    same_below: Vec<bool>,
+}
+
+impl Level {
+    fn members(&self, g: u32) -> &[u32] {
+        &self.order[self.starts[g as usize] as usize..self.starts[g as usize + 1] as usize]
+    }
 }
 
 impl Groups {
     fn of(keys: &[Key], levels: u32) -> Groups {
         let n = keys.len() as u32;
-        let mut out = Groups {
-            members: Vec::new(),
-            group_of: Vec::new(),
-            same_below: Vec::new(),
-        };
+        let mut out = Groups { levels: Vec::new() };
         for level in 1..=levels {
             let cell = |b: u32| {
                 let k = keys[b as usize];
@@ -191,34 +203,39 @@ impl Groups {
             let mut order: Vec<u32> = (0..n).collect();
             order.par_sort_unstable_by_key(|&b| (cell(b), b));
             let mut group_of = vec![0u32; n as usize];
-            let mut members = Vec::new();
+            let mut starts = vec![0u32];
             let mut same_below = Vec::new();
+            let below = |b: u32| out.levels.last().map_or(b, |l| l.group_of[b as usize]);
             for group in order.chunk_by(|&a, &b| cell(a) == cell(b)) {
-                let below = |b: u32| out.group_of.last().map_or(b, |g| g[b as usize]);
                 same_below.push(group.iter().all(|&b| below(b) == below(group[0])));
                 for &b in group {
-                    group_of[b as usize] = members.len() as u32;
+                    group_of[b as usize] = starts.len() as u32 - 1;
                 }
-                members.push(group.to_vec());
+                starts.push(starts[starts.len() - 1] + group.len() as u32);
             }
-            out.members.push(members);
-            out.group_of.push(group_of);
-            out.same_below.push(same_below);
+            out.levels.push(Level {
+                order,
+                starts,
+                group_of,
+                same_below,
+            });
         }
         out
     }
 
-    fn levels(&self) -> u32 {
-        self.members.len() as u32
+    /// Levels grouped.
+    fn depth(&self) -> u32 {
+        self.levels.len() as u32
     }
 
     /// The coarse brick brick `b`'s level-`level` rows read: the lowest level's group of the
     /// same bricks, or `None` when that is `b` alone.
     fn resolve(&self, level: u32, b: u32) -> Option<(u32, u32)> {
-        let mut level = level.min(self.levels());
+        let mut level = level.min(self.depth());
         while level >= 1 {
-            let g = self.group_of[level as usize - 1][b as usize];
-            if !self.same_below[level as usize - 1][g as usize] {
+            let l = &self.levels[level as usize - 1];
+            let g = l.group_of[b as usize];
+            if !l.same_below[g as usize] {
                 return Some((level, g));
             }
             level -= 1;

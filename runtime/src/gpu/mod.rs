@@ -235,6 +235,7 @@ pub struct PrtRuntime {
     probe_count: u32,
     brick_count: u32,
     coarse_count: u32,
+    surfel_spread_sq: f32,
     ray_count: u32,
     grid: prt_format::Grid,
     offset_scale: f32,
@@ -336,6 +337,7 @@ impl PrtRuntime {
             probe_count: asset.probes.len() as u32,
             brick_count: asset.bricks.len() as u32,
             coarse_count: asset.coarse.bricks.len() as u32,
+            surfel_spread_sq: crate::lights::surfel_spread_sq(asset.header.settings.cell_size),
             ray_count: asset.header.ray_count,
             grid: asset.header.grid,
             offset_scale: match &asset.factors {
@@ -487,7 +489,7 @@ impl PrtRuntime {
             },
             cache_capacity: self.cache_capacity,
             coarse_count: self.coarse_count,
-            _pad: 0,
+            surfel_spread_sq: self.surfel_spread_sq,
         }
     }
 

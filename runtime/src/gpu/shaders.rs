@@ -384,6 +384,10 @@ pub(crate) mod tests {
                         offset_of!(contract::Params, cache_capacity),
                     ),
                     ("coarse_count", offset_of!(contract::Params, coarse_count)),
+                    (
+                        "surfel_spread_sq",
+                        offset_of!(contract::Params, surfel_spread_sq),
+                    ),
                 ],
             ),
         ];
