@@ -51,6 +51,9 @@ pub struct GpuArgs {
     /// Surfel cell size, fixed so that only the probe count changes between rows.
     #[arg(long, default_value_t = 0.05)]
     cell_size: f32,
+    /// Far hits in coarse bricks from this many brick sizes (the bake's `--far-ratio`; 0: none).
+    #[arg(long, default_value_t = 0.0)]
+    far_ratio: f32,
     #[command(flatten)]
     out: Out,
 }
@@ -64,7 +67,7 @@ pub fn run(args: GpuArgs) -> Result<()> {
         &lighting,
         &args.spacings,
         args.rays,
-        args.cell_size,
+        (args.cell_size, args.far_ratio),
     )?;
     println!("{gpu}");
     // Cost against light count, on the same scene (`prt-bench lights` alone).
@@ -89,6 +92,7 @@ struct Setup<'a> {
     scene: &'a Path,
     rays: u32,
     cell: f32,
+    far_ratio: f32,
     runtime: RuntimeSettings,
     lit: &'a Lighting,
     moved: Lighting,
@@ -111,7 +115,13 @@ struct Row {
 /// probe counts, the gather alone, the update against the prior art's
 /// scheme (every probe relights its own unmerged surfels), an update when nothing changed, and a
 /// multi-bounce update (the volume fed back into every surfel).
-pub fn gpu(scene: &Path, a: &Lighting, spacings: &[f32], rays: u32, cell: f32) -> Result<String> {
+pub fn gpu(
+    scene: &Path,
+    a: &Lighting,
+    spacings: &[f32],
+    rays: u32,
+    (cell, far_ratio): (f32, f32),
+) -> Result<String> {
     let (device, queue, info) = headless_device()?;
     let sky = |c: f32| Lighting {
         rig: a.rig.clone(),
@@ -123,7 +133,8 @@ pub fn gpu(scene: &Path, a: &Lighting, spacings: &[f32], rays: u32, cell: f32) -
         l.direction[0] += 0.05;
     }
     let mut md = format!(
-        "Adapter: {} ({:?}), subgroups: {}. Scene {}, {rays} rays per probe, cell size {cell} m. \
+        "Adapter: {} ({:?}), subgroups: {}. Scene {}, {rays} rays per probe, cell size {cell} m, \
+         far ratio {far_ratio}. \
          Times are wall-clock per update (record, submit, wait); lavapipe runs on the CPU, so \
          compare ratios, not absolute times.\n\n",
         info.name,
@@ -137,6 +148,7 @@ pub fn gpu(scene: &Path, a: &Lighting, spacings: &[f32], rays: u32, cell: f32) -
         scene,
         rays,
         cell,
+        far_ratio,
         runtime: RuntimeSettings::default().with_room_for(a.rig.lights.len()),
         lit: a,
         moved,
@@ -183,6 +195,7 @@ impl Setup<'_> {
             rays: self.rays,
             spacing: Some(spacing),
             cell_size: Some(self.cell),
+            far_ratio: self.far_ratio,
             ..BakeSettings::default()
         };
         let (asset, _) = prt_bake::bake(self.scene, &settings, &NoProgress)?;
