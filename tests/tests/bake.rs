@@ -741,7 +741,7 @@ fn bad_settings_are_errors_with_the_value() {
         "{e}"
     );
 
-    let cases: [(BakeSettings, &str); 5] = [
+    let cases: [(BakeSettings, &str); 7] = [
         (
             BakeSettings {
                 spacing: Some(0.0),
@@ -770,6 +770,20 @@ fn bad_settings_are_errors_with_the_value() {
                 ..rays(64)
             },
             "threads = 0",
+        ),
+        (
+            BakeSettings {
+                far_ratio: -2.0,
+                ..rays(64)
+            },
+            "far_ratio = -2",
+        ),
+        (
+            BakeSettings {
+                far_ratio: f32::NAN,
+                ..rays(64)
+            },
+            "far_ratio = NaN",
         ),
     ];
     for (settings, value) in cases {
