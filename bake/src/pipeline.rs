@@ -75,10 +75,12 @@ pub(crate) fn bake_in_pool(
         folder,
         far_levels,
     } = traced;
-    let levels = far_field(settings, cell_size).level_at(min.distance(max));
-    let far = (levels, &far_levels[..]);
-    let (mut bricked, coarse, factors) =
-        bricks_and_tables((folder, tables), carried, settings, (cell_size, far))?;
+    let (mut bricked, coarse, factors) = bricks_and_tables(
+        (folder, tables),
+        carried,
+        settings,
+        (cell_size, &far_levels),
+    )?;
     lap(&mut report, "bricks", Some("surface"));
 
     let probe_positions: Vec<Vec3> = positions.iter().map(|&(p, _)| p).collect();
@@ -309,7 +311,7 @@ fn trace_stage(
         settings.merge_normal_cos,
         Vec3::splat(-0.5 * cell_size),
     );
-    let far = far_field(settings, cell_size);
+    let far = coarse::FarField::of(settings.far_ratio, cell_size);
     stream::trace_and_fold(
         probe_trace.positions.len(),
         &|index| probe_trace.trace(index),
@@ -324,21 +326,6 @@ fn trace_stage(
         },
         progress,
     )
-}
-
-/// Where the bake sends far hits ([`coarse::FarField`], origin left for each probe): nowhere
-/// without merging (every hit is its own brick) or with a `far_ratio` of 0.
-fn far_field(settings: &BakeSettings, cell_size: f32) -> coarse::FarField {
-    let brick_size = 4.0 * cell_size;
-    coarse::FarField {
-        origin: Vec3::ZERO,
-        anchor: Vec3::splat(-0.5 * cell_size),
-        brick_size,
-        near: match cell_size > 0.0 {
-            true => settings.far_ratio * brick_size,
-            false => 0.0,
-        },
-    }
 }
 
 /// The asset's header: what was baked (`scene_path`, as `loaded`) on which `grid`, how
@@ -486,13 +473,16 @@ fn bricks_and_tables(
     (folder, tables): (fold::BrickFolder, factors::Rows),
     carried: factors::Carried,
     settings: &BakeSettings,
-    (cell_size, (levels, far_levels)): (f32, (u32, &[u8])),
+    (cell_size, far_levels): (f32, &[u8]),
 ) -> Result<(fold::Bricked, CoarseBricks, Factors), BakeError> {
     let (bricked, remap) = folder.finish();
     let mut used = vec![0u8; bricked.bricks.len()];
     for (&b, &l) in remap.iter().zip(far_levels) {
         used[b as usize] |= l;
     }
+    // As many levels as the farthest row's (none without far rows).
+    let levels = 8 - used.iter().fold(0u8, |all, &l| all | l).leading_zeros();
+    let levels = levels.saturating_sub(1);
     let (coarse, placement) = coarse::build(&bricked.keys, &bricked.fits, (levels, &used));
     let u8_rows = settings.transfer_precision == TransferPrecision::U8;
     let all = bricked.bricks.len() + coarse.bricks.len();

@@ -213,7 +213,13 @@ fn fold_block(block: Block, out: &mut Traced, per_probe: &PerProbe) -> Result<()
         })
         .collect();
     for (position, r, rows, depth) in finished {
-        for (brick, level) in rows.far_rows() {
+        // Rows carry levels only when far hits have somewhere to go (unmerged rows use every
+        // bit of their brick word: up to 2^32 - 1 bricks).
+        let far_rows = match keep.far.is_on() {
+            true => rows.far_rows(),
+            false => Vec::new(),
+        };
+        for (brick, level) in far_rows {
             if brick >= out.far_levels.len() {
                 out.far_levels.resize(brick + 1, 0);
             }

@@ -312,8 +312,8 @@ fn sample(
 /// The asset's bytes an engine keeps at runtime: every array section of `prt_format::Summary`
 /// (the in-memory sizes `prt inspect` prints), since the GPU runtime uploads them all (probes,
 /// sky mask and transfer, visibility maps and factors for the gather; bricks and surfels for
-/// the direct light; BVH and triangles for its shadow rays; the surface lookup's terms). The
-/// file adds a header and a few bytes of lengths per section.
+/// the direct light; coarse bricks; BVH and triangles for its shadow rays; the surface
+/// lookup's terms). The file adds a header and a few bytes of lengths per section.
 fn runtime_bytes(summary: &Summary) -> u64 {
     let s = &summary.section_bytes;
     s.probes
@@ -322,6 +322,7 @@ fn runtime_bytes(summary: &Summary) -> u64 {
         + s.probe_depth
         + s.factors
         + s.bricks
+        + s.coarse
         + s.surfels
         + s.bvh_nodes
         + s.triangles

@@ -97,6 +97,15 @@ fn header(h: &Header) -> Result<(), FormatError> {
             format!("counts {:?}", g.counts),
         ));
     }
+    // The runtime lights surfels with it (`prt_runtime::lights::surfel_spread_sq`).
+    let cell = h.settings.cell_size;
+    if !(cell >= 0.0 && (cell * cell).is_finite()) {
+        return Err(FormatError::invalid(
+            "header.settings",
+            0,
+            format!("cell_size {cell} (expected at least 0, its square finite)"),
+        ));
+    }
     if h.ray_count == 0 || h.ray_count > MAX_RAYS {
         return Err(FormatError::invalid(
             "header",

@@ -435,6 +435,15 @@ fn structurally_broken_assets_are_invalid() {
         a.header.grid.counts[0] += 1
     });
     assert_invalid("zero ray count", "header", |a| a.header.ray_count = 0);
+    assert_invalid("NaN cell size", "header.settings", |a| {
+        a.header.settings.cell_size = f32::NAN
+    });
+    assert_invalid("negative cell size", "header.settings", |a| {
+        a.header.settings.cell_size = -0.5
+    });
+    assert_invalid("cell size whose square overflows", "header.settings", |a| {
+        a.header.settings.cell_size = 1e20
+    });
     assert_invalid("zero spacing", "header.grid", |a| {
         a.header.grid.spacing = 0.0
     });

@@ -107,6 +107,14 @@ fn gpu_equals_cpu_on_cornell() {
             },
             VolumeFormat::F32,
         ),
+        (
+            BakeSettings {
+                far_ratio: 2.0,
+                transfer_precision: prt_format::TransferPrecision::F16,
+                ..BakeSettings::default()
+            },
+            VolumeFormat::F32,
+        ),
     ] {
         let asset = bake(&scene, &settings);
         assert_eq!(

@@ -29,8 +29,34 @@ pub struct FarField {
     pub near: f32,
 }
 
+/// Levels are kept as bits 1..=7 of a byte per brick (`stream::Traced::far_levels`).
+const _: () = assert!(MAX_LEVEL <= 7);
+
 impl FarField {
+    /// Where a bake with `far_ratio` and surfel cells of `cell_size` sends far hits (origin
+    /// left for each probe): nowhere without merging (every hit its own brick) or with a
+    /// ratio of 0. The brick lattice is the fold's, half a cell off the origin
+    /// ([`crate::merge::fold::BrickFolder::new`]).
+    pub fn of(far_ratio: f32, cell_size: f32) -> FarField {
+        let brick_size = 4.0 * cell_size;
+        FarField {
+            origin: Vec3::ZERO,
+            anchor: Vec3::splat(-0.5 * cell_size),
+            brick_size,
+            near: match cell_size > 0.0 {
+                true => far_ratio * brick_size,
+                false => 0.0,
+            },
+        }
+    }
+
+    /// Whether any hit can go to a coarse brick.
+    pub fn is_on(&self) -> bool {
+        self.near > 0.0
+    }
+
     /// No coarse levels: every hit is a level-0 hit.
+    #[cfg(test)]
     pub fn off() -> FarField {
         FarField {
             origin: Vec3::ZERO,
@@ -86,6 +112,12 @@ pub struct CoarsePlacement {
 }
 
 impl CoarsePlacement {
+    /// Whether rows carry levels: some coarse level was made (never for unmerged bakes,
+    /// whose rows' brick words use every bit).
+    pub fn has_levels(&self) -> bool {
+        !self.targets.is_empty()
+    }
+
     /// What a level-`level` row of (final) brick `brick` reads, and the centroid and scale of
     /// its offsets, or `None` for the brick itself (level 0, or a level that has no coarse
     /// brick over it of more than itself).

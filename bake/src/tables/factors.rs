@@ -87,8 +87,10 @@ pub fn probe_rows(
     ProbeRows::of(rows, precision, basis.len() as u32)
 }
 
-/// Where a row of sums keeps its level ([`crate::merge::coarse`]) above its provisional brick
-/// (provisional bricks are below [`crate::merge::index::MAX_BRICKS`], 2^28).
+/// Where a row of sums keeps its level ([`crate::merge::coarse`]) above its provisional brick:
+/// far hits go to coarse bricks only in merged bakes, whose provisional bricks are below
+/// [`crate::merge::index::MAX_BRICKS`], 2^28 (an unmerged bake's use all 32 bits and carry no
+/// level: [`Placement::sums_brick`]).
 const LEVEL_SHIFT: u32 = 28;
 const BRICK_BITS: u32 = (1 << LEVEL_SHIFT) - 1;
 
@@ -355,6 +357,16 @@ impl Placement<'_> {
         let (b, centroid) = self.placed[brick];
         self.coarse.place(b, level).unwrap_or((b, centroid, 1.0))
     }
+
+    /// A row of sums' provisional brick and level: the word as it is unless rows carry
+    /// levels (an unmerged bake's provisional bricks use all 32 bits).
+    #[inline]
+    fn sums_brick(&self, word: u32) -> (usize, u32) {
+        match self.coarse.has_levels() {
+            true => brick_and_level(word),
+            false => (word as usize, 0),
+        }
+    }
 }
 
 /// u8 rows encoded into `out` (one factor each): bricks renumbered, offsets from the bricks'
@@ -364,11 +376,13 @@ fn encode_u8(rows: &[RowU8], out: &mut [FactorU8], at: Placement, offset_scale: 
         at.placed.len() <= U8_MAX_BRICK as usize + 1,
         "every provisional brick fits the row's brick field"
     );
-    // By brick; a split row's parts (the only factors of one brick) full ones first, as they
-    // were split: the key is the final brick above the rays' complement. The rows are sorted
-    // as integers, key above row index (distinct, so any sort gives one order; only a split
-    // row's full parts share a key, and they are equal byte for byte), then placed in that
-    // order: cheaper than sorting the 16-byte factors by their key.
+    // By brick; a split row's parts full ones first, as they were split: the key is the final
+    // brick above the rays' complement. The rows are sorted as integers, key above row index
+    // (distinct, so any sort gives one order), then placed in that order: cheaper than sorting
+    // the 16-byte factors by their key. A brick has several factors when a row was split, and
+    // with coarse bricks also when a near row and a far row, or far rows of two levels, end on
+    // the same brick or coarse brick (a coarse cell of one brick is that brick); equal keys then
+    // keep the rows' order.
     const _: () = assert!(U8_MAX_RAYS == 0xff);
     prefetch_placed(rows.iter().map(RowU8::brick), at.placed);
     let located: Vec<(u32, Vec3, f32)> = rows
@@ -502,7 +516,7 @@ fn prefetch_placed(bricks: impl Iterator<Item = usize>, placed: &[Placed]) {
 
 /// Rows of sums finished ([`finish`]) and encoded into `out` by `of`, one factor each.
 fn encode_sums<T>(rows: &[RowSums], out: &mut [T], at: Placement, of: fn(&FactorRow) -> T) {
-    prefetch_placed(rows.iter().map(|w| brick_and_level(w[0]).0), at.placed);
+    prefetch_placed(rows.iter().map(|w| at.sums_brick(w[0]).0), at.placed);
     let mut rows: Vec<FactorRow> = rows.iter().map(from_words).collect();
     finish(&mut rows, at);
     for (f, row) in out.iter_mut().zip(&rows) {
@@ -515,7 +529,7 @@ fn encode_sums<T>(rows: &[RowSums], out: &mut [T], at: Placement, of: fn(&Factor
 /// `prt_format::FactorF32`).
 fn finish(rows: &mut [FactorRow], at: Placement) {
     for row in rows.iter_mut() {
-        let (brick, level) = brick_and_level(row.0);
+        let (brick, level) = at.sums_brick(row.0);
         let (b, centroid, scale) = at.locate(brick, level);
         row.0 = b;
         row.3 = ((Vec3::from(row.3) / row.1 as f32 - centroid) / scale).to_array();

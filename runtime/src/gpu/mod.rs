@@ -21,11 +21,15 @@
 //! 4. **brick_radiance** (per brick, per surfel chunk; for a dirty brick, or every front-face
 //!    brick when a fixed bounce count restarts): mean and gradient of the brick's radiance, direct plus bounce,
 //!    and the mean radiance of each of its near groups (the surface lookup's, `crate::surface`).
-//! 5. **near_radiance** (per near group, every group; when brick_radiance ran): what the
+//! 5. **coarse_radiance** (per coarse brick, every one; when brick_radiance ran; assets baked
+//!    with `--far-ratio` only): a coarse brick with a dirty brick is dirty, and its mean and
+//!    gradient are fitted from its bricks' (`prt_format::coarse`).
+//! 6. **near_radiance** (per near group, every group; when brick_radiance ran): what the
 //!    group's near-field rays bring, for `sample_irradiance`'s surface terms.
-//! 6. **mark_probes** (per probe, per factor chunk): probes with a factor on a dirty brick (or all, when the sky
-//!    changed, a bounce began or a fixed bounce count restarted) are flagged for gathering.
-//! 7. **gather** (one workgroup per probe of this update's window, per factor chunk): the probe's factors and sky
+//! 7. **mark_probes** (per probe, per factor chunk): probes with a factor on a dirty brick or
+//!    coarse brick (or all, when the sky changed, a bounce began or a fixed bounce count
+//!    restarted) are flagged for gathering.
+//! 8. **gather** (one workgroup per probe of this update's window, per factor chunk): the probe's factors and sky
 //!    term reduced into SH9 RGB (subgroup adds where the adapter has them, a shared-memory tree
 //!    otherwise), written with its validity into the seven volume textures at once.
 //!
