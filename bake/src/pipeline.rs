@@ -18,7 +18,7 @@ use prt_scene::Scene;
 use crate::accel::bvh;
 use crate::merge::{coarse, fold};
 use crate::surface_terms;
-use crate::tables::factors;
+use crate::tables::{encode, factors};
 use crate::{
     diagnostics, dilate, offset, probes, stream, trace, BakeError, BakeReport, BakeSettings,
     Progress,
@@ -63,7 +63,7 @@ pub(crate) fn bake_in_pool(
     let scene = &loaded.scene;
     let valid = validity(&traced.rays, settings, &built, scene, &mut report);
     let (from, lens) = carried_layout(&grid, &valid, settings, &traced.rows)?;
-    let carried = factors::Carried {
+    let carried = encode::Carried {
         from: &from,
         lens: &lens,
     };
@@ -467,11 +467,11 @@ fn load(
 }
 
 /// The bricks stage: numbers the bricks and finishes their surfels, then encodes the factor
-/// tables the probes carry into the asset's table ([`factors::encode_tables`]), freeing the
+/// tables the probes carry into the asset's table ([`encode::encode_tables`]), freeing the
 /// rows as it goes; fails when u8 factors cannot address the bricks.
 fn bricks_and_tables(
     (folder, tables): (fold::BrickFolder, factors::Rows),
-    carried: factors::Carried,
+    carried: encode::Carried,
     settings: &BakeSettings,
     (cell_size, far_levels): (f32, &[u8]),
 ) -> Result<(fold::Bricked, CoarseBricks, Factors), BakeError> {
@@ -499,7 +499,7 @@ fn bricks_and_tables(
     }
     let encoding = (settings.transfer_precision, 4.0 * cell_size);
     let numbering = (&remap[..], &bricked.bricks[..], &placement);
-    let factors = factors::encode_tables(tables, carried, numbering, encoding)?;
+    let factors = encode::encode_tables(tables, carried, numbering, encoding)?;
     Ok((bricked, coarse, factors))
 }
 
@@ -568,7 +568,7 @@ fn carried_layout(
 fn assemble_probes(
     traced: &[trace::ProbeRays],
     positions: &[(Vec3, bool)],
-    carried: factors::Carried,
+    carried: encode::Carried,
 ) -> Assembled {
     let mut probes = Vec::with_capacity(traced.len());
     let mask_words = traced.first().map_or(0, |r| r.sky_mask.len());
