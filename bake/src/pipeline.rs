@@ -311,7 +311,7 @@ fn trace_stage(
         settings.merge_normal_cos,
         Vec3::splat(-0.5 * cell_size),
     );
-    let far = coarse::FarField::of(settings.far_ratio, cell_size);
+    let far = coarse::FarField::of(settings.far_ratio, folder.lattice());
     stream::trace_and_fold(
         probe_trace.positions.len(),
         &|index| probe_trace.trace(index),
@@ -480,10 +480,7 @@ fn bricks_and_tables(
     for (&b, &l) in remap.iter().zip(far_levels) {
         used[b as usize] |= l;
     }
-    // As many levels as the farthest row's (none without far rows).
-    let levels = 8 - used.iter().fold(0u8, |all, &l| all | l).leading_zeros();
-    let levels = levels.saturating_sub(1);
-    let (coarse, placement) = coarse::build(&bricked.keys, &bricked.fits, (levels, &used));
+    let (coarse, placement) = coarse::build(&bricked.keys, &bricked.fits, &used);
     let u8_rows = settings.transfer_precision == TransferPrecision::U8;
     let all = bricked.bricks.len() + coarse.bricks.len();
     if u8_rows && all > U8_MAX_BRICK as usize + 1 {

@@ -42,10 +42,9 @@ pub struct AccuracyArgs {
         default_value = "64,128,256,512,1024,2048,4096"
     )]
     pub rays: Vec<u32>,
-    /// Coarse bricks for hits this many brick sizes away and farther (0: none) [default: the
-    /// bake's].
-    #[arg(long)]
-    pub far_ratio: Option<f32>,
+    /// Coarse bricks for hits this many brick sizes away and farther (0: none).
+    #[arg(long, default_value_t = BakeSettings::default().far_ratio)]
+    pub far_ratio: f32,
     /// Bakes per setting; the least time is reported (a bake of a small scene lasts
     /// milliseconds, which a busy machine can double).
     #[arg(long, default_value_t = 3)]
@@ -113,7 +112,7 @@ pub fn run(args: AccuracyArgs) -> Result<()> {
     let base = BakeSettings {
         spacing: args.spacing,
         bounds: args.bounds,
-        far_ratio: args.far_ratio.unwrap_or(BakeSettings::default().far_ratio),
+        far_ratio: args.far_ratio,
         ..BakeSettings::default()
     };
     let rows = sweep(&args, &lighting, &reference, &base)?;

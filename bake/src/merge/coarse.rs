@@ -14,7 +14,7 @@ use prt_format::coarse::{BrickMoments, CoarseBrick, CoarseBricks, MAX_LEVEL};
 use rayon::prelude::*;
 
 use crate::merge::fold::{regularised, BrickFit};
-use crate::merge::key::{flags_of, floor_i32, Key};
+use crate::merge::key::{brick_key, Key};
 use crate::trace::Hit;
 
 /// Where a probe's hits go by their distance from it.
@@ -33,17 +33,15 @@ pub struct FarField {
 const _: () = assert!(MAX_LEVEL <= 7);
 
 impl FarField {
-    /// Where a bake with `far_ratio` and surfel cells of `cell_size` sends far hits (origin
-    /// left for each probe): nowhere without merging (every hit its own brick) or with a
-    /// ratio of 0. The brick lattice is the fold's, half a cell off the origin
-    /// ([`crate::merge::fold::BrickFolder::new`]).
-    pub fn of(far_ratio: f32, cell_size: f32) -> FarField {
-        let brick_size = 4.0 * cell_size;
+    /// Where a bake with `far_ratio` sends far hits over the fold's brick lattice
+    /// ([`crate::merge::fold::BrickFolder::lattice`]; origin left for each probe): nowhere
+    /// without merging (every hit its own brick) or with a ratio of 0.
+    pub fn of(far_ratio: f32, (anchor, brick_size): (Vec3, f32)) -> FarField {
         FarField {
             origin: Vec3::ZERO,
-            anchor: Vec3::splat(-0.5 * cell_size),
+            anchor,
             brick_size,
-            near: match cell_size > 0.0 {
+            near: match brick_size > 0.0 {
                 true => far_ratio * brick_size,
                 false => 0.0,
             },
@@ -71,7 +69,11 @@ impl FarField {
     /// two of `near`, not a logarithm, so that the level is the same on every platform.
     #[inline]
     pub fn level(&self, position: Vec3) -> u32 {
-        self.level_at((position - self.origin).length())
+        // Every hit of every default bake comes here: no distance when nothing is far.
+        match self.is_on() {
+            true => self.level_at((position - self.origin).length()),
+            false => 0,
+        }
     }
 
     /// The level of a hit `d` from its probe ([`FarField::level`]).
@@ -94,10 +96,8 @@ impl FarField {
     /// divided by `2^level`.
     #[inline]
     pub fn key(&self, hit: &Hit, level: u32) -> Key {
-        let c = ((hit.position - self.anchor) / self.brick_size)
-            .to_array()
-            .map(floor_i32);
-        (c[0] >> level, c[1] >> level, c[2] >> level, flags_of(hit))
+        let (x, y, z, flags) = brick_key(hit, self.anchor, self.brick_size);
+        (x >> level, y >> level, z >> level, flags)
     }
 }
 
@@ -132,17 +132,15 @@ impl CoarsePlacement {
     }
 }
 
-/// The coarse bricks over `keys`' bricks (with their `fits`), levels 1..=`levels`, and where
-/// each level's rows go; `used[b]` has bit `l` set when a level-`l` row names brick `b`. Only
-/// those rows' coarse bricks are made: the levels' cells are grouped bottom-up (a cell of the
-/// same bricks as the one below it is that one), then each used cell's group is numbered, in
-/// order of level and cell.
-pub fn build(
-    keys: &[Key],
-    fits: &[BrickFit],
-    (levels, used): (u32, &[u8]),
-) -> (CoarseBricks, CoarsePlacement) {
+/// The coarse bricks over `keys`' bricks (with their `fits`), and where each level's rows go;
+/// `used[b]` has bit `l` set when a level-`l` row names brick `b`. Only those rows' coarse
+/// bricks are made: the cells of the levels up to the highest used are grouped bottom-up (a
+/// cell of the same bricks as the one below it is that one), then each used cell's group is
+/// numbered, in order of level and cell. Nothing used (no far rows): no level is grouped.
+pub fn build(keys: &[Key], fits: &[BrickFit], used: &[u8]) -> (CoarseBricks, CoarsePlacement) {
     let n = keys.len() as u32;
+    let all = used.iter().fold(0u8, |all, &bits| all | bits);
+    let levels = (u8::BITS - all.leading_zeros()).saturating_sub(1);
     let groups = Groups::of(keys, levels.min(MAX_LEVEL));
     // Per level and group, its number once used (a group the same as below is never used:
     // its rows resolve to the group below).
@@ -384,7 +382,7 @@ mod tests {
             fit(0.25, 1.0),
         ];
         let used = [1 << 1, 0, 1 << 2, (1 << 1) | (1 << 2)];
-        let (coarse, placement) = build(&keys, &fits, (2, &used));
+        let (coarse, placement) = build(&keys, &fits, &used);
         assert_eq!(coarse.bricks.len(), 2, "{:?}", coarse.bricks);
         assert_eq!(coarse.children, [0, 1, 0, 1, 2]);
         assert_eq!(coarse.moments.len(), 4);
@@ -404,7 +402,7 @@ mod tests {
         assert_eq!(placement.place(3, 2), None);
         assert_eq!(placement.place(1, 0), None);
         // Nothing used: nothing made.
-        let (none, _) = build(&keys, &fits, (2, &[0; 4]));
+        let (none, _) = build(&keys, &fits, &[0; 4]);
         assert!(none.bricks.is_empty() && none.children.is_empty() && none.moments.is_empty());
     }
 }

@@ -23,7 +23,7 @@ use rayon::prelude::*;
 use crate::memory::chunked::Chunked;
 use crate::memory::{prefetch, split_runs};
 use crate::merge::index::{BrickIndex, MAX_BRICKS};
-use crate::merge::key::{flags_of, floor_i32, Key};
+use crate::merge::key::{brick_key, flags_of, floor_i32, Key};
 use crate::trace::Hit;
 use crate::BakeError;
 
@@ -114,6 +114,11 @@ impl BrickFolder {
         }
     }
 
+    /// The brick lattice: its corner and brick size (0 unmerged).
+    pub fn lattice(&self) -> (Vec3, f32) {
+        (self.anchor, 4.0 * self.cell_size)
+    }
+
     /// Folds the next `hits` (one probe's) in and appends the provisional brick of each to
     /// `brick_of_hit`. Fails, before any change, when the surfels would pass 2^32 - 1 or the
     /// bricks what the index numbers (`MAX_BRICKS` merged, 2^32 - 1 unmerged; every hit adds
@@ -155,12 +160,7 @@ impl BrickFolder {
         let brick_size = 4.0 * self.cell_size;
         let mut keys = std::mem::take(&mut self.keys_of_hits);
         keys.clear();
-        keys.extend(hits.iter().map(|h| {
-            let c = ((h.position - self.anchor) / brick_size)
-                .to_array()
-                .map(floor_i32);
-            (c[0], c[1], c[2], flags_of(h))
-        }));
+        keys.extend(hits.iter().map(|h| brick_key(h, self.anchor, brick_size)));
         brick_of_hit.resize(first + hits.len(), 0);
         let runs = || keys.chunk_by(|a, b| a == b);
         // Every run's slot asked for before any is looked up, so that their misses overlap.

@@ -20,6 +20,17 @@ pub(crate) fn flags_of(h: &Hit) -> u32 {
     dominant_axis(h.normal) | if h.backface { BRICK_BACKFACE } else { 0 }
 }
 
+/// The key of the brick of `hit` in the lattice of `brick_size` bricks from `anchor`: its cell
+/// and flags. The fold and the coarse cells of far hits ([`crate::merge::coarse`]) both take
+/// it from here, so that a hit's coarse cell is its brick's, bit for bit.
+#[inline]
+pub(crate) fn brick_key(hit: &Hit, anchor: Vec3, brick_size: f32) -> Key {
+    let c = ((hit.position - anchor) / brick_size)
+        .to_array()
+        .map(floor_i32);
+    (c[0], c[1], c[2], flags_of(hit))
+}
+
 /// `v.floor() as i32` (saturating, NaN to 0) by truncation: the baseline x86-64 target has no
 /// SSE4.1 `roundps`, so `floor` is a call to a software routine, and the fold takes six a hit.
 #[inline]

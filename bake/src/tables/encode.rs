@@ -228,7 +228,7 @@ mod tests {
 
     /// A placement without coarse bricks.
     fn no_coarse() -> CoarsePlacement {
-        crate::merge::coarse::build(&[], &[], (0, &[])).1
+        crate::merge::coarse::build(&[], &[], &[]).1
     }
 
     /// Far hits of one coarse cell make one row, which reads the coarse brick over their bricks
@@ -275,8 +275,7 @@ mod tests {
             })
             .collect();
         let remap = [0u32, 1, 2, 3];
-        let (coarse, placement) =
-            crate::merge::coarse::build(&keys, &fits, (1, &[0, 0, 1 << 1, 0]));
+        let (coarse, placement) = crate::merge::coarse::build(&keys, &fits, &[0, 0, 1 << 1, 0]);
         assert_eq!(coarse.children, [2, 3]);
         let centroid = (10.5 + 3.0 * 11.5) / 4.0;
         for precision in [TransferPrecision::F32, TransferPrecision::U8] {

@@ -194,11 +194,19 @@ impl RowU8 {
 impl ProbeRows {
     /// The provisional brick and level of each of its far rows (level 1 and up).
     pub fn far_rows(&self) -> Vec<(usize, u32)> {
-        let all: Vec<(usize, u32)> = match self {
-            ProbeRows::Sums(rows) => rows.iter().map(|r| brick_and_level(r.0)).collect(),
-            ProbeRows::U8(rows) => rows.iter().map(|r| (r.brick(), r.level())).collect(),
-        };
-        all.into_iter().filter(|&(_, level)| level > 0).collect()
+        let far = |&(_, level): &(usize, u32)| level > 0;
+        match self {
+            ProbeRows::Sums(rows) => rows
+                .iter()
+                .map(|r| brick_and_level(r.0))
+                .filter(far)
+                .collect(),
+            ProbeRows::U8(rows) => rows
+                .iter()
+                .map(|r| (r.brick(), r.level()))
+                .filter(far)
+                .collect(),
+        }
     }
 
     /// No rows yet, kept as `precision` keeps them.
