@@ -785,9 +785,10 @@ fn sigterm_during_the_write_leaves_no_temporary_file() {
     panic!("three bakes finished before their temporary file was seen");
 }
 
-/// `--quality fast` is the 512-direction default exactly: the same bytes.
+/// `--quality fast` is the 512-direction lattice without coarse bricks exactly (the same
+/// bytes), and the default is not: 2048 rays.
 #[test]
-fn quality_fast_is_todays_default() {
+fn quality_fast_is_512_rays_without_coarse_bricks() {
     let dir = Scratch::new("quality-fast");
     let scene = cornell();
     let bake = |name: &str, extra: &[&str]| {
@@ -805,10 +806,12 @@ fn quality_fast_is_todays_default() {
         assert!(out.status.success(), "{}", text(&out.stderr));
         std::fs::read(asset).unwrap()
     };
+    let fast = bake("fast.prt", &["--quality", "fast"]);
     assert_eq!(
-        bake("default.prt", &[]),
-        bake("fast.prt", &["--quality", "fast"])
+        bake("explicit.prt", &["--rays", "512", "--far-ratio", "0"]),
+        fast
     );
+    assert_ne!(bake("default.prt", &[]), fast);
 }
 
 /// Factor rows past `--row-memory` go to a file in `$TMPDIR`: the bake reports them, and when

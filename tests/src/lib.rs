@@ -54,11 +54,12 @@ pub fn cornell() -> PathBuf {
     fixture("cornell/cornell.gltf")
 }
 
-/// Settings with `rays` rays and otherwise the defaults.
+/// Settings with `rays` rays and otherwise the fast preset's ([`BakeSettings::fast`]: every hit
+/// in its own brick's factor, no coarse bricks unless a test asks for them).
 pub fn rays(rays: u32) -> BakeSettings {
     BakeSettings {
         rays,
-        ..BakeSettings::default()
+        ..BakeSettings::fast()
     }
 }
 

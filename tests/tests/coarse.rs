@@ -97,17 +97,18 @@ fn fit(
     (mean, b.map(|bc| (inv * bc).to_array()))
 }
 
-/// Far rays share factors: with a far ratio of 2 the default Cornell bake keeps under a third
-/// of the factors, and after a light moves the GPU re-gathers every probe whose coarse bricks
-/// changed (a coarse brick is dirty when one of its bricks is): it equals the CPU relight.
+/// Far rays share factors: with a far ratio of 2 the fast preset's Cornell bake keeps under a
+/// third of the factors, and after a light moves the GPU re-gathers every probe whose coarse
+/// bricks changed (a coarse brick is dirty when one of its bricks is): it equals the CPU
+/// relight.
 #[test]
 fn coarse_bricks_follow_light_changes_on_the_gpu() {
     use prt_runtime::gpu::{PrtRuntime, RuntimeSettings, VolumeFormat};
     let scene = fixture("cornell/cornell.gltf");
-    let off = bake(&scene, &BakeSettings::default());
+    let off = bake(&scene, &BakeSettings::fast());
     let settings = BakeSettings {
         far_ratio: 2.0,
-        ..BakeSettings::default()
+        ..BakeSettings::fast()
     };
     let asset = bake(&scene, &settings);
     assert_eq!(asset.header.settings.far_ratio, 2.0);

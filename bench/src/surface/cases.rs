@@ -56,7 +56,7 @@ pub struct Case {
 }
 
 /// The bundled cases: name, scene, rig, surface reference (relative to the root), double-sided.
-const BUNDLED: [(&str, &str, &str, &str, bool); 4] = [
+const BUNDLED: [(&str, &str, &str, &str, bool); 5] = [
     (
         "cornell",
         "fixtures/cornell/cornell.gltf",
@@ -85,11 +85,23 @@ const BUNDLED: [(&str, &str, &str, &str, bool); 4] = [
         "fixtures/surface/sponza_surface.json",
         true,
     ),
+    // Sponza lit as issue 31's unseen rig is: the sun, the sky and two ranged point lights. The
+    // sun carries most of the light here, where 31 lights fill the shadows of `sponza`'s rig.
+    (
+        "sponza_sun_2",
+        "fixtures/scenes/sponza_lod4.glb",
+        "fixtures/rigs/sponza_sun_2.json",
+        "fixtures/surface/sponza_sun_2_surface.json",
+        true,
+    ),
 ];
 
 /// The groups `--case` takes besides case names, with what they hold (for the error message).
 const GROUPS: [(&str, &str); 5] = [
-    ("bundled", "cornell, two_rooms, thick_walls, sponza"),
+    (
+        "bundled",
+        "cornell, two_rooms, thick_walls, sponza, sponza_sun_2",
+    ),
     ("tuning", "the levels of seeds 0-7"),
     ("held-out", "the levels of seeds 8-15"),
     ("family", "tuning + held-out"),

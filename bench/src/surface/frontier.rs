@@ -1,5 +1,5 @@
 //! `prt-bench frontier` (issue 32, item 3): what a bake costs against what it buys. Each case
-//! of `prt-bench surface` (the level family and Sponza by default) is baked at several probe
+//! of `prt-bench surface` (the level family and Sponza under both rigs by default) is baked at several probe
 //! spacings (relative to the case's default) and ray counts, relit on the CPU and sampled with
 //! the runtime's lookup at the oracle's surface points and camera pixels. Per setting: bake
 //! seconds, the runtime bytes an engine uploads and the transport bytes per probe against the
@@ -27,14 +27,18 @@ use crate::results::{self, Out};
 #[derive(clap::Args)]
 pub struct FrontierArgs {
     /// Cases (comma-separated), named as `prt-bench surface --case` names them.
-    #[arg(long = "case", value_delimiter = ',', default_value = "family,sponza")]
+    #[arg(
+        long = "case",
+        value_delimiter = ',',
+        default_value = "family,sponza,sponza_sun_2"
+    )]
     cases: Vec<String>,
     /// Probe spacings relative to each case's default (1: the default; 0.5: half, 8x the
     /// probes), comma-separated.
     #[arg(long, value_delimiter = ',', default_value = "1.26,1,0.79,0.63,0.5")]
     scales: Vec<f32>,
     /// Rays per probe, comma-separated.
-    #[arg(long, value_delimiter = ',', default_value = "256,512")]
+    #[arg(long, value_delimiter = ',', default_value = "512,2048")]
     rays: Vec<u32>,
     /// Surfel cells per probe spacing (the bake's `cells_per_spacing`; 8 is its default),
     /// comma-separated: surfels, bricks and surface terms grow with the square of it.
@@ -47,7 +51,8 @@ pub struct FrontierArgs {
     /// Directory the cases' paths are relative to (the repository root).
     #[arg(long, default_value = ".")]
     root: PathBuf,
-    /// Also write frontier.md, frontier.svg (the family) and frontier_sponza.svg to DIR.
+    /// Also write frontier.md, frontier.svg (the family), frontier_sponza.svg and
+    /// frontier_sponza_sun_2.svg to DIR.
     #[command(flatten)]
     out: Out,
 }
@@ -187,12 +192,11 @@ pub fn run(args: FrontierArgs) -> Result<()> {
     if let Some(dir) = &args.out.out {
         let family = plot_family(&rows, &args);
         results::write(dir, "frontier.svg", family.as_bytes())?;
-        if rows.iter().any(|r| r.case == "sponza") {
-            results::write(
-                dir,
-                "frontier_sponza.svg",
-                plot_case(&rows, "sponza").as_bytes(),
-            )?;
+        for case in ["sponza", "sponza_sun_2"] {
+            if rows.iter().any(|r| r.case == case) {
+                let name = format!("frontier_{case}.svg");
+                results::write(dir, &name, plot_case(&rows, case).as_bytes())?;
+            }
         }
     }
     Ok(())
@@ -321,13 +325,17 @@ fn markdown(rows: &[Row], args: &FrontierArgs) -> String {
     let mut md = String::from(
         "Bake seconds and runtime bytes against surface error (`prt-bench frontier`, issue 32 item 3): each case baked at spacings relative to its default (x1) and at several ray counts, on the uniform grid (the only placement so far), relit on the CPU (one bounce) and sampled with the runtime's lookup (`default`, the surface terms) at the oracle's surface points and camera pixels. Scores as in [surface.md](surface.md): open mean is the mean relative error at points that are not pockets, leaks the open points lit over 1.5x their truth, over-lit the camera view's pixels lit over 1.5x. Runtime MB: every array an engine uploads (probes, sky, visibility, factors, bricks, surfels, BVH, triangles, surface terms). Bake seconds on all of this machine's cores (2 here). A setting is on a front when no other setting is as small on that axis and better on the median level's error.\n\n## Summary\n",
     );
-    let sets: [(&str, Keep); 4] = [
+    let sets: [(&str, Keep); 5] = [
         ("The level family (seeds 0-15)", in_family),
         ("Tuning seeds 0-7", |r| r.set == Set::Tuning),
         ("Held-out seeds 8-15", |r| r.set == Set::HeldOut),
         (
             "Sponza (double-sided, fixtures/rigs/sponza_sun_31.json)",
             |r| r.case == "sponza",
+        ),
+        (
+            "Sponza under the sun and two lights (fixtures/rigs/sponza_sun_2.json)",
+            |r| r.case == "sponza_sun_2",
         ),
     ];
     for (title, keep) in sets {
