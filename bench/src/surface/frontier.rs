@@ -1,11 +1,11 @@
 //! `prt-bench frontier` (issue 32, item 3): what a bake costs against what it buys. Each case
 //! of `prt-bench surface` (the level family and Sponza under both rigs by default) is baked at
 //! several probe spacings (relative to the case's default) and ray counts, relit on the CPU and
-//! sampled with the runtime's lookup at the oracle's surface points and camera pixels. Per setting: bake
-//! seconds, the runtime bytes an engine uploads and the transport bytes per probe against the
-//! surface error (open points, leaks, over-lit pixels), as tables and as log-log plots with
-//! their Pareto fronts: the settings users pick from. The family's figures are medians over its
-//! levels (and the worst level), so that no level's size dominates.
+//! sampled with the runtime's lookup at the oracle's surface points and camera pixels. Per
+//! setting: bake seconds, the runtime bytes an engine uploads and the transport bytes per
+//! probe against the surface error (open points, leaks, over-lit pixels), as tables and as
+//! log-log plots with their Pareto fronts: the settings users pick from. The family's figures
+//! are medians over its levels (and the worst level), so that no level's size dominates.
 //!
 //! Placement is the uniform grid: the bake has no other yet (issue 32, item 2).
 
