@@ -49,7 +49,7 @@ pub struct BakeSettings {
     /// Hits at least this many brick sizes from their probe go to coarse bricks, one level
     /// coarser each time the distance doubles ([`prt_format::coarse`]): a probe's far rays
     /// share factors instead of taking one each. 0 keeps every hit in its own brick's factor.
-    /// 4 by default, with 2048 rays ([`BakeSettings::rays`] says why).
+    /// 5 by default, with 2048 rays ([`BakeSettings::rays`] says why).
     pub far_ratio: f32,
     /// Hits merge into one surfel only when the cosine between their normals is at least this.
     pub merge_normal_cos: f32,
@@ -67,8 +67,9 @@ pub struct BakeSettings {
     pub dilate: bool,
     /// Trace the surface terms the lookup reads where a point has a surfel
     /// ([`crate::surface_terms`]: which probes each surfel sees, its near field). Off, the bake
-    /// skips that stage (most of a default bake's time: 91 rays per surfel against 512 per
-    /// probe) and surfaces are sampled from the probe volume alone. Merging off has none.
+    /// skips that stage (much of a default bake's time: 64 near-field rays and up to 27
+    /// visibility rays per surfel) and surfaces are sampled from the probe volume alone.
+    /// Merging off has none.
     pub surface_terms: bool,
     /// Move probes that lie on a surface (within 2% of a spacing, as the grid's outer layers do
     /// on a room's walls) 5% of a spacing off it before tracing: a probe on a wall sees both of
@@ -125,10 +126,11 @@ impl BakeSettings {
         self.cell_size.unwrap_or(spacing / self.cells_per_spacing)
     }
 
-    /// Higher accuracy: 8x the rays and bricks a third the size (a half of those the default
-    /// had when this was measured). On the Cornell reference (27 probes at
-    /// 0.6 m) it brings the mean irradiance error from 4.0% to 0.5% (p95 1.3%), at 5.6x the
-    /// factors per probe (runtime gather work and asset size) and 8x the trace time.
+    /// Higher accuracy: 8x the rays of [`BakeSettings::fast`] (2x the default's), bricks a third
+    /// the size of an eighth-cell brick (half of a twelfth-cell one) and no coarse bricks. On
+    /// the Cornell reference (27 probes at 0.6 m) it brought the mean irradiance error from
+    /// 4.0% (512 rays, cells of a twelfth) to 0.5% (p95 1.3%), at 5.6x the factors per probe
+    /// (runtime gather work and asset size) and 8x the trace time.
     pub fn high_quality() -> Self {
         BakeSettings {
             rays: 4096,

@@ -97,9 +97,10 @@ fn gpu_bounces_equal_the_cpu_bounce_by_bounce() {
                 e(&gpu) / e(p)
             });
             report.push((name.clone(), n, w, gain));
-            let bound = match asset.coarse.bricks.is_empty() || !name.starts_with("sponza") {
-                true => 1e-4,
-                false => 5e-4,
+            let bound = if name.starts_with("sponza") && !asset.coarse.bricks.is_empty() {
+                5e-4
+            } else {
+                1e-4
             };
             assert!(
                 w <= bound,
