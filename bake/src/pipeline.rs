@@ -16,7 +16,7 @@ use prt_format::{
 use prt_scene::Scene;
 
 use crate::accel::bvh;
-use crate::merge::{coarse, fold};
+use crate::merge::{coarse, fold, snap};
 use crate::surface_terms;
 use crate::tables::{encode, factors};
 use crate::{
@@ -75,11 +75,17 @@ pub(crate) fn bake_in_pool(
         folder,
         far_levels,
     } = traced;
+    let surfaces = snap::Surfaces {
+        bvh: &built.bvh,
+        triangles: &loaded.scene.triangles,
+        cell_size,
+    };
     let (mut bricked, coarse, factors) = bricks_and_tables(
         (folder, tables),
         carried,
         settings,
         (cell_size, &far_levels),
+        &surfaces,
     )?;
     lap(&mut report, "bricks", Some("surface"));
 
@@ -466,16 +472,18 @@ fn load(
     Ok((loaded, memory))
 }
 
-/// The bricks stage: numbers the bricks and finishes their surfels, then encodes the factor
-/// tables the probes carry into the asset's table ([`encode::encode_tables`]), freeing the
-/// rows as it goes; fails when u8 factors cannot address the bricks.
+/// The bricks stage: numbers the bricks and finishes their surfels (those behind their
+/// surface put back on it, [`snap`]), then encodes the factor tables the probes carry into the
+/// asset's table ([`encode::encode_tables`]), freeing the rows as it goes; fails when u8
+/// factors cannot address the bricks.
 fn bricks_and_tables(
     (folder, tables): (fold::BrickFolder, factors::Rows),
     carried: encode::Carried,
     settings: &BakeSettings,
     (cell_size, far_levels): (f32, &[u8]),
+    surfaces: &snap::Surfaces,
 ) -> Result<(fold::Bricked, CoarseBricks, Factors), BakeError> {
-    let (bricked, remap) = folder.finish();
+    let (bricked, remap) = folder.finish_placed(&|s, cell| surfaces.place(s, cell));
     let mut used = vec![0u8; bricked.bricks.len()];
     for (&b, &l) in remap.iter().zip(far_levels) {
         used[b as usize] |= l;

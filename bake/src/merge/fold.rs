@@ -298,6 +298,16 @@ impl BrickFolder {
     /// The bricks numbered in key order (merged) or hit order (unmerged), their surfels, and the
     /// final number of every provisional brick.
     pub fn finish(self) -> (Bricked, Vec<u32>) {
+        self.finish_placed(&|_, _| {})
+    }
+
+    /// [`Self::finish`], each merged surfel first given to `place` with its brick's cell (min,
+    /// max), before the bricks' bounds and fits are taken: the bake puts surfels that lie
+    /// behind their surface back on it ([`super::snap`]). Unmerged hits are not placed.
+    pub fn finish_placed(
+        self,
+        place: &(dyn Fn(&mut Surfel, [Vec3; 2]) + Sync),
+    ) -> (Bricked, Vec<u32>) {
         let unmerged = self.cell_size == 0.0;
         // Keys sorted beside their bricks, not bricks through their keys, where each comparison
         // reads two keys scattered over the table. Keys are distinct, so any sort gives one
@@ -333,13 +343,18 @@ impl BrickFolder {
             .enumerate()
             .map(|(final_index, (&b, (first, run)))| {
                 self.prefetch_brick(b, order.get(final_index + 1).copied());
-                let flags = self.keys[b as usize].3;
+                let (x, y, z, flags) = self.keys[b as usize];
                 let backface = flags & BRICK_BACKFACE != 0;
+                let brick_size = 4.0 * self.cell_size;
+                let lo = self.anchor + Vec3::new(x as f32, y as f32, z as f32) * brick_size;
                 for (out, cl) in run.iter_mut().zip(self.clusters_of(b)) {
                     *out = Surfel {
                         brick: final_index as u32,
                         ..cl.surfel(!unmerged, backface)
                     };
+                    if !unmerged {
+                        place(out, [lo, lo + Vec3::splat(brick_size)]);
+                    }
                 }
                 // The fold refuses more than 2^32 - 1 surfels.
                 brick_of(run, flags, first as u32)

@@ -6,3 +6,4 @@ pub mod coarse;
 pub mod fold;
 pub(crate) mod index;
 pub mod key;
+pub mod snap;
