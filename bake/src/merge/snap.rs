@@ -4,25 +4,25 @@
 //! surface that mean lies behind the surface, up to the sagitta of a surfel cell (1.5 cm for a
 //! 19 cm cell across a 30 cm column). The runtime starts each surfel's shadow rays a ten
 //! thousandth of a spacing off it (`prt_runtime::shadow_rays::ray_offset`), so such a surfel
-//! shadows itself: its surface goes dark for every light. On Sponza's default bake (1.5 m,
-//! cells of 19 cm) a quarter of the front-face surfels facing the sun saw it; a fifth more saw
-//! it from 1 cm further out, most of them blocked within a millimetre or a centimetre, that is
-//! by their own surface. The relit probes came out dark where they see such surfaces: the
-//! open points of `prt-bench surface` were 12% too dark on average under Sponza's 31 lights
-//! (188 of 290 more than 10% below the truth, 6 above), and 17.1% off.
+//! shadows itself and its surface goes dark for every light. On Sponza's default bake (1.5 m,
+//! cells of 19 cm) 25.0% of the front-face surfels facing a sun saw it, 29.3% from 9 mm further
+//! out; most of those newly lit had been blocked within 1 mm or 1 cm, by their own surface. The
+//! relit probes came out dark where they see such surfaces: the open points of `prt-bench
+//! surface` were 12.4% too dark on average under Sponza's 31 lights (188 of 290 more than 10%
+//! below the truth, 6 above), with every lookup.
 //!
 //! The bake therefore moves each merged surfel that lies behind its surface onto it: along its
 //! normal to the first surface within [`REACH`] cells that is about parallel to it
 //! ([`PARALLEL_COS`]), unless such a surface lies about as close behind it ([`BEHIND`]: then the
 //! surfel already stands in front of its surface, and what is ahead is something else, a
-//! shelf over a floor). A move that would take the surfel out of its brick's cell is not made (a brick's
-//! key, bounds and centroid stay its own). Measured with `prt-bench surface` on the tuning seeds
-//! and the bundled scenes, default spacing (half spacing in brackets): Sponza under its 31
-//! lights 17.1% -> 10.5% (12.0% -> 7.7%); under the sun and two lights 17.9% -> 16.0%; the
-//! tuning seeds' worst level 9.2% -> 8.6%, median 6.7% -> 6.6%; Cornell, fixtures/two_rooms
-//! and thick walls unchanged. The alternative, a shadow-ray offset of a fixed share of the
-//! cell, measured about the same (0.02 cells: Sponza 11.6%, 16.2%) but moves every origin,
-//! past thin occluders as well; `docs/results/surface_candidates.md` has both.
+//! shelf over a floor). A move that would take the surfel out of its brick's cell is not made
+//! (a brick's key, bounds and centroid stay its own). Measured with `prt-bench surface`
+//! (default spacing, half in brackets): Sponza under its 31 lights 17.1% -> 10.5% (12.0% ->
+//! 7.7%); under the sun and two lights 17.9% -> 15.9% (12.2% -> 12.7%); the tuning seeds'
+//! median level 6.7% -> 6.6%, worst 9.2% -> 8.6%; Cornell, fixtures/two_rooms and thick walls
+//! unchanged. A shadow-ray offset of a share of the cell instead removed the bias as well
+//! (0.02 cells: 11.6% and 16.2%) but moves every origin, past thin occluders too, and worsened
+//! as it grew; `docs/results/surface_candidates.md` (stop 39) has both, and what is left.
 //!
 //! Unmerged bakes keep their hits where the rays found them (the exact bake is unchanged).
 
@@ -31,7 +31,9 @@ use prt_format::{Surfel, BRICK_BACKFACE};
 
 use crate::accel::bvh::{SceneBvh, TriangleHit};
 
-/// How far along its normal a surfel may move, in surfel cells.
+/// How far along its normal a surfel may move, in surfel cells: the sagitta of a cell across a
+/// column a cell and a half wide. A tenth of a cell measured as well on the tuning seeds
+/// (median level 6.7% against 6.6%, worst 8.6% both).
 pub const REACH: f32 = 0.25;
 
 /// A surfel does not move when a parallel surface lies behind it within this many times the
