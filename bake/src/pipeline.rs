@@ -79,6 +79,7 @@ pub(crate) fn bake_in_pool(
         bvh: &built.bvh,
         triangles: &loaded.scene.triangles,
         cell_size,
+        double_sided: settings.double_sided,
     };
     let (mut bricked, coarse, factors) = bricks_and_tables(
         (folder, tables),

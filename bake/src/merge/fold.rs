@@ -295,15 +295,17 @@ impl BrickFolder {
         single.into_iter().chain(listed)
     }
 
-    /// The bricks numbered in key order (merged) or hit order (unmerged), their surfels, and the
-    /// final number of every provisional brick.
-    pub fn finish(self) -> (Bricked, Vec<u32>) {
+    /// [`Self::finish_placed`] with no placement (the tests of the merge alone).
+    #[cfg(test)]
+    fn finish(self) -> (Bricked, Vec<u32>) {
         self.finish_placed(&|_, _| {})
     }
 
-    /// [`Self::finish`], each merged surfel first given to `place` with its brick's cell (min,
-    /// max), before the bricks' bounds and fits are taken: the bake puts surfels that lie
-    /// behind their surface back on it ([`super::snap`]). Unmerged hits are not placed.
+    /// The bricks numbered in key order (merged) or hit order (unmerged), their surfels, and the
+    /// final number of every provisional brick. Each merged surfel is first given to `place`
+    /// with its brick's cell (min, max), before the bricks' bounds and fits are taken: the bake
+    /// puts surfels that lie behind their surface back on it ([`super::snap`]). Unmerged hits
+    /// are not placed.
     pub fn finish_placed(
         self,
         place: &(dyn Fn(&mut Surfel, [Vec3; 2]) + Sync),

@@ -2,7 +2,7 @@
 //!
 //! A merged surfel sits at the mean of its hits ([`super::fold`]): on a curved or bevelled
 //! surface that mean lies behind the surface, up to the sagitta of a surfel cell (1.5 cm for a
-//! 19 cm cell across a 30 cm column). The runtime starts each surfel's shadow rays a ten
+//! 19 cm cell across a column of 30 cm radius). The runtime starts each surfel's shadow rays a ten
 //! thousandth of a spacing off it (`prt_runtime::shadow_rays::ray_offset`), so such a surfel
 //! shadows itself and its surface goes dark for every light. On Sponza's default bake (1.5 m,
 //! cells of 19 cm) 25.0% of the front-face surfels facing a sun saw it, 29.3% from 9 mm further
@@ -13,14 +13,14 @@
 //!
 //! The bake therefore moves each merged surfel that lies behind its surface onto it: along its
 //! normal to the first surface within [`REACH`] cells that is about parallel to it
-//! ([`PARALLEL_COS`]), unless such a surface lies about as close behind it ([`BEHIND`]: then the
-//! surfel already stands in front of its surface, and what is ahead is something else, a
-//! shelf over a floor). A move that would take the surfel out of its brick's cell is not made
+//! ([`PARALLEL_COS`]; facing the same way, where the scene is single-sided), unless such a
+//! surface lies about as close behind it ([`BEHIND`]: then the surfel already stands in front
+//! of its surface, and what is ahead is something else, a shelf over a floor). A move that would take the surfel out of its brick's cell is not made
 //! (a brick's key, bounds and centroid stay its own). Measured with `prt-bench surface`
-//! (default spacing, half in brackets): Sponza under its 31 lights 17.1% -> 10.5% (12.0% ->
-//! 7.7%); under the sun and two lights 17.9% -> 15.9% (12.2% -> 12.7%); the tuning seeds'
-//! median level 6.7% -> 6.6%, worst 9.2% -> 8.6%; Cornell, fixtures/two_rooms and thick walls
-//! unchanged. A shadow-ray offset of a share of the cell instead removed the bias as well
+//! (default spacing, half in brackets): Sponza under its 31 lights 17.1% -> 10.45% (12.0% ->
+//! 7.6%); under the sun and two lights 17.9% -> 15.8% (12.2% -> 12.7%); the tuning seeds'
+//! median level 6.7% -> 6.6%, worst 9.2% -> 8.6% (5.6% -> 5.5%); Cornell, fixtures/two_rooms
+//! and thick walls unchanged. A shadow-ray offset of a share of the cell instead removed the bias as well
 //! (0.02 cells: 11.6% and 16.2%) but moves every origin, past thin occluders too, and worsened
 //! as it grew; `docs/results/surface_candidates.md` (stop 39) has both, and what is left.
 //!
@@ -31,9 +31,8 @@ use prt_format::{Surfel, BRICK_BACKFACE};
 
 use crate::accel::bvh::{SceneBvh, TriangleHit};
 
-/// How far along its normal a surfel may move, in surfel cells: the sagitta of a cell across a
-/// column a cell and a half wide. A tenth of a cell measured as well on the tuning seeds
-/// (median level 6.7% against 6.6%, worst 8.6% both).
+/// How far along its normal a surfel may move, in surfel cells: the sagitta of a cell's chord
+/// across a column 1.25 cells wide.
 pub const REACH: f32 = 0.25;
 
 /// A surfel does not move when a parallel surface lies behind it within this many times the
@@ -44,14 +43,16 @@ pub const REACH: f32 = 0.25;
 pub const BEHIND: f32 = 2.0;
 
 /// A surface counts as the surfel's own when its normal is within this cosine of the
-/// surfel's (either side: double-sided surfaces have no winding to go by).
+/// surfel's (about 45 degrees; either side in a double-sided scene).
 pub const PARALLEL_COS: f32 = 0.7;
 
-/// What a move reads: the scene's BVH and triangles (by the BVH's index), and the cell size.
+/// What a move reads: the scene's BVH and triangles (by the BVH's index), the cell size, and
+/// whether every surface is double-sided (then a triangle's winding says nothing).
 pub struct Surfaces<'a> {
     pub bvh: &'a SceneBvh,
     pub triangles: &'a [[Vec3; 3]],
     pub cell_size: f32,
+    pub double_sided: bool,
 }
 
 impl Surfaces<'_> {
@@ -66,24 +67,33 @@ impl Surfaces<'_> {
         let Some(ahead) = self.parallel(self.bvh.closest_hit(c, n, reach), n) else {
             return;
         };
-        if self
-            .parallel(self.bvh.closest_hit(c, -n, ahead), n)
-            .is_some()
-        {
+        let behind = self.bvh.closest_hit(c, -n, BEHIND * ahead);
+        if self.parallel(behind, n).is_some() {
             return;
         }
+        // Half-open, as brick keys are (`floor`): a surfel on the cell's upper face would
+        // belong to the next brick.
         let p = c + n * ahead;
-        if p.cmpge(cell[0]).all() && p.cmple(cell[1]).all() {
+        if p.cmpge(cell[0]).all() && p.cmplt(cell[1]).all() {
             s.position = p.to_array();
         }
     }
 
-    /// The distance of `hit` when its triangle is about parallel to `n`.
+    /// The distance of `hit` when its triangle is about parallel to `n`: facing the same way
+    /// in a single-sided scene (the surfel's own surface, met from behind ahead of it or from
+    /// the front behind it; a face turned towards the surfel is something else), either way
+    /// when double-sided. A triangle whose cross product underflows to zero has no plane.
     fn parallel(&self, hit: Option<TriangleHit>, n: Vec3) -> Option<f32> {
         let hit = hit?;
         let [v0, v1, v2] = self.triangles[hit.triangle as usize];
         let g = (v1 - v0).cross(v2 - v0);
-        (g.dot(n).abs() >= PARALLEL_COS * g.length()).then_some(hit.t)
+        let (area, along) = (g.length(), g.dot(n));
+        let along = if self.double_sided {
+            along.abs()
+        } else {
+            along
+        };
+        (area > 0.0 && along >= PARALLEL_COS * area).then_some(hit.t)
     }
 }
 
@@ -91,13 +101,14 @@ impl Surfaces<'_> {
 mod tests {
     use super::*;
 
-    /// A square of half-size `r` at height `z`, facing +z.
-    fn square(z: f32, r: f32) -> [[Vec3; 3]; 2] {
+    /// A square of half-size `r` at height `z`, facing +z (-z with `down`).
+    fn square(z: f32, r: f32, down: bool) -> [[Vec3; 3]; 2] {
         let v = |x: f32, y: f32| Vec3::new(x, y, z);
-        [
-            [v(-r, -r), v(r, -r), v(r, r)],
-            [v(-r, -r), v(r, r), v(-r, r)],
-        ]
+        let (a, b, c, d) = (v(-r, -r), v(r, -r), v(r, r), v(-r, r));
+        match down {
+            false => [[a, b, c], [a, c, d]],
+            true => [[a, c, b], [a, d, c]],
+        }
     }
 
     fn surfel(p: Vec3, n: Vec3) -> Surfel {
@@ -109,69 +120,75 @@ mod tests {
         }
     }
 
-    /// The cell `[-1, 1]^3` and a surfel cell of 0.4 (reach 0.1).
-    fn place(triangles: &[[Vec3; 3]], s: &mut Surfel) {
+    /// Where `s` goes in the cell `[-1, 1)^3` with surfel cells of 0.4 (reach 0.1).
+    fn placed(triangles: &[[Vec3; 3]], double_sided: bool, s: Surfel) -> Vec3 {
         let surfaces = Surfaces {
             bvh: &SceneBvh::build(triangles, 1.0),
             triangles,
             cell_size: 0.4,
+            double_sided,
         };
-        surfaces.place(s, [Vec3::splat(-1.0), Vec3::splat(1.0)]);
+        let mut s = s;
+        surfaces.place(&mut s, [Vec3::splat(-1.0), Vec3::splat(1.0)]);
+        Vec3::from(s.position)
     }
 
     #[test]
     fn a_surfel_behind_its_surface_moves_onto_it() {
-        // The mean of hits on a bent surface: 5 cm behind it, within the reach of 10 cm.
-        let tris = square(0.0, 1.0);
-        let mut s = surfel(Vec3::new(0.1, 0.2, -0.05), Vec3::Z);
-        place(&tris, &mut s);
-        assert!((Vec3::from(s.position) - Vec3::new(0.1, 0.2, 0.0)).length() < 1e-6);
+        // The mean of hits on a bent surface: 5 cm behind it, within the reach of 10 cm; a
+        // double-sided scene's surface wound either way.
+        let behind = surfel(Vec3::new(0.1, 0.2, -0.05), Vec3::Z);
+        for (down, double_sided) in [(false, false), (false, true), (true, true)] {
+            let p = placed(&square(0.0, 1.0, down), double_sided, behind);
+            assert!((p - Vec3::new(0.1, 0.2, 0.0)).length() < 1e-6, "{p}");
+        }
     }
 
     #[test]
     fn a_surfel_in_front_of_its_surface_stays_under_a_shelf() {
-        // A floor surfel 1 mm above the floor, a shelf 5 cm above it: the shelf is not its
-        // surface.
-        let mut tris = square(0.0, 1.0).to_vec();
-        tris.extend(square(0.051, 0.5));
+        // A floor surfel 1 mm above the floor, a shelf 5 cm above it (its underside facing the
+        // floor, or double-sided): the shelf is not its surface.
         let p = Vec3::new(0.1, 0.2, 0.001);
-        let mut s = surfel(p, Vec3::Z);
-        place(&tris, &mut s);
-        assert_eq!(Vec3::from(s.position), p);
+        for (down, double_sided) in [(true, false), (false, true)] {
+            let mut tris = square(0.0, 1.0, false).to_vec();
+            tris.extend(square(0.051, 0.5, down));
+            assert_eq!(placed(&tris, double_sided, surfel(p, Vec3::Z)), p);
+        }
     }
 
     #[test]
-    fn what_is_beyond_reach_across_or_outside_the_cell_stays() {
-        let tris = square(0.0, 1.0);
+    fn a_face_turned_towards_the_surfel_is_not_its_surface_when_single_sided() {
+        let p = Vec3::new(0.0, 0.0, -0.05);
+        let facing = square(0.0, 1.0, true);
+        assert_eq!(placed(&facing, false, surfel(p, Vec3::Z)), p);
+    }
+
+    #[test]
+    fn what_is_beyond_reach_tilted_or_outside_the_cell_stays() {
+        let floor = square(0.0, 1.0, false);
         // 20 cm behind: out of reach.
         let far = Vec3::new(0.0, 0.0, -0.2);
-        let mut s = surfel(far, Vec3::Z);
-        place(&tris, &mut s);
-        assert_eq!(Vec3::from(s.position), far);
-        // A wall across the normal is not the surfel's surface.
-        let mut s = surfel(Vec3::new(0.0, 0.0, -0.05), Vec3::X);
-        let wall: Vec<[Vec3; 3]> = square(0.0, 1.0)
-            .iter()
-            .map(|t| t.map(|v| Vec3::new(v.z + 0.03, v.x, v.y)))
-            .chain(square(0.0, 1.0))
-            .collect();
-        let before = s.position;
-        place(&wall, &mut s);
-        assert!((Vec3::from(s.position) - Vec3::new(0.03, 0.0, -0.05)).length() < 1e-6);
-        s.position = before;
-        s.normal = Vec3::Y.to_array();
-        place(&tris, &mut s);
-        assert_eq!(s.position, before);
-        // The surface above the cell's top.
-        let mut s = surfel(Vec3::new(0.0, 0.0, 0.95), Vec3::Z);
-        place(&square(1.02, 1.0), &mut s);
-        assert_eq!(Vec3::from(s.position), Vec3::new(0.0, 0.0, 0.95));
+        assert_eq!(placed(&floor, false, surfel(far, Vec3::Z)), far);
+        // A surface 50 degrees off the surfel's plane is not its own.
+        let p = Vec3::new(0.0, 0.0, -0.05);
+        let tilt = glam::Quat::from_rotation_x(50f32.to_radians());
+        let tilted: Vec<[Vec3; 3]> = floor.iter().map(|t| t.map(|v| tilt * v)).collect();
+        assert_eq!(placed(&tilted, true, surfel(p, Vec3::Z)), p);
+        // 40 degrees off still is.
+        let tilt = glam::Quat::from_rotation_x(40f32.to_radians());
+        let tilted: Vec<[Vec3; 3]> = floor.iter().map(|t| t.map(|v| tilt * v)).collect();
+        assert_ne!(placed(&tilted, true, surfel(p, Vec3::Z)), p);
+        // The surface on the cell's upper face belongs to the next brick.
+        let top = Vec3::new(0.0, 0.0, 0.95);
+        assert_eq!(
+            placed(&square(1.0, 1.0, false), false, surfel(top, Vec3::Z)),
+            top
+        );
         // Back faces stay.
-        let mut s = Surfel {
+        let back = Surfel {
             flags: BRICK_BACKFACE,
-            ..surfel(Vec3::new(0.0, 0.0, -0.05), Vec3::Z)
+            ..surfel(p, Vec3::Z)
         };
-        place(&tris, &mut s);
-        assert_eq!(Vec3::from(s.position), Vec3::new(0.0, 0.0, -0.05));
+        assert_eq!(placed(&floor, false, back), p);
     }
 }
