@@ -60,9 +60,9 @@ use report::{Row, Setting};
 #[derive(clap::Args)]
 pub struct SurfaceArgs {
     /// Cases to run (comma-separated): case names (cornell, two_rooms, thick_walls, sponza,
-    /// sponza_sun_2, and each level of fixtures/levels/levels.json) and groups: bundled, tuning, held-out, family
-    /// (tuning + held-out), all [default: bundled,family; street_20_L120 runs only when named
-    /// or with all].
+    /// sponza_sun_2, and each level of fixtures/levels/levels.json) and groups: bundled,
+    /// tuning, held-out, family (tuning + held-out), all [default: bundled,family;
+    /// street_20_L120 runs only when named or with all].
     #[arg(long = "case", value_delimiter = ',')]
     cases: Vec<String>,
     /// Lookups to sample with (comma-separated): default (the runtime's), trilinear, and the

@@ -347,8 +347,8 @@ impl BrickFolder {
                 self.prefetch_brick(b, order.get(final_index + 1).copied());
                 let (x, y, z, flags) = self.keys[b as usize];
                 let backface = flags & BRICK_BACKFACE != 0;
-                let brick_size = 4.0 * self.cell_size;
-                let lo = self.anchor + Vec3::new(x as f32, y as f32, z as f32) * brick_size;
+                let (anchor, brick_size) = self.lattice();
+                let lo = anchor + Vec3::new(x as f32, y as f32, z as f32) * brick_size;
                 for (out, cl) in run.iter_mut().zip(self.clusters_of(b)) {
                     *out = Surfel {
                         brick: final_index as u32,

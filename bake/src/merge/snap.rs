@@ -1,28 +1,29 @@
 //! # Merged surfels back on their surface
 //!
-//! A merged surfel sits at the mean of its hits ([`super::fold`]): on a curved or bevelled
-//! surface that mean lies behind the surface, up to the sagitta of a surfel cell (1.5 cm for a
-//! 19 cm cell across a column of 30 cm radius). The runtime starts each surfel's shadow rays a ten
-//! thousandth of a spacing off it (`prt_runtime::shadow_rays::ray_offset`), so such a surfel
-//! shadows itself and its surface goes dark for every light. On Sponza's default bake (1.5 m,
-//! cells of 19 cm) 25.0% of the front-face surfels facing a sun saw it, 29.3% from 9 mm further
-//! out; most of those newly lit had been blocked within 1 mm or 1 cm, by their own surface. The
-//! relit probes came out dark where they see such surfaces: the open points of `prt-bench
-//! surface` were 12.4% too dark on average under Sponza's 31 lights (188 of 290 more than 10%
-//! below the truth, 6 above), with every lookup.
+//! A merged surfel sits at the mean of its hits ([`super::fold`]): on a curved or bevelled surface
+//! that mean lies behind the surface, up to the sagitta of a surfel cell (1.5 cm for a 19 cm cell
+//! across a column of 30 cm radius). The runtime starts each surfel's shadow rays a ten thousandth
+//! of a spacing off it (`prt_runtime::shadow_rays::ray_offset`), so such a surfel shadows itself
+//! and its surface goes dark for every light. On Sponza's default bake (1.5 m, cells of 19 cm)
+//! 25.0% of the front-face surfels facing a sun saw it, 29.3% from 9 mm further out; most of those
+//! newly lit had been blocked within 1 mm or 1 cm, by their own surface. The relit probes came out
+//! dark where they see such surfaces: the open points of `prt-bench surface` were 12.4% too dark on
+//! average under Sponza's 31 lights (188 of 290 more than 10% below the truth, 6 above), with every
+//! lookup.
 //!
 //! The bake therefore moves each merged surfel that lies behind its surface onto it: along its
 //! normal to the first surface within [`REACH`] cells that is about parallel to it
-//! ([`PARALLEL_COS`]; facing the same way, where the scene is single-sided), unless such a
-//! surface lies about as close behind it ([`BEHIND`]: then the surfel already stands in front
-//! of its surface, and what is ahead is something else, a shelf over a floor). A move that would take the surfel out of its brick's cell is not made
-//! (a brick's key, bounds and centroid stay its own). Measured with `prt-bench surface`
-//! (default spacing, half in brackets): Sponza under its 31 lights 17.1% -> 10.45% (12.0% ->
-//! 7.6%); under the sun and two lights 17.9% -> 15.8% (12.2% -> 12.7%); the tuning seeds'
-//! median level 6.7% -> 6.6%, worst 9.2% -> 8.6% (5.6% -> 5.5%); Cornell, fixtures/two_rooms
-//! and thick walls unchanged. A shadow-ray offset of a share of the cell instead removed the bias as well
-//! (0.02 cells: 11.6% and 16.2%) but moves every origin, past thin occluders too, and worsened
-//! as it grew; `docs/results/surface_candidates.md` (stop 39) has both, and what is left.
+//! ([`PARALLEL_COS`]; facing the same way, where the scene is single-sided), unless such a surface
+//! lies about as close behind it ([`BEHIND`]: then the surfel already stands in front of its
+//! surface, and what is ahead is something else, a shelf over a floor). A move that would take the
+//! surfel out of its brick's cell is not made (a brick's key, bounds and centroid stay its own).
+//! Measured with `prt-bench surface` (default spacing, half in brackets): Sponza under its 31
+//! lights 17.1% -> 10.45% (12.0% -> 7.6%); under the sun and two lights 17.9% -> 15.8% (12.2% ->
+//! 12.7%); the tuning seeds' median level 6.7% -> 6.6%, worst 9.2% -> 8.6% (5.6% -> 5.5%); Cornell,
+//! fixtures/two_rooms and thick walls unchanged. A shadow-ray offset of a share of the cell instead
+//! removed the bias as well (0.02 cells: 11.6% and 16.2%) but moves every origin, past thin
+//! occluders too, and worsened as it grew; `docs/results/surface_candidates.md` (stop 39) has both,
+//! and what is left.
 //!
 //! Unmerged bakes keep their hits where the rays found them (the exact bake is unchanged).
 
