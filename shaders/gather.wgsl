@@ -112,13 +112,13 @@ fn accumulate(p: u32, lid: u32) -> array<vec3<f32>, 9> {
     }
     if params.sky_mode == SKY_CONSTANT && lid == 0u {
         for (var k = 0u; k < 9u; k = k + 1u) {
-            acc[k] = acc[k] + sky_transfer[9u * p + k] * params.sky_color;
+            acc[k] = acc[k] + sky_transfer[9u * probe.slot + k] * params.sky_color;
         }
     }
     if params.sky_mode == SKY_DIRECTIONS {
         let words = (params.ray_count + 31u) / 32u;
         for (var i = lid; i < params.ray_count; i = i + GATHER_WORKGROUP) {
-            if (sky_mask[p * words + i / 32u] & (1u << (i % 32u))) != 0u {
+            if (sky_mask[probe.slot * words + i / 32u] & (1u << (i % 32u))) != 0u {
                 let y = sh_basis(sky_directions[2u * i].xyz);
                 let l = sky_directions[2u * i + 1u].xyz;
                 for (var k = 0u; k < 9u; k = k + 1u) {

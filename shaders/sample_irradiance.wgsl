@@ -71,11 +71,12 @@ struct PrtSample {
 @group(PRT_GROUP) @binding(6) var prt_volume6: texture_3d<f32>;
 @group(PRT_GROUP) @binding(7) var prt_sampler: sampler;
 @group(PRT_GROUP) @binding(8) var<uniform> prt_volume: PrtVolumeInfo;
-// Per probe, PRT_DEPTH_WORDS words: per texel, mean and standard deviation of hit distances in
+// Per placed probe, PRT_DEPTH_WORDS words: per texel, mean and standard deviation of hit distances in
 // spacings, one byte each, two texels per word (prt_format::depth).
 @group(PRT_GROUP) @binding(9) var<storage, read> prt_depth_moments: array<u32>;
-// Per probe, where its rays started (xyz; the grid position unless it was moved off a surface or
-// out of geometry): depth-moment distances are measured from there.
+// Per grid point, where its probe's rays started (xyz; the grid position unless it was moved off
+// a surface or out of geometry: depth-moment distances are measured from there) and, as the bits
+// of w, its slot (prt_format::Probe::slot): where its depth moments sit.
 @group(PRT_GROUP) @binding(10) var<storage, read> prt_probe_positions: array<vec4<f32>>;
 // The surface lookup's tables, one array of words (prt_format::surface): the brick table (four
 // words a slot: key xyz, axis << 29 | brick + 1), then from the offsets in prt_volume the cells
@@ -135,9 +136,9 @@ fn prt_depth_texel(d: vec3<f32>) -> u32 {
     return t.y * PRT_DEPTH_SIDE + t.x;
 }
 
-// Facing and Chebyshev weight of probe `index` at `probe` for the surface point `surface`
-// (facing) moved along its normal n to x (Chebyshev test against its depth moments).
-fn prt_depth_weight(index: u32, probe: vec3<f32>, surface: vec3<f32>, x: vec3<f32>, n: vec3<f32>) -> f32 {
+// Facing and Chebyshev weight of the probe at `probe` whose depth moments sit at `slot` for the
+// surface point `surface` (facing) moved along its normal n to x (Chebyshev test against them).
+fn prt_depth_weight(slot: u32, probe: vec3<f32>, surface: vec3<f32>, x: vec3<f32>, n: vec3<f32>) -> f32 {
     let v = x - probe;
     let len = length(v);
     let dist = len / prt_volume.spacing;
@@ -148,7 +149,7 @@ fn prt_depth_weight(index: u32, probe: vec3<f32>, surface: vec3<f32>, x: vec3<f3
     let behind = clamp(dot(probe - surface, n) / prt_volume.spacing / PRT_FACING_DEPTH + 1.0, 0.0, 1.0);
     var w = behind * behind + PRT_FACING_FLOOR;
     let texel = prt_depth_texel(dir);
-    let bytes = unpack4x8unorm(prt_depth_moments[index * PRT_DEPTH_WORDS + texel / 2u]);
+    let bytes = unpack4x8unorm(prt_depth_moments[slot * PRT_DEPTH_WORDS + texel / 2u]);
     let pair = select(bytes.xy, bytes.zw, (texel & 1u) == 1u);
     let mean = pair.x * PRT_MAX_DEPTH;
     let deviation = pair.y * PRT_MAX_DEVIATION;
@@ -204,7 +205,8 @@ fn prt_sample_probes(surface: vec3<f32>, p: vec3<f32>, n: vec3<f32>, masked: boo
             w = w * select(PRT_BLOCKED_WEIGHT, 1.0, visible);
         } else {
             let index = ijk.x + counts.x * (ijk.y + counts.y * ijk.z);
-            w = w * prt_depth_weight(index, prt_probe_positions[index].xyz, surface, p, n);
+            let probe = prt_probe_positions[index];
+            w = w * prt_depth_weight(bitcast<u32>(probe.w), probe.xyz, surface, p, n);
         }
         total = total + w * t0.w;
         acc[0] = acc[0] + w * t0;

@@ -9,7 +9,8 @@ struct Probe {
     first_factor: u32,
     factor_count: u32,
     sky_rays: u32,
-    backface_rays: u32,
+    // Where its sky mask, sky transfer and visibility map sit (prt_format::Probe::slot).
+    slot: u32,
 }
 
 struct Brick {

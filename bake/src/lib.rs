@@ -35,6 +35,7 @@ mod memory;
 pub mod merge;
 pub mod offset;
 mod pipeline;
+pub mod placement;
 pub mod probes;
 mod settings;
 pub mod stream;
@@ -80,6 +81,9 @@ pub struct BakeReport {
     /// Bytes of factor rows that went through the temporary file
     /// ([`BakeSettings::row_memory`]).
     pub rows_spilled: u64,
+    /// With sparse placement ([`BakeSettings::sparse`]): the probes placed, of the grid's
+    /// points.
+    pub placed: Option<(usize, usize)>,
 }
 
 /// Bakes `scene_path` into a validated asset (not written).

@@ -10,7 +10,7 @@ use glam::Vec3;
 use prt_format::coarse::CoarseBricks;
 use prt_format::{
     directions, Asset, BakeSettingsRecord, BakeStats, Factors, Header, Probe, TransferPrecision,
-    PROBE_DILATED, PROBE_OFFSET, PROBE_VALID, U8_MAX_BRICK,
+    NO_SLOT, PROBE_DILATED, PROBE_OFFSET, PROBE_VALID, U8_MAX_BRICK,
 };
 
 use prt_scene::Scene;
@@ -20,8 +20,8 @@ use crate::merge::{coarse, fold, snap};
 use crate::surface_terms;
 use crate::tables::{encode, factors};
 use crate::{
-    diagnostics, dilate, offset, probes, stream, trace, BakeError, BakeReport, BakeSettings,
-    Progress,
+    diagnostics, dilate, offset, placement, probes, stream, trace, BakeError, BakeReport,
+    BakeSettings, Progress,
 };
 
 /// The bake's stages, in the current thread pool: the asset, not yet validated, and the report.
@@ -54,15 +54,23 @@ pub(crate) fn bake_in_pool(
     let built = bvh_stage(&loaded, ploc_memory, &grid, settings, &mut report)?;
     lap(&mut report, "bvh", None);
 
+    let placed = settings
+        .sparse
+        .then(|| placement::surface_probes(&grid, &loaded.scene.triangles));
+    if let Some(placed) = &placed {
+        report.placed = Some((placed.iter().filter(|&&p| p).count(), placed.len()));
+    }
     progress.start("trace", grid.probe_count());
     let cell_size = settings.cell_size_for(spacing);
-    let traced = trace_stage(&loaded, &built.bvh, &grid, settings, cell_size, progress)?;
+    let stage = (&grid, placed.as_deref());
+    let traced = trace_stage(&loaded, &built.bvh, stage, settings, cell_size, progress)?;
     report.rows_spilled = traced.rows.spilled_bytes();
     lap(&mut report, "trace", Some("bricks"));
 
     let scene = &loaded.scene;
     let valid = validity(&traced.rays, settings, &built, scene, &mut report);
-    let (from, lens) = carried_layout(&grid, &valid, settings, &traced.rows)?;
+    let placed: Vec<bool> = traced.rays.iter().map(|r| r.placed).collect();
+    let (from, lens) = carried_layout(&grid, (&valid, &placed), settings, &traced.rows)?;
     let carried = encode::Carried {
         from: &from,
         lens: &lens,
@@ -143,6 +151,11 @@ pub(crate) fn bake_in_pool(
     report.warnings.extend(diagnostics::gap_warning(&asset));
     lap(&mut report, "assemble", None);
     Ok((asset, report))
+}
+
+/// Whether a probe was traced and its rays say it lies outside geometry ([`inside`]).
+fn valid(settings: &BakeSettings, r: &trace::ProbeRays) -> bool {
+    r.placed && !inside(settings, r)
 }
 
 /// Whether a probe's rays say it lies inside geometry: too many of them hit back faces, or it
@@ -247,6 +260,8 @@ impl Lattice {
 struct ProbeTrace<'a> {
     tracer: &'a trace::Tracer<'a>,
     settings: &'a BakeSettings,
+    /// Per grid point, whether the placement keeps it ([`placement`]); `None`: every one.
+    placed: Option<&'a [bool]>,
     /// The grid points, and how many along each axis.
     positions: &'a [Vec3],
     counts: [u32; 3],
@@ -263,6 +278,9 @@ impl ProbeTrace<'_> {
     fn trace(&self, index: usize) -> (Vec3, trace::ProbeRays, bool) {
         let settings = self.settings;
         let grid_p = self.positions[index];
+        if self.placed.is_some_and(|placed| !placed[index]) {
+            return (grid_p, trace::ProbeRays::not_placed(), false);
+        }
         let [nx, ny, nz] = self.counts;
         let (i, j, k) = (
             index as u32 % nx,
@@ -292,12 +310,13 @@ impl ProbeTrace<'_> {
     }
 }
 
-/// The trace stage: every probe of `grid` traced through `bvh` over the `loaded` scene and its
-/// hits folded into bricks of cells of `cell_size` as they come ([`stream::trace_and_fold`]).
+/// The trace stage: every probe of `grid` the placement keeps (all of them with `None`) traced
+/// through `bvh` over the `loaded` scene and its hits folded into bricks of cells of
+/// `cell_size` as they come ([`stream::trace_and_fold`]).
 fn trace_stage(
     loaded: &Loaded,
     bvh: &bvh::SceneBvh,
-    grid: &prt_format::Grid,
+    (grid, placed): (&prt_format::Grid, Option<&[bool]>),
     settings: &BakeSettings,
     cell_size: f32,
     progress: &dyn Progress,
@@ -307,6 +326,7 @@ fn trace_stage(
     let probe_trace = ProbeTrace {
         tracer: &tracer,
         settings,
+        placed,
         positions: &probes::positions(grid),
         counts: grid.counts,
         bounds: loaded.bounds,
@@ -328,7 +348,7 @@ fn trace_stage(
             spacing: grid.spacing,
             precision: settings.transfer_precision,
             row_memory: settings.row_memory,
-            rows_of: &|r| !inside(settings, r),
+            rows_of: &|r| valid(settings, r),
             far,
         },
         progress,
@@ -380,20 +400,17 @@ fn settings_record(settings: &BakeSettings, spacing: f32, cell_size: f32) -> Bak
 /// unmerged surfels are the other probes' hits.
 fn stats(scene: &Scene, traced: &[trace::ProbeRays], settings: &BakeSettings) -> BakeStats {
     let n = settings.rays;
+    let traced = || traced.iter().filter(|r| r.placed);
     // Every ray hits a surface or the sky.
     let hits_of = |r: &trace::ProbeRays| u64::from(n - r.sky_rays);
-    let hits: u64 = traced.iter().map(hits_of).sum();
+    let hits: u64 = traced().map(hits_of).sum();
     BakeStats {
         triangles: scene.triangles.len() as u64,
         degenerate_triangles_skipped: scene.degenerate_skipped,
-        rays: traced.len() as u64 * u64::from(n),
+        rays: traced().count() as u64 * u64::from(n),
         ray_hits: hits,
-        backface_hits: traced.iter().map(|r| u64::from(r.backface_rays)).sum(),
-        surfels_unmerged: traced
-            .iter()
-            .filter(|r| !inside(settings, r))
-            .map(hits_of)
-            .sum(),
+        backface_hits: traced().map(|r| u64::from(r.backface_rays)).sum(),
+        surfels_unmerged: traced().filter(|r| !inside(settings, r)).map(hits_of).sum(),
     }
 }
 
@@ -509,9 +526,9 @@ fn bricks_and_tables(
     Ok((bricked, coarse, factors))
 }
 
-/// Per probe, whether it is valid (not inside geometry, [`inside`]); warns when most probes
-/// are not, with the winding hint when the BVH stage found inconsistent winding (counting it
-/// now if it did not run then).
+/// Per probe, whether it is valid (placed and not inside geometry, [`valid`]); warns when most
+/// placed probes are not, with the winding hint when the BVH stage found inconsistent winding
+/// (counting it now if it did not run then).
 fn validity(
     rays: &[trace::ProbeRays],
     settings: &BakeSettings,
@@ -519,25 +536,29 @@ fn validity(
     scene: &Scene,
     report: &mut BakeReport,
 ) -> Vec<bool> {
-    let valid: Vec<bool> = rays.iter().map(|r| !inside(settings, r)).collect();
+    let valid: Vec<bool> = rays.iter().map(|r| valid(settings, r)).collect();
+    let placed: Vec<bool> = (rays.iter().zip(&valid))
+        .filter(|(r, _)| r.placed)
+        .map(|(_, &v)| v)
+        .collect();
     let count_winding = || {
         built
             .winding
             .unwrap_or_else(|| diagnostics::winding(&scene.triangles))
     };
     let hint = built.winding_hint;
-    if let Some(w) = diagnostics::inside_warning(&valid, settings, count_winding, hint) {
+    if let Some(w) = diagnostics::inside_warning(&placed, settings, count_winding, hint) {
         report.warnings.push(w);
     }
     valid
 }
 
-/// Per probe of `grid`: whose factor table it carries (its own when valid, else its dilation
-/// source's when the settings dilate, else none) and how many factors that is; fails when they
-/// pass 2^32 in all.
+/// Per probe of `grid`: whose factor table it carries (its own when valid, else, placed, its
+/// dilation source's when the settings dilate, else none) and how many factors that is; fails
+/// when they pass 2^32 in all.
 fn carried_layout(
     grid: &prt_format::Grid,
-    valid: &[bool],
+    (valid, placed): (&[bool], &[bool]),
     settings: &BakeSettings,
     tables: &factors::Rows,
 ) -> Result<(Vec<Option<usize>>, Vec<usize>), BakeError> {
@@ -550,7 +571,10 @@ fn carried_layout(
         .iter()
         .zip(&sources)
         .enumerate()
-        .map(|(p, (&valid, &source))| if valid { Some(p) } else { source })
+        .map(|(p, (&valid, &source))| match valid {
+            true => Some(p),
+            false => source.filter(|_| placed[p]),
+        })
         .collect();
     let lens: Vec<usize> = from
         .iter()
@@ -570,18 +594,33 @@ fn carried_layout(
 /// Per probe, in probe order: its record, and the sky mask and sky transfer it carries with
 /// its factor table (`carried`). A dilated probe carries its source's table, sky and ray counts
 /// (the record describes the data it carries); only its position is its own. An invalid probe
-/// is never gathered and carries no table.
+/// is never gathered and carries no table; a grid point the placement left out carries
+/// nothing, not even a slot in the sky sections ([`prt_format::Probe::slot`]).
 fn assemble_probes(
     traced: &[trace::ProbeRays],
     positions: &[(Vec3, bool)],
     carried: encode::Carried,
 ) -> Assembled {
     let mut probes = Vec::with_capacity(traced.len());
-    let mask_words = traced.first().map_or(0, |r| r.sky_mask.len());
-    let mut sky_mask = Vec::with_capacity(mask_words * positions.len());
-    let mut sky_transfer = Vec::with_capacity(positions.len());
+    let placed = traced.iter().filter(|r| r.placed).count();
+    let mask_words = traced
+        .iter()
+        .find(|r| r.placed)
+        .map_or(0, |r| r.sky_mask.len());
+    let mut sky_mask = Vec::with_capacity(mask_words * placed);
+    let mut sky_transfer = Vec::with_capacity(placed);
     let mut first_factor = 0u32;
+    let mut slot = 0u32;
     for (p, &(pos, moved)) in positions.iter().enumerate() {
+        if !traced[p].placed {
+            probes.push(Probe {
+                position: pos.to_array(),
+                slot: NO_SLOT,
+                first_factor,
+                ..Probe::default()
+            });
+            continue;
+        }
         let (flags, from) = match carried.from[p] {
             Some(q) if q == p => (PROBE_VALID, p),
             Some(q) => (PROBE_VALID | PROBE_DILATED, q),
@@ -594,10 +633,12 @@ fn assemble_probes(
             first_factor,
             factor_count: len,
             sky_rays: traced[from].sky_rays,
-            backface_rays: traced[from].backface_rays,
+            slot,
         });
-        // At most 2^32 - 1 factors in all (checked before the tables were encoded).
+        // At most 2^32 - 1 factors in all (checked before the tables were encoded), and as
+        // many placed probes as grid points.
         first_factor += len;
+        slot += 1;
         sky_mask.extend_from_slice(&traced[from].sky_mask);
         sky_transfer.push(traced[from].sky_transfer);
     }

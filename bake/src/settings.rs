@@ -30,6 +30,10 @@ pub struct BakeSettings {
     /// Probe spacing in metres; `None` picks about 4,000 probes over the bounds
     /// ([`crate::probes::DEFAULT_PROBES`]).
     pub spacing: Option<f32>,
+    /// Place probes only at the grid points surfaces need ([`crate::placement`]): the others
+    /// are not traced and carry no data. Off by default: a point in open air away from every
+    /// surface then gets no probe light (validity 0).
+    pub sparse: bool,
     /// Bake bounds `[min x, y, z, max x, y, z]`; `None` uses the scene's bounds.
     pub bounds: Option<[f32; 6]>,
     /// Refuse grids with more probes than this.
@@ -99,6 +103,7 @@ impl Default for BakeSettings {
         BakeSettings {
             rays: 2048,
             spacing: None,
+            sparse: false,
             bounds: None,
             max_probes: 1 << 20,
             cell_size: None,

@@ -50,7 +50,7 @@ pub struct Traced {
     pub rays: Vec<ProbeRays>,
     /// Per probe: factor rows keyed by provisional brick ([`factors::Rows`]).
     pub rows: Rows,
-    /// Per probe, its packed visibility map ([`DepthFilter::map`]), probe after probe.
+    /// Per placed probe, its packed visibility map ([`DepthFilter::map`]), probe after probe.
     pub depth: Vec<u32>,
     pub folder: BrickFolder,
     /// Per provisional brick, bit `l` set when some probe has a level-`l` row naming it:
@@ -207,7 +207,9 @@ fn fold_block(block: Block, out: &mut Traced, per_probe: &PerProbe) -> Result<()
                 }),
                 false => factors::ProbeRows::new(precision),
             };
-            let depth = depth_filter.map(p, &r, tracer.directions.len(), spacing);
+            let depth = r
+                .placed
+                .then(|| depth_filter.map(p, &r, tracer.directions.len(), spacing));
             r.hits = Vec::new();
             ((p, moved), r, rows, depth)
         })
@@ -228,7 +230,9 @@ fn fold_block(block: Block, out: &mut Traced, per_probe: &PerProbe) -> Result<()
         out.positions.push(position);
         out.rays.push(r);
         out.rows.push(&rows)?;
-        out.depth.extend_from_slice(&depth);
+        if let Some(depth) = depth {
+            out.depth.extend_from_slice(&depth);
+        }
     }
     Ok(())
 }

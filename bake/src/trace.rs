@@ -53,6 +53,15 @@ pub struct ProbeRays {
     pub backface_rays: u32,
     /// Hits on the back side of their triangle's winding ([`Hit::facing_away`]).
     pub facing_away_rays: u32,
+    /// Traced: false for a grid point the placement left out ([`ProbeRays::not_placed`]).
+    pub placed: bool,
+}
+
+impl ProbeRays {
+    /// A grid point the placement left out ([`crate::placement`]): no rays, no data.
+    pub fn not_placed() -> ProbeRays {
+        ProbeRays::default()
+    }
 }
 
 /// Shared, read-only inputs of tracing.
@@ -106,6 +115,7 @@ impl Tracer<'_> {
         let mut out = ProbeRays {
             hits: Vec::with_capacity(n),
             sky_mask: vec![0; n.div_ceil(32)],
+            placed: true,
             ..ProbeRays::default()
         };
         for packet in self.order.chunks(PACKET) {

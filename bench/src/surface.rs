@@ -82,6 +82,9 @@ pub struct SurfaceArgs {
     /// bake's default for each case].
     #[arg(long)]
     spacing: Option<f32>,
+    /// Bake with sparse placement (`prt bake --sparse`): probes only where surfaces need them.
+    #[arg(long)]
+    sparse: bool,
     /// Write each camera view (the levels') per spacing and lookup to DIR as a PNG: reference,
     /// lookup, over-lit (red) and under-lit (blue) pixels (`surface/pictures.rs`).
     #[arg(long, value_name = "DIR")]
@@ -141,21 +144,27 @@ pub fn run(args: SurfaceArgs) -> Result<()> {
             case,
             &refs,
             &lookups.for_set(case.set),
-            args.spacing,
+            (args.spacing, args.sparse),
         )?);
     }
     args.out
         .report("surface", &report::markdown(&rows, &oracle)?)
 }
 
-/// Bakes and relights `case` at its default spacing (or `spacing`) and at half of it, a row per
-/// lookup each.
-fn measure(case: &Case, refs: &Refs, lookups: &[Lookup], spacing: Option<f32>) -> Result<Vec<Row>> {
+/// Bakes and relights `case` at its default spacing (or `spacing`) and at half of it, with
+/// sparse placement or not, a row per lookup each.
+fn measure(
+    case: &Case,
+    refs: &Refs,
+    lookups: &[Lookup],
+    (spacing, sparse): (Option<f32>, bool),
+) -> Result<Vec<Row>> {
     let lighting = prt_runtime::load_rig(&case.rig)
         .with_context(|| format!("{}: loading the rig {}", case.name, case.rig.display()))?;
     let base = BakeSettings {
         double_sided: case.double_sided,
         spacing,
+        sparse,
         ..BakeSettings::default()
     };
     let bricks = lookups.iter().any(Lookup::needs_bricks);
@@ -295,7 +304,7 @@ fn sample(
         setting,
         spacing: baked.asset.header.grid.spacing,
         lookup: *lookup,
-        probes: summary.probe_count,
+        probes: summary.placed_probe_count,
         surface_probes: placement::surface_probes(&baked.asset),
         valid: summary.valid_probe_count,
         dilated: summary.dilated_probe_count,

@@ -49,6 +49,11 @@ pub struct BakeArgs {
     /// Probe spacing in metres [default: about 4,000 probes over the bounds].
     #[arg(long)]
     spacing: Option<f32>,
+    /// Place probes only at the grid points surfaces need (within a cell and a quarter
+    /// spacing of a triangle); the rest carry no data, and points in open air away from every
+    /// surface get no probe light.
+    #[arg(long)]
+    sparse: bool,
     /// Bake bounds MINX,MINY,MINZ,MAXX,MAXY,MAXZ [default: the scene's bounds].
     #[arg(long, value_parser = parse_bounds, allow_hyphen_values = true)]
     bounds: Option<[f32; 6]>,
@@ -120,6 +125,7 @@ pub fn run(args: BakeArgs) -> Result<()> {
         scene,
         output,
         spacing,
+        sparse,
         bounds,
         rays,
         quality,
@@ -147,6 +153,7 @@ pub fn run(args: BakeArgs) -> Result<()> {
     let settings = BakeSettings {
         rays: rays.unwrap_or(preset.rays),
         spacing,
+        sparse,
         bounds,
         max_probes,
         cell_size: if no_merge { Some(0.0) } else { cell_size },

@@ -13,14 +13,16 @@ use crate::surface::SurfaceTerms;
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Asset {
     pub header: Header,
-    /// One per probe, in grid order (x fastest, then y, then z).
+    /// One per grid point, in grid order (x fastest, then y, then z), placed or not
+    /// ([`Probe::slot`]).
     pub probes: Vec<Probe>,
-    /// Per probe, `header.sky_mask_words()` words: bit i set when lattice ray i escaped to the sky.
+    /// Per placed probe (in slot order, [`Probe::slot`]), `header.sky_mask_words()` words: bit i
+    /// set when lattice ray i escaped to the sky.
     pub sky_mask: Vec<u32>,
-    /// Per probe, the SH9 projection of its sky directions (`4pi/N sum_{i in sky} Y_k(w_i)`):
+    /// Per placed probe, the SH9 projection of its sky directions (`4pi/N sum_{i in sky} Y_k(w_i)`):
     /// multiply by a constant sky radiance to get the probe's sky term without touching the mask.
     pub sky_transfer: Vec<[f32; SH_COUNT]>,
-    /// Per probe, [`DEPTH_WORDS`] words: the probe's visibility as an octahedral map
+    /// Per placed probe, [`DEPTH_WORDS`] words: the probe's visibility as an octahedral map
     /// ([`crate::depth`]) of the mean and standard deviation of its rays' hit distances in probe
     /// spacings, one byte each, two texels per word. Sampling weights each probe by whether the
     /// shaded point is visible from it (Chebyshev test, Majercik et al. 2019).
@@ -186,7 +188,15 @@ pub const DEPTH_TEXELS: usize = (DEPTH_MAP_SIDE * DEPTH_MAP_SIDE) as usize;
 /// Words of visibility data per probe (two texels per word): 512 bytes.
 pub const DEPTH_WORDS: usize = DEPTH_TEXELS / 2;
 
-/// A probe: where it is, whether it may be used, and where its factor table starts.
+/// [`Probe::slot`] of a grid point the bake placed no probe at.
+pub const NO_SLOT: u32 = u32::MAX;
+
+/// A probe: where it is, whether it may be used, where its factor table starts, and where its
+/// sky and visibility data sit.
+///
+/// Every grid point has a record; a bake with sparse placement (`prt_bake::placement`) traces
+/// only the points surfaces need and leaves the others out: [`NO_SLOT`], not valid, no factors,
+/// no sky or visibility data, never gathered, and weighted 0 by every lookup.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable, Serialize, Deserialize)]
 #[repr(C)]
 pub struct Probe {
@@ -198,8 +208,9 @@ pub struct Probe {
     pub factor_count: u32,
     /// Rays that escaped to the sky (their solid angle is `4pi * sky_rays / N`).
     pub sky_rays: u32,
-    /// Rays that hit a back face of single-sided geometry (evidence of being inside geometry).
-    pub backface_rays: u32,
+    /// The probe's index among the placed probes, in grid order: where its sky mask, sky
+    /// transfer and visibility map sit in their sections; [`NO_SLOT`] when it was not placed.
+    pub slot: u32,
 }
 const _: () = assert!(std::mem::size_of::<Probe>() == 32);
 
@@ -207,6 +218,11 @@ impl Probe {
     /// Gathered and sampled: a real probe or a dilated one.
     pub fn is_valid(&self) -> bool {
         self.flags & PROBE_VALID != 0
+    }
+
+    /// Traced by the bake: it has a slot ([`Probe::slot`]) in the per-probe sections.
+    pub fn is_placed(&self) -> bool {
+        self.slot != NO_SLOT
     }
 
     /// Inside geometry, its table copied from a neighbour ([`PROBE_DILATED`]).

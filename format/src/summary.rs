@@ -13,7 +13,11 @@ pub struct Summary {
     pub format_version: u32,
     pub source_name: String,
     pub source_hash: String,
+    /// Grid points (the probes' records).
     pub probe_count: usize,
+    /// Probes the bake placed and traced (every grid point unless the placement is sparse,
+    /// [`Probe::slot`]): the "per probe" of the figures below.
+    pub placed_probe_count: usize,
     /// Probes outside geometry (dilated ones not counted).
     pub valid_probe_count: usize,
     /// Probes inside geometry whose table was copied from a valid neighbour.
@@ -41,8 +45,8 @@ pub struct Summary {
     pub light_count: usize,
     pub file_bytes: u64,
     pub bytes_per_probe: f64,
-    /// Per-probe runtime data: probe record, sky mask, sky transfer, visibility map and factor
-    /// table.
+    /// Per placed probe, the per-probe runtime data: probe records (the grid's, placed or not),
+    /// sky mask, sky transfer, visibility map and factor table.
     pub transport_bytes_per_probe: f64,
     pub section_bytes: SectionBytes,
     pub grid: Grid,
@@ -74,7 +78,7 @@ fn bytes<T>(v: &[T]) -> u64 {
 impl Summary {
     /// Summarises `asset`, whose file is `file_bytes` long.
     pub fn of(asset: &Asset, file_bytes: u64) -> Summary {
-        let probes = asset.probes.len();
+        let probes = asset.probes.iter().filter(|p| p.is_placed()).count();
         let section_bytes = SectionBytes {
             probes: bytes(&asset.probes),
             sky_mask: bytes(&asset.sky_mask),
@@ -106,7 +110,8 @@ impl Summary {
             format_version: FORMAT_VERSION,
             source_name: asset.header.source_name.clone(),
             source_hash: format!("{:016x}", asset.header.source_hash),
-            probe_count: probes,
+            probe_count: asset.probes.len(),
+            placed_probe_count: probes,
             valid_probe_count: asset
                 .probes
                 .iter()
@@ -147,10 +152,12 @@ impl Summary {
 /// beside one wall sees the room over half its texels; one between two plates a centimetre
 /// apart sees them everywhere but at grazing angles).
 pub fn probe_in_gap(asset: &Asset, p: usize) -> bool {
-    let Some(words) = asset
-        .probe_depth
-        .get(p * DEPTH_WORDS..(p + 1) * DEPTH_WORDS)
-    else {
+    let Some(words) = asset.probes.get(p).and_then(|probe| {
+        let slot = probe.slot as usize;
+        asset
+            .probe_depth
+            .get(slot * DEPTH_WORDS..(slot + 1) * DEPTH_WORDS)
+    }) else {
         return false;
     };
     let mut means: Vec<f32> = (0..DEPTH_TEXELS)
@@ -190,10 +197,11 @@ impl std::fmt::Display for Summary {
         )?;
         writeln!(
             f,
-            "probes           {} ({} valid, {} inside geometry of which {} dilated, {} moved off a surface or out of geometry), {} rays each",
+            "probes           {} placed of {} grid points ({} valid, {} inside geometry of which {} dilated, {} moved off a surface or out of geometry), {} rays each",
+            self.placed_probe_count,
             self.probe_count,
             self.valid_probe_count,
-            self.probe_count - self.valid_probe_count,
+            self.placed_probe_count - self.valid_probe_count,
             self.dilated_probe_count,
             self.offset_probe_count,
             self.ray_count

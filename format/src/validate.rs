@@ -116,8 +116,8 @@ fn header(h: &Header) -> Result<(), FormatError> {
     Ok(())
 }
 
-/// The per-probe sections' lengths (the probes, sky masks, sky transfers, visibility maps)
-/// against the grid, and the sky transfers' values.
+/// The per-probe sections' lengths (the probes against the grid; sky masks, sky transfers and
+/// visibility maps against the placed probes, [`Probe::slot`]), and the sky transfers' values.
 fn probe_sections(asset: &Asset) -> Result<(), FormatError> {
     let h = &asset.header;
     let g = &h.grid;
@@ -129,6 +129,7 @@ fn probe_sections(asset: &Asset) -> Result<(), FormatError> {
             expected: g.probe_count() as usize,
         });
     }
+    let probes = asset.probes.iter().filter(|p| p.is_placed()).count();
     count(
         "sky_mask",
         asset.sky_mask.len(),
@@ -146,22 +147,40 @@ fn probe_sections(asset: &Asset) -> Result<(), FormatError> {
     Ok(())
 }
 
-/// Each probe's record: a finite position, sky and back-face ray counts within the header's
-/// `ray_count`, dilated only if valid, and factor runs that follow one another and add up to
+/// Each probe's record: a finite position, a sky ray count within the header's `ray_count`,
+/// dilated only if valid, slots numbering the placed probes in grid order (a probe left out
+/// has no flags, factors or sky rays), and factor runs that follow one another and add up to
 /// the factor table's length.
 fn probe_records(asset: &Asset) -> Result<(), FormatError> {
     let h = &asset.header;
     let factors = &asset.factors;
     let mut next_factor = 0u64;
+    let mut next_slot = 0u32;
     for (i, p) in asset.probes.iter().enumerate() {
         finite("probes", i, "position", &p.position)?;
-        if p.sky_rays > h.ray_count || p.backface_rays > h.ray_count {
+        if p.sky_rays > h.ray_count {
+            return Err(FormatError::invalid(
+                "probes",
+                i,
+                format!("sky_rays {} exceed ray_count {}", p.sky_rays, h.ray_count),
+            ));
+        }
+        if p.is_placed() {
+            if p.slot != next_slot {
+                return Err(FormatError::invalid(
+                    "probes",
+                    i,
+                    format!("slot {} (expected {next_slot})", p.slot),
+                ));
+            }
+            next_slot += 1;
+        } else if p.flags != 0 || p.factor_count != 0 || p.sky_rays != 0 {
             return Err(FormatError::invalid(
                 "probes",
                 i,
                 format!(
-                    "sky_rays {} / backface_rays {} exceed ray_count {}",
-                    p.sky_rays, p.backface_rays, h.ray_count
+                    "not placed (slot {NO_SLOT:#x}) but flags {:#x}, factor_count {}, sky_rays {}",
+                    p.flags, p.factor_count, p.sky_rays
                 ),
             ));
         }

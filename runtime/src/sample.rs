@@ -93,6 +93,8 @@ pub struct VolumeSampler<'a> {
     weight: Vec<f32>,
     /// Where each probe's rays started (`Probe::position`).
     positions: Vec<Vec3>,
+    /// Where each probe's visibility map sits (`Probe::slot`).
+    slots: Vec<u32>,
     sh: &'a [ShRgb],
     /// The probes' depth moments (`Asset::probe_depth`); empty: trilinear only.
     depth_moments: &'a [u32],
@@ -108,10 +110,12 @@ impl<'a> VolumeSampler<'a> {
         let n = count.min(probes.len()).min(sh.len());
         let weight = (0..n).map(|i| probes[i].sample_weight()).collect();
         let positions = (0..n).map(|i| Vec3::from(probes[i].position)).collect();
+        let slots = (0..n).map(|i| probes[i].slot).collect();
         VolumeSampler {
             grid: *grid,
             weight,
             positions,
+            slots,
             sh,
             depth_moments: &[],
             normal_bias,
@@ -130,9 +134,16 @@ impl<'a> VolumeSampler<'a> {
         }
     }
 
-    /// Weights probes by their depth moments `depth` (`Asset::probe_depth`).
+    /// Weights probes by their depth moments `depth` (`Asset::probe_depth`, one map per placed
+    /// probe in slot order); ignored when it is too short for the probes' slots.
     pub fn with_depth_moments(mut self, depth: &'a [u32]) -> Self {
-        if depth.len() >= self.weight.len() * DEPTH_WORDS {
+        let maps = depth.len() / DEPTH_WORDS;
+        let fits = self
+            .slots
+            .iter()
+            .zip(&self.weight)
+            .all(|(&slot, &w)| w <= 0.0 || (slot as usize) < maps);
+        if fits && !depth.is_empty() {
             self.depth_moments = depth;
         }
         self
@@ -151,7 +162,8 @@ impl<'a> VolumeSampler<'a> {
         let behind =
             ((probe - surface).dot(n) / self.grid.spacing / FACING_DEPTH + 1.0).clamp(0.0, 1.0);
         let mut w = behind * behind + FACING_FLOOR;
-        let words = &self.depth_moments[i * DEPTH_WORDS..(i + 1) * DEPTH_WORDS];
+        let slot = self.slots[i] as usize;
+        let words = &self.depth_moments[slot * DEPTH_WORDS..(slot + 1) * DEPTH_WORDS];
         let (mean, deviation) =
             prt_format::depth::moments(words, prt_format::depth::texel_of(dir.to_array()));
         // A saturated mean (sky, or hits beyond MAX_DEPTH) bounds nothing: points beyond it,

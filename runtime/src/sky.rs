@@ -265,7 +265,8 @@ impl SkyModel {
         }
     }
 
-    /// SH9 of the sky radiance a probe sees through its sky rays; `lattice` is
+    /// SH9 of the sky radiance a probe sees through its sky rays (none for a probe the bake did
+    /// not place); `lattice` is
     /// [`SkyModel::lattice`] for the asset's ray count, computed once for all probes.
     pub fn probe_sky(
         &self,
@@ -273,16 +274,20 @@ impl SkyModel {
         probe: usize,
         lattice: &[([f32; 3], [f32; 3])],
     ) -> ShRgb {
+        let slot = asset.probes[probe].slot as usize;
+        if !asset.probes[probe].is_placed() {
+            return [[0.0; 3]; SH_COUNT];
+        }
         match self {
             SkyModel::Black => [[0.0; 3]; SH_COUNT],
             SkyModel::Constant(c) => {
-                let t = &asset.sky_transfer[probe];
+                let t = &asset.sky_transfer[slot];
                 std::array::from_fn(|k| c.map(|v| v * t[k]))
             }
             SkyModel::Equirect { .. } => {
                 let n = asset.header.ray_count;
                 let words = asset.header.sky_mask_words();
-                let mask = &asset.sky_mask[probe * words..(probe + 1) * words];
+                let mask = &asset.sky_mask[slot * words..(slot + 1) * words];
                 let w = direction_weight(n);
                 let mut acc = [[0.0; 3]; SH_COUNT];
                 for (i, &(d, l)) in lattice.iter().enumerate() {

@@ -202,16 +202,18 @@ fn truncated_files_are_rejected() {
     ));
 }
 
-/// Another format version is refused with the version found and the one supported.
+/// Another format version (an older one too: version 5 had no probe slots) is refused with the
+/// version found and the one supported, and says to re-bake.
 #[test]
 fn wrong_version_is_unsupported() {
-    for version in [0, FORMAT_VERSION + 1, u32::MAX] {
+    for version in [0, FORMAT_VERSION - 1, FORMAT_VERSION + 1, u32::MAX] {
         let mut bad = small_file();
         bad[8..12].copy_from_slice(&version.to_le_bytes());
         match decode(&bad) {
             Err(e @ FormatError::UnsupportedVersion { found, supported }) => {
                 assert_eq!((found, supported), (version, FORMAT_VERSION));
                 assert!(e.to_string().contains(&version.to_string()), "{e}");
+                assert!(e.to_string().contains("re-bake"), "{e}");
             }
             other => panic!("version {version}: {other:?}"),
         }
@@ -412,6 +414,25 @@ fn structurally_broken_assets_are_invalid() {
     });
     assert_invalid("sky rays beyond ray count", "probes", |a| {
         a.probes[0].sky_rays = a.header.ray_count + 1
+    });
+    assert_invalid("probe slots out of order", "probes", |a| {
+        a.probes[1].slot += 1
+    });
+    assert_invalid("a probe left out that keeps its flags", "probes", |a| {
+        // The last probe, its sky and visibility data gone with its slot.
+        let last = a.probes.last_mut().unwrap();
+        assert!(last.is_valid());
+        last.slot = prt_format::NO_SLOT;
+        let words = a.header.sky_mask_words();
+        a.sky_mask.truncate(a.sky_mask.len() - words);
+        a.sky_transfer.pop();
+        a.probe_depth
+            .truncate(a.probe_depth.len() - prt_format::DEPTH_WORDS);
+    });
+    // The sky and visibility sections hold one entry per placed probe (the sections are
+    // checked before the records).
+    assert_count("a sky mask for a probe not placed", "sky_mask", |a| {
+        a.probes[0].slot = prt_format::NO_SLOT
     });
     assert_count("last probe claims an extra factor", "factors", |a| {
         a.probes.last_mut().unwrap().factor_count += 1

@@ -78,7 +78,7 @@ fn volume_sh(runtime: &PrtRuntime) -> Vec<Option<ShRgb>> {
 }
 
 /// GPU equals the CPU reference on the Cornell reference scene (unmerged f32 factors, default
-/// merged u8 and f16 factors, and far hits in coarse bricks) with point, spot with range,
+/// merged u8 and f16 factors, far hits in coarse bricks, sparse placement) with point, spot with range,
 /// directional and sky; the f32 volume read back equals the probe SH exactly, the f16 volume
 /// within half-float rounding.
 #[test]
@@ -111,6 +111,14 @@ fn gpu_equals_cpu_on_cornell() {
             BakeSettings {
                 far_ratio: 2.0,
                 transfer_precision: prt_format::TransferPrecision::F16,
+                ..BakeSettings::default()
+            },
+            VolumeFormat::F32,
+        ),
+        // Sky masks and transfers in slot order, probes left out never gathered.
+        (
+            BakeSettings {
+                sparse: true,
                 ..BakeSettings::default()
             },
             VolumeFormat::F32,
@@ -671,6 +679,21 @@ fn sample_points_matches_the_cpu_sampler() {
         let mixed = compare_samplers(&device, &queue, &asset, &lighting, settings);
         assert!(mixed > 0, "no point beside a probe inside geometry");
     }
+    // Sparse placement: depth moments in slot order, points beside grid points left out.
+    let sparse = BakeSettings {
+        sparse: true,
+        ..cornell
+    };
+    let asset = bake(&fixture("cornell/cornell.gltf"), &sparse);
+    assert!(asset.probes.iter().any(|p| !p.is_placed()));
+    let mixed = compare_samplers(
+        &device,
+        &queue,
+        &asset,
+        &lighting,
+        RuntimeSettings::default(),
+    );
+    assert!(mixed > 0, "no point beside a probe left out");
     // Two rooms sharing a thin wall: the depth moments decide most of the weights there.
     let rooms = bake(&fixture("two_rooms.gltf"), &BakeSettings::default());
     let lighting = load_rig(&fixture("rigs/two_rooms.json")).unwrap();

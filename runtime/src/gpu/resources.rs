@@ -161,7 +161,10 @@ impl AssetBuffers {
         let positions: Vec<[f32; 4]> = asset
             .probes
             .iter()
-            .map(|p| [p.position[0], p.position[1], p.position[2], 0.0])
+            .map(|p| {
+                let [x, y, z] = p.position;
+                [x, y, z, f32::from_bits(p.slot)]
+            })
             .collect();
         Ok(AssetBuffers {
             probes: upload("prt probes", bytemuck::cast_slice(&asset.probes))?,

@@ -1,0 +1,176 @@
+//! Sparse placement: probes only at the grid points that surfaces need.
+//!
+//! A renderer samples the volume at surfaces. `sample_irradiance` moves the point along its
+//! normal by the normal bias (0.2 spacings by default) and reads the eight probes of the grid
+//! cell around it; the surface terms' lookup weights the same eight. A probe none of whose
+//! eight cells holds such a point is never read at a surface, yet on a uniform grid it costs as
+//! much as any other: in the air of an open level most probes are such probes (issue 32: a
+//! 200 x 200 x 40 m street at 1 m is 1.66 M probes, about 116 k of them beside surfaces).
+//!
+//! [`surface_probes`] keeps a grid point when some triangle comes within one lattice step plus
+//! [`REACH`] spacings of it along every axis (the box its cells cover, widened by at least the
+//! normal bias), by a conservative test: the triangle's bounding box overlaps that box and its
+//! plane passes through it (Akenine-Moller's triangle-box test without the nine edge axes, so a
+//! box beside a triangle's corner may be kept; none a surface needs is dropped). The bake traces
+//! only those probes; the others keep a record with no data ([`prt_format::NO_SLOT`]) and weigh
+//! nothing in any lookup, so a point in open air far from every surface gets no probe light
+//! (validity 0), as a point outside the grid's bounds always did.
+//!
+//! The outer layers also stand for everything beyond the bounds (lookups clamp to the grid),
+//! so a triangle outside the bounds keeps the outer grid points it faces.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use glam::Vec3;
+use prt_format::Grid;
+use rayon::prelude::*;
+
+/// Spacings beyond a grid point's cells within which a surface keeps it: covers the lookup's
+/// default normal bias (0.2 spacings, `prt_runtime::LookupSettings::normal_bias`) with room to
+/// spare. A surface point sampled with a larger bias can land in a cell whose far corners were
+/// not placed; those weigh 0 and the lookup renormalises over the rest.
+pub const REACH: f32 = 0.25;
+
+/// Which probes of `grid` surfaces need: per grid point in grid order, whether some triangle
+/// of `triangles` lies within its cells widened by [`REACH`] (module docs).
+pub fn surface_probes(grid: &Grid, triangles: &[[Vec3; 3]]) -> Vec<bool> {
+    let count = grid.probe_count() as usize;
+    let keep: Vec<AtomicBool> = (0..count).map(|_| AtomicBool::new(false)).collect();
+    triangles.par_iter().for_each(|t| {
+        for_points_near(grid, t, |index| keep[index].store(true, Ordering::Relaxed));
+    });
+    keep.into_iter().map(AtomicBool::into_inner).collect()
+}
+
+/// Calls `f` with the index of every grid point whose widened box triangle `t` overlaps.
+fn for_points_near(grid: &Grid, t: &[Vec3; 3], mut f: impl FnMut(usize)) {
+    let (tmin, tmax) = (t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2]));
+    let origin = Vec3::from(grid.origin);
+    let step = Vec3::from(grid.step);
+    let half = step + Vec3::splat(REACH * grid.spacing);
+    let counts = grid.counts;
+    // The grid points whose boxes the triangle's bounding box overlaps, clamped to the grid
+    // (the outer layers stand for what lies beyond it).
+    let range = |a: usize| -> Option<(u32, u32)> {
+        let n = counts[a];
+        if n <= 1 {
+            return Some((0, 0));
+        }
+        let lo = ((tmin[a] - half[a] - origin[a]) / step[a]).ceil();
+        let hi = ((tmax[a] + half[a] - origin[a]) / step[a]).floor();
+        let last = (n - 1) as f32;
+        if !(lo.is_finite() && hi.is_finite()) {
+            return None;
+        }
+        let (lo, hi) = (lo.clamp(0.0, last), hi.clamp(0.0, last));
+        (lo <= hi).then_some((lo as u32, hi as u32))
+    };
+    let (Some(rx), Some(ry), Some(rz)) = (range(0), range(1), range(2)) else {
+        return;
+    };
+    let normal = (t[1] - t[0]).cross(t[2] - t[0]);
+    let plane = normal.dot(t[0]);
+    for k in rz.0..=rz.1 {
+        for j in ry.0..=ry.1 {
+            for i in rx.0..=rx.1 {
+                let ijk = [i, j, k];
+                let p = Vec3::from(grid.position(i, j, k));
+                // The point's box; an outer layer's reaches out to the triangle beyond it, and
+                // a flat axis's (one layer) covers the triangle's whole extent along it.
+                let (mut lo, mut hi) = (p - half, p + half);
+                for a in 0..3 {
+                    if ijk[a] == 0 {
+                        lo[a] = lo[a].min(tmin[a]);
+                    }
+                    if ijk[a] + 1 >= counts[a] {
+                        hi[a] = hi[a].max(tmax[a]);
+                    }
+                }
+                if overlaps(normal, plane, (tmin, tmax), (lo, hi)) {
+                    f(grid.index(i, j, k));
+                }
+            }
+        }
+    }
+}
+
+/// Whether a triangle (plane `normal . x = plane`, bounding box `tri`) may overlap the box:
+/// their bounding boxes overlap and the plane passes within the box.
+fn overlaps(normal: Vec3, plane: f32, tri: (Vec3, Vec3), (lo, hi): (Vec3, Vec3)) -> bool {
+    if tri.0.cmpgt(hi).any() || tri.1.cmplt(lo).any() {
+        return false;
+    }
+    let (centre, extent) = ((lo + hi) * 0.5, (hi - lo) * 0.5);
+    let distance = normal.dot(centre) - plane;
+    distance.abs() <= extent.dot(normal.abs())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A floor at y = 0.1 over a 5 x 5 x 5 grid of step 1 keeps the layers y = 0 and y = 1,
+    /// whose cells hold it; y = 2 is 1.9 away, beyond a step and REACH.
+    #[test]
+    fn a_floor_keeps_the_two_layers_around_it() {
+        let grid = Grid::cubic([0.0; 3], 1.0, [5, 5, 5]);
+        let floor = [
+            [
+                Vec3::new(-1.0, 0.1, -1.0),
+                Vec3::new(9.0, 0.1, -1.0),
+                Vec3::new(-1.0, 0.1, 9.0),
+            ],
+            [
+                Vec3::new(9.0, 0.1, -1.0),
+                Vec3::new(9.0, 0.1, 9.0),
+                Vec3::new(-1.0, 0.1, 9.0),
+            ],
+        ];
+        let keep = surface_probes(&grid, &floor);
+        for k in 0..5 {
+            for j in 0..5 {
+                for i in 0..5 {
+                    assert_eq!(keep[grid.index(i, j, k)], j <= 1, "({i}, {j}, {k})");
+                }
+            }
+        }
+    }
+
+    /// A slanted triangle keeps the points whose boxes its plane crosses, not its whole
+    /// bounding box; one outside the bounds keeps the outer layer it faces.
+    #[test]
+    fn slanted_and_outside_triangles() {
+        let grid = Grid::cubic([0.0; 3], 1.0, [9, 9, 9]);
+        let slant = [[
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(8.0, 8.0, 0.0),
+            Vec3::new(0.0, 0.0, 8.0),
+        ]];
+        let keep = surface_probes(&grid, &slant);
+        // The plane x = y: a point is within 1.25 of it along both axes' boxes when
+        // |x - y| <= 2.5.
+        for j in 0..9 {
+            for i in 0..9 {
+                let near = (i as i32 - j as i32).abs() <= 2;
+                assert_eq!(keep[grid.index(i, j, 4)], near, "({i}, {j})");
+            }
+        }
+        assert!(keep.iter().filter(|&&k| k).count() < keep.len() / 2);
+        let beyond = [[
+            Vec3::new(20.0, 1.0, 1.0),
+            Vec3::new(20.0, 2.0, 1.0),
+            Vec3::new(20.0, 1.0, 2.0),
+        ]];
+        let keep = surface_probes(&grid, &beyond);
+        assert!(keep[grid.index(8, 1, 1)] && keep[grid.index(8, 2, 2)]);
+        assert!(!keep[grid.index(7, 1, 1)]);
+    }
+
+    /// Degenerate and non-finite triangles keep nothing and do not panic.
+    #[test]
+    fn bad_triangles_keep_nothing() {
+        let grid = Grid::cubic([0.0; 3], 1.0, [3, 3, 3]);
+        let nan = [[Vec3::NAN, Vec3::ONE, Vec3::ZERO]];
+        assert!(surface_probes(&grid, &nan).iter().all(|&k| !k));
+    }
+}

@@ -1,0 +1,112 @@
+//! Sparse placement (`BakeSettings::sparse`, `prt_bake::placement`; issue 32, item 2): probes
+//! only at the grid points surfaces need, the rest recorded without data.
+
+use prt_bake::BakeSettings;
+use prt_format::{decode, encode, Asset};
+use prt_runtime::sample::corners;
+use prt_runtime::surface::SurfaceSampler;
+use prt_runtime::{load_rig, CpuRelighter, LookupSettings};
+use prt_tests::{bake_ok, fixture, rays};
+
+/// The two-room fixture (a thin shared wall, a door) at a spacing that leaves air between the
+/// rooms' floors and ceilings, 256 rays: uniform and sparse.
+fn two_rooms(sparse: bool) -> Asset {
+    let settings = BakeSettings {
+        spacing: Some(0.25),
+        sparse,
+        ..rays(256)
+    };
+    bake_ok(&fixture("two_rooms.gltf"), &settings)
+}
+
+/// Front-face surfels: where the lookup reads the probes at surfaces.
+fn surfel_points(asset: &Asset) -> Vec<([f32; 3], [f32; 3])> {
+    asset
+        .surfels
+        .iter()
+        .filter(|s| s.flags & prt_format::BRICK_BACKFACE == 0)
+        .map(|s| (s.position, s.normal))
+        .collect()
+}
+
+/// A sparse bake places fewer probes than its grid has, keeps every probe the lookup reads at
+/// a surfel (at the surfel and moved by the default normal bias), leaves the others without
+/// data, validates and round-trips, and says so in its summary.
+#[test]
+fn sparse_placement_keeps_every_probe_surfaces_read() {
+    let asset = two_rooms(true);
+    let g = asset.header.grid;
+    let placed = asset.probes.iter().filter(|p| p.is_placed()).count();
+    assert!(
+        placed < asset.probes.len() * 9 / 10,
+        "{placed} of {} placed",
+        asset.probes.len()
+    );
+    let bias = LookupSettings::default().normal_bias * g.spacing;
+    let mut read = 0;
+    for (p, n) in surfel_points(&asset) {
+        let moved = std::array::from_fn(|a| p[a] + n[a] * bias);
+        for at in [p, moved] {
+            for (i, w) in corners(&g, at.into()) {
+                if w > 0.0 {
+                    read += 1;
+                    assert!(asset.probes[i].is_placed(), "probe {i} read at {at:?}");
+                }
+            }
+        }
+    }
+    assert!(read > 1000);
+    for p in asset.probes.iter().filter(|p| !p.is_placed()) {
+        assert_eq!((p.flags, p.factor_count, p.sky_rays), (0, 0, 0), "{p:?}");
+    }
+    assert_eq!(
+        asset.probe_depth.len(),
+        placed * prt_format::DEPTH_WORDS,
+        "one visibility map per placed probe"
+    );
+    assert_eq!(decode(&encode(&asset).unwrap()).unwrap(), asset);
+    let summary = prt_format::Summary::of(&asset, 0);
+    assert_eq!(summary.placed_probe_count, placed);
+    assert!(summary.to_string().contains(&format!("{placed} placed of")));
+}
+
+/// At the surfaces the sparse bake samples as the uniform bake of the same grid does: full
+/// validity at every surfel of the uniform bake, and irradiance within a few percent (the two
+/// bakes merge different ray hits into their surfels, so they are not equal).
+#[test]
+fn sparse_and_uniform_bakes_agree_at_surfaces() {
+    let (uniform, sparse) = (two_rooms(false), two_rooms(true));
+    let lighting = load_rig(&fixture("rigs/two_rooms.json")).unwrap();
+    let lookup = LookupSettings::default();
+    let relit = |a: &Asset| CpuRelighter::new(a).unwrap().relight(&lighting, 1).unwrap();
+    let (ru, rs) = (relit(&uniform), relit(&sparse));
+    let su = SurfaceSampler::new(&uniform, &ru.sh, &ru.surfel_irradiance, &lookup);
+    let ss = SurfaceSampler::new(&sparse, &rs.sh, &rs.surfel_irradiance, &lookup);
+    let points = surfel_points(&uniform);
+    let (mut diff, mut total) = (0.0f64, 0.0f64);
+    for &(p, n) in points.iter().step_by(7) {
+        let (a, b) = (su.sample(p, n), ss.sample(p, n));
+        assert!(b.validity >= a.validity - 1e-6, "at {p:?}: {b:?} vs {a:?}");
+        for c in 0..3 {
+            diff += f64::from((a.irradiance[c] - b.irradiance[c]).abs());
+            total += f64::from(a.irradiance[c].abs());
+        }
+    }
+    let rel = diff / total;
+    assert!(rel < 0.03, "mean relative difference {rel}");
+}
+
+/// Sparse bakes are byte-identical on one thread and two.
+#[test]
+fn sparse_bakes_are_identical_at_any_thread_count() {
+    let bake = |threads: usize| {
+        let settings = BakeSettings {
+            spacing: Some(0.4),
+            sparse: true,
+            threads: Some(threads),
+            ..rays(128)
+        };
+        encode(&bake_ok(&fixture("two_rooms.gltf"), &settings)).unwrap()
+    };
+    assert!(bake(1) == bake(2));
+}
