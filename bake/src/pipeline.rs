@@ -10,7 +10,7 @@ use glam::Vec3;
 use prt_format::coarse::CoarseBricks;
 use prt_format::{
     directions, Asset, BakeSettingsRecord, BakeStats, Factors, Header, Probe, TransferPrecision,
-    NO_SLOT, PROBE_DILATED, PROBE_OFFSET, PROBE_VALID, U8_MAX_BRICK,
+    DEPTH_WORDS, NO_SLOT, PROBE_DILATED, PROBE_OFFSET, PROBE_VALID, U8_MAX_BRICK,
 };
 
 use prt_scene::Scene;
@@ -83,6 +83,7 @@ pub(crate) fn bake_in_pool(
         folder,
         far_levels,
     } = traced;
+    let probe_depth = with_data(probe_depth, &traced, &from);
     let surfaces = snap::Surfaces {
         bvh: &built.bvh,
         triangles: &loaded.scene.triangles,
@@ -151,6 +152,22 @@ pub(crate) fn bake_in_pool(
     report.warnings.extend(diagnostics::gap_warning(&asset));
     lap(&mut report, "assemble", None);
     Ok((asset, report))
+}
+
+/// The visibility maps of the probes with data (those that carry a table, `from`) out of
+/// `depth`, one map per traced probe of `traced`.
+fn with_data(mut depth: Vec<u32>, traced: &[trace::ProbeRays], from: &[Option<usize>]) -> Vec<u32> {
+    let mut kept = 0;
+    let maps = traced.iter().zip(from).filter(|(r, _)| r.placed);
+    for (map, (_, from)) in maps.enumerate() {
+        if from.is_some() {
+            let words = map * DEPTH_WORDS..(map + 1) * DEPTH_WORDS;
+            depth.copy_within(words, kept * DEPTH_WORDS);
+            kept += 1;
+        }
+    }
+    depth.truncate(kept * DEPTH_WORDS);
+    depth
 }
 
 /// Whether a probe was traced and its rays say it lies outside geometry ([`inside`]).
@@ -594,15 +611,15 @@ fn carried_layout(
 /// Per probe, in probe order: its record, and the sky mask and sky transfer it carries with
 /// its factor table (`carried`). A dilated probe carries its source's table, sky and ray counts
 /// (the record describes the data it carries); only its position is its own. An invalid probe
-/// is never gathered and carries no table; a grid point the placement left out carries
-/// nothing, not even a slot in the sky sections ([`prt_format::Probe::slot`]).
+/// that is not dilated, like a grid point the placement left out, carries nothing: no table,
+/// flags or slot in the sky and visibility sections ([`prt_format::Probe::slot`]).
 fn assemble_probes(
     traced: &[trace::ProbeRays],
     positions: &[(Vec3, bool)],
     carried: encode::Carried,
 ) -> Assembled {
     let mut probes = Vec::with_capacity(traced.len());
-    let placed = traced.iter().filter(|r| r.placed).count();
+    let placed = carried.from.iter().filter(|f| f.is_some()).count();
     let mask_words = traced
         .iter()
         .find(|r| r.placed)
@@ -612,19 +629,20 @@ fn assemble_probes(
     let mut first_factor = 0u32;
     let mut slot = 0u32;
     for (p, &(pos, moved)) in positions.iter().enumerate() {
-        if !traced[p].placed {
-            probes.push(Probe {
-                position: pos.to_array(),
-                slot: NO_SLOT,
-                first_factor,
-                ..Probe::default()
-            });
-            continue;
-        }
+        // Left out by the placement, or invalid with nothing to copy: never gathered, weighed
+        // 0 by every lookup, so its sky and visibility data would never be read.
         let (flags, from) = match carried.from[p] {
             Some(q) if q == p => (PROBE_VALID, p),
             Some(q) => (PROBE_VALID | PROBE_DILATED, q),
-            None => (0, p),
+            None => {
+                probes.push(Probe {
+                    position: pos.to_array(),
+                    slot: NO_SLOT,
+                    first_factor,
+                    ..Probe::default()
+                });
+                continue;
+            }
         };
         let len = carried.lens[p] as u32;
         probes.push(Probe {

@@ -194,9 +194,10 @@ pub const NO_SLOT: u32 = u32::MAX;
 /// A probe: where it is, whether it may be used, where its factor table starts, and where its
 /// sky and visibility data sit.
 ///
-/// Every grid point has a record; a bake with sparse placement (`prt_bake::placement`) traces
-/// only the points surfaces need and leaves the others out: [`NO_SLOT`], not valid, no factors,
-/// no sky or visibility data, never gathered, and weighted 0 by every lookup.
+/// Every grid point has a record. A bake with sparse placement (`prt_bake::placement`) traces
+/// only the points surfaces need and leaves the others out; those, and probes inside geometry
+/// with no valid neighbour to copy, have no data: [`NO_SLOT`], not valid, no factors, no sky or
+/// visibility data, never gathered, and weighted 0 by every lookup.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable, Serialize, Deserialize)]
 #[repr(C)]
 pub struct Probe {
@@ -208,8 +209,8 @@ pub struct Probe {
     pub factor_count: u32,
     /// Rays that escaped to the sky (their solid angle is `4pi * sky_rays / N`).
     pub sky_rays: u32,
-    /// The probe's index among the placed probes, in grid order: where its sky mask, sky
-    /// transfer and visibility map sit in their sections; [`NO_SLOT`] when it was not placed.
+    /// The probe's index among the probes with data, in grid order: where its sky mask, sky
+    /// transfer and visibility map sit in their sections; [`NO_SLOT`] for a probe without.
     pub slot: u32,
 }
 const _: () = assert!(std::mem::size_of::<Probe>() == 32);
@@ -220,7 +221,7 @@ impl Probe {
         self.flags & PROBE_VALID != 0
     }
 
-    /// Traced by the bake: it has a slot ([`Probe::slot`]) in the per-probe sections.
+    /// Has data: a slot ([`Probe::slot`]) in the per-probe sections.
     pub fn is_placed(&self) -> bool {
         self.slot != NO_SLOT
     }

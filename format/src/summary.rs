@@ -15,8 +15,8 @@ pub struct Summary {
     pub source_hash: String,
     /// Grid points (the probes' records).
     pub probe_count: usize,
-    /// Probes the bake placed and traced (every grid point unless the placement is sparse,
-    /// [`Probe::slot`]): the "per probe" of the figures below.
+    /// Probes with data ([`Probe::slot`]): grid points the bake placed, less those inside
+    /// geometry with no valid neighbour to copy; the "per probe" of the figures below.
     pub placed_probe_count: usize,
     /// Probes outside geometry (dilated ones not counted).
     pub valid_probe_count: usize,
@@ -197,12 +197,12 @@ impl std::fmt::Display for Summary {
         )?;
         writeln!(
             f,
-            "probes           {} placed of {} grid points ({} valid, {} inside geometry of which {} dilated, {} moved off a surface or out of geometry), {} rays each",
+            "probes           {} with data of {} grid points ({} valid, {} inside geometry with a neighbour's data; the other {} left out by the placement or inside geometry: no data), {} moved off a surface or out of geometry, {} rays each",
             self.placed_probe_count,
             self.probe_count,
             self.valid_probe_count,
-            self.placed_probe_count - self.valid_probe_count,
             self.dilated_probe_count,
+            self.probe_count - self.placed_probe_count,
             self.offset_probe_count,
             self.ray_count
         )?;

@@ -67,7 +67,9 @@ fn sparse_placement_keeps_every_probe_surfaces_read() {
     assert_eq!(decode(&encode(&asset).unwrap()).unwrap(), asset);
     let summary = prt_format::Summary::of(&asset, 0);
     assert_eq!(summary.placed_probe_count, placed);
-    assert!(summary.to_string().contains(&format!("{placed} placed of")));
+    assert!(summary
+        .to_string()
+        .contains(&format!("{placed} with data of")));
 }
 
 /// At the surfaces the sparse bake samples as the uniform bake of the same grid does: full

@@ -197,7 +197,8 @@ fn damaged_terms_are_refused() {
 /// the family: sun through the roof opening, hard shadow edges beside dark gallery ceilings
 /// and arcade soffits), default bake, against the oracle's 299 points: with the surface terms
 /// at most 1% of the open points are lit over 1.5x their truth (measured 2 of 299 with 2048
-/// rays, 1 with stop 37's 512; the probe volume alone, 6 of 299: at least 3x as many), and the
+/// rays, 1 with stop 37's 512; the probe volume alone, 5 of 299 since probes are dilated only
+/// where a cell has no valid corner, 6 before: at least twice as many), and the
 /// mean error of the open points falls below 15% (7.4% against 9.7%, the mean over colour
 /// channels of the relative error; at stop 35's coarser default grid 12.6% against 23.9%).
 #[test]
@@ -238,7 +239,7 @@ fn a_sunlit_atrium_keeps_its_galleries_dark() {
     assert!(100 * leaks <= n, "{leaks} of {n} points over-lit");
     assert!(err < 0.15, "mean error {err}");
     assert!(
-        volume_leaks >= 3 * leaks.max(1),
+        volume_leaks >= 2 * leaks.max(1),
         "the volume alone: {volume_leaks} over-lit"
     );
     assert!(
