@@ -19,17 +19,19 @@ use prt_format::Grid;
 pub const RINGS: i64 = 2;
 
 /// For each probe, the valid probe it copies (`None` for valid probes, for invalid ones that
-/// fill no hole, and for those with no valid probe within reach). Nearest by grid distance,
-/// ties to the lowest index: deterministic, and sources are only originally valid probes (no
-/// chains).
-pub fn sources(grid: &Grid, valid: &[bool]) -> Vec<Option<usize>> {
+/// fill no hole, and for those with no valid probe within reach). With `cells` (per cell,
+/// indexed by its lowest corner: whether a surface needs it, `crate::placement::surface_cells`)
+/// only holes in those cells count: a sparse bake fills no hole inside a solid block. Nearest
+/// by grid distance, ties to the lowest index: deterministic, and sources are only originally
+/// valid probes (no chains).
+pub fn sources(grid: &Grid, valid: &[bool], cells: Option<&[bool]>) -> Vec<Option<usize>> {
     let n = grid.counts.map(i64::from);
     let mut out = vec![None; valid.len()];
     for k in 0..n[2] {
         for j in 0..n[1] {
             for i in 0..n[0] {
                 let p = grid.index(i as u32, j as u32, k as u32);
-                if valid[p] || !fills_a_hole(grid, valid, [i, j, k]) {
+                if valid[p] || !fills_a_hole(grid, (valid, cells), [i, j, k]) {
                     continue;
                 }
                 let mut best: Option<(i64, usize)> = None;
@@ -56,14 +58,18 @@ pub fn sources(grid: &Grid, valid: &[bool]) -> Vec<Option<usize>> {
 }
 
 /// Whether the probe at `ijk` is a corner of a cell none of whose corners is valid (along an
-/// axis of one probe, the cell is that layer).
-fn fills_a_hole(grid: &Grid, valid: &[bool], ijk: [i64; 3]) -> bool {
+/// axis of one probe, the cell is that layer) and, with `cells`, that a surface needs.
+fn fills_a_hole(grid: &Grid, (valid, cells): (&[bool], Option<&[bool]>), ijk: [i64; 3]) -> bool {
     let n = grid.counts.map(i64::from);
     // The cells' lowest corners along each axis: the probe's own and the one below.
     let lows = |a: usize| (ijk[a] - 1).max(0)..=ijk[a].min((n[a] - 2).max(0));
     for ck in lows(2) {
         for cj in lows(1) {
             for ci in lows(0) {
+                let cell = grid.index(ci as u32, cj as u32, ck as u32);
+                if cells.is_some_and(|cells| !cells[cell]) {
+                    continue;
+                }
                 let corner = |o: usize, c: i64, a: usize| (c + ((o >> a) & 1) as i64).min(n[a] - 1);
                 let any_valid = (0..8).any(|o| {
                     let (x, y, z) = (corner(o, ci, 0), corner(o, cj, 1), corner(o, ck, 2));
@@ -86,16 +92,16 @@ mod tests {
     fn nearest_valid_neighbour_deterministically() {
         let grid = Grid::cubic([0.0; 3], 1.0, [5, 1, 1]);
         let valid = [true, false, false, false, true];
-        let s = sources(&grid, &valid);
+        let s = sources(&grid, &valid, None);
         // Cells 1-2 and 2-3 have no valid corner: probes 1, 2 and 3 fill holes.
         assert_eq!(s, vec![None, Some(0), Some(0), Some(4), None]);
         let six = Grid::cubic([0.0; 3], 1.0, [6, 1, 1]);
         // Cells 0-1 and 1-2 have a valid corner: probe 1 fills no hole.
         assert_eq!(
-            sources(&six, &[true, false, true, false, false, true]),
+            sources(&six, &[true, false, true, false, false, true], None),
             vec![None, None, None, Some(2), Some(5), None]
         );
-        let none = sources(&grid, &[false; 5]);
+        let none = sources(&grid, &[false; 5], None);
         assert!(none.iter().all(Option::is_none));
     }
 }

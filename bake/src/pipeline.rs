@@ -70,7 +70,12 @@ pub(crate) fn bake_in_pool(
     let scene = &loaded.scene;
     let valid = validity(&traced.rays, settings, &built, scene, &mut report);
     let placed: Vec<bool> = traced.rays.iter().map(|r| r.placed).collect();
-    let (from, lens) = carried_layout(&grid, (&valid, &placed), settings, &traced.rows)?;
+    // Sparse: holes are filled only in cells a surface passes through.
+    let cells = settings
+        .sparse
+        .then(|| placement::surface_cells(&grid, &scene.triangles));
+    let layout = (&valid[..], &placed[..], cells.as_deref());
+    let (from, lens) = carried_layout(&grid, layout, settings, &traced.rows)?;
     let carried = encode::Carried {
         from: &from,
         lens: &lens,
@@ -571,16 +576,16 @@ fn validity(
 }
 
 /// Per probe of `grid`: whose factor table it carries (its own when valid, else, placed, its
-/// dilation source's when the settings dilate, else none) and how many factors that is; fails
-/// when they pass 2^32 in all.
+/// dilation source's when the settings dilate, into holes of `cells` if given, else none) and
+/// how many factors that is; fails when they pass 2^32 in all.
 fn carried_layout(
     grid: &prt_format::Grid,
-    (valid, placed): (&[bool], &[bool]),
+    (valid, placed, cells): (&[bool], &[bool], Option<&[bool]>),
     settings: &BakeSettings,
     tables: &factors::Rows,
 ) -> Result<(Vec<Option<usize>>, Vec<usize>), BakeError> {
     let sources = if settings.dilate {
-        dilate::sources(grid, valid)
+        dilate::sources(grid, valid, cells)
     } else {
         vec![None; valid.len()]
     };

@@ -34,31 +34,64 @@ pub const REACH: f32 = 0.25;
 /// Which probes of `grid` surfaces need: per grid point in grid order, whether some triangle
 /// of `triangles` lies within its cells widened by [`REACH`] (module docs).
 pub fn surface_probes(grid: &Grid, triangles: &[[Vec3; 3]]) -> Vec<bool> {
+    near(grid, triangles, Boxes::Points)
+}
+
+/// Which cells of `grid` surfaces pass through: per cell, indexed by its lowest corner's grid
+/// index, whether some triangle of `triangles` lies within the cell widened by [`REACH`]
+/// spacings (the last index along an axis names no cell and is never marked).
+/// Sparse bakes dilate only into cells a surface needs (`crate::dilate`).
+pub fn surface_cells(grid: &Grid, triangles: &[[Vec3; 3]]) -> Vec<bool> {
+    near(grid, triangles, Boxes::Cells)
+}
+
+/// What a grid index stands for in [`near`]: its point's cells, or the cell it is the lowest
+/// corner of.
+#[derive(Clone, Copy, PartialEq)]
+enum Boxes {
+    Points,
+    Cells,
+}
+
+/// Per grid index, whether a triangle overlaps its box ([`Boxes`]).
+fn near(grid: &Grid, triangles: &[[Vec3; 3]], boxes: Boxes) -> Vec<bool> {
     let count = grid.probe_count() as usize;
     let keep: Vec<AtomicBool> = (0..count).map(|_| AtomicBool::new(false)).collect();
     triangles.par_iter().for_each(|t| {
-        for_points_near(grid, t, |index| keep[index].store(true, Ordering::Relaxed));
+        for_boxes_near(grid, t, boxes, |index| {
+            keep[index].store(true, Ordering::Relaxed)
+        });
     });
     keep.into_iter().map(AtomicBool::into_inner).collect()
 }
 
-/// Calls `f` with the index of every grid point whose widened box triangle `t` overlaps.
-fn for_points_near(grid: &Grid, t: &[Vec3; 3], mut f: impl FnMut(usize)) {
+/// Calls `f` with every grid index whose widened box ([`Boxes`]) triangle `t` overlaps.
+fn for_boxes_near(grid: &Grid, t: &[Vec3; 3], boxes: Boxes, mut f: impl FnMut(usize)) {
     let (tmin, tmax) = (t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2]));
     let origin = Vec3::from(grid.origin);
     let step = Vec3::from(grid.step);
-    let half = step + Vec3::splat(REACH * grid.spacing);
+    let reach = Vec3::splat(REACH * grid.spacing);
+    // The box of index p is [p - below, p + above].
+    let (below, above) = match boxes {
+        Boxes::Points => (step + reach, step + reach),
+        Boxes::Cells => (reach, step + reach),
+    };
+    // The last index along an axis: the outer layer, or the last cell.
+    let outer = |n: u32| match boxes {
+        Boxes::Points => n.saturating_sub(1),
+        Boxes::Cells => n.saturating_sub(2),
+    };
     let counts = grid.counts;
-    // The grid points whose boxes the triangle's bounding box overlaps, clamped to the grid
-    // (the outer layers stand for what lies beyond it).
+    // The indices whose boxes the triangle's bounding box overlaps, clamped to the grid (the
+    // outer layers and cells stand for what lies beyond it).
     let range = |a: usize| -> Option<(u32, u32)> {
         let n = counts[a];
         if n <= 1 {
             return Some((0, 0));
         }
-        let lo = ((tmin[a] - half[a] - origin[a]) / step[a]).ceil();
-        let hi = ((tmax[a] + half[a] - origin[a]) / step[a]).floor();
-        let last = (n - 1) as f32;
+        let lo = ((tmin[a] - above[a] - origin[a]) / step[a]).ceil();
+        let hi = ((tmax[a] + below[a] - origin[a]) / step[a]).floor();
+        let last = outer(n) as f32;
         if !(lo.is_finite() && hi.is_finite()) {
             return None;
         }
@@ -77,12 +110,12 @@ fn for_points_near(grid: &Grid, t: &[Vec3; 3], mut f: impl FnMut(usize)) {
                 let p = Vec3::from(grid.position(i, j, k));
                 // The point's box; an outer layer's reaches out to the triangle beyond it, and
                 // a flat axis's (one layer) covers the triangle's whole extent along it.
-                let (mut lo, mut hi) = (p - half, p + half);
+                let (mut lo, mut hi) = (p - below, p + above);
                 for a in 0..3 {
                     if ijk[a] == 0 {
                         lo[a] = lo[a].min(tmin[a]);
                     }
-                    if ijk[a] + 1 >= counts[a] {
+                    if ijk[a] >= outer(counts[a]) {
                         hi[a] = hi[a].max(tmax[a]);
                     }
                 }
@@ -164,6 +197,27 @@ mod tests {
         let keep = surface_probes(&grid, &beyond);
         assert!(keep[grid.index(8, 1, 1)] && keep[grid.index(8, 2, 2)]);
         assert!(!keep[grid.index(7, 1, 1)]);
+    }
+
+    /// A floor at y = 0.1 passes through the cells of the layer y = 0 (0 to 1) and, within
+    /// REACH, of none other; the last index along an axis names no cell.
+    #[test]
+    fn a_floor_passes_through_one_layer_of_cells() {
+        let grid = Grid::cubic([0.0; 3], 1.0, [4, 4, 4]);
+        let floor = [[
+            Vec3::new(-1.0, 0.1, -1.0),
+            Vec3::new(9.0, 0.1, -1.0),
+            Vec3::new(-1.0, 0.1, 9.0),
+        ]];
+        let cells = surface_cells(&grid, &floor);
+        for k in 0..4 {
+            for j in 0..4 {
+                for i in 0..4 {
+                    let expected = j == 0 && i < 3 && k < 3;
+                    assert_eq!(cells[grid.index(i, j, k)], expected, "({i}, {j}, {k})");
+                }
+            }
+        }
     }
 
     /// Degenerate and non-finite triangles keep nothing and do not panic.

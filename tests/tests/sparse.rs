@@ -112,3 +112,35 @@ fn sparse_bakes_are_identical_at_any_thread_count() {
     };
     assert!(bake(1) == bake(2));
 }
+
+/// A sparse bake fills holes (cells with no valid corner) only where a surface passes: inside
+/// a closed 2 m box, whose 4x4x4 inner probes the uniform bake dilates (no surface there
+/// needs them), it dilates none, and every surfel of the box's faces still samples with
+/// probes around it.
+#[test]
+fn sparse_bakes_fill_only_the_holes_surfaces_need() {
+    let bake = |sparse: bool| {
+        let settings = BakeSettings {
+            bounds: Some([-1.25, -1.25, -1.25, 1.25, 1.25, 1.25]),
+            spacing: Some(0.5),
+            sparse,
+            ..rays(256)
+        };
+        bake_ok(&fixture("closed_box_outward.gltf"), &settings)
+    };
+    let (uniform, sparse) = (bake(false), bake(true));
+    let dilated = |a: &Asset| a.probes.iter().filter(|p| p.is_dilated()).count();
+    assert_eq!((dilated(&uniform), dilated(&sparse)), (64, 0));
+    let lighting = load_rig(&fixture("rigs/sky_only.json")).unwrap();
+    let relit = CpuRelighter::new(&sparse)
+        .unwrap()
+        .relight(&lighting, 1)
+        .unwrap();
+    let lookup = LookupSettings::default();
+    let s = SurfaceSampler::new(&sparse, &relit.sh, &relit.surfel_irradiance, &lookup);
+    let points = surfel_points(&sparse);
+    assert!(!points.is_empty());
+    for (p, n) in points {
+        assert!(s.sample(p, n).validity > 0.0, "no probe around {p:?}");
+    }
+}

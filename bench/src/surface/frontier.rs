@@ -7,7 +7,8 @@
 //! log-log plots with their Pareto fronts: the settings users pick from. The family's figures
 //! are medians over its levels (and the worst level), so that no level's size dominates.
 //!
-//! Placement is the uniform grid: the bake has no other yet (issue 32, item 2).
+//! Placement is the uniform grid or the sparse one (`--placement`; `prt bake --sparse`, issue
+//! 32, item 2): probes only at the grid points surfaces need.
 
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -48,6 +49,10 @@ pub struct FrontierArgs {
     /// coarse bricks; 0: none), comma-separated [default: the bake's].
     #[arg(long, value_delimiter = ',')]
     far: Vec<f32>,
+    /// Probe placements, comma-separated: uniform (every grid point), sparse (only those
+    /// surfaces need, `prt bake --sparse`).
+    #[arg(long, value_delimiter = ',', default_value = "uniform")]
+    placement: Vec<Placement>,
     /// Directory the cases' paths are relative to (the repository root).
     #[arg(long, default_value = ".")]
     root: PathBuf,
@@ -57,25 +62,45 @@ pub struct FrontierArgs {
     out: Out,
 }
 
-/// What a bake traces and merges: rays per probe, surfel cells per spacing, far ratio.
+/// Where a bake places probes.
+#[derive(Clone, Copy, Debug, PartialEq, clap::ValueEnum)]
+enum Placement {
+    Uniform,
+    Sparse,
+}
+
+/// What a bake traces and merges: rays per probe, surfel cells per spacing, far ratio, and
+/// where its probes are.
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct Knob {
     rays: u32,
     cells: f32,
     far: f32,
+    placement: Placement,
 }
 
 impl Knob {
+    fn placement(self) -> &'static str {
+        match self.placement {
+            Placement::Uniform => "uniform",
+            Placement::Sparse => "sparse",
+        }
+    }
+
     fn label(self) -> String {
+        let sparse = match self.placement {
+            Placement::Uniform => "",
+            Placement::Sparse => ", sparse",
+        };
         format!(
-            "{} rays, cells spacing/{}, far {}",
+            "{} rays, cells spacing/{}, far {}{sparse}",
             self.rays, self.cells, self.far
         )
     }
 }
 
 impl FrontierArgs {
-    /// Every ray count with every cell size and far ratio, in argument order.
+    /// Every ray count with every cell size, far ratio and placement, in argument order.
     fn knobs(&self) -> Vec<Knob> {
         let far = match self.far.is_empty() {
             true => vec![BakeSettings::default().far_ratio],
@@ -85,7 +110,14 @@ impl FrontierArgs {
         for &rays in &self.rays {
             for &cells in &self.cells {
                 for &far in &far {
-                    knobs.push(Knob { rays, cells, far });
+                    for &placement in &self.placement {
+                        knobs.push(Knob {
+                            rays,
+                            cells,
+                            far,
+                            placement,
+                        });
+                    }
                 }
             }
         }
@@ -153,6 +185,7 @@ pub fn run(args: FrontierArgs) -> Result<()> {
                     rays: knob.rays,
                     cells_per_spacing: knob.cells,
                     far_ratio: knob.far,
+                    sparse: knob.placement == Placement::Sparse,
                     spacing,
                     ..BakeSettings::default()
                 };
@@ -295,15 +328,16 @@ fn on_front(all: &[Aggregate], a: &Aggregate, x: fn(&Aggregate) -> f64) -> bool 
 
 fn summary_table(md: &mut String, title: &str, rows: &[Aggregate]) {
     let _ = writeln!(md, "\n### {title}\n");
-    md.push_str("| rays | cells, far ratio | spacing | levels | probes (median) | runtime MB (median) | transport B/probe (median) | bake s (median) | open mean, median level | open mean, worst level | open leaks, worst level | over-lit pixels, worst level | front: bytes / bake time |\n|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n");
+    md.push_str("| rays | cells, far ratio, placement | spacing | levels | probes (median) | runtime MB (median) | transport B/probe (median) | bake s (median) | open mean, median level | open mean, worst level | open leaks, worst level | over-lit pixels, worst level | front: bytes / bake time |\n|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n");
     for a in rows {
         let front = |x: fn(&Aggregate) -> f64| if on_front(rows, a, x) { "yes" } else { "-" };
         let _ = writeln!(
             md,
-            "| {} | spacing/{}, {} | x{} | {} | {:.0} | {:.1} | {:.0} | {:.2} | {:.1}% | {:.1}% {} | {:.1}% | {:.1}% | {} / {} |",
+            "| {} | spacing/{}, {}, {} | x{} | {} | {:.0} | {:.1} | {:.0} | {:.2} | {:.1}% | {:.1}% {} | {:.1}% | {:.1}% | {} / {} |",
             a.knob.rays,
             a.knob.cells,
             a.knob.far,
+            a.knob.placement(),
             a.scale,
             a.levels,
             a.probes,
@@ -323,7 +357,7 @@ fn summary_table(md: &mut String, title: &str, rows: &[Aggregate]) {
 
 fn markdown(rows: &[Row], args: &FrontierArgs) -> String {
     let mut md = String::from(
-        "Bake seconds and runtime bytes against surface error (`prt-bench frontier`, issue 32 item 3): each case baked at spacings relative to its default (x1) and at several ray counts, on the uniform grid (the only placement so far), relit on the CPU (one bounce) and sampled with the runtime's lookup (`default`, the surface terms) at the oracle's surface points and camera pixels. Scores as in [surface.md](surface.md): open mean is the mean relative error at points that are not pockets, leaks the open points lit over 1.5x their truth, over-lit the camera view's pixels lit over 1.5x. Runtime MB: every array an engine uploads (probes, sky, visibility, factors, bricks, surfels, BVH, triangles, surface terms). Bake seconds on all of this machine's cores (2 here). A setting is on a front when no other setting is as small on that axis and better on the median level's error.\n\n## Summary\n",
+        "Bake seconds and runtime bytes against surface error (`prt-bench frontier`, issue 32 item 3): each case baked at spacings relative to its default (x1) and at several ray counts, on the uniform grid or, labelled sparse, only at the grid points surfaces need (`prt bake --sparse`), relit on the CPU (one bounce) and sampled with the runtime's lookup (`default`, the surface terms) at the oracle's surface points and camera pixels. Scores as in [surface.md](surface.md): open mean is the mean relative error at points that are not pockets, leaks the open points lit over 1.5x their truth, over-lit the camera view's pixels lit over 1.5x. Runtime MB: every array an engine uploads (probes, sky, visibility, factors, bricks, surfels, BVH, triangles, surface terms). Bake seconds on all of this machine's cores (2 here). A setting is on a front when no other setting is as small on that axis and better on the median level's error.\n\n## Summary\n",
     );
     let sets: [(&str, Keep); 5] = [
         ("The level family (seeds 0-15)", in_family),
@@ -344,16 +378,17 @@ fn markdown(rows: &[Row], args: &FrontierArgs) -> String {
             summary_table(&mut md, title, &agg);
         }
     }
-    md.push_str("\n## Per case\n\n| case | set | rays | cells, far ratio | spacing | probes | runtime MB | transport B/probe | bake s | open mean | open leaks | over-lit pixels |\n|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+    md.push_str("\n## Per case\n\n| case | set | rays | cells, far ratio, placement | spacing | probes | runtime MB | transport B/probe | bake s | open mean | open leaks | over-lit pixels |\n|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
     for r in rows {
         let _ = writeln!(
             md,
-            "| {} | {} | {} | spacing/{}, {} | {:.3} m (x{}) | {} | {:.1} | {:.0} | {:.2} | {:.2}% | {:.1}% | {} |",
+            "| {} | {} | {} | spacing/{}, {}, {} | {:.3} m (x{}) | {} | {:.1} | {:.0} | {:.2} | {:.2}% | {:.1}% | {} |",
             r.case,
             r.set.label(),
             r.knob.rays,
             r.knob.cells,
             r.knob.far,
+            r.knob.placement(),
             r.spacing,
             r.scale,
             r.probes,
