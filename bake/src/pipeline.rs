@@ -58,7 +58,16 @@ pub(crate) fn bake_in_pool(
         .sparse
         .then(|| placement::surface_probes(&grid, &loaded.scene.triangles));
     if let Some(placed) = &placed {
-        report.placed = Some((placed.iter().filter(|&&p| p).count(), placed.len()));
+        let count = placed.iter().filter(|&&p| p).count();
+        report.placed = Some((count, placed.len()));
+        if count == 0 {
+            report.warnings.push(format!(
+                "--sparse placed no probe: no triangle lies within a cell and a quarter \
+                 spacing of any of the {} grid points (check the bounds); the asset has no \
+                 probe light",
+                placed.len()
+            ));
+        }
     }
     progress.start("trace", grid.probe_count());
     let cell_size = settings.cell_size_for(spacing);

