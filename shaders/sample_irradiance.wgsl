@@ -75,9 +75,10 @@ struct PrtSample {
 // spacings, one byte each, two texels per word (prt_format::depth).
 @group(PRT_GROUP) @binding(9) var<storage, read> prt_depth_moments: array<u32>;
 // Per grid point, where its probe's rays started (xyz; the grid position unless it was moved off
-// a surface or out of geometry: depth-moment distances are measured from there) and, as the bits
-// of w, its slot (prt_format::Probe::slot): where its depth moments sit.
-@group(PRT_GROUP) @binding(10) var<storage, read> prt_probe_positions: array<vec4<f32>>;
+// a surface or out of geometry: depth-moment distances are measured from there) as the bits of
+// xyz, and in w its slot (prt_format::Probe::slot): where its depth moments sit. Words, not
+// floats: a slot is no float (NO_SLOT is a NaN's bits), and WGSL may flush NaNs and subnormals.
+@group(PRT_GROUP) @binding(10) var<storage, read> prt_probe_positions: array<vec4<u32>>;
 // The surface lookup's tables, one array of words (prt_format::surface): the brick table (four
 // words a slot: key xyz, axis << 29 | brick + 1), then from the offsets in prt_volume the cells
 // (16 words a brick), the surfel terms (8 words a surfel) and per brick its first surfel and
@@ -206,7 +207,7 @@ fn prt_sample_probes(surface: vec3<f32>, p: vec3<f32>, n: vec3<f32>, masked: boo
         } else {
             let index = ijk.x + counts.x * (ijk.y + counts.y * ijk.z);
             let probe = prt_probe_positions[index];
-            w = w * prt_depth_weight(bitcast<u32>(probe.w), probe.xyz, surface, p, n);
+            w = w * prt_depth_weight(probe.w, bitcast<vec3<f32>>(probe.xyz), surface, p, n);
         }
         total = total + w * t0.w;
         acc[0] = acc[0] + w * t0;

@@ -80,8 +80,7 @@ pub(crate) fn bake_in_pool(
     let valid = validity(&traced.rays, settings, &built, scene, &mut report);
     let placed: Vec<bool> = traced.rays.iter().map(|r| r.placed).collect();
     // Sparse: holes are filled only in cells a surface passes through.
-    let cells = settings
-        .sparse
+    let cells = (settings.sparse && settings.dilate)
         .then(|| placement::surface_cells(&grid, &scene.triangles));
     let layout = (&valid[..], &placed[..], cells.as_deref());
     let (from, lens) = carried_layout(&grid, layout, settings, &traced.rows)?;
@@ -181,6 +180,7 @@ fn with_data(mut depth: Vec<u32>, traced: &[trace::ProbeRays], from: &[Option<us
         }
     }
     depth.truncate(kept * DEPTH_WORDS);
+    depth.shrink_to_fit();
     depth
 }
 
@@ -651,6 +651,7 @@ fn assemble_probes(
             None => {
                 probes.push(Probe {
                     position: pos.to_array(),
+                    flags: if moved { PROBE_OFFSET } else { 0 },
                     slot: NO_SLOT,
                     first_factor,
                     ..Probe::default()

@@ -137,7 +137,9 @@ fn overlaps(normal: Vec3, plane: f32, tri: (Vec3, Vec3), (lo, hi): (Vec3, Vec3))
     }
     let (centre, extent) = ((lo + hi) * 0.5, (hi - lo) * 0.5);
     let distance = normal.dot(centre) - plane;
-    !(distance.abs() > extent.dot(normal.abs()))
+    let radius = extent.dot(normal.abs());
+    // NaN (an overflowed plane test) counts as a hit.
+    distance.abs() <= radius || distance.is_nan() || radius.is_nan()
 }
 
 #[cfg(test)]

@@ -304,7 +304,7 @@ fn sample(
         setting,
         spacing: baked.asset.header.grid.spacing,
         lookup: *lookup,
-        probes: summary.placed_probe_count,
+        probes: summary.probes_with_data,
         surface_probes: placement::surface_probes(&baked.asset),
         valid: summary.valid_probe_count,
         dilated: summary.dilated_probe_count,

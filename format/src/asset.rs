@@ -222,7 +222,7 @@ impl Probe {
     }
 
     /// Has data: a slot ([`Probe::slot`]) in the per-probe sections.
-    pub fn is_placed(&self) -> bool {
+    pub fn has_data(&self) -> bool {
         self.slot != NO_SLOT
     }
 

@@ -17,7 +17,7 @@ pub struct Summary {
     pub probe_count: usize,
     /// Probes with data ([`Probe::slot`]): grid points the bake placed, less those inside
     /// geometry with no valid neighbour to copy; the "per probe" of the figures below.
-    pub placed_probe_count: usize,
+    pub probes_with_data: usize,
     /// Probes outside geometry (dilated ones not counted).
     pub valid_probe_count: usize,
     /// Probes inside geometry whose table was copied from a valid neighbour.
@@ -78,7 +78,7 @@ fn bytes<T>(v: &[T]) -> u64 {
 impl Summary {
     /// Summarises `asset`, whose file is `file_bytes` long.
     pub fn of(asset: &Asset, file_bytes: u64) -> Summary {
-        let probes = asset.probes.iter().filter(|p| p.is_placed()).count();
+        let probes = asset.probes.iter().filter(|p| p.has_data()).count();
         let section_bytes = SectionBytes {
             probes: bytes(&asset.probes),
             sky_mask: bytes(&asset.sky_mask),
@@ -111,7 +111,7 @@ impl Summary {
             source_name: asset.header.source_name.clone(),
             source_hash: format!("{:016x}", asset.header.source_hash),
             probe_count: asset.probes.len(),
-            placed_probe_count: probes,
+            probes_with_data: probes,
             valid_probe_count: asset
                 .probes
                 .iter()
@@ -152,12 +152,17 @@ impl Summary {
 /// beside one wall sees the room over half its texels; one between two plates a centimetre
 /// apart sees them everywhere but at grazing angles).
 pub fn probe_in_gap(asset: &Asset, p: usize) -> bool {
-    let Some(words) = asset.probes.get(p).and_then(|probe| {
-        let slot = probe.slot as usize;
-        asset
-            .probe_depth
-            .get(slot * DEPTH_WORDS..(slot + 1) * DEPTH_WORDS)
-    }) else {
+    let Some(words) = asset
+        .probes
+        .get(p)
+        .filter(|probe| probe.has_data())
+        .and_then(|probe| {
+            let slot = probe.slot as usize;
+            asset
+                .probe_depth
+                .get(slot * DEPTH_WORDS..(slot + 1) * DEPTH_WORDS)
+        })
+    else {
         return false;
     };
     let mut means: Vec<f32> = (0..DEPTH_TEXELS)
@@ -198,11 +203,11 @@ impl std::fmt::Display for Summary {
         writeln!(
             f,
             "probes           {} with data of {} grid points ({} valid, {} inside geometry with a neighbour's data; the other {} left out by the placement or inside geometry: no data), {} moved off a surface or out of geometry, {} rays each",
-            self.placed_probe_count,
+            self.probes_with_data,
             self.probe_count,
             self.valid_probe_count,
             self.dilated_probe_count,
-            self.probe_count - self.placed_probe_count,
+            self.probe_count - self.probes_with_data,
             self.offset_probe_count,
             self.ray_count
         )?;

@@ -129,7 +129,7 @@ fn probe_sections(asset: &Asset) -> Result<(), FormatError> {
             expected: g.probe_count() as usize,
         });
     }
-    let probes = asset.probes.iter().filter(|p| p.is_placed()).count();
+    let probes = asset.probes.iter().filter(|p| p.has_data()).count();
     count(
         "sky_mask",
         asset.sky_mask.len(),
@@ -148,8 +148,8 @@ fn probe_sections(asset: &Asset) -> Result<(), FormatError> {
 }
 
 /// Each probe's record: a finite position, a sky ray count within the header's `ray_count`,
-/// dilated only if valid, slots numbering the placed probes in grid order (a probe left out
-/// has no flags, factors or sky rays), and factor runs that follow one another and add up to
+/// dilated only if valid, slots numbering the probes with data in grid order (a probe without
+/// has no flags but `PROBE_OFFSET`, no factors and no sky rays), and factor runs that follow one another and add up to
 /// the factor table's length.
 fn probe_records(asset: &Asset) -> Result<(), FormatError> {
     let h = &asset.header;
@@ -165,7 +165,7 @@ fn probe_records(asset: &Asset) -> Result<(), FormatError> {
                 format!("sky_rays {} exceed ray_count {}", p.sky_rays, h.ray_count),
             ));
         }
-        if p.is_placed() {
+        if p.has_data() {
             if p.slot != next_slot {
                 return Err(FormatError::invalid(
                     "probes",
@@ -174,12 +174,12 @@ fn probe_records(asset: &Asset) -> Result<(), FormatError> {
                 ));
             }
             next_slot += 1;
-        } else if p.flags != 0 || p.factor_count != 0 || p.sky_rays != 0 {
+        } else if p.flags & !PROBE_OFFSET != 0 || p.factor_count != 0 || p.sky_rays != 0 {
             return Err(FormatError::invalid(
                 "probes",
                 i,
                 format!(
-                    "not placed (slot {NO_SLOT:#x}) but flags {:#x}, factor_count {}, sky_rays {}",
+                    "no data (slot {NO_SLOT:#x}) but flags {:#x}, factor_count {}, sky_rays {}",
                     p.flags, p.factor_count, p.sky_rays
                 ),
             ));

@@ -275,7 +275,7 @@ impl SkyModel {
         lattice: &[([f32; 3], [f32; 3])],
     ) -> ShRgb {
         let slot = asset.probes[probe].slot as usize;
-        if !asset.probes[probe].is_placed() {
+        if !asset.probes[probe].has_data() {
             return [[0.0; 3]; SH_COUNT];
         }
         match self {

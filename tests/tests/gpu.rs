@@ -685,7 +685,7 @@ fn sample_points_matches_the_cpu_sampler() {
         ..cornell
     };
     let asset = bake(&fixture("cornell/cornell.gltf"), &sparse);
-    assert!(asset.probes.iter().any(|p| !p.is_placed()));
+    assert!(asset.probes.iter().any(|p| !p.has_data()));
     let mixed = compare_samplers(
         &device,
         &queue,

@@ -2,7 +2,8 @@
 //! only at the grid points surfaces need, the rest recorded without data.
 
 use prt_bake::BakeSettings;
-use prt_format::{decode, encode, Asset};
+use prt_format::depth::MAX_DEPTH;
+use prt_format::{decode, encode, Asset, DEPTH_TEXELS, DEPTH_WORDS};
 use prt_runtime::sample::corners;
 use prt_runtime::surface::SurfaceSampler;
 use prt_runtime::{load_rig, CpuRelighter, LookupSettings};
@@ -36,7 +37,7 @@ fn surfel_points(asset: &Asset) -> Vec<([f32; 3], [f32; 3])> {
 fn sparse_placement_keeps_every_probe_surfaces_read() {
     let asset = two_rooms(true);
     let g = asset.header.grid;
-    let placed = asset.probes.iter().filter(|p| p.is_placed()).count();
+    let placed = asset.probes.iter().filter(|p| p.has_data()).count();
     assert!(
         placed < asset.probes.len() * 9 / 10,
         "{placed} of {} placed",
@@ -50,13 +51,13 @@ fn sparse_placement_keeps_every_probe_surfaces_read() {
             for (i, w) in corners(&g, at.into()) {
                 if w > 0.0 {
                     read += 1;
-                    assert!(asset.probes[i].is_placed(), "probe {i} read at {at:?}");
+                    assert!(asset.probes[i].has_data(), "probe {i} read at {at:?}");
                 }
             }
         }
     }
     assert!(read > 1000);
-    for p in asset.probes.iter().filter(|p| !p.is_placed()) {
+    for p in asset.probes.iter().filter(|p| !p.has_data()) {
         assert_eq!((p.flags, p.factor_count, p.sky_rays), (0, 0, 0), "{p:?}");
     }
     assert_eq!(
@@ -66,7 +67,7 @@ fn sparse_placement_keeps_every_probe_surfaces_read() {
     );
     assert_eq!(decode(&encode(&asset).unwrap()).unwrap(), asset);
     let summary = prt_format::Summary::of(&asset, 0);
-    assert_eq!(summary.placed_probe_count, placed);
+    assert_eq!(summary.probes_with_data, placed);
     assert!(summary
         .to_string()
         .contains(&format!("{placed} with data of")));
@@ -157,7 +158,7 @@ fn sparse_bake_of_nothing_warns() {
     };
     let (asset, report) =
         prt_bake::bake(&fixture("empty.gltf"), &settings, &prt_bake::NoProgress).unwrap();
-    assert!(asset.probes.iter().all(|p| !p.is_placed()));
+    assert!(asset.probes.iter().all(|p| !p.has_data()));
     assert_eq!(report.placed, Some((0, asset.probes.len())));
     assert!(
         report
@@ -177,4 +178,48 @@ fn sparse_bake_of_nothing_warns() {
     let got = s.sample([0.0; 3], [0.0, 1.0, 0.0]);
     assert_eq!(got.validity, 0.0);
     assert!(got.irradiance.iter().all(|v| *v == 0.0));
+}
+
+/// A dilated probe carries its source's factors and sky but keeps its own visibility map in
+/// its slot: inside a closed 2 m box (uniform bake, 4x4x4 dilated probes) the maps in the
+/// dilated probes' slots see the box's walls within the maps' range nearly everywhere, while
+/// the measured probes outside it, their sources, see the sky over much of theirs.
+#[test]
+fn dilated_probes_keep_their_own_visibility_maps() {
+    let settings = BakeSettings {
+        bounds: Some([-1.25, -1.25, -1.25, 1.25, 1.25, 1.25]),
+        spacing: Some(0.5),
+        ..rays(256)
+    };
+    let asset = bake_ok(&fixture("closed_box_outward.gltf"), &settings);
+    let g = asset.header.grid;
+    // Share of a probe's texels whose mean hit distance saturates (sky, or beyond the range).
+    let open = |p: usize| {
+        let slot = asset.probes[p].slot as usize;
+        let words = &asset.probe_depth[slot * DEPTH_WORDS..(slot + 1) * DEPTH_WORDS];
+        let far = (0..DEPTH_TEXELS)
+            .filter(|&t| prt_format::depth::moments(words, t).0 >= 0.99 * MAX_DEPTH)
+            .count();
+        far as f32 / DEPTH_TEXELS as f32
+    };
+    let mut dilated = 0;
+    for k in 0..g.counts[2] {
+        for j in 0..g.counts[1] {
+            for i in 0..g.counts[0] {
+                let p = g.index(i, j, k);
+                if !asset.probes[p].is_dilated() {
+                    continue;
+                }
+                dilated += 1;
+                assert!(open(p) < 0.3, "dilated probe {p}: {} open", open(p));
+            }
+        }
+    }
+    assert_eq!(dilated, 64);
+    // The measured probes, their sources, are all outside the box.
+    for (q, probe) in asset.probes.iter().enumerate() {
+        if probe.is_valid() && !probe.is_dilated() {
+            assert!(open(q) > 0.3, "measured probe {q}: {} open", open(q));
+        }
+    }
 }

@@ -229,7 +229,7 @@ fn depth_moments_hold_distances_in_spacings() {
         },
     );
     let g = asset.header.grid;
-    let p = g.index(1, 1, 1);
+    let p = asset.probes[g.index(1, 1, 1)].slot as usize;
     assert_eq!(g.position(1, 1, 1), [0.0; 3]);
     let words = &asset.probe_depth[p * prt_format::DEPTH_WORDS..(p + 1) * prt_format::DEPTH_WORDS];
     for d in [[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]] {

@@ -52,9 +52,10 @@ pub struct AssetBuffers {
     pub triangles: wgpu::Buffer,
     pub sky_transfer: wgpu::Buffer,
     pub sky_mask: wgpu::Buffer,
-    /// The probes' depth moments (`Asset::probe_depth`, `prt_format::depth`).
+    /// The depth moments of the probes with data, in slot order (`Asset::probe_depth`,
+    /// `prt_format::depth`).
     pub depth_moments: wgpu::Buffer,
-    /// Where each probe's rays started (xyz, w unused).
+    /// Per grid point, where its probe's rays started (xyz) and its slot (w), as u32 words.
     pub probe_positions: wgpu::Buffer,
     /// The surface lookup's tables, one array of words ([`SurfaceLayout`]).
     pub surface: wgpu::Buffer,
@@ -158,12 +159,14 @@ impl AssetBuffers {
         } else {
             (&asset.geometry.nodes[..], &asset.geometry.triangles[..])
         };
-        let positions: Vec<[f32; 4]> = asset
+        // Words, not floats: the slot is not a float (NO_SLOT is a NaN's bits, small slots are
+        // subnormals), and WGSL may flush either; the snippet bitcasts xyz instead.
+        let positions: Vec<[u32; 4]> = asset
             .probes
             .iter()
             .map(|p| {
-                let [x, y, z] = p.position;
-                [x, y, z, f32::from_bits(p.slot)]
+                let [x, y, z] = p.position.map(f32::to_bits);
+                [x, y, z, p.slot]
             })
             .collect();
         Ok(AssetBuffers {
