@@ -53,7 +53,12 @@ pub fn run(args: RelightArgs) -> Result<()> {
             )
         }
         Backend::Gpu => {
-            let (sh, counters, info) = prt_runtime::gpu::relight_once(
+            let prt_runtime::gpu::Relit {
+                sh,
+                counters,
+                adapter: info,
+                memory: (allocations, total),
+            } = prt_runtime::gpu::relight_once(
                 &loaded,
                 &lighting,
                 prt_runtime::gpu::RuntimeSettings {
@@ -63,6 +68,14 @@ pub fn run(args: RelightArgs) -> Result<()> {
                 .with_room_for(lighting.rig.lights.len()),
             )?;
             eprintln!("adapter: {} ({:?})", info.name, info.backend);
+            let largest: Vec<String> = (allocations.iter().take(4))
+                .map(|a| format!("{} {:.1}", a.name, a.bytes as f64 / 1e6))
+                .collect();
+            println!(
+                "gpu memory: {:.1} MB in all (largest, MB: {})",
+                total as f64 / 1e6,
+                largest.join(", ")
+            );
             println!(
                 "gpu work: {} bricks relit, {} surfels relit, {} shadow rays, {} probes gathered",
                 counters.bricks_relit,

@@ -40,7 +40,7 @@ fn twenty_bakes_and_relights_are_identical() {
         bits(
             &relight_once(&asset, &lighting, RuntimeSettings::default())
                 .unwrap()
-                .0,
+                .sh,
         )
     };
     let runs: Vec<Vec<u32>> = (0..3).map(gpu).collect();

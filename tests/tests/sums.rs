@@ -29,7 +29,9 @@ fn gpu_gather_sums_match_the_f64_reference_up_to_100k_factors() {
             .relight(&lighting, 1)
             .unwrap()
             .sh;
-        let (gpu, _, _) = relight_once(&asset, &lighting, RuntimeSettings::default()).unwrap();
+        let gpu = relight_once(&asset, &lighting, RuntimeSettings::default())
+            .unwrap()
+            .sh;
         let dc = cpu[0][0].iter().fold(0.0f32, |m, v| m.max(v.abs()));
         let mut worst = 0.0f32;
         for k in 0..9 {
@@ -60,11 +62,21 @@ fn f16_volume_clamping_is_counted() {
     );
     let base = load_rig(&fixture("cornell/rig.json")).unwrap();
     let bright = brighter(&base, 1e6);
-    let (sh, counters, _) = relight_once(&asset, &base, RuntimeSettings::default()).unwrap();
+    let relit = relight_once(&asset, &base, RuntimeSettings::default()).unwrap();
+    let (sh, counters) = (relit.sh, relit.counters);
     assert_eq!(counters.probes_clamped, 0);
-    let (sh_bright, counters, _) =
-        relight_once(&asset, &bright, RuntimeSettings::default()).unwrap();
+    let relit = relight_once(&asset, &bright, RuntimeSettings::default()).unwrap();
+    let (sh_bright, counters) = (relit.sh, relit.counters);
     assert!(counters.probes_clamped > 0, "{counters:?}");
+    // The GPU memory adds up and counts the volume's seven texels per grid point (f16).
+    let (allocations, total) = relit.memory;
+    assert_eq!(total, allocations.iter().map(|a| a.bytes).sum::<u64>());
+    let volume = allocations
+        .iter()
+        .find(|a| a.name.contains("SH volume"))
+        .unwrap();
+    assert_eq!(volume.bytes, 7 * 8 * asset.probes.len() as u64);
+    assert!(allocations.windows(2).all(|w| w[0].bytes >= w[1].bytes));
     for (a, b) in sh.iter().zip(&sh_bright) {
         let dc = a[0].iter().fold(0.0f32, |m, v| m.max(v.abs())).max(1e-12);
         let rel = (b[0][0] / 1e6 - a[0][0]).abs() / dc;

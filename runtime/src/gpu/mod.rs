@@ -49,12 +49,14 @@ pub use wgpu;
 
 mod bindings;
 mod changes;
+mod memory;
 pub mod resources;
 pub mod sample;
 pub mod shaders;
 mod stages;
 mod volume;
 
+pub use memory::Allocation;
 pub use volume::{read_buffer, sh_from_texels};
 
 use prt_format::sh::ShRgb;
@@ -547,19 +549,35 @@ impl PrtRuntime {
 }
 
 /// Relights `asset` on the GPU until settled (all probes, blocking: one update per bounce) and
-/// returns every probe's SH, the work counters summed over the updates, and the adapter: what
-/// `prt relight --backend gpu` runs.
+/// returns every probe's SH, the work counters summed over the updates, the adapter and the
+/// runtime's GPU memory: what `prt relight --backend gpu` runs.
 pub fn relight_once(
     asset: &Asset,
     lighting: &Lighting,
     settings: RuntimeSettings,
-) -> Result<(Vec<ShRgb>, Counters, wgpu::AdapterInfo), GpuError> {
-    let (device, queue, info) = headless_device()?;
+) -> Result<Relit, GpuError> {
+    let (device, queue, adapter) = headless_device()?;
     let mut runtime = PrtRuntime::new(&device, &queue, asset, settings)?;
-    let mut total = Counters::default();
+    let mut counters = Counters::default();
     runtime.settle_each(lighting, |r| {
-        total = total.plus(&r.read_counters()?);
+        counters = counters.plus(&r.read_counters()?);
         Ok(())
     })?;
-    Ok((runtime.read_probe_sh()?, total, info))
+    Ok(Relit {
+        sh: runtime.read_probe_sh()?,
+        counters,
+        adapter,
+        memory: runtime.gpu_memory(),
+    })
+}
+
+/// What [`relight_once`] returns.
+pub struct Relit {
+    /// Every probe's SH, in grid order.
+    pub sh: Vec<ShRgb>,
+    /// The work counters summed over the updates.
+    pub counters: Counters,
+    pub adapter: wgpu::AdapterInfo,
+    /// The runtime's allocations, largest first, and their total ([`PrtRuntime::gpu_memory`]).
+    pub memory: (Vec<Allocation>, u64),
 }
