@@ -25,6 +25,9 @@
 @group(0) @binding(8) var<storage, read_write> probe_sh: array<vec4<f32>>;
 @group(0) @binding(9) var<storage, read_write> counters: Counters;
 @group(0) @binding(10) var<uniform> chunk: FactorChunk;
+// The probes the gather visits, in grid order: the valid ones (a grid point without data, or an
+// invalid probe, is never gathered, so a window of the round robin spends no work on them).
+@group(0) @binding(11) var<storage, read> gather_list: array<u32>;
 
 @group(1) @binding(0) var volume0: texture_storage_3d<VOLUME_FORMAT, write>;
 @group(1) @binding(1) var volume1: texture_storage_3d<VOLUME_FORMAT, write>;
@@ -40,10 +43,13 @@ var<workgroup> go: u32;
 // invalid, or clean). Workgroup-uniform, so the reduction's barriers stay in uniform control.
 fn workgroup_probe(wg: vec3<u32>, lid: u32) -> u32 {
     let slot = wg.x + wg.y * params.dispatch_width;
-    let p = (params.window_start + slot) % max(params.probe_count, 1u);
+    var p = PROBE_NONE;
+    if slot < params.window_count {
+        p = gather_list[(params.window_start + slot) % max(params.gather_count, 1u)];
+    }
     if lid == 0u {
         var flag = 0u;
-        if slot < params.window_count && p >= chunk.probe_begin && p < chunk.probe_end {
+        if p != PROBE_NONE && p >= chunk.probe_begin && p < chunk.probe_end {
             if (probes[p].flags & PROBE_VALID) != 0u && probe_dirty[p] != 0u {
                 flag = 1u;
             }

@@ -177,6 +177,11 @@ struct Params {
     coarse_count: u32,
     // What a surfel's inverse square is softened by (prt_runtime::lights::surfel_spread_sq).
     surfel_spread_sq: f32,
+    // Probes the gather visits (gather_list: the valid ones); its window wraps around them.
+    gather_count: u32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 }
 
 const PI: f32 = 3.14159265358979;

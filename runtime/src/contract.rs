@@ -194,8 +194,11 @@ pub struct Params {
     pub coarse_count: u32,
     /// What a surfel's inverse square is softened by (`crate::lights::surfel_spread_sq`).
     pub surfel_spread_sq: f32,
+    /// Probes the gather visits (`gather_list`: the valid ones); its window wraps around it.
+    pub gather_count: u32,
+    pub _pad: [u32; 3],
 }
-const _: () = assert!(std::mem::size_of::<Params>() == 112);
+const _: () = assert!(std::mem::size_of::<Params>() == 128);
 
 /// The uniform of the engine-side sampling snippet (`PrtVolumeInfo` in
 /// `shaders/sample_irradiance.wgsl`): the grid the volume covers and the sampling bias.

@@ -104,7 +104,7 @@ impl PrtRuntime {
         })
     }
 
-    /// Cycles (passes of the gather over every probe) a change of lighting owes: `n` for
+    /// Cycles (passes of the gather over every valid probe) a change of lighting owes: `n` for
     /// [`Bounces::Fixed`]`(n)`, no end for [`Bounces::Feedback`].
     fn cycles_owed(&self) -> u32 {
         match self.settings.bounces {
@@ -114,11 +114,11 @@ impl PrtRuntime {
     }
 
     /// Moves the gather's cursor past the `gathered` probes of this update and counts a cycle
-    /// when every probe has been gathered.
+    /// when every valid probe has been gathered.
     pub(super) fn advance(&mut self, gathered: u32) {
-        self.cursor = (self.cursor + gathered) % self.probe_count.max(1);
+        self.cursor = (self.cursor + gathered) % self.gather_count.max(1);
         self.cycle_gathered += gathered;
-        if self.cycle_gathered >= self.probe_count {
+        if self.cycle_gathered >= self.gather_count {
             self.cycle_gathered = 0;
             // Feedback needs only "the first cycle is done": stop counting there, so that it
             // never reaches the owed (unbounded) count and goes idle.
@@ -136,12 +136,13 @@ impl PrtRuntime {
             return 0;
         }
         let budget = budget.max(1);
-        let rest = (self.probe_count - self.cycle_gathered.min(self.probe_count)).div_ceil(budget);
+        let rest =
+            (self.gather_count - self.cycle_gathered.min(self.gather_count)).div_ceil(budget);
         match self.settings.bounces {
             Bounces::Feedback { .. } if self.cycles_done > 0 => 0,
             Bounces::Feedback { .. } => rest,
             Bounces::Fixed(_) => rest.saturating_add(
-                (owed - self.cycles_done - 1).saturating_mul(self.probe_count.div_ceil(budget)),
+                (owed - self.cycles_done - 1).saturating_mul(self.gather_count.div_ceil(budget)),
             ),
         }
     }
@@ -158,8 +159,8 @@ impl PrtRuntime {
                 || old.sky_directions != new.sky_directions
         });
         let budget = budget
-            .unwrap_or(self.probe_count)
-            .clamp(1, self.probe_count.max(1));
+            .unwrap_or(self.gather_count)
+            .clamp(1, self.gather_count.max(1));
         let lights_changed = changed > 0 || first;
         let restart = lights_changed || sky_changed;
         if restart {
@@ -183,7 +184,7 @@ impl PrtRuntime {
             sky_changed,
             fixed_restart,
             bounce,
-            window: (self.cursor, budget.min(self.probe_count)),
+            window: (self.cursor, budget.min(self.gather_count)),
         })
     }
 }

@@ -55,6 +55,7 @@ impl Resources {
             one("sky_mask", &a.sky_mask),
             one("prt_depth_moments", &a.depth_moments),
             one("prt_probe_positions", &a.probe_positions),
+            one("gather_list", &a.gather_list),
             one("prt_surface", &a.surface),
             one("surface_groups", &a.surface_groups),
             one("surface_near", &a.surface_near),

@@ -40,9 +40,10 @@
 //!
 //! When nothing changed and no round-robin cycle is pending, `update` records nothing (with
 //! [`Bounces::Feedback`] there is always one: it feeds back for ever). With a
-//! budget of B probes, the gather visits B probes per update round robin; a probe's texels
-//! always hold one complete gather, and a cycle of `ceil(P / B)` updates converges exactly to the
-//! full update. With [`Bounces`] beyond one, each such cycle adds one bounce.
+//! budget of B probes, the gather visits B probes per update round robin over the P valid ones
+//! (a grid point without data, or an invalid probe, costs no window slot: a sparse asset's
+//! cycle is as short as its probes with data make it); a probe's texels always hold one
+//! complete gather, and a cycle of `ceil(P / B)` updates converges exactly to the full update. With [`Bounces`] beyond one, each such cycle adds one bounce.
 
 pub use sample::sample_points;
 pub use wgpu;
@@ -196,7 +197,8 @@ pub struct UpdateReport {
     /// Lights whose parameters changed (or that were added or removed).
     pub changed_lights: u32,
     pub sky_changed: bool,
-    /// First probe and probe count of the gather window (it wraps around the probe count).
+    /// Where in the valid probes (grid order) the gather window starts, and how many it gathers
+    /// (it wraps around the valid probes).
     pub window: (u32, u32),
     /// Updates still needed to visit every probe since the last change, times the cycles still
     /// needed for the bounces ([`Bounces::Fixed`]; 0 with [`Bounces::Feedback`]'s endless cycles
@@ -239,6 +241,8 @@ pub struct PrtRuntime {
     device: wgpu::Device,
     queue: wgpu::Queue,
     probe_count: u32,
+    /// Valid probes: what the gather's round robin cycles over (`resources::gather_list`).
+    gather_count: u32,
     brick_count: u32,
     coarse_count: u32,
     surfel_spread_sq: f32,
@@ -258,7 +262,7 @@ pub struct PrtRuntime {
     /// every direction's cell: computed again only when the sky changes, not every update).
     sky_cache: Option<(SkyModel, Vec<[f32; 4]>)>,
     cursor: u32,
-    /// Probes gathered in the current cycle (one pass of the gather over every probe).
+    /// Probes gathered in the current cycle (one pass of the gather over every valid probe).
     cycle_gathered: u32,
     /// Cycles completed since the last change of lights or sky.
     cycles_done: u32,
@@ -341,6 +345,7 @@ impl PrtRuntime {
             device: device.clone(),
             queue: queue.clone(),
             probe_count: asset.probes.len() as u32,
+            gather_count: asset.probes.iter().filter(|p| p.is_valid()).count() as u32,
             brick_count: asset.bricks.len() as u32,
             coarse_count: asset.coarse.bricks.len() as u32,
             surfel_spread_sq: crate::lights::surfel_spread_sq(asset.header.settings.cell_size),
@@ -496,6 +501,8 @@ impl PrtRuntime {
             cache_capacity: self.cache_capacity,
             coarse_count: self.coarse_count,
             surfel_spread_sq: self.surfel_spread_sq,
+            gather_count: self.gather_count,
+            _pad: [0; 3],
         }
     }
 

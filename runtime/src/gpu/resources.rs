@@ -57,6 +57,8 @@ pub struct AssetBuffers {
     pub depth_moments: wgpu::Buffer,
     /// Per grid point, where its probe's rays started (xyz) and its slot (w), as u32 words.
     pub probe_positions: wgpu::Buffer,
+    /// The valid probes' indices in grid order: what the gather's round robin visits.
+    pub gather_list: wgpu::Buffer,
     /// The surface lookup's tables, one array of words ([`SurfaceLayout`]).
     pub surface: wgpu::Buffer,
     /// Brick count, then per brick its first near group and group count, then per group its
@@ -185,6 +187,7 @@ impl AssetBuffers {
                 bytemuck::cast_slice(&asset.probe_depth),
             )?,
             probe_positions: upload("prt probe positions", bytemuck::cast_slice(&positions))?,
+            gather_list: upload("prt gather list", bytemuck::cast_slice(&gather_list(asset)))?,
             surface: upload(
                 "prt surface",
                 bytemuck::cast_slice(&SurfaceLayout::words(asset)),
@@ -667,5 +670,18 @@ impl Alloc<'_> {
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | extra,
             mapped_at_creation: false,
         }))
+    }
+}
+
+/// The probes the gather visits, in grid order: the valid ones (at least one entry, so that the
+/// buffer binds; `Params::gather_count` says how many count).
+pub fn gather_list(asset: &Asset) -> Vec<u32> {
+    let list: Vec<u32> = (0..asset.probes.len() as u32)
+        .filter(|&p| asset.probes[p as usize].is_valid())
+        .collect();
+    if list.is_empty() {
+        vec![0]
+    } else {
+        list
     }
 }
