@@ -45,6 +45,17 @@ pub struct Asset {
     pub surface: SurfaceTerms,
 }
 
+impl Asset {
+    /// The visibility map ([`DEPTH_WORDS`] words) of probe `p`, found by its slot; `None` for a
+    /// probe without data or out of range.
+    pub fn visibility_map(&self, p: usize) -> Option<&[u32]> {
+        let probe = self.probes.get(p).filter(|probe| probe.has_data())?;
+        let slot = probe.slot as usize;
+        self.probe_depth
+            .get(slot * DEPTH_WORDS..(slot + 1) * DEPTH_WORDS)
+    }
+}
+
 /// Counts, grid and provenance. Validated against the sections on load.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Header {

@@ -152,17 +152,7 @@ impl Summary {
 /// beside one wall sees the room over half its texels; one between two plates a centimetre
 /// apart sees them everywhere but at grazing angles).
 pub fn probe_in_gap(asset: &Asset, p: usize) -> bool {
-    let Some(words) = asset
-        .probes
-        .get(p)
-        .filter(|probe| probe.has_data())
-        .and_then(|probe| {
-            let slot = probe.slot as usize;
-            asset
-                .probe_depth
-                .get(slot * DEPTH_WORDS..(slot + 1) * DEPTH_WORDS)
-        })
-    else {
+    let Some(words) = asset.visibility_map(p) else {
         return false;
     };
     let mut means: Vec<f32> = (0..DEPTH_TEXELS)

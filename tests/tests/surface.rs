@@ -229,9 +229,8 @@ fn depth_moments_hold_distances_in_spacings() {
         },
     );
     let g = asset.header.grid;
-    let p = asset.probes[g.index(1, 1, 1)].slot as usize;
     assert_eq!(g.position(1, 1, 1), [0.0; 3]);
-    let words = &asset.probe_depth[p * prt_format::DEPTH_WORDS..(p + 1) * prt_format::DEPTH_WORDS];
+    let words = asset.visibility_map(g.index(1, 1, 1)).unwrap();
     for d in [[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]] {
         let (m, dev) = prt_format::depth::moments(words, prt_format::depth::texel_of(d));
         let want = 1.0 / g.spacing;

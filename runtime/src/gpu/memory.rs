@@ -29,10 +29,11 @@ impl Resources {
     fn allocations(&self) -> Vec<Allocation> {
         let a = &self.asset;
         let s = &self.state;
-        let one = |name, buffer: &wgpu::Buffer| Allocation {
+        let all = |name, buffers: &mut dyn Iterator<Item = &wgpu::Buffer>| Allocation {
             name,
-            bytes: buffer.size(),
+            bytes: buffers.map(wgpu::Buffer::size).sum(),
         };
+        let one = |name, buffer: &wgpu::Buffer| all(name, &mut std::iter::once(buffer));
         let texels: u64 = self
             .textures
             .iter()
@@ -62,20 +63,12 @@ impl Resources {
             one("coarse_bricks", &a.coarse_bricks),
             one("coarse_children", &a.coarse_children),
             one("brick_moments", &a.brick_moments),
-            Allocation {
-                name: "factors (all chunks)",
-                bytes: self.chunk_factors.iter().map(wgpu::Buffer::size).sum(),
-            },
-            Allocation {
-                name: "factor chunk uniforms",
-                bytes: self.chunk_uniforms.iter().map(wgpu::Buffer::size).sum(),
-            },
-            Allocation {
-                name: "surfels, their direct and bounce radiance (all chunks)",
-                bytes: (self.chunk_surfels.iter().flatten())
-                    .map(wgpu::Buffer::size)
-                    .sum(),
-            },
+            all("factors (all chunks)", &mut self.chunk_factors.iter()),
+            all("factor chunk uniforms", &mut self.chunk_uniforms.iter()),
+            all(
+                "surfels, their direct and bounce radiance (all chunks)",
+                &mut self.chunk_surfels.iter().flatten(),
+            ),
             one("brick_lights", &s.brick_lights),
             one("brick_dirty", &s.brick_dirty),
             one("brick_cache", &s.brick_cache),

@@ -43,7 +43,8 @@
 //! budget of B probes, the gather visits B probes per update round robin over the P valid ones
 //! (a grid point without data, or an invalid probe, costs no window slot: a sparse asset's
 //! cycle is as short as its probes with data make it); a probe's texels always hold one
-//! complete gather, and a cycle of `ceil(P / B)` updates converges exactly to the full update. With [`Bounces`] beyond one, each such cycle adds one bounce.
+//! complete gather, and a cycle of `ceil(P / B)` updates converges exactly to the full update.
+//! With [`Bounces`] beyond one, each such cycle adds one bounce.
 
 pub use sample::sample_points;
 pub use wgpu;
@@ -345,7 +346,7 @@ impl PrtRuntime {
             device: device.clone(),
             queue: queue.clone(),
             probe_count: asset.probes.len() as u32,
-            gather_count: asset.probes.iter().filter(|p| p.is_valid()).count() as u32,
+            gather_count: res.asset.gather_count,
             brick_count: asset.bricks.len() as u32,
             coarse_count: asset.coarse.bricks.len() as u32,
             surfel_spread_sq: crate::lights::surfel_spread_sq(asset.header.settings.cell_size),

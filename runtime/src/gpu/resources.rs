@@ -57,8 +57,10 @@ pub struct AssetBuffers {
     pub depth_moments: wgpu::Buffer,
     /// Per grid point, where its probe's rays started (xyz) and its slot (w), as u32 words.
     pub probe_positions: wgpu::Buffer,
-    /// The valid probes' indices in grid order: what the gather's round robin visits.
+    /// The valid probes' indices in grid order: what the gather's round robin visits (at least
+    /// one word, so that the buffer binds; `gather_count` of them count).
     pub gather_list: wgpu::Buffer,
+    pub gather_count: u32,
     /// The surface lookup's tables, one array of words ([`SurfaceLayout`]).
     pub surface: wgpu::Buffer,
     /// Brick count, then per brick its first near group and group count, then per group its
@@ -171,6 +173,13 @@ impl AssetBuffers {
                 [x, y, z, p.slot]
             })
             .collect();
+        let mut gather_list: Vec<u32> = (0..asset.probes.len() as u32)
+            .filter(|&p| asset.probes[p as usize].is_valid())
+            .collect();
+        let valid_probes = gather_list.len() as u32;
+        if gather_list.is_empty() {
+            gather_list.push(0);
+        }
         Ok(AssetBuffers {
             probes: upload("prt probes", bytemuck::cast_slice(&asset.probes))?,
             bricks: upload("prt bricks", bytemuck::cast_slice(&asset.bricks))?,
@@ -187,7 +196,8 @@ impl AssetBuffers {
                 bytemuck::cast_slice(&asset.probe_depth),
             )?,
             probe_positions: upload("prt probe positions", bytemuck::cast_slice(&positions))?,
-            gather_list: upload("prt gather list", bytemuck::cast_slice(&gather_list(asset)))?,
+            gather_list: upload("prt gather list", bytemuck::cast_slice(&gather_list))?,
+            gather_count: valid_probes,
             surface: upload(
                 "prt surface",
                 bytemuck::cast_slice(&SurfaceLayout::words(asset)),
@@ -670,18 +680,5 @@ impl Alloc<'_> {
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | extra,
             mapped_at_creation: false,
         }))
-    }
-}
-
-/// The probes the gather visits, in grid order: the valid ones (at least one entry, so that the
-/// buffer binds; `Params::gather_count` says how many count).
-pub fn gather_list(asset: &Asset) -> Vec<u32> {
-    let list: Vec<u32> = (0..asset.probes.len() as u32)
-        .filter(|&p| asset.probes[p as usize].is_valid())
-        .collect();
-    if list.is_empty() {
-        vec![0]
-    } else {
-        list
     }
 }
