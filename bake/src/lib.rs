@@ -81,9 +81,21 @@ pub struct BakeReport {
     /// Bytes of factor rows that went through the temporary file
     /// ([`BakeSettings::row_memory`]).
     pub rows_spilled: u64,
-    /// With sparse placement ([`BakeSettings::sparse`]): the probes placed, of the grid's
-    /// points.
-    pub placed: Option<(usize, usize)>,
+    /// With sparse placement ([`BakeSettings::sparse`]): what it placed where.
+    pub placed: Option<Placed>,
+}
+
+/// What sparse placement ([`placement`]) placed, of a grid's points.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Placed {
+    /// Grid points.
+    pub grid: usize,
+    /// Points traced because surfaces need them (the fine tier).
+    pub near_surfaces: usize,
+    /// Points traced on the coarse tier only (`prt_format::tier`).
+    pub coarse: usize,
+    /// Points left out and filled from the coarse tier at runtime.
+    pub filled: usize,
 }
 
 /// Bakes `scene_path` into a validated asset (not written).

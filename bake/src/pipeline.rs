@@ -56,19 +56,26 @@ pub(crate) fn bake_in_pool(
 
     let placed = settings
         .sparse
-        .then(|| placement::surface_probes(&grid, &loaded.scene.triangles));
-    if let Some(placed) = &placed {
+        .then(|| placement::sparse_probes(&grid, &loaded.scene.triangles));
+    if let Some((placed, near)) = &placed {
         let count = placed.iter().filter(|&&p| p).count();
-        report.placed = Some((count, placed.len()));
-        if count == 0 {
+        report.placed = Some(crate::Placed {
+            grid: placed.len(),
+            near_surfaces: *near,
+            coarse: count - near,
+            filled: 0,
+        });
+        if *near == 0 {
             report.warnings.push(format!(
-                "--sparse placed no probe: no triangle lies within a cell and a quarter \
-                 spacing of any of the {} grid points (check the bounds); the asset has no \
-                 probe light",
-                placed.len()
+                "--sparse placed no probe near a surface: no triangle lies within a cell and a \
+                 quarter spacing of any of the {} grid points (check the bounds); only the \
+                 coarse tier's {} probes light the volume",
+                placed.len(),
+                count
             ));
         }
     }
+    let placed = placed.map(|(placed, _)| placed);
     progress.start("trace", grid.probe_count());
     let cell_size = settings.cell_size_for(spacing);
     let stage = (&grid, placed.as_deref());
@@ -143,10 +150,13 @@ pub(crate) fn bake_in_pool(
     lap(&mut report, "surface", Some("assemble"));
 
     let Assembled {
-        probes: probes_out,
+        probes: mut probes_out,
         sky_mask,
         sky_transfer,
     } = assemble_probes(&traced, &positions, carried);
+    if let Some(sparse) = &mut report.placed {
+        sparse.filled = placement::mark_filled(&grid, &mut probes_out, &placed);
+    }
     let header = header(scene_path, &loaded, grid, settings, cell_size, &traced);
     let asset = Asset {
         header,

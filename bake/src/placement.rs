@@ -12,9 +12,11 @@
 //! normal bias), by a conservative test: the triangle's bounding box overlaps that box and its
 //! plane passes through it (Akenine-Moller's triangle-box test without the nine edge axes, so a
 //! box beside a triangle's corner may be kept; none a surface needs is dropped). The bake traces
-//! only those probes; the others keep a record with no data ([`prt_format::NO_SLOT`]) and weigh
-//! nothing in any lookup, so a point in open air far from every surface gets no probe light
-//! (validity 0), as a point outside the grid's bounds always did.
+//! those probes (the fine tier) and the coarse tier's ([`prt_format::tier`]: every fourth grid
+//! point along each axis), [`sparse_probes`]. The others keep a record with no data
+//! ([`prt_format::NO_SLOT`]); [`mark_filled`] flags those the runtime fills from the coarse
+//! tier after every gather, so that a point in open air far from every surface gets the coarse
+//! tier's light, interpolated without a seam where it meets the fine tier.
 //!
 //! The outer layers also stand for everything beyond the bounds (lookups clamp to the grid),
 //! so a triangle outside the bounds keeps the outer grid points it faces.
@@ -22,7 +24,7 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use glam::Vec3;
-use prt_format::Grid;
+use prt_format::{tier, Grid, Probe, PROBE_FILLED};
 use rayon::prelude::*;
 
 /// Spacings beyond a grid point's cells within which a surface keeps it: covers the lookup's
@@ -35,6 +37,43 @@ pub const REACH: f32 = 0.25;
 /// of `triangles` lies within its cells widened by [`REACH`] (module docs).
 pub fn surface_probes(grid: &Grid, triangles: &[[Vec3; 3]]) -> Vec<bool> {
     near(grid, triangles, Boxes::Points)
+}
+
+/// What a sparse bake traces: per grid point, whether surfaces need it ([`surface_probes`]) or
+/// it is on the coarse tier ([`tier::is_coarse_point`]); and how many the surfaces need.
+pub fn sparse_probes(grid: &Grid, triangles: &[[Vec3; 3]]) -> (Vec<bool>, usize) {
+    let mut placed = surface_probes(grid, triangles);
+    let near = placed.iter().filter(|&&p| p).count();
+    let n = grid.counts;
+    placed.par_iter_mut().enumerate().for_each(|(index, p)| {
+        let i = index as u32;
+        *p |= tier::is_coarse_point(grid, [i % n[0], i / n[0] % n[1], i / (n[0] * n[1])]);
+    });
+    (placed, near)
+}
+
+/// Flags [`PROBE_FILLED`] on every grid point of `grid` the placement left out (`placed`
+/// false) that has a valid coarse point with a positive weight ([`tier::corners`]), and
+/// returns how many. The coarse points are all placed, so none of a filled point's corners is
+/// filled itself (as validation requires). A point whose coarse points are all inside
+/// geometry stays without light, as a point inside geometry should.
+pub fn mark_filled(grid: &Grid, probes: &mut [Probe], placed: &[bool]) -> usize {
+    let n = grid.counts;
+    let fill: Vec<bool> = (0..probes.len())
+        .into_par_iter()
+        .map(|index| {
+            let i = index as u32;
+            let ijk = [i % n[0], i / n[0] % n[1], i / (n[0] * n[1])];
+            !placed[index]
+                && tier::corners(grid, ijk)
+                    .iter()
+                    .any(|&(c, w)| w > 0.0 && probes[c].is_valid())
+        })
+        .collect();
+    for (p, _) in probes.iter_mut().zip(&fill).filter(|(_, &f)| f) {
+        p.flags |= PROBE_FILLED;
+    }
+    fill.iter().filter(|&&f| f).count()
 }
 
 /// Which cells of `grid` surfaces pass through: per cell, indexed by its lowest corner's grid
@@ -222,6 +261,45 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The coarse tier is placed wherever surfaces are not; left-out points next to a valid
+    /// coarse point are filled, those whose coarse points are all invalid are not.
+    #[test]
+    fn the_coarse_tier_is_placed_and_fills_the_rest() {
+        let grid = Grid::cubic([0.0; 3], 1.0, [9, 9, 6]);
+        let (placed, near) = sparse_probes(&grid, &[]);
+        assert_eq!(near, 0);
+        for k in 0..6 {
+            for j in 0..9 {
+                for i in 0..9 {
+                    let coarse = i % 4 == 0 && j % 4 == 0 && (k % 4 == 0 || k == 5);
+                    assert_eq!(placed[grid.index(i, j, k)], coarse, "({i}, {j}, {k})");
+                }
+            }
+        }
+        let mut probes: Vec<Probe> = placed
+            .iter()
+            .map(|&p| Probe {
+                flags: if p { prt_format::PROBE_VALID } else { 0 },
+                ..Probe::default()
+            })
+            .collect();
+        // The coarse cell x, y in 4..8 loses its valid corners: points strictly inside it stay
+        // dark, points on its faces shared with valid cells are filled.
+        for k in [0, 4, 5] {
+            for (i, j) in [(4, 4), (8, 4), (4, 8), (8, 8)] {
+                probes[grid.index(i, j, k)].flags = 0;
+            }
+        }
+        let filled = mark_filled(&grid, &mut probes, &placed);
+        assert!(!probes[grid.index(5, 6, 1)].is_filled());
+        assert!(probes[grid.index(2, 6, 1)].is_filled());
+        assert!(
+            !probes[grid.index(4, 4, 0)].is_filled(),
+            "placed points are never filled"
+        );
+        assert_eq!(filled, probes.iter().filter(|p| p.is_filled()).count());
     }
 
     /// A triangle whose plane test overflows f32 keeps the points it may touch (a huge quad

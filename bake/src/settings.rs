@@ -30,9 +30,9 @@ pub struct BakeSettings {
     /// Probe spacing in metres; `None` picks about 4,000 probes over the bounds
     /// ([`crate::probes::DEFAULT_PROBES`]).
     pub spacing: Option<f32>,
-    /// Place probes only at the grid points surfaces need ([`crate::placement`]): the others
-    /// are not traced and carry no data. Off by default: a point in open air away from every
-    /// surface then gets no probe light (validity 0).
+    /// Place probes only at the grid points surfaces need and on the coarse tier
+    /// ([`crate::placement`]): the others are not traced, carry no data and are filled from
+    /// the coarse tier at runtime (`prt_format::tier`).
     pub sparse: bool,
     /// Bake bounds `[min x, y, z, max x, y, z]`; `None` uses the scene's bounds.
     pub bounds: Option<[f32; 6]>,

@@ -50,8 +50,8 @@ pub struct BakeArgs {
     #[arg(long)]
     spacing: Option<f32>,
     /// Place probes only at the grid points surfaces need (within a cell and a quarter
-    /// spacing of a triangle); the rest carry no data, and points in open air away from every
-    /// surface get no probe light.
+    /// spacing of a triangle) and on a coarse tier of every fourth point; the rest carry no
+    /// data and are filled from the coarse tier at runtime.
     #[arg(long)]
     sparse: bool,
     /// Bake bounds MINX,MINY,MINZ,MAXX,MAXY,MAXZ [default: the scene's bounds].
@@ -183,6 +183,16 @@ pub fn run(args: BakeArgs) -> Result<()> {
         eprintln!("warning: {w}");
     }
     println!("{}", prt_format::Summary::of(&asset, report.file_bytes));
+    if let Some(p) = report.placed {
+        println!(
+            "placement        sparse: {} grid points traced near surfaces, {} more on the coarse tier (every {}th point), {} filled from it, {} left dark (inside geometry)",
+            p.near_surfaces,
+            p.coarse,
+            prt_format::tier::COARSE_STRIDE,
+            p.filled,
+            p.grid - p.near_surfaces - p.coarse - p.filled
+        );
+    }
     let times: Vec<String> = report
         .timings
         .iter()

@@ -192,6 +192,11 @@ pub const PROBE_OFFSET: u32 = 2;
 /// visibility map, which sees the geometry around it at short range: visibility-aware sampling
 /// therefore weights it down wherever a real probe sees the point.
 pub const PROBE_DILATED: u32 = 4;
+/// Probe flag (without [`PROBE_VALID`], on a grid point without data): a sparse bake did not
+/// trace this point, and the runtime *fills* it after every gather with the trilinear
+/// interpolation of the coarse tier around it ([`crate::tier`]); lookups weigh it 1, like a
+/// valid probe, and, having no visibility map, by its facing term alone.
+pub const PROBE_FILLED: u32 = 8;
 /// Side of the octahedral visibility map.
 pub const DEPTH_MAP_SIDE: u32 = 16;
 /// Texels of a visibility map (two bytes each: mean and standard deviation of distance).
@@ -208,13 +213,14 @@ pub const NO_SLOT: u32 = u32::MAX;
 /// Every grid point has a record. A bake with sparse placement (`prt_bake::placement`) traces
 /// only the points surfaces need and leaves the others out; those, and probes inside geometry
 /// with no valid neighbour to copy, have no data: [`NO_SLOT`], not valid, no factors, no sky or
-/// visibility data, never gathered, and weighted 0 by every lookup.
+/// visibility data, never gathered, and weighted 0 by every lookup, except the points the
+/// coarse tier fills ([`PROBE_FILLED`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable, Serialize, Deserialize)]
 #[repr(C)]
 pub struct Probe {
     /// Where the probe's rays start: its grid position, unless [`PROBE_OFFSET`] is set.
     pub position: [f32; 3],
-    /// [`PROBE_VALID`], [`PROBE_OFFSET`].
+    /// [`PROBE_VALID`], [`PROBE_OFFSET`], [`PROBE_DILATED`], [`PROBE_FILLED`].
     pub flags: u32,
     pub first_factor: u32,
     pub factor_count: u32,
@@ -242,10 +248,15 @@ impl Probe {
         self.flags & PROBE_DILATED != 0
     }
 
-    /// Weight of the probe when the volume is sampled: 1 for a valid (or dilated) probe, 0 for
-    /// an invalid one.
+    /// Filled from the coarse tier at runtime ([`PROBE_FILLED`]).
+    pub fn is_filled(&self) -> bool {
+        self.flags & PROBE_FILLED != 0
+    }
+
+    /// Weight of the probe when the volume is sampled: 1 for a valid (or dilated) probe and a
+    /// filled grid point, 0 for an invalid one.
     pub fn sample_weight(&self) -> f32 {
-        if self.is_valid() {
+        if self.is_valid() || self.is_filled() {
             1.0
         } else {
             0.0

@@ -40,6 +40,7 @@ pub mod sh;
 mod snorm;
 pub mod summary;
 pub mod surface;
+pub mod tier;
 pub mod validate;
 
 pub use asset::*;

@@ -22,6 +22,9 @@ pub struct Summary {
     pub valid_probe_count: usize,
     /// Probes inside geometry whose table was copied from a valid neighbour.
     pub dilated_probe_count: usize,
+    /// Grid points without data the runtime fills from the coarse tier of a sparse bake
+    /// ([`crate::tier`]).
+    pub filled_probe_count: usize,
     /// Probes moved off a surface they lay on, or out of geometry by the virtual offset.
     pub offset_probe_count: usize,
     /// Valid probes in a gap narrower than a tenth of the spacing ([`probe_in_gap`]): they see
@@ -118,6 +121,7 @@ impl Summary {
                 .filter(|p| p.is_valid() && !p.is_dilated())
                 .count(),
             dilated_probe_count: asset.probes.iter().filter(|p| p.is_dilated()).count(),
+            filled_probe_count: asset.probes.iter().filter(|p| p.is_filled()).count(),
             offset_probe_count: asset
                 .probes
                 .iter()
@@ -192,12 +196,13 @@ impl std::fmt::Display for Summary {
         )?;
         writeln!(
             f,
-            "probes           {} with data of {} grid points ({} valid, {} inside geometry with a neighbour's data; the other {} left out by the placement or inside geometry: no data), {} moved off a surface or out of geometry, {} rays each",
+            "probes           {} with data of {} grid points ({} valid, {} inside geometry with a neighbour's data; the other {} left out by the placement or inside geometry: no data, {} of them filled from the coarse tier), {} moved off a surface or out of geometry, {} rays each",
             self.probes_with_data,
             self.probe_count,
             self.valid_probe_count,
             self.dilated_probe_count,
             self.probe_count - self.probes_with_data,
+            self.filled_probe_count,
             self.offset_probe_count,
             self.ray_count
         )?;

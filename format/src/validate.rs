@@ -53,6 +53,7 @@ pub fn validate(asset: &Asset) -> Result<(), FormatError> {
     header(&asset.header)?;
     probe_sections(asset)?;
     probe_records(asset)?;
+    filled_points(asset)?;
     factor_table(asset)?;
     bricks(asset)?;
     coarse::coarse_bricks(asset)?;
@@ -166,6 +167,16 @@ fn probe_records(asset: &Asset) -> Result<(), FormatError> {
             ));
         }
         if p.has_data() {
+            if p.is_filled() {
+                return Err(FormatError::invalid(
+                    "probes",
+                    i,
+                    format!(
+                        "slot {} and flags {:#x}: filled, yet with data",
+                        p.slot, p.flags
+                    ),
+                ));
+            }
             if p.slot != next_slot {
                 return Err(FormatError::invalid(
                     "probes",
@@ -174,7 +185,10 @@ fn probe_records(asset: &Asset) -> Result<(), FormatError> {
                 ));
             }
             next_slot += 1;
-        } else if p.flags & !PROBE_OFFSET != 0 || p.factor_count != 0 || p.sky_rays != 0 {
+        } else if p.flags & !(PROBE_OFFSET | PROBE_FILLED) != 0
+            || p.factor_count != 0
+            || p.sky_rays != 0
+        {
             return Err(FormatError::invalid(
                 "probes",
                 i,
@@ -206,6 +220,50 @@ fn probe_records(asset: &Asset) -> Result<(), FormatError> {
             found: factors.len(),
             expected: next_factor as usize,
         });
+    }
+    Ok(())
+}
+
+/// Each filled grid point ([`PROBE_FILLED`], no data by [`probe_records`]): among the coarse
+/// points it is interpolated from with a positive weight ([`crate::tier::corners`]) one is
+/// valid, and none is filled itself (the runtime fills every point in one pass, reading only
+/// gathered probes).
+fn filled_points(asset: &Asset) -> Result<(), FormatError> {
+    let grid = &asset.header.grid;
+    let n = grid.counts;
+    for (index, p) in asset
+        .probes
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| p.is_filled())
+    {
+        let i = index as u32;
+        let ijk = [i % n[0], i / n[0] % n[1], i / (n[0] * n[1])];
+        let used = crate::tier::corners(grid, ijk)
+            .into_iter()
+            .filter(|&(_, w)| w > 0.0)
+            .map(|(c, _)| (c, asset.probes[c]));
+        let mut valid = false;
+        for (c, corner) in used {
+            if corner.is_filled() {
+                return Err(FormatError::invalid(
+                    "probes",
+                    index,
+                    format!(
+                        "filled from probe {c}, which is filled itself (flags {:#x})",
+                        p.flags
+                    ),
+                ));
+            }
+            valid |= corner.is_valid();
+        }
+        if !valid {
+            return Err(FormatError::invalid(
+                "probes",
+                index,
+                "filled, but no coarse point around it is valid".to_string(),
+            ));
+        }
     }
     Ok(())
 }

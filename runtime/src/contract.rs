@@ -196,7 +196,9 @@ pub struct Params {
     pub surfel_spread_sq: f32,
     /// Probes the gather visits (`gather_list`: the valid ones); its window wraps around it.
     pub gather_count: u32,
-    pub _pad: [u32; 3],
+    /// Grid points the coarse tier fills (`fill_list`, `prt_format::tier`).
+    pub fill_count: u32,
+    pub _pad: [u32; 2],
 }
 const _: () = assert!(std::mem::size_of::<Params>() == 128);
 
@@ -334,6 +336,10 @@ pub fn wgsl_constants() -> Vec<(&'static str, String)> {
         ),
         ("PROBE_VALID", format!("{PROBE_VALID}u")),
         ("PROBE_NONE", format!("{}u", u32::MAX)),
+        (
+            "COARSE_STRIDE",
+            format!("{}u", prt_format::tier::COARSE_STRIDE),
+        ),
         ("SKY_BLACK", format!("{SKY_BLACK}u")),
         ("SKY_CONSTANT", format!("{SKY_CONSTANT}u")),
         ("SKY_DIRECTIONS", format!("{SKY_DIRECTIONS}u")),
@@ -432,5 +438,6 @@ pub fn snippet_constants() -> Vec<(&'static str, String)> {
         ("PRT_TERMS_TRACED", format!("{TERMS_TRACED}u")),
         ("PRT_NO_SURFEL", format!("{NO_SURFEL}u")),
         ("PRT_BLOCKED_WEIGHT", format!("{BLOCKED_WEIGHT:e}")),
+        ("PRT_NO_SLOT", format!("{}u", prt_format::NO_SLOT)),
     ]
 }

@@ -8,6 +8,7 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod contract;
+pub mod fill;
 pub mod gpu;
 pub mod lights;
 pub mod output;

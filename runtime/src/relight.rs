@@ -7,7 +7,8 @@
 //! 2. **Surfel radiance** `L = emission + albedo / pi * E`.
 //! 3. **Brick radiance**: the weighted mean of its surfels'.
 //! 4. **Gather**: probe SH9 = sum over its factors of transfer x brick radiance, plus the sky
-//!    term. Invalid probes are skipped (zero, flagged invalid).
+//!    term. Invalid probes are skipped (zero, flagged invalid); then the grid points a sparse
+//!    bake left to the coarse tier are filled from it ([`crate::fill`]).
 //! 5. **Bounces** (optional, `bounces > 1`): surfels also receive the irradiance of the probe
 //!    volume from the previous iteration, sampled at the surfel with its normal through the
 //!    engine's lookup (`sample_irradiance`: normal bias, validity and depth-moment weights), and
@@ -330,7 +331,7 @@ impl<'a> CpuRelighter<'a> {
     ) -> (Vec<ShRgb>, RelightStats) {
         let asset = self.asset;
         let n = asset.header.ray_count;
-        let sh: Vec<ShRgb> = asset
+        let mut sh: Vec<ShRgb> = asset
             .probes
             .par_iter()
             .enumerate()
@@ -354,6 +355,7 @@ impl<'a> CpuRelighter<'a> {
                 acc.map(|c| c.map(|v| v as f32))
             })
             .collect();
+        crate::fill::fill(asset, &mut sh);
         let valid = asset.probes.iter().filter(|p| p.is_valid()).count() as u64;
         let stats = RelightStats {
             probes_gathered: valid,

@@ -10,14 +10,16 @@
 //! - grid coordinate `(p - origin) / step` (texel centres sit on the probes), clamped to the
 //!   grid: outside it the nearest face's probes are used, as the sampler's `ClampToEdge` does;
 //! - each of the eight probes around the point gets its trilinear weight times its validity
-//!   (`Probe::sample_weight`: 1 for a valid or dilated probe, 0 for an invalid one), and **with
+//!   (`Probe::sample_weight`: 1 for a valid or dilated probe and a grid point filled from the
+//!   coarse tier, `prt_format::tier`; 0 for an invalid one), and **with
 //!   depth moments** (the runtime's default) also the facing term `clamp(1 + h / FACING_DEPTH,
 //!   0, 1)^2 + FACING_FLOOR` (`h`: the probe's signed distance in spacings from the plane
 //!   through the unmoved surface point) and the Chebyshev term `max(crush(cheb^3),
 //!   MIN_CHEBYSHEV)` of the point's distance against the probe's depth moments in that
 //!   direction (the mean and deviation of its hit distances, `prt_format::depth`; Majercik et
 //!   al., JCGT 2019); distances are measured from where the probe's rays started
-//!   (`Probe::position`: the grid position unless the probe was moved off a surface). A
+//!   (`Probe::position`: the grid position unless the probe was moved off a surface). A filled
+//!   grid point has no depth moments and gets the facing term alone. A
 //!   dilated probe sits inside geometry and its map sees that geometry close by, so it only
 //!   weighs where no real probe sees the point;
 //! - SH = weighted sum / summed weight, zero when the summed trilinear-times-probe weight
@@ -31,7 +33,7 @@
 use glam::Vec3;
 use prt_format::depth::MAX_DEPTH;
 use prt_format::sh::{ShRgb, SH_COUNT};
-use prt_format::{Asset, Grid, Probe, DEPTH_WORDS};
+use prt_format::{Asset, Grid, Probe, DEPTH_WORDS, NO_SLOT};
 
 use crate::contract::{
     CRUSH_THRESHOLD, FACING_DEPTH, FACING_FLOOR, MIN_CHEBYSHEV, MIN_DISTANCE, MIN_VALIDITY,
@@ -142,7 +144,7 @@ impl<'a> VolumeSampler<'a> {
             .slots
             .iter()
             .zip(&self.weight)
-            .all(|(&slot, &w)| w <= 0.0 || (slot as usize) < maps);
+            .all(|(&slot, &w)| w <= 0.0 || slot == NO_SLOT || (slot as usize) < maps);
         if fits && !depth.is_empty() {
             self.depth_moments = depth;
         }
@@ -162,6 +164,10 @@ impl<'a> VolumeSampler<'a> {
         let behind =
             ((probe - surface).dot(n) / self.grid.spacing / FACING_DEPTH + 1.0).clamp(0.0, 1.0);
         let mut w = behind * behind + FACING_FLOOR;
+        // A filled grid point has no visibility map: its facing term alone.
+        if self.slots[i] == NO_SLOT {
+            return w;
+        }
         let slot = self.slots[i] as usize;
         let words = &self.depth_moments[slot * DEPTH_WORDS..(slot + 1) * DEPTH_WORDS];
         let (mean, deviation) =

@@ -1,9 +1,13 @@
 //! Sparse placement (`BakeSettings::sparse`, `prt_bake::placement`; issue 32, item 2): probes
-//! only at the grid points surfaces need, the rest recorded without data.
+//! only at the grid points surfaces need and on a coarse tier, the rest recorded without data
+//! and filled from the coarse tier at runtime (`prt_format::tier`).
+
+// SH maths index parallel arrays with one index; range loops read best.
+#![allow(clippy::needless_range_loop)]
 
 use prt_bake::BakeSettings;
 use prt_format::depth::MAX_DEPTH;
-use prt_format::{decode, encode, Asset, DEPTH_TEXELS, DEPTH_WORDS};
+use prt_format::{decode, encode, Asset, DEPTH_TEXELS, DEPTH_WORDS, PROBE_FILLED};
 use prt_runtime::sample::corners;
 use prt_runtime::surface::SurfaceSampler;
 use prt_runtime::{load_rig, CpuRelighter, LookupSettings};
@@ -58,8 +62,14 @@ fn sparse_placement_keeps_every_probe_surfaces_read() {
     }
     assert!(read > 1000);
     for p in asset.probes.iter().filter(|p| !p.has_data()) {
-        assert_eq!((p.flags, p.factor_count, p.sky_rays), (0, 0, 0), "{p:?}");
+        let flags = p.flags & !PROBE_FILLED;
+        assert_eq!((flags, p.factor_count, p.sky_rays), (0, 0, 0), "{p:?}");
     }
+    let filled = asset.probes.iter().filter(|p| p.is_filled()).count();
+    assert!(
+        filled > 0,
+        "the coarse tier fills the air between the rooms"
+    );
     assert_eq!(
         asset.probe_depth.len(),
         placed * DEPTH_WORDS,
@@ -71,6 +81,7 @@ fn sparse_placement_keeps_every_probe_surfaces_read() {
     assert!(summary
         .to_string()
         .contains(&format!("{placed} with data of")));
+    assert_eq!(summary.filled_probe_count, filled);
 }
 
 /// At the surfaces the sparse bake samples as the uniform bake of the same grid does: full
@@ -146,8 +157,9 @@ fn sparse_bakes_fill_only_the_holes_surfaces_need() {
     }
 }
 
-/// A level with no surface in the bounds bakes sparse without a panic: no probe placed, a
-/// warning that says so, an asset that validates and samples to validity 0.
+/// A level with no surface in the bounds bakes sparse without a panic: no probe placed near a
+/// surface, a warning that says so, only the coarse tier traced (every fourth point of 5 x 5
+/// x 5), the rest filled from it, an asset that validates and samples the sky everywhere.
 #[test]
 fn sparse_bake_of_nothing_warns() {
     let settings = BakeSettings {
@@ -158,13 +170,23 @@ fn sparse_bake_of_nothing_warns() {
     };
     let (asset, report) =
         prt_bake::bake(&fixture("empty.gltf"), &settings, &prt_bake::NoProgress).unwrap();
-    assert!(asset.probes.iter().all(|p| !p.has_data()));
-    assert_eq!(report.placed, Some((0, asset.probes.len())));
+    let with_data = asset.probes.iter().filter(|p| p.has_data()).count();
+    assert_eq!(
+        with_data, 8,
+        "the coarse tier: indices 0 and 4 along each axis"
+    );
+    let placed = prt_bake::Placed {
+        grid: 125,
+        near_surfaces: 0,
+        coarse: 8,
+        filled: 117,
+    };
+    assert_eq!(report.placed, Some(placed));
     assert!(
         report
             .warnings
             .iter()
-            .any(|w| w.contains("--sparse placed no probe")),
+            .any(|w| w.contains("--sparse placed no probe near a surface")),
         "{:?}",
         report.warnings
     );
@@ -175,9 +197,14 @@ fn sparse_bake_of_nothing_warns() {
         .unwrap();
     let lookup = LookupSettings::default();
     let s = SurfaceSampler::new(&asset, &relit.sh, &relit.surfel_irradiance, &lookup);
-    let got = s.sample([0.0; 3], [0.0, 1.0, 0.0]);
-    assert_eq!(got.validity, 0.0);
-    assert!(got.irradiance.iter().all(|v| *v == 0.0));
+    // A constant sky of radiance 1 everywhere: E = pi on any surface, through the fills.
+    for at in [[0.0; 3], [0.3, -0.6, 0.9], [1.0, 1.0, 1.0]] {
+        let got = s.sample(at, [0.0, 1.0, 0.0]);
+        assert_eq!(got.validity, 1.0);
+        for e in got.irradiance {
+            assert!((e - std::f32::consts::PI).abs() < 0.05, "{at:?}: {got:?}");
+        }
+    }
 }
 
 /// A dilated probe carries its source's factors and sky but keeps its own visibility map in
@@ -213,4 +240,201 @@ fn dilated_probes_keep_their_own_visibility_maps() {
             assert!(open(q) > 0.3, "measured probe {q}: {} open", open(q));
         }
     }
+}
+
+/// A 2 m box lit by a point light, a spot, a sun and a sky, baked sparse in bounds that reach
+/// 3.75 m past it: the fine tier around the box, the coarse tier and its fills beyond.
+fn box_in_the_open() -> (Asset, Vec<prt_format::sh::ShRgb>) {
+    let settings = BakeSettings {
+        bounds: Some([-1.25, -1.25, -1.25, 4.75, 4.75, 4.75]),
+        spacing: Some(0.5),
+        sparse: true,
+        ..rays(256)
+    };
+    let asset = bake_ok(&fixture("closed_box_outward.gltf"), &settings);
+    let lighting = load_rig(&fixture("rigs/point_spot_sun_sky.json")).unwrap();
+    let relit = CpuRelighter::new(&asset)
+        .unwrap()
+        .relight(&lighting, 1)
+        .unwrap();
+    (asset, relit.sh)
+}
+
+/// Where the coarse tier alone covers a point, the lookup returns the trilinear
+/// interpolation of the coarse probes, exactly: the fills between them reproduce it
+/// (`prt_format::tier`).
+#[test]
+fn the_coarse_tier_is_interpolated_exactly() {
+    let (asset, sh) = box_in_the_open();
+    let g = asset.header.grid;
+    assert_eq!(g.counts, [13, 13, 13]);
+    // Coarse points at indices 8 and 12 (2.75 m and 4.75 m): no surface within reach.
+    let (lo, hi) = (8u32, 12u32);
+    let corners: Vec<usize> = (0..8)
+        .map(|c| {
+            let at = |bit: u32| if c >> bit & 1 == 1 { hi } else { lo };
+            g.index(at(0), at(1), at(2))
+        })
+        .collect();
+    for &c in &corners {
+        assert!(asset.probes[c].is_valid() && !asset.probes[c].is_dilated());
+    }
+    let filled = (0..asset.probes.len())
+        .filter(|&p| asset.probes[p].is_filled())
+        .count();
+    assert!(filled > 1000, "{filled} filled");
+    let lookup = LookupSettings {
+        depth_moments: false,
+        normal_bias: 0.0,
+        ..LookupSettings::default()
+    };
+    let sampler = prt_runtime::VolumeSampler::for_asset(&asset, &sh, &lookup);
+    let (a, b) = (g.position(lo, lo, lo), g.position(hi, hi, hi));
+    for p in [[3.6, 4.1, 3.3], [2.8, 4.7, 4.0], [4.2, 3.0, 2.9]] {
+        let t: [f32; 3] = std::array::from_fn(|i| (p[i] - a[i]) / (b[i] - a[i]));
+        let mut expected = [[0.0f32; 3]; 9];
+        for (c, &q) in corners.iter().enumerate() {
+            let w: f32 = (0..3)
+                .map(|i| if c >> i & 1 == 1 { t[i] } else { 1.0 - t[i] })
+                .product();
+            for k in 0..9 {
+                for ch in 0..3 {
+                    expected[k][ch] += w * sh[q][k][ch];
+                }
+            }
+        }
+        let got = sampler.sample(p, [0.0, 1.0, 0.0]);
+        assert!((got.validity - 1.0).abs() < 1e-5, "{got:?}");
+        for k in 0..9 {
+            for ch in 0..3 {
+                let (x, y) = (got.sh[k][ch], expected[k][ch]);
+                let scale = expected[0][ch].abs();
+                assert!((x - y).abs() <= 1e-5 * scale, "{p:?} k {k}: {x} vs {y}");
+            }
+        }
+    }
+}
+
+/// No seam where the fine tier meets the coarse one: along lines from the box's faces out
+/// into the coarse tier's air, the trilinear lookup is continuous at every grid face it
+/// crosses (a jump would be a seam), and the default lookup finds probes everywhere.
+#[test]
+fn the_lookup_is_seam_free_across_the_tier_boundary() {
+    let (asset, sh) = box_in_the_open();
+    let g = asset.header.grid;
+    let trilinear = LookupSettings {
+        depth_moments: false,
+        normal_bias: 0.0,
+        ..LookupSettings::default()
+    };
+    let sampler = prt_runtime::VolumeSampler::for_asset(&asset, &sh, &trilinear);
+    let default = LookupSettings::default();
+    let full = prt_runtime::VolumeSampler::for_asset(&asset, &sh, &default);
+    let (mut faces, mut mixed) = (0, 0);
+    for (axis, offset) in [(0, [0.1, 0.2]), (1, [0.3, -0.4]), (2, [0.7, 1.3])] {
+        let at = |x: f32| -> [f32; 3] {
+            let mut p = [0.0; 3];
+            p[axis] = x;
+            p[(axis + 1) % 3] = offset[0];
+            p[(axis + 2) % 3] = offset[1];
+            p
+        };
+        let n = {
+            let mut n = [0.0; 3];
+            n[axis] = 1.0;
+            n
+        };
+        // Grid faces x = origin + i * step from just outside the box to the far bound.
+        for i in 5..12 {
+            let x = g.origin[axis] + g.step[axis] * i as f32;
+            let (below, above) = (
+                sampler.sample(at(x - 1e-4), n),
+                sampler.sample(at(x + 1e-4), n),
+            );
+            // Validity is continuous too (the corners inside the box weigh 0 on both sides).
+            let (u, v) = (below.validity, above.validity);
+            assert!(
+                u > 0.99 && (u - v).abs() < 1e-3,
+                "face {i}: validity {u} vs {v}"
+            );
+            for k in 0..9 {
+                for ch in 0..3 {
+                    let (u, v) = (below.sh[k][ch], above.sh[k][ch]);
+                    let scale = below.sh[0][ch].abs().max(1e-6);
+                    assert!(
+                        (u - v).abs() <= 2e-3 * scale,
+                        "axis {axis} face {i} k {k}: {u} vs {v}"
+                    );
+                }
+            }
+            faces += 1;
+        }
+        // Every point of the line has probes around it with the default lookup too, and the
+        // line passes cells whose corners are partly traced and partly filled.
+        for s in 0..200 {
+            let x = 1.05 + 3.6 * s as f32 / 199.0;
+            let p = at(x);
+            assert!(full.sample(p, n).validity > 0.5, "{p:?}");
+            let cs = corners(&g, p.into());
+            let fill = cs
+                .iter()
+                .filter(|&&(c, w)| w > 0.0 && asset.probes[c].is_filled())
+                .count();
+            let traced = cs
+                .iter()
+                .filter(|&&(c, w)| w > 0.0 && asset.probes[c].has_data())
+                .count();
+            mixed += usize::from(fill > 0 && traced > 0 && fill + traced == 8);
+        }
+    }
+    assert_eq!(faces, 21);
+    assert!(mixed > 0, "no cell mixes the tiers");
+}
+
+/// Validation refuses fills the runtime could not compute: a point filled although it has
+/// data, filled where no coarse point around it is valid, or filled from a filled point.
+#[test]
+fn broken_fills_are_invalid() {
+    let settings = BakeSettings {
+        bounds: Some([-1.0, -1.0, -1.0, 1.0, 1.0, 1.0]),
+        spacing: Some(0.5),
+        sparse: true,
+        ..rays(64)
+    };
+    let asset = bake_ok(&fixture("empty.gltf"), &settings);
+    let g = asset.header.grid;
+    let message = |damage: &dyn Fn(&mut Asset)| {
+        let mut a = asset.clone();
+        damage(&mut a);
+        match prt_format::validate::validate(&a) {
+            Err(e) => e.to_string(),
+            Ok(()) => panic!("accepted"),
+        }
+    };
+    let corner = g.index(4, 4, 4);
+    let e = message(&|a| a.probes[corner].flags |= PROBE_FILLED);
+    assert!(e.contains("filled, yet with data"), "{e}");
+    let e = message(&|a| {
+        for p in a.probes.iter_mut().filter(|p| p.has_data()) {
+            p.flags = 0;
+        }
+    });
+    assert!(e.contains("no coarse point around it is valid"), "{e}");
+    // The last coarse point (the last probe with data; no factors in an empty scene) left out
+    // and marked filled: it would be filled from itself, and its neighbours from it.
+    let e = message(&|a| {
+        let last = &mut a.probes[corner];
+        *last = prt_format::Probe {
+            position: last.position,
+            flags: PROBE_FILLED,
+            first_factor: last.first_factor,
+            slot: prt_format::NO_SLOT,
+            ..prt_format::Probe::default()
+        };
+        let words = a.header.sky_mask_words();
+        a.sky_mask.truncate(a.sky_mask.len() - words);
+        a.sky_transfer.pop();
+        a.probe_depth.truncate(a.probe_depth.len() - DEPTH_WORDS);
+    });
+    assert!(e.contains("which is filled itself"), "{e}");
 }

@@ -46,6 +46,8 @@ pub(super) enum Binding {
     ProbeSh,
     /// The probes the gather visits (`gather_list`).
     GatherList,
+    /// The grid points the coarse tier fills (`fill_list`).
+    FillList,
     Counters,
     SkyTransfer,
     SkyMask,
@@ -107,6 +109,7 @@ impl Binding {
             "probe_dirty" => Binding::ProbeDirty,
             "probe_sh" => Binding::ProbeSh,
             "gather_list" => Binding::GatherList,
+            "fill_list" => Binding::FillList,
             "counters" => Binding::Counters,
             "sky_transfer" => Binding::SkyTransfer,
             "sky_mask" => Binding::SkyMask,
@@ -160,6 +163,7 @@ impl Binding {
             Binding::ProbeDirty => b(&r.state.probe_dirty),
             Binding::ProbeSh => b(&r.state.probe_sh),
             Binding::GatherList => b(&r.asset.gather_list),
+            Binding::FillList => b(&r.asset.fill_list),
             Binding::Counters => b(&r.state.counters),
             Binding::SkyTransfer => b(&r.asset.sky_transfer),
             Binding::SkyMask => b(&r.asset.sky_mask),

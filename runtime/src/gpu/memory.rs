@@ -57,6 +57,7 @@ impl Resources {
             one("prt_depth_moments", &a.depth_moments),
             one("prt_probe_positions", &a.probe_positions),
             one("gather_list", &a.gather_list),
+            one("fill_list", &a.fill_list),
             one("prt_surface", &a.surface),
             one("surface_groups", &a.surface_groups),
             one("surface_near", &a.surface_near),

@@ -32,6 +32,9 @@
 //! 8. **gather** (one workgroup per probe of this update's window, per factor chunk): the probe's factors and sky
 //!    term reduced into SH9 RGB (subgroup adds where the adapter has them, a shared-memory tree
 //!    otherwise), written with its validity into the seven volume textures at once.
+//! 9. **fill** (per grid point a sparse bake left to the coarse tier, every one): its SH is
+//!    the trilinear interpolation of the coarse probes around it (`prt_format::tier`), written
+//!    with validity 1 like a gathered probe's.
 //!
 //! A light costs a brick's surfels one bit test where it does not reach, and moving one light
 //! of a thousand tests it against every brick once and traces only its own pairs
@@ -244,6 +247,8 @@ pub struct PrtRuntime {
     probe_count: u32,
     /// Valid probes: what the gather's round robin cycles over (`resources::gather_list`).
     gather_count: u32,
+    /// Grid points the coarse tier fills (`resources::fill_list`).
+    fill_count: u32,
     brick_count: u32,
     coarse_count: u32,
     surfel_spread_sq: f32,
@@ -336,6 +341,7 @@ impl PrtRuntime {
             probes: asset.probes.len() as u32,
             groups: asset.surface.group_surfels.len() as u32,
             coarse: asset.coarse.bricks.len() as u32,
+            fills: res.asset.fill_count,
         };
         let pipelines = STAGES
             .iter()
@@ -347,6 +353,7 @@ impl PrtRuntime {
             queue: queue.clone(),
             probe_count: asset.probes.len() as u32,
             gather_count: res.asset.gather_count,
+            fill_count: res.asset.fill_count,
             brick_count: asset.bricks.len() as u32,
             coarse_count: asset.coarse.bricks.len() as u32,
             surfel_spread_sq: crate::lights::surfel_spread_sq(asset.header.settings.cell_size),
@@ -503,7 +510,8 @@ impl PrtRuntime {
             coarse_count: self.coarse_count,
             surfel_spread_sq: self.surfel_spread_sq,
             gather_count: self.gather_count,
-            _pad: [0; 3],
+            fill_count: self.fill_count,
+            _pad: [0; 2],
         }
     }
 

@@ -61,6 +61,10 @@ pub struct AssetBuffers {
     /// one word, so that the buffer binds; `gather_count` of them count).
     pub gather_list: wgpu::Buffer,
     pub gather_count: u32,
+    /// The grid points the coarse tier fills, in grid order (`prt_format::tier`; at least one
+    /// word, `fill_count` of them count).
+    pub fill_list: wgpu::Buffer,
+    pub fill_count: u32,
     /// The surface lookup's tables, one array of words ([`SurfaceLayout`]).
     pub surface: wgpu::Buffer,
     /// Brick count, then per brick its first near group and group count, then per group its
@@ -180,6 +184,13 @@ impl AssetBuffers {
         if gather_list.is_empty() {
             gather_list.push(0);
         }
+        let mut fill_list: Vec<u32> = (0..asset.probes.len() as u32)
+            .filter(|&p| asset.probes[p as usize].is_filled())
+            .collect();
+        let fill_count = fill_list.len() as u32;
+        if fill_list.is_empty() {
+            fill_list.push(0);
+        }
         Ok(AssetBuffers {
             probes: upload("prt probes", bytemuck::cast_slice(&asset.probes))?,
             bricks: upload("prt bricks", bytemuck::cast_slice(&asset.bricks))?,
@@ -198,6 +209,8 @@ impl AssetBuffers {
             probe_positions: upload("prt probe positions", bytemuck::cast_slice(&positions))?,
             gather_list: upload("prt gather list", bytemuck::cast_slice(&gather_list))?,
             gather_count: valid_probes,
+            fill_list: upload("prt fill list", bytemuck::cast_slice(&fill_list))?,
+            fill_count,
             surface: upload(
                 "prt surface",
                 bytemuck::cast_slice(&SurfaceLayout::words(asset)),

@@ -5,7 +5,7 @@
 //! in `bindings.rs` and its buffer in `resources.rs`.
 
 use prt_shaders::{
-    BOUNCE_SURFELS, BRICK_RADIANCE, COARSE_RADIANCE, CULL_LIGHTS, GATHER, GATHER_SUBGROUP,
+    BOUNCE_SURFELS, BRICK_RADIANCE, COARSE_RADIANCE, CULL_LIGHTS, FILL, GATHER, GATHER_SUBGROUP,
     GATHER_TREE, LIGHT_SAMPLE, MARK_PROBES, NEAR_RADIANCE, RELIGHT_SURFELS, SHADOW_RAYS, TYPES,
 };
 
@@ -46,6 +46,8 @@ pub(super) enum Dispatch {
     ChunkProbes,
     /// A workgroup per probe of the update's window, one dispatch per factor chunk.
     Window,
+    /// A thread per grid point the coarse tier fills, every one in one dispatch.
+    Fills,
 }
 
 /// One compute stage.
@@ -79,7 +81,7 @@ impl Stage {
 }
 
 /// Every stage, in dispatch order (the module docs of [`super`] say what each computes).
-pub(super) const STAGES: [Stage; 8] = [
+pub(super) const STAGES: [Stage; 9] = [
     // 1. Per brick: light masks of the changed lights, dirty bricks, shadow-ray cache room.
     Stage {
         label: "prt cull_lights",
@@ -148,6 +150,14 @@ pub(super) const STAGES: [Stage; 8] = [
         runs: |_| true,
         bounces_only: false,
     },
+    // 9. Per grid point the coarse tier fills: its SH from the coarse probes around it.
+    Stage {
+        label: "prt fill",
+        wgsl: &[Part::File(FILL)],
+        dispatch: Dispatch::Fills,
+        runs: |_| true,
+        bounces_only: false,
+    },
 ];
 
 /// Bricks and probes of the asset, for the dispatches that cover them all.
@@ -159,6 +169,8 @@ pub(super) struct Counts {
     pub(super) groups: u32,
     /// Coarse bricks (`prt_format::coarse`).
     pub(super) coarse: u32,
+    /// Grid points the coarse tier fills (`prt_format::tier`).
+    pub(super) fills: u32,
 }
 
 /// A stage's pipeline and its bind-group sets.
@@ -246,6 +258,7 @@ fn sets(dispatch: Dispatch, r: &Resources, counts: Counts) -> Vec<(Set, u32)> {
         Dispatch::Bricks => vec![(Set::Whole, counts.bricks)],
         Dispatch::Groups => vec![(Set::Whole, counts.groups)],
         Dispatch::Coarse => vec![(Set::Whole, counts.coarse)],
+        Dispatch::Fills => vec![(Set::Whole, counts.fills)],
         Dispatch::ChunkBricks => surfel_chunks(|s| s.brick_end - s.brick_begin),
         Dispatch::ChunkSurfels => surfel_chunks(|s| s.surfel_end - s.surfel_begin),
         Dispatch::ChunkProbes => factor_chunks(counts.probes),

@@ -1,0 +1,43 @@
+//! # Filling the coarse tier's grid points: the CPU twin of `shaders/fill.wgsl`
+//!
+//! A sparse bake leaves most of an open level's grid points untraced and flags those between
+//! coarse-tier probes as filled (`prt_format::tier` says why this is seam-free). After every
+//! gather each filled point gets the trilinear interpolation of the SH of the coarse points
+//! around it, each weighted by its trilinear weight times its validity and renormalised, so
+//! that a coarse point inside geometry drops out as it does from any lookup. Validation
+//! guarantees every filled point has a valid coarse point with a positive weight and reads no
+//! filled one, so the order of the fills does not matter.
+
+use prt_format::sh::{ShRgb, SH_COUNT};
+use prt_format::{tier, Asset};
+
+/// Sets the SH of every filled grid point of `asset` in `sh` (one per probe, grid order) from
+/// the coarse points around it.
+pub fn fill(asset: &Asset, sh: &mut [ShRgb]) {
+    let grid = &asset.header.grid;
+    let n = grid.counts;
+    for (index, probe) in asset.probes.iter().enumerate() {
+        if !probe.is_filled() || index >= sh.len() {
+            continue;
+        }
+        let i = index as u32;
+        let ijk = [i % n[0], i / n[0] % n[1], i / (n[0] * n[1])];
+        let mut acc = [[0.0f32; 3]; SH_COUNT];
+        let mut total = 0.0f32;
+        for (c, w) in tier::corners(grid, ijk) {
+            let valid = asset.probes.get(c).is_some_and(|p| p.is_valid());
+            if w <= 0.0 || !valid || c >= sh.len() {
+                continue;
+            }
+            total += w;
+            for k in 0..SH_COUNT {
+                for ch in 0..3 {
+                    acc[k][ch] += w * sh[c][k][ch];
+                }
+            }
+        }
+        if total > 0.0 {
+            sh[index] = acc.map(|v| v.map(|x| x / total));
+        }
+    }
+}
