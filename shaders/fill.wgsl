@@ -1,10 +1,10 @@
-// Stage 9, one thread per grid point the coarse tier fills (prt_format::tier; CPU twin
-// prt_runtime::fill): after the gather, its SH is the trilinear interpolation of the coarse
-// points around it, each weighted by its trilinear weight times its validity and renormalised,
-// written to probe_sh and, with validity 1, to its seven volume texels in the gather's layout.
-// Validation guarantees that a filled point reads no filled point, so the threads are
-// independent. Every update that gathers runs it over every filled point: a point's texels
-// follow its coarse points' latest gather.
+// Stage 9, one thread per grid point a coarse level fills (prt_format::tier; CPU twin
+// prt_runtime::fill): after the gather, its SH is the trilinear interpolation of the points of
+// its level (its flags' FILL_LEVEL_SHIFT bits) around it, each weighted by its trilinear weight
+// times its validity and renormalised, written to probe_sh and, with validity 1, to its seven
+// volume texels in the gather's layout. Validation guarantees that a filled point reads no
+// filled point, so the threads are independent. Every update that gathers runs it over every
+// filled point: a point's texels follow its coarse points' latest gather.
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> probes: array<Probe>;
@@ -33,10 +33,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     let p = fill_list[i];
     let n = params.grid_counts;
     let ijk = vec3<u32>(p % n.x, (p / n.x) % n.y, p / (n.x * n.y));
-    // prt_format::tier::span along each axis.
+    // prt_format::tier::span along each axis, at the point's level.
+    let stride = 1u << ((probes[p].flags >> FILL_LEVEL_SHIFT) & 0xfu);
     let last = n - 1u;
-    let lo = min(ijk / COARSE_STRIDE * COARSE_STRIDE, last);
-    let hi = min(lo + COARSE_STRIDE, last);
+    let lo = min(ijk / stride * stride, last);
+    let hi = min(lo + stride, last);
     let t = vec3<f32>(ijk - lo) / vec3<f32>(max(hi - lo, vec3<u32>(1u)));
     var c: array<vec3<f32>, 9>;
     var total = 0.0;

@@ -90,12 +90,12 @@ pub struct BakeReport {
 pub struct Placed {
     /// Grid points.
     pub grid: usize,
-    /// Points traced because surfaces need them (the fine tier).
-    pub near_surfaces: usize,
-    /// Points traced on the coarse tier only (`prt_format::tier`).
-    pub coarse: usize,
-    /// Points left out and filled from the coarse tier at runtime.
-    pub filled: usize,
+    /// Points traced.
+    pub traced: usize,
+    /// Per level 1..=`prt_format::tier::LEVELS`: its cells a surface passes through.
+    pub busy_cells: [usize; prt_format::tier::LEVELS as usize],
+    /// Per level: points left out and filled from it at runtime.
+    pub filled: [usize; prt_format::tier::LEVELS as usize],
 }
 
 /// Bakes `scene_path` into a validated asset (not written).

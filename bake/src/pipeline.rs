@@ -54,28 +54,15 @@ pub(crate) fn bake_in_pool(
     let built = bvh_stage(&loaded, ploc_memory, &grid, settings, &mut report)?;
     lap(&mut report, "bvh", None);
 
-    let placed = settings
+    let plan = settings
         .sparse
-        .then(|| placement::sparse_probes(&grid, &loaded.scene.triangles));
-    if let Some((placed, near)) = &placed {
-        let count = placed.iter().filter(|&&p| p).count();
-        report.placed = Some(crate::Placed {
-            grid: placed.len(),
-            near_surfaces: *near,
-            coarse: count - near,
-            filled: 0,
-        });
-        if *near == 0 {
-            report.warnings.push(format!(
-                "--sparse placed no probe near a surface: no triangle lies within a cell and a \
-                 quarter spacing of any of the {} grid points (check the bounds); only the \
-                 coarse tier's {} probes light the volume",
-                placed.len(),
-                count
-            ));
-        }
+        .then(|| placement::plan(&grid, &loaded.scene.triangles));
+    if let Some(plan) = &plan {
+        let (placed, warning) = placement::summary(plan);
+        report.placed = Some(placed);
+        report.warnings.extend(warning);
     }
-    let placed = placed.map(|(placed, _)| placed);
+    let placed = plan.as_ref().map(placement::Plan::traced);
     progress.start("trace", grid.probe_count());
     let cell_size = settings.cell_size_for(spacing);
     let stage = (&grid, placed.as_deref());
@@ -154,8 +141,8 @@ pub(crate) fn bake_in_pool(
         sky_mask,
         sky_transfer,
     } = assemble_probes(&traced, &positions, carried);
-    if let Some(sparse) = &mut report.placed {
-        sparse.filled = placement::mark_filled(&grid, &mut probes_out, &placed);
+    if let (Some(plan), Some(sparse)) = (&plan, &mut report.placed) {
+        sparse.filled = placement::mark_filled(&grid, &mut probes_out, plan);
     }
     let header = header(scene_path, &loaded, grid, settings, cell_size, &traced);
     let asset = Asset {

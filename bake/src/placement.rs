@@ -1,4 +1,4 @@
-//! Sparse placement: probes only at the grid points that surfaces need.
+//! Sparse placement: probes where surfaces need them, coarse levels in the open.
 //!
 //! A renderer samples the volume at surfaces. `sample_irradiance` moves the point along its
 //! normal by the normal bias (0.2 spacings by default) and reads the eight probes of the grid
@@ -11,12 +11,15 @@
 //! [`REACH`] spacings of it along every axis (the box its cells cover, widened by at least the
 //! normal bias), by a conservative test: the triangle's bounding box overlaps that box and its
 //! plane passes through it (Akenine-Moller's triangle-box test without the nine edge axes, so a
-//! box beside a triangle's corner may be kept; none a surface needs is dropped). The bake traces
-//! those probes (the fine tier) and the coarse tier's ([`prt_format::tier`]: every fourth grid
-//! point along each axis), [`sparse_probes`]. The others keep a record with no data
-//! ([`prt_format::NO_SLOT`]); [`mark_filled`] flags those the runtime fills from the coarse
-//! tier after every gather, so that a point in open air far from every surface gets the coarse
-//! tier's light, interpolated without a seam where it meets the fine tier.
+//! box beside a triangle's corner may be kept; none a surface needs is dropped); its twin
+//! [`surface_cells`] marks the grid cells a surface passes through. [`plan`] builds the coarse
+//! levels of `prt_format::tier` over those cells, as Unity's adaptive probe volumes refine bricks
+//! only where geometry is: it traces every point of the smallest cells (2 steps wide) surfaces
+//! pass through and ever fewer points in the larger empty cells (4 and 8 steps wide) around
+//! them. The others keep a record with no data ([`prt_format::NO_SLOT`]); [`mark_filled`]
+//! flags those the runtime fills from their level after every gather, so that a point in open
+//! air gets the light of the probes around it, interpolated without a seam where the levels
+//! meet.
 //!
 //! The outer layers also stand for everything beyond the bounds (lookups clamp to the grid),
 //! so a triangle outside the bounds keeps the outer grid points it faces.
@@ -24,7 +27,7 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use glam::Vec3;
-use prt_format::{tier, Grid, Probe, PROBE_FILLED};
+use prt_format::{tier, Grid, Probe, FILL_LEVEL_SHIFT, PROBE_FILLED};
 use rayon::prelude::*;
 
 /// Spacings beyond a grid point's cells within which a surface keeps it: covers the lookup's
@@ -39,41 +42,146 @@ pub fn surface_probes(grid: &Grid, triangles: &[[Vec3; 3]]) -> Vec<bool> {
     near(grid, triangles, Boxes::Points)
 }
 
-/// What a sparse bake traces: per grid point, whether surfaces need it ([`surface_probes`]) or
-/// it is on the coarse tier ([`tier::is_coarse_point`]); and how many the surfaces need.
-pub fn sparse_probes(grid: &Grid, triangles: &[[Vec3; 3]]) -> (Vec<bool>, usize) {
-    let mut placed = surface_probes(grid, triangles);
-    let near = placed.iter().filter(|&&p| p).count();
-    let n = grid.counts;
-    placed.par_iter_mut().enumerate().for_each(|(index, p)| {
-        let i = index as u32;
-        *p |= tier::is_coarse_point(grid, [i % n[0], i / n[0] % n[1], i / (n[0] * n[1])]);
-    });
-    (placed, near)
+/// What a sparse bake does with each grid point: trace it, or leave it to be filled from a
+/// coarse level ([`prt_format::tier`]).
+#[derive(Clone, Debug)]
+pub struct Plan {
+    /// Per grid point: 0 to trace it, else the level it is filled from.
+    pub level: Vec<u8>,
+    /// Per level 1..=[`tier::LEVELS`]: how many of its cells a surface passes through.
+    pub busy_cells: Vec<usize>,
 }
 
-/// Flags [`PROBE_FILLED`] on every grid point of `grid` the placement left out (`placed`
-/// false) that has a valid coarse point with a positive weight ([`tier::corners`]), and
-/// returns how many. The coarse points are all placed, so none of a filled point's corners is
-/// filled itself (as validation requires). A point whose coarse points are all inside
-/// geometry stays without light, as a point inside geometry should.
-pub fn mark_filled(grid: &Grid, probes: &mut [Probe], placed: &[bool]) -> usize {
-    let n = grid.counts;
-    let fill: Vec<bool> = (0..probes.len())
+impl Plan {
+    /// Per grid point, whether the bake traces it.
+    pub fn traced(&self) -> Vec<bool> {
+        self.level.iter().map(|&l| l == 0).collect()
+    }
+}
+
+/// Sparse placement over `grid` for `triangles` ([`Plan`]). Per level `l`, a cell is *busy*
+/// when a surface passes through it (one of its grid cells is in [`surface_cells`], which
+/// covers every point [`surface_probes`] keeps). A point is traced when surfaces need it
+/// ([`surface_probes`]), or it is on level `l` and lies in a busy level-`l + 1` cell, or it
+/// is on the top level. Any other point is filled from the lowest level `l` whose
+/// level-`l + 1` cell around it is busy (the top level where none is), whose corners are
+/// therefore traced. No wall stands between a filled point and the probes it is interpolated
+/// from: where its level-`l` cell is not busy, the segments stay in a cell no surface passes
+/// through; where it is (level 1), the corners are at most one step from the point along each
+/// axis, inside the box that [`surface_probes`] found no triangle in. One level of cells 4
+/// steps wide, filled over whole cells whether a surface passed through them or not, leaked
+/// light through walls into rooms (`prt-bench open-air`: 57% and 78% mean error at the filled
+/// points of the two-room fixture and interior_4); docs/results/sparse.md has the variants.
+pub fn plan(grid: &Grid, triangles: &[[Vec3; 3]]) -> Plan {
+    let near = surface_probes(grid, triangles);
+    let cells = surface_cells(grid, triangles);
+    let levels = tier::LEVELS as usize;
+    // Per level, per cell by its lowest corner's grid index: whether a surface passes through.
+    let mut busy = vec![vec![false; cells.len()]; levels];
+    for (index, _) in cells.iter().enumerate().filter(|(_, &c)| c) {
+        let c = tier::ijk(grid, index);
+        for (l, busy) in busy.iter_mut().enumerate() {
+            let lo: [u32; 3] =
+                std::array::from_fn(|a| tier::span(grid.counts[a], c[a], l as u32 + 1).0);
+            busy[grid.index(lo[0], lo[1], lo[2])] = true;
+        }
+    }
+    let level = (0..cells.len())
         .into_par_iter()
         .map(|index| {
-            let i = index as u32;
-            let ijk = [i % n[0], i / n[0] % n[1], i / (n[0] * n[1])];
-            !placed[index]
-                && tier::corners(grid, ijk)
-                    .iter()
-                    .any(|&(c, w)| w > 0.0 && probes[c].is_valid())
+            let ijk = tier::ijk(grid, index);
+            // Whether a busy cell of level `l` (1..=LEVELS) holds the point.
+            let in_busy = |l: u32| in_busy_cell(grid, ijk, l, &busy[l as usize - 1]);
+            let traced = near[index]
+                || (1..tier::LEVELS).any(|l| tier::on_level_point(grid, ijk, l) && in_busy(l + 1))
+                || tier::on_level_point(grid, ijk, tier::LEVELS);
+            match traced {
+                true => 0,
+                false => (1..tier::LEVELS)
+                    .find(|&l| in_busy(l + 1))
+                    .unwrap_or(tier::LEVELS) as u8,
+            }
         })
         .collect();
-    for (p, _) in probes.iter_mut().zip(&fill).filter(|(_, &f)| f) {
-        p.flags |= PROBE_FILLED;
+    let busy_cells = busy
+        .iter()
+        .map(|b| b.iter().filter(|&&b| b).count())
+        .collect();
+    Plan { level, busy_cells }
+}
+
+/// Whether a cell of `level` holding grid point `ijk` (on its boundary too) is in `busy`
+/// (indexed by the cell's lowest corner).
+fn in_busy_cell(grid: &Grid, ijk: [u32; 3], level: u32, busy: &[bool]) -> bool {
+    let n = grid.counts;
+    // The lowest corners of the cells holding the point along one axis: its own, and the one
+    // below where the point is on the level (the last point of an axis starts no cell).
+    let lows = |a: usize| {
+        let (lo, hi, _) = tier::span(n[a], ijk[a], level);
+        let own = (lo < hi || n[a] == 1).then_some(lo);
+        let below = (ijk[a] == lo && lo > 0).then(|| tier::span(n[a], lo - 1, level).0);
+        [own, below]
+    };
+    let (x, y, z) = (lows(0), lows(1), lows(2));
+    x.iter().flatten().any(|&i| {
+        y.iter()
+            .flatten()
+            .any(|&j| z.iter().flatten().any(|&k| busy[grid.index(i, j, k)]))
+    })
+}
+
+/// What `plan` places ([`crate::Placed`], before [`mark_filled`] counts the filled points), and
+/// the warning for a plan with no surface in the bounds.
+pub fn summary(plan: &Plan) -> (crate::Placed, Option<String>) {
+    let traced = plan.level.iter().filter(|&&l| l == 0).count();
+    let placed = crate::Placed {
+        grid: plan.level.len(),
+        traced,
+        busy_cells: std::array::from_fn(|l| plan.busy_cells[l]),
+        filled: [0; tier::LEVELS as usize],
+    };
+    let warning = (plan.busy_cells[0] == 0).then(|| {
+        format!(
+            "--sparse placed no probe near a surface: no triangle lies within a quarter spacing \
+             of any cell of the {} grid points (check the bounds); only the {traced} probes \
+             of the coarsest level light the volume",
+            plan.level.len()
+        )
+    });
+    (placed, warning)
+}
+
+/// Flags [`PROBE_FILLED`] and its level ([`prt_format::FILL_LEVEL_SHIFT`]) on every grid point
+/// of `grid` the plan leaves out that has a valid point of its level with a positive weight
+/// ([`tier::corners`]), and returns how many per level (1..=[`tier::LEVELS`]). Those points are
+/// all traced, so none is filled itself (as validation requires). A point whose level's points
+/// are all inside geometry stays without light, as a point inside geometry should.
+pub fn mark_filled(
+    grid: &Grid,
+    probes: &mut [Probe],
+    plan: &Plan,
+) -> [usize; tier::LEVELS as usize] {
+    let fill: Vec<u8> = (0..probes.len())
+        .into_par_iter()
+        .map(|index| {
+            let level = plan.level[index];
+            let lit = level > 0
+                && tier::corners(grid, tier::ijk(grid, index), u32::from(level))
+                    .iter()
+                    .any(|&(c, w)| w > 0.0 && probes[c].is_valid());
+            if lit {
+                level
+            } else {
+                0
+            }
+        })
+        .collect();
+    let mut counts = [0; tier::LEVELS as usize];
+    for (p, &level) in probes.iter_mut().zip(&fill).filter(|(_, &l)| l > 0) {
+        p.flags |= PROBE_FILLED | u32::from(level) << FILL_LEVEL_SHIFT;
+        counts[level as usize - 1] += 1;
     }
-    fill.iter().filter(|&&f| f).count()
+    counts
 }
 
 /// Which cells of `grid` surfaces pass through: per cell, indexed by its lowest corner's grid
@@ -263,43 +371,79 @@ mod tests {
         }
     }
 
-    /// The coarse tier is placed wherever surfaces are not; left-out points next to a valid
-    /// coarse point are filled, those whose coarse points are all invalid are not.
+    /// Without surfaces only the top level is traced and everything else is filled from it;
+    /// left-out points next to a valid point of their level are filled, those whose level's
+    /// points are all invalid are not.
     #[test]
-    fn the_coarse_tier_is_placed_and_fills_the_rest() {
-        let grid = Grid::cubic([0.0; 3], 1.0, [9, 9, 6]);
-        let (placed, near) = sparse_probes(&grid, &[]);
-        assert_eq!(near, 0);
+    fn without_surfaces_the_top_level_fills_the_rest() {
+        let grid = Grid::cubic([0.0; 3], 1.0, [17, 9, 6]);
+        let plan = plan(&grid, &[]);
+        assert_eq!(plan.busy_cells, vec![0; tier::LEVELS as usize]);
         for k in 0..6 {
             for j in 0..9 {
-                for i in 0..9 {
-                    let coarse = i % 4 == 0 && j % 4 == 0 && (k % 4 == 0 || k == 5);
-                    assert_eq!(placed[grid.index(i, j, k)], coarse, "({i}, {j}, {k})");
+                for i in 0..17 {
+                    let top = i % 8 == 0 && j % 8 == 0 && (k == 0 || k == 5);
+                    let level = plan.level[grid.index(i, j, k)];
+                    assert_eq!(level, if top { 0 } else { 3 }, "({i}, {j}, {k})");
                 }
             }
         }
-        let mut probes: Vec<Probe> = placed
+        let mut probes: Vec<Probe> = plan
+            .traced()
             .iter()
             .map(|&p| Probe {
                 flags: if p { prt_format::PROBE_VALID } else { 0 },
                 ..Probe::default()
             })
             .collect();
-        // The coarse cell x, y in 4..8 loses its valid corners: points strictly inside it stay
-        // dark, points on its faces shared with valid cells are filled.
-        for k in [0, 4, 5] {
-            for (i, j) in [(4, 4), (8, 4), (4, 8), (8, 8)] {
+        // The cell x in 8..16 loses its valid corners: points strictly inside it stay dark,
+        // points on its face x = 8 shared with the valid cell are filled.
+        for (i, j, k) in [(8, 0, 0), (16, 0, 0), (8, 8, 0), (16, 8, 0)] {
+            for k in [k, 5] {
                 probes[grid.index(i, j, k)].flags = 0;
             }
         }
-        let filled = mark_filled(&grid, &mut probes, &placed);
-        assert!(!probes[grid.index(5, 6, 1)].is_filled());
+        let filled = mark_filled(&grid, &mut probes, &plan);
+        assert!(!probes[grid.index(9, 6, 1)].is_filled());
         assert!(probes[grid.index(2, 6, 1)].is_filled());
+        assert_eq!(probes[grid.index(2, 6, 1)].fill_level(), 3);
         assert!(
-            !probes[grid.index(4, 4, 0)].is_filled(),
-            "placed points are never filled"
+            !probes[grid.index(8, 0, 0)].is_filled(),
+            "traced points are never filled"
         );
-        assert_eq!(filled, probes.iter().filter(|p| p.is_filled()).count());
+        let count = probes.iter().filter(|p| p.is_filled()).count();
+        assert_eq!(filled, [0, 0, count]);
+    }
+
+    /// A floor through a 17 x 17 x 17 grid at y = 0.1: the levels refine towards it. The
+    /// layers y = 0 and 1 that the lookup reads at the floor are traced; going up, level-1
+    /// points are traced in the level-2 cells holding the floor, level-2 points in the
+    /// level-3 cells, and the points in between are filled from the lowest level whose next
+    /// level's cell holds the floor.
+    #[test]
+    fn the_levels_refine_towards_a_surface() {
+        let grid = Grid::cubic([0.0; 3], 1.0, [17, 17, 17]);
+        let floor = [[
+            Vec3::new(-1.0, 0.1, -1.0),
+            Vec3::new(40.0, 0.1, -1.0),
+            Vec3::new(-1.0, 0.1, 40.0),
+        ]];
+        let plan = plan(&grid, &floor);
+        let at = |i, j, k| plan.level[grid.index(i, j, k)];
+        for j in 0..=1 {
+            assert_eq!((at(1, j, 3), at(5, j, 7)), (0, 0), "y {j}");
+        }
+        // y in 2..=4 (the level-2 cells holding the floor): level-1 points traced, the others
+        // filled from level 1.
+        assert_eq!(
+            (at(2, 4, 2), at(2, 2, 6), at(1, 3, 2), at(3, 2, 5)),
+            (0, 0, 1, 1)
+        );
+        // y in 4..=8 (the level-3 cell): level-2 points traced, others filled from level 2.
+        assert_eq!((at(4, 8, 4), at(2, 6, 2), at(5, 6, 1)), (0, 2, 2));
+        // Above: only level-3 points traced, the rest filled from level 3.
+        assert_eq!((at(8, 16, 8), at(4, 12, 4), at(1, 9, 1)), (0, 3, 3));
+        assert_eq!(plan.busy_cells, vec![64, 16, 4]);
     }
 
     /// A triangle whose plane test overflows f32 keeps the points it may touch (a huge quad

@@ -52,6 +52,9 @@ enum Kind {
     /// Bake seconds and runtime bytes against surface error over probe spacings and ray
     /// counts, on the level family and Sponza: tables and plots with their fronts.
     Frontier(surface::frontier::FrontierArgs),
+    /// The coarse tier of sparse placement against the fine grid in open air: at every grid
+    /// point a sparse bake fills, the filled SH against a uniform bake's probe there.
+    OpenAir(surface::open_air::OpenAirArgs),
     /// Mutation fuzzing of the glTF path or the asset loader for a fixed time (issue 8).
     Fuzz(fuzz::FuzzArgs),
 }
@@ -69,6 +72,7 @@ fn run(cli: Cli) -> Result<()> {
         Kind::Render(args) => render::run(args),
         Kind::Surface(args) => surface::run(args),
         Kind::Frontier(args) => surface::frontier::run(args),
+        Kind::OpenAir(args) => surface::open_air::run(args),
         Kind::Fuzz(args) => fuzz::run(args),
     }
 }

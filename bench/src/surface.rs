@@ -31,6 +31,7 @@ mod cases;
 pub mod frontier;
 mod image;
 mod lookups;
+pub mod open_air;
 mod pictures;
 mod placement;
 mod refs;

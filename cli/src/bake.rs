@@ -184,13 +184,14 @@ pub fn run(args: BakeArgs) -> Result<()> {
     }
     println!("{}", prt_format::Summary::of(&asset, report.file_bytes));
     if let Some(p) = report.placed {
+        let filled: usize = p.filled.iter().sum();
         println!(
-            "placement        sparse: {} grid points traced near surfaces, {} more on the coarse tier (every {}th point), {} filled from it, {} left dark (inside geometry)",
-            p.near_surfaces,
-            p.coarse,
-            prt_format::tier::COARSE_STRIDE,
+            "placement        sparse: {} grid points traced; {} filled from coarse levels 1 / 2 / 3 (probes 2 / 4 / 8 steps apart: {:?}); {} left dark (inside geometry); cells surfaces pass through per level: {:?}",
+            p.traced,
+            filled,
             p.filled,
-            p.grid - p.near_surfaces - p.coarse - p.filled
+            p.grid - p.traced - filled,
+            p.busy_cells
         );
     }
     let times: Vec<String> = report

@@ -194,9 +194,13 @@ pub const PROBE_OFFSET: u32 = 2;
 pub const PROBE_DILATED: u32 = 4;
 /// Probe flag (without [`PROBE_VALID`], on a grid point without data): a sparse bake did not
 /// trace this point, and the runtime *fills* it after every gather with the trilinear
-/// interpolation of the coarse tier around it ([`crate::tier`]); lookups weigh it 1, like a
-/// valid probe, and, having no visibility map, by its facing term alone.
+/// interpolation of the coarse level around it ([`crate::tier`]), the level in the flags' bits
+/// from [`FILL_LEVEL_SHIFT`] ([`Probe::fill_level`]); lookups weigh it 1, like a valid probe,
+/// and, having no visibility map, by its facing term alone.
 pub const PROBE_FILLED: u32 = 8;
+/// Where a filled probe's level ([`crate::tier`], 1..=[`crate::tier::LEVELS`]) sits in its
+/// flags: four bits.
+pub const FILL_LEVEL_SHIFT: u32 = 8;
 /// Side of the octahedral visibility map.
 pub const DEPTH_MAP_SIDE: u32 = 16;
 /// Texels of a visibility map (two bytes each: mean and standard deviation of distance).
@@ -248,9 +252,14 @@ impl Probe {
         self.flags & PROBE_DILATED != 0
     }
 
-    /// Filled from the coarse tier at runtime ([`PROBE_FILLED`]).
+    /// Filled from a coarse level at runtime ([`PROBE_FILLED`]).
     pub fn is_filled(&self) -> bool {
         self.flags & PROBE_FILLED != 0
+    }
+
+    /// The level a filled probe is interpolated from ([`FILL_LEVEL_SHIFT`]).
+    pub fn fill_level(&self) -> u32 {
+        self.flags >> FILL_LEVEL_SHIFT & 0xf
     }
 
     /// Weight of the probe when the volume is sampled: 1 for a valid (or dilated) probe and a

@@ -1,60 +1,87 @@
-//! # The coarse tier of sparse placement: open air lit from a lattice four grid steps apart
+//! # The coarse tiers of sparse placement: open air lit from lattices 2, 4 and 8 steps apart
 //!
-//! A sparse bake (`prt_bake::placement`) traces the grid points that surfaces need (the fine
-//! tier) and, everywhere else, only the points of a coarse sub-lattice: every
-//! [`COARSE_STRIDE`]-th index along each axis, plus each axis's last index. A grid point
-//! between them that the bake did not trace is *filled* ([`crate::PROBE_FILLED`]): after
-//! every gather the runtime sets its SH to the trilinear interpolation of the coarse cell
-//! around it ([`corners`]), renormalised over the corners a lookup may use (valid or dilated).
+//! Level `l` of the grid (1..=[`LEVELS`]) is its sub-lattice of every `2^l`-th index along each
+//! axis plus each axis's last index ([`on_level`]); its cells ([`span`]) are `2^l` grid steps
+//! wide (less at the last). A sparse bake (`prt_bake::placement`) traces every point of the
+//! level-1 cells a surface passes through, the level-`l` points of the level-`l + 1` cells a
+//! surface passes through, and every point of the top level. A grid point it does not trace is
+//! *filled* ([`crate::PROBE_FILLED`], with its level): after every gather the runtime sets its
+//! SH to the trilinear interpolation of the level's cell around it ([`corners`]), renormalised
+//! over the corners a lookup may use (valid or dilated). Its level is the lowest whose next
+//! level's cell around it holds a surface, so its corners are traced and no surface lies in its
+//! own cell: no wall stands between a filled point and the probes it is interpolated from.
 //!
-//! Why fill grid points instead of a second volume and an indirection: a trilinear function on
-//! a coarse cell, restricted to one of its fine cells, is trilinear there too, so the fine
-//! lookup over filled points returns the coarse tier's interpolation exactly, and where a fine
-//! cell has traced and filled corners the lookup blends them across that one cell, continuous
-//! on both of its faces. There is no T-junction (every grid point exists), so no seam: the
-//! lookup keeps its eight corner reads and no extra dependent load. What it costs is a texel
-//! and a probe record per grid point, as on a uniform grid; what it saves is every factor
-//! table, sky mask and visibility map of the points it does not trace (most of an open
-//! level's volume).
+//! Why fill grid points instead of coarser volumes and an indirection: a trilinear function on
+//! a cell, restricted to one of its grid cells, is trilinear there too, so the lookup over
+//! filled points returns the coarse level's interpolation exactly, and where a grid cell has
+//! traced and filled corners the lookup blends them across that one cell, continuous on both of
+//! its faces. There is no T-junction (every grid point exists), so no seam: the lookup keeps its
+//! eight corner reads and needs no extra dependent load. What it costs is a texel and a probe
+//! record per grid point, as on a uniform grid; what it saves is every factor table, sky mask
+//! and visibility map of the points it does not trace.
 //!
 //! The twins of [`corners`]: `shaders/fill.wgsl` (stage 9 of the GPU runtime) and
-//! `prt_runtime::fill`; `tests/tests/sparse.rs` checks that the lookup is continuous across a
-//! tier boundary.
+//! `prt_runtime::fill`; `tests/tests/sparse.rs` checks that the lookup reproduces a coarse
+//! level exactly and is continuous across a level boundary.
 
 use crate::Grid;
 
-/// Grid steps between the coarse tier's points along each axis.
-pub const COARSE_STRIDE: u32 = 4;
+/// The coarsest level: its points are `2^LEVELS` grid steps apart.
+pub const LEVELS: u32 = 3;
 
-/// Whether index `i` of an axis of `n` points is on the coarse tier: a multiple of
-/// [`COARSE_STRIDE`] or the axis's last point (so that the coarse cells cover the grid).
-pub fn is_coarse(n: u32, i: u32) -> bool {
-    i.is_multiple_of(COARSE_STRIDE) || i + 1 == n
+/// Grid steps between the points of `level` along each axis.
+pub fn stride(level: u32) -> u32 {
+    1 << level.min(31)
 }
 
-/// The coarse interval of index `i` (below `n`) along an axis of `n` points: its lower and
-/// upper coarse indices and `i`'s fraction between them, `(i - lo) / max(hi - lo, 1)` in f32
-/// (as the WGSL twin divides). A coarse index is its own interval's lower end, fraction 0,
-/// except the last index, which is the upper end of the interval below it, fraction 1.
-pub fn span(n: u32, i: u32) -> (u32, u32, f32) {
+/// Whether index `i` of an axis of `n` points is on `level`: a multiple of its stride or the
+/// axis's last point (so that the level's cells cover the grid). Every index is on level 0.
+pub fn on_level(n: u32, i: u32, level: u32) -> bool {
+    i.is_multiple_of(stride(level)) || i + 1 == n
+}
+
+/// Whether grid point `ijk` of `grid` is on `level` along every axis.
+pub fn on_level_point(grid: &Grid, ijk: [u32; 3], level: u32) -> bool {
+    (0..3).all(|a| on_level(grid.counts[a], ijk[a], level))
+}
+
+/// How many indices of an axis of `n` points are on `level`.
+pub fn level_count(n: u32, level: u32) -> u32 {
+    match n {
+        0 => 0,
+        n => {
+            let s = stride(level);
+            (n - 1) / s + 1 + u32::from(!(n - 1).is_multiple_of(s))
+        }
+    }
+}
+
+/// The cell of `level` around index `i` (below `n`) along an axis of `n` points: its lower and
+/// upper indices and `i`'s fraction between them, `(i - lo) / max(hi - lo, 1)` in f32 (as the
+/// WGSL twin divides). An index on the level is its own cell's lower end, fraction 0, except
+/// the last index, the upper end of the cell below it, fraction 1.
+pub fn span(n: u32, i: u32, level: u32) -> (u32, u32, f32) {
+    let s = stride(level);
     let last = n.saturating_sub(1);
-    let lo = (i / COARSE_STRIDE * COARSE_STRIDE).min(last);
-    let hi = (lo + COARSE_STRIDE).min(last);
+    let lo = (i / s * s).min(last);
+    let hi = (lo + s).min(last);
     let t = (i.saturating_sub(lo)) as f32 / (hi - lo).max(1) as f32;
     (lo, hi, t)
 }
 
-/// Whether grid point `(i, j, k)` of `grid` is on the coarse tier along every axis.
-pub fn is_coarse_point(grid: &Grid, ijk: [u32; 3]) -> bool {
-    (0..3).all(|a| is_coarse(grid.counts[a], ijk[a]))
+/// Grid index `index` of `grid` as `(i, j, k)`.
+pub fn ijk(grid: &Grid, index: usize) -> [u32; 3] {
+    let n = grid.counts;
+    let i = index as u32;
+    [i % n[0], i / n[0] % n[1], i / (n[0] * n[1])]
 }
 
-/// The eight coarse points around grid point `(i, j, k)` (grid indices) and their trilinear
+/// The eight points of `level` around grid point `ijk` (grid indices) and their trilinear
 /// weights, corner `c` taking the upper end along axis `a` when bit `a` of `c` is set (the
 /// order `shaders/fill.wgsl` visits them in). Weights of corners the point does not lie
 /// between are zero; along an axis of one point both ends are that point.
-pub fn corners(grid: &Grid, ijk: [u32; 3]) -> [(usize, f32); 8] {
-    let spans: [(u32, u32, f32); 3] = std::array::from_fn(|a| span(grid.counts[a], ijk[a]));
+pub fn corners(grid: &Grid, ijk: [u32; 3], level: u32) -> [(usize, f32); 8] {
+    let spans: [(u32, u32, f32); 3] = std::array::from_fn(|a| span(grid.counts[a], ijk[a], level));
     std::array::from_fn(|c| {
         let mut at = [0u32; 3];
         let mut w = 1.0f32;
@@ -74,63 +101,64 @@ mod tests {
 
     #[test]
     fn spans_cover_every_index() {
-        for n in 1..14u32 {
-            for i in 0..n {
-                let (lo, hi, t) = span(n, i);
-                assert!(is_coarse(n, lo) && is_coarse(n, hi), "n {n} i {i}");
-                assert!(
-                    lo <= i && i <= hi && hi - lo <= COARSE_STRIDE,
-                    "n {n} i {i}"
-                );
-                let back = lo as f32 + t * (hi - lo) as f32;
-                assert_eq!(back, i as f32, "n {n} i {i}");
-                if is_coarse(n, i) {
-                    // A coarse point is its own interpolation.
-                    assert!(i == lo && t == 0.0 || i == hi && t == 1.0, "n {n} i {i}");
+        for level in 0..=LEVELS {
+            for n in 1..20u32 {
+                let on: u32 = (0..n).map(|i| u32::from(on_level(n, i, level))).sum();
+                assert_eq!(level_count(n, level), on, "n {n} level {level}");
+                for i in 0..n {
+                    let (lo, hi, t) = span(n, i, level);
+                    let at = format!("n {n} i {i} level {level}");
+                    assert!(on_level(n, lo, level) && on_level(n, hi, level), "{at}");
+                    assert!(lo <= i && i <= hi && hi - lo <= stride(level), "{at}");
+                    assert_eq!(lo as f32 + t * (hi - lo) as f32, i as f32, "{at}");
+                    if on_level(n, i, level) {
+                        // A point of the level is its own interpolation.
+                        assert!(i == lo && t == 0.0 || i == hi && t == 1.0, "{at}");
+                    }
                 }
             }
         }
     }
 
-    /// Filling from the coarse tier reproduces any trilinear function exactly, and so does
-    /// the fine lookup between filled points (the module's argument for no seams).
+    /// Filling from a level reproduces any trilinear function exactly, and so does the fine
+    /// lookup between filled points (the module's argument for no seams).
     #[test]
     fn a_trilinear_function_is_reproduced() {
-        let grid = Grid::cubic([0.0; 3], 0.5, [11, 6, 9]);
+        let grid = Grid::cubic([0.0; 3], 0.5, [11, 6, 19]);
         let f = |p: [f32; 3]| {
             let (x, y, z) = (p[0], p[1], p[2]);
             1.0 + 0.5 * x - 0.25 * y + 2.0 * z + 0.125 * x * y - 0.75 * y * z + 0.0625 * x * y * z
         };
-        let value: Vec<f32> = (0..grid.probe_count() as u32)
+        let value: Vec<f32> = (0..grid.probe_count() as usize)
             .map(|index| {
-                let n = grid.counts;
-                let ijk = [index % n[0], index / n[0] % n[1], index / (n[0] * n[1])];
-                f(grid.position(ijk[0], ijk[1], ijk[2]))
+                let [i, j, k] = ijk(&grid, index);
+                f(grid.position(i, j, k))
             })
             .collect();
-        for k in 0..9 {
-            for j in 0..6 {
-                for i in 0..11 {
-                    let filled: f32 = corners(&grid, [i, j, k])
-                        .iter()
-                        .map(|&(c, w)| w * value[c])
-                        .sum();
-                    let truth = value[grid.index(i, j, k)];
-                    assert!((filled - truth).abs() < 1e-5, "({i}, {j}, {k})");
-                }
+        for level in 1..=LEVELS {
+            for (index, &truth) in value.iter().enumerate() {
+                let filled: f32 = corners(&grid, ijk(&grid, index), level)
+                    .iter()
+                    .map(|&(c, w)| w * value[c])
+                    .sum();
+                assert!((filled - truth).abs() < 1e-4, "{index} level {level}");
             }
         }
     }
 
     #[test]
-    fn weights_sum_to_one_and_the_last_layer_is_coarse() {
+    fn weights_sum_to_one_and_the_last_layer_is_on_every_level() {
         let grid = Grid::cubic([0.0; 3], 1.0, [6, 1, 5]);
         for (i, j, k) in [(0, 0, 0), (1, 0, 3), (5, 0, 4), (4, 0, 2)] {
-            let sum: f32 = corners(&grid, [i, j, k]).iter().map(|c| c.1).sum();
-            assert!((sum - 1.0).abs() < 1e-6);
+            for level in 1..=LEVELS {
+                let sum: f32 = corners(&grid, [i, j, k], level).iter().map(|c| c.1).sum();
+                assert!((sum - 1.0).abs() < 1e-6);
+            }
         }
-        assert!(is_coarse_point(&grid, [5, 0, 4]));
-        assert!(is_coarse_point(&grid, [4, 0, 0]));
-        assert!(!is_coarse_point(&grid, [2, 0, 0]));
+        assert!(on_level_point(&grid, [5, 0, 4], LEVELS));
+        assert!(on_level_point(&grid, [4, 0, 0], 2));
+        assert!(!on_level_point(&grid, [4, 0, 0], 3));
+        assert!(!on_level_point(&grid, [2, 0, 0], 2));
+        assert!(on_level_point(&grid, [2, 0, 0], 1));
     }
 }

@@ -185,7 +185,8 @@ fn probe_records(asset: &Asset) -> Result<(), FormatError> {
                 ));
             }
             next_slot += 1;
-        } else if p.flags & !(PROBE_OFFSET | PROBE_FILLED) != 0
+        } else if p.flags & !(PROBE_OFFSET | PROBE_FILLED | 0xf << FILL_LEVEL_SHIFT) != 0
+            || (p.is_filled() != (p.fill_level() != 0))
             || p.factor_count != 0
             || p.sky_rays != 0
         {
@@ -224,22 +225,32 @@ fn probe_records(asset: &Asset) -> Result<(), FormatError> {
     Ok(())
 }
 
-/// Each filled grid point ([`PROBE_FILLED`], no data by [`probe_records`]): among the coarse
-/// points it is interpolated from with a positive weight ([`crate::tier::corners`]) one is
-/// valid, and none is filled itself (the runtime fills every point in one pass, reading only
-/// gathered probes).
+/// Each filled grid point ([`PROBE_FILLED`], no data by [`probe_records`]): its level is one of
+/// the tiers', among the points of that level it is interpolated from with a positive weight
+/// ([`crate::tier::corners`]) one is valid, and none is filled itself (the runtime fills every
+/// point in one pass, reading only gathered probes).
 fn filled_points(asset: &Asset) -> Result<(), FormatError> {
     let grid = &asset.header.grid;
-    let n = grid.counts;
     for (index, p) in asset
         .probes
         .iter()
         .enumerate()
         .filter(|(_, p)| p.is_filled())
     {
-        let i = index as u32;
-        let ijk = [i % n[0], i / n[0] % n[1], i / (n[0] * n[1])];
-        let used = crate::tier::corners(grid, ijk)
+        let level = p.fill_level();
+        if !(1..=crate::tier::LEVELS).contains(&level) {
+            return Err(FormatError::invalid(
+                "probes",
+                index,
+                format!(
+                    "filled from level {level} (flags {:#x}); levels run 1 to {}",
+                    p.flags,
+                    crate::tier::LEVELS
+                ),
+            ));
+        }
+        let ijk = crate::tier::ijk(grid, index);
+        let used = crate::tier::corners(grid, ijk, level)
             .into_iter()
             .filter(|&(_, w)| w > 0.0)
             .map(|(c, _)| (c, asset.probes[c]));

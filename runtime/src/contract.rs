@@ -337,8 +337,8 @@ pub fn wgsl_constants() -> Vec<(&'static str, String)> {
         ("PROBE_VALID", format!("{PROBE_VALID}u")),
         ("PROBE_NONE", format!("{}u", u32::MAX)),
         (
-            "COARSE_STRIDE",
-            format!("{}u", prt_format::tier::COARSE_STRIDE),
+            "FILL_LEVEL_SHIFT",
+            format!("{}u", prt_format::FILL_LEVEL_SHIFT),
         ),
         ("SKY_BLACK", format!("{SKY_BLACK}u")),
         ("SKY_CONSTANT", format!("{SKY_CONSTANT}u")),

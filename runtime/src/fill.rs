@@ -1,8 +1,8 @@
 //! # Filling the coarse tier's grid points: the CPU twin of `shaders/fill.wgsl`
 //!
-//! A sparse bake leaves most of an open level's grid points untraced and flags those between
-//! coarse-tier probes as filled (`prt_format::tier` says why this is seam-free). After every
-//! gather each filled point gets the trilinear interpolation of the SH of the coarse points
+//! A sparse bake leaves the grid points away from surfaces untraced and flags them as filled
+//! from a coarse level (`prt_format::tier` says which, and why this is seam-free). After every
+//! gather each filled point gets the trilinear interpolation of the SH of its level's points
 //! around it, each weighted by its trilinear weight times its validity and renormalised, so
 //! that a coarse point inside geometry drops out as it does from any lookup. Validation
 //! guarantees every filled point has a valid coarse point with a positive weight and reads no
@@ -15,16 +15,14 @@ use prt_format::{tier, Asset};
 /// the coarse points around it.
 pub fn fill(asset: &Asset, sh: &mut [ShRgb]) {
     let grid = &asset.header.grid;
-    let n = grid.counts;
     for (index, probe) in asset.probes.iter().enumerate() {
         if !probe.is_filled() || index >= sh.len() {
             continue;
         }
-        let i = index as u32;
-        let ijk = [i % n[0], i / n[0] % n[1], i / (n[0] * n[1])];
+        let ijk = tier::ijk(grid, index);
         let mut acc = [[0.0f32; 3]; SH_COUNT];
         let mut total = 0.0f32;
-        for (c, w) in tier::corners(grid, ijk) {
+        for (c, w) in tier::corners(grid, ijk, probe.fill_level()) {
             let valid = asset.probes.get(c).is_some_and(|p| p.is_valid());
             if w <= 0.0 || !valid || c >= sh.len() {
                 continue;

@@ -7,7 +7,9 @@
 
 use prt_bake::BakeSettings;
 use prt_format::depth::MAX_DEPTH;
-use prt_format::{decode, encode, Asset, DEPTH_TEXELS, DEPTH_WORDS, PROBE_FILLED};
+use prt_format::{
+    decode, encode, Asset, DEPTH_TEXELS, DEPTH_WORDS, FILL_LEVEL_SHIFT, PROBE_FILLED,
+};
 use prt_runtime::sample::corners;
 use prt_runtime::surface::SurfaceSampler;
 use prt_runtime::{load_rig, CpuRelighter, LookupSettings};
@@ -62,7 +64,7 @@ fn sparse_placement_keeps_every_probe_surfaces_read() {
     }
     assert!(read > 1000);
     for p in asset.probes.iter().filter(|p| !p.has_data()) {
-        let flags = p.flags & !PROBE_FILLED;
+        let flags = p.flags & !(PROBE_FILLED | 0xf << FILL_LEVEL_SHIFT);
         assert_eq!((flags, p.factor_count, p.sky_rays), (0, 0, 0), "{p:?}");
     }
     let filled = asset.probes.iter().filter(|p| p.is_filled()).count();
@@ -158,8 +160,8 @@ fn sparse_bakes_fill_only_the_holes_surfaces_need() {
 }
 
 /// A level with no surface in the bounds bakes sparse without a panic: no probe placed near a
-/// surface, a warning that says so, only the coarse tier traced (every fourth point of 5 x 5
-/// x 5), the rest filled from it, an asset that validates and samples the sky everywhere.
+/// surface, a warning that says so, only the coarsest level traced (the corners of 5 x 5 x 5),
+/// the rest filled from it, an asset that validates and samples the sky everywhere.
 #[test]
 fn sparse_bake_of_nothing_warns() {
     let settings = BakeSettings {
@@ -173,13 +175,13 @@ fn sparse_bake_of_nothing_warns() {
     let with_data = asset.probes.iter().filter(|p| p.has_data()).count();
     assert_eq!(
         with_data, 8,
-        "the coarse tier: indices 0 and 4 along each axis"
+        "the coarsest level: the first and last index of each axis"
     );
     let placed = prt_bake::Placed {
         grid: 125,
-        near_surfaces: 0,
-        coarse: 8,
-        filled: 117,
+        traced: 8,
+        busy_cells: [0; 3],
+        filled: [0, 0, 117],
     };
     assert_eq!(report.placed, Some(placed));
     assert!(
@@ -260,15 +262,18 @@ fn box_in_the_open() -> (Asset, Vec<prt_format::sh::ShRgb>) {
     (asset, relit.sh)
 }
 
-/// Where the coarse tier alone covers a point, the lookup returns the trilinear
-/// interpolation of the coarse probes, exactly: the fills between them reproduce it
-/// (`prt_format::tier`).
+/// Where a coarse level alone covers a point, the lookup returns the trilinear interpolation
+/// of that level's probes, exactly: the fills between them reproduce it (`prt_format::tier`).
 #[test]
 fn the_coarse_tier_is_interpolated_exactly() {
     let (asset, sh) = box_in_the_open();
     let g = asset.header.grid;
     assert_eq!(g.counts, [13, 13, 13]);
-    // Coarse points at indices 8 and 12 (2.75 m and 4.75 m): no surface within reach.
+    // Points of the top level (every 8th and the last) at indices 8 and 12, 2.75 m and 4.75 m:
+    // no surface in the cell between, filled from level 2 or 3, whose cells there are the same.
+    assert!([10, 9, 11]
+        .iter()
+        .all(|&i| asset.probes[g.index(i, i, 9)].fill_level() >= 2));
     let (lo, hi) = (8u32, 12u32);
     let corners: Vec<usize> = (0..8)
         .map(|c| {
@@ -392,7 +397,8 @@ fn the_lookup_is_seam_free_across_the_tier_boundary() {
 }
 
 /// Validation refuses fills the runtime could not compute: a point filled although it has
-/// data, filled where no coarse point around it is valid, or filled from a filled point.
+/// data, from a level that does not exist, where no point of its level around it is valid, or
+/// from a filled point.
 #[test]
 fn broken_fills_are_invalid() {
     let settings = BakeSettings {
@@ -414,6 +420,9 @@ fn broken_fills_are_invalid() {
     let corner = g.index(4, 4, 4);
     let e = message(&|a| a.probes[corner].flags |= PROBE_FILLED);
     assert!(e.contains("filled, yet with data"), "{e}");
+    let first_filled = asset.probes.iter().position(|p| p.is_filled()).unwrap();
+    let e = message(&|a| a.probes[first_filled].flags = PROBE_FILLED | 5 << FILL_LEVEL_SHIFT);
+    assert!(e.contains("filled from level 5"), "{e}");
     let e = message(&|a| {
         for p in a.probes.iter_mut().filter(|p| p.has_data()) {
             p.flags = 0;
@@ -426,7 +435,7 @@ fn broken_fills_are_invalid() {
         let last = &mut a.probes[corner];
         *last = prt_format::Probe {
             position: last.position,
-            flags: PROBE_FILLED,
+            flags: PROBE_FILLED | 3 << FILL_LEVEL_SHIFT,
             first_factor: last.first_factor,
             slot: prt_format::NO_SLOT,
             ..prt_format::Probe::default()
