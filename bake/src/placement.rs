@@ -36,6 +36,13 @@ use rayon::prelude::*;
 /// not placed; those weigh 0 and the lookup renormalises over the rest.
 pub const REACH: f32 = 0.25;
 
+/// Spacings added to every box of the placement's tests, so that a triangle exactly on a box's
+/// face (walls at round coordinates and grids of round spacings put many there) is kept at
+/// every scale: without it, rounding flipped such decisions between a 2 m Cornell room and its
+/// copy scaled by 0.001 (11% of a probe's SH0 apart, `tests/tests/scale.rs`). Relative to the
+/// spacing, as rounding is relative to the coordinates.
+pub const TOLERANCE: f32 = 1e-3;
+
 /// Which probes of `grid` surfaces need: per grid point in grid order, whether some triangle
 /// of `triangles` lies within its cells widened by [`REACH`] (module docs).
 pub fn surface_probes(grid: &Grid, triangles: &[[Vec3; 3]]) -> Vec<bool> {
@@ -142,7 +149,7 @@ pub fn summary(plan: &Plan) -> (crate::Placed, Option<String>) {
     };
     let warning = (plan.busy_cells[0] == 0).then(|| {
         format!(
-            "--sparse placed no probe near a surface: no triangle lies within a quarter spacing \
+            "sparse placement found no surface: no triangle lies within a quarter spacing \
              of any cell of the {} grid points (check the bounds); only the {traced} probes \
              of the coarsest level light the volume",
             plan.level.len()
@@ -217,7 +224,8 @@ fn for_boxes_near(grid: &Grid, t: &[Vec3; 3], boxes: Boxes, mut f: impl FnMut(us
     let (tmin, tmax) = (t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2]));
     let origin = Vec3::from(grid.origin);
     let step = Vec3::from(grid.step);
-    let reach = Vec3::splat(REACH * grid.spacing);
+    let tolerance = TOLERANCE * grid.spacing;
+    let reach = Vec3::splat(REACH * grid.spacing + tolerance);
     // The box of index p is [p - below, p + above].
     let (below, above) = match boxes {
         Boxes::Points => (step + reach, step + reach),
@@ -256,15 +264,16 @@ fn for_boxes_near(grid: &Grid, t: &[Vec3; 3], boxes: Boxes, mut f: impl FnMut(us
             for i in rx.0..=rx.1 {
                 let ijk = [i, j, k];
                 let p = Vec3::from(grid.position(i, j, k));
-                // The point's box; an outer layer's reaches out to the triangle beyond it, and
-                // a flat axis's (one layer) covers the triangle's whole extent along it.
+                // The point's box; an outer layer's reaches out to the triangle beyond it (and
+                // the tolerance past it: the triangle is then on no face of the box), and a
+                // flat axis's (one layer) covers the triangle's whole extent along it.
                 let (mut lo, mut hi) = (p - below, p + above);
                 for a in 0..3 {
                     if ijk[a] == 0 {
-                        lo[a] = lo[a].min(tmin[a]);
+                        lo[a] = lo[a].min(tmin[a] - tolerance);
                     }
                     if ijk[a] >= outer(counts[a]) {
-                        hi[a] = hi[a].max(tmax[a]);
+                        hi[a] = hi[a].max(tmax[a] + tolerance);
                     }
                 }
                 if overlaps(normal, plane, (tmin, tmax), (lo, hi)) {

@@ -113,6 +113,8 @@ pub fn run(args: AccuracyArgs) -> Result<()> {
         spacing: args.spacing,
         bounds: args.bounds,
         far_ratio: args.far_ratio,
+        // The probes themselves are measured, at the reference's positions: trace them all.
+        sparse: false,
         ..BakeSettings::default()
     };
     let rows = sweep(&args, &lighting, &reference, &base)?;

@@ -51,6 +51,8 @@ pub fn run(args: BakeArgs) -> Result<()> {
         spacing: args.spacing,
         bounds: args.bounds,
         double_sided: args.double_sided,
+        // Every grid point, as the bare obvhs trace it is measured against.
+        sparse: false,
         ..BakeSettings::default()
     };
     let runs = args.runs as usize;
@@ -325,6 +327,9 @@ fn bake_process(exe: &Path, scene: &Path, settings: &BakeSettings) -> Result<Pro
     }
     if settings.double_sided {
         args.push("--double-sided".into());
+    }
+    if !settings.sparse {
+        args.push("--uniform".into());
     }
     let start = Instant::now();
     let mut child = std::process::Command::new(exe)

@@ -83,9 +83,9 @@ pub struct SurfaceArgs {
     /// bake's default for each case].
     #[arg(long)]
     spacing: Option<f32>,
-    /// Bake with sparse placement (`prt bake --sparse`): probes only where surfaces need them.
+    /// Bake on the uniform grid (`prt bake --uniform`) instead of the default sparse placement.
     #[arg(long)]
-    sparse: bool,
+    uniform: bool,
     /// Write each camera view (the levels') per spacing and lookup to DIR as a PNG: reference,
     /// lookup, over-lit (red) and under-lit (blue) pixels (`surface/pictures.rs`).
     #[arg(long, value_name = "DIR")]
@@ -145,7 +145,7 @@ pub fn run(args: SurfaceArgs) -> Result<()> {
             case,
             &refs,
             &lookups.for_set(case.set),
-            (args.spacing, args.sparse),
+            (args.spacing, !args.uniform),
         )?);
     }
     args.out

@@ -49,11 +49,11 @@ pub struct BakeArgs {
     /// Probe spacing in metres [default: about 4,000 probes over the bounds].
     #[arg(long)]
     spacing: Option<f32>,
-    /// Place probes only at the grid points surfaces need (within a cell and a quarter
-    /// spacing of a triangle) and on a coarse tier of every fourth point; the rest carry no
-    /// data and are filled from the coarse tier at runtime.
+    /// Trace every grid point. By default the bake traces the points surfaces need (within a
+    /// cell and a quarter spacing of a triangle) and coarse levels 2, 4 and 8 steps apart
+    /// around them, and the runtime fills the other points from those levels.
     #[arg(long)]
-    sparse: bool,
+    uniform: bool,
     /// Bake bounds MINX,MINY,MINZ,MAXX,MAXY,MAXZ [default: the scene's bounds].
     #[arg(long, value_parser = parse_bounds, allow_hyphen_values = true)]
     bounds: Option<[f32; 6]>,
@@ -125,7 +125,7 @@ pub fn run(args: BakeArgs) -> Result<()> {
         scene,
         output,
         spacing,
-        sparse,
+        uniform,
         bounds,
         rays,
         quality,
@@ -153,7 +153,7 @@ pub fn run(args: BakeArgs) -> Result<()> {
     let settings = BakeSettings {
         rays: rays.unwrap_or(preset.rays),
         spacing,
-        sparse,
+        sparse: !uniform,
         bounds,
         max_probes,
         cell_size: if no_merge { Some(0.0) } else { cell_size },

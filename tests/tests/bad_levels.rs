@@ -13,8 +13,11 @@ use prt_tests::{fixture, gpu_device};
 
 /// Bakes a fixture with the default settings; the asset and the bake's warnings.
 fn bake(name: &str) -> (Asset, Vec<String>) {
-    let (asset, report) =
-        prt_bake::bake(&fixture(name), &BakeSettings::default(), &NoProgress).unwrap();
+    bake_with(name, &BakeSettings::default())
+}
+
+fn bake_with(name: &str, settings: &BakeSettings) -> (Asset, Vec<String>) {
+    let (asset, report) = prt_bake::bake(&fixture(name), settings, &NoProgress).unwrap();
     (asset, report.warnings)
 }
 
@@ -103,16 +106,24 @@ fn a_single_plane_bakes_and_samples() {
     sample_everywhere(&asset, &lighting, &points(&asset, top), 64);
 }
 
-/// A closed solid with no room around it (its faces seen from outside only, most probes inside
-/// it): the bake warns of the probes inside geometry, and every sample stays finite.
+/// A closed solid with no room around it (its faces seen from outside only): on the uniform
+/// grid, most probes inside it, the bake warns of the probes inside geometry; sparse (the
+/// default) traces only the layers beside its faces and the coarse levels inside. Every sample
+/// of both stays finite.
 #[test]
 fn a_solid_without_a_room_bakes_and_samples() {
-    let (asset, warnings) = bake("closed_box_outward.gltf");
+    let uniform = BakeSettings {
+        sparse: false,
+        ..BakeSettings::default()
+    };
+    let (asset, warnings) = bake_with("closed_box_outward.gltf", &uniform);
     assert!(
         warnings.iter().any(|w| w.contains("inside geometry")),
         "{warnings:?}"
     );
     let lighting = load_rig(&fixture("rigs/point_spot_sun_sky.json")).unwrap();
+    sample_everywhere(&asset, &lighting, &points(&asset, 0.0)[64..], 0);
+    let (asset, _) = bake("closed_box_outward.gltf");
     sample_everywhere(&asset, &lighting, &points(&asset, 0.0)[64..], 0);
 }
 

@@ -188,7 +188,7 @@ fn sparse_bake_of_nothing_warns() {
         report
             .warnings
             .iter()
-            .any(|w| w.contains("--sparse placed no probe near a surface")),
+            .any(|w| w.contains("sparse placement found no surface")),
         "{:?}",
         report.warnings
     );
@@ -218,6 +218,7 @@ fn dilated_probes_keep_their_own_visibility_maps() {
     let settings = BakeSettings {
         bounds: Some([-1.25, -1.25, -1.25, 1.25, 1.25, 1.25]),
         spacing: Some(0.5),
+        sparse: false,
         ..rays(256)
     };
     let asset = bake_ok(&fixture("closed_box_outward.gltf"), &settings);

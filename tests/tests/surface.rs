@@ -99,6 +99,8 @@ fn holes_are_filled_by_dilation() {
     let base = BakeSettings {
         bounds: Some([-1.25, -1.25, -1.25, 1.25, 1.25, 1.25]),
         spacing: Some(0.5),
+        // Every grid point traced: sparse placement leaves the box's inside untraced.
+        sparse: false,
         ..BakeSettings::default()
     };
     let settings = LookupSettings {
@@ -146,6 +148,8 @@ fn holes_are_filled_by_dilation() {
 fn probes_inside_double_sided_walls_are_detected() {
     let settings = BakeSettings {
         virtual_offset: false,
+        // The room's centre traced, not filled.
+        sparse: false,
         ..BakeSettings::default()
     };
     let asset = bake_ok(&fixture("thick_walls.gltf"), &settings);
@@ -225,6 +229,8 @@ fn depth_moments_hold_distances_in_spacings() {
                 2.0 / 3.0,
             ]),
             spacing: Some(2.0 / 3.0),
+            // The centre, 1.5 spacings from every wall, traced (sparse placement fills it).
+            sparse: false,
             ..BakeSettings::default()
         },
     );

@@ -7,7 +7,7 @@
 //! log-log plots with their Pareto fronts: the settings users pick from. The family's figures
 //! are medians over its levels (and the worst level), so that no level's size dominates.
 //!
-//! Placement is the uniform grid or the sparse one (`--placement`; `prt bake --sparse`, issue
+//! Placement is the uniform grid or the sparse one (`--placement`; `prt bake --uniform` or the default sparse, issue
 //! 32, item 2): probes only at the grid points surfaces need.
 
 use std::fmt::Write as _;
@@ -50,7 +50,7 @@ pub struct FrontierArgs {
     #[arg(long, value_delimiter = ',')]
     far: Vec<f32>,
     /// Probe placements, comma-separated: uniform (every grid point), sparse (only those
-    /// surfaces need, `prt bake --sparse`).
+    /// surfaces need and coarse levels around them, the bake's default).
     #[arg(long, value_delimiter = ',', default_value = "uniform")]
     placement: Vec<Placement>,
     /// Directory the cases' paths are relative to (the repository root).
@@ -357,7 +357,7 @@ fn summary_table(md: &mut String, title: &str, rows: &[Aggregate]) {
 
 fn markdown(rows: &[Row], args: &FrontierArgs) -> String {
     let mut md = String::from(
-        "Bake seconds and runtime bytes against surface error (`prt-bench frontier`, issue 32 item 3): each case baked at spacings relative to its default (x1) and at several ray counts, on the uniform grid or, labelled sparse, only at the grid points surfaces need (`prt bake --sparse`), relit on the CPU (one bounce) and sampled with the runtime's lookup (`default`, the surface terms) at the oracle's surface points and camera pixels. Scores as in [surface.md](surface.md): open mean is the mean relative error at points that are not pockets, leaks the open points lit over 1.5x their truth, over-lit the camera view's pixels lit over 1.5x. Runtime MB: every array an engine uploads (probes, sky, visibility, factors, bricks, surfels, BVH, triangles, surface terms). Bake seconds on all of this machine's cores (2 here). A setting is on a front when no other setting is as small on that axis and better on the median level's error.\n\n## Summary\n",
+        "Bake seconds and runtime bytes against surface error (`prt-bench frontier`, issue 32 item 3): each case baked at spacings relative to its default (x1) and at several ray counts, on the uniform grid or, labelled sparse, at the grid points surfaces need and coarse levels around them (the bake's default; uniform is `prt bake --uniform`), relit on the CPU (one bounce) and sampled with the runtime's lookup (`default`, the surface terms) at the oracle's surface points and camera pixels. Scores as in [surface.md](surface.md): open mean is the mean relative error at points that are not pockets, leaks the open points lit over 1.5x their truth, over-lit the camera view's pixels lit over 1.5x. Runtime MB: every array an engine uploads (probes, sky, visibility, factors, bricks, surfels, BVH, triangles, surface terms). Bake seconds on all of this machine's cores (2 here). A setting is on a front when no other setting is as small on that axis and better on the median level's error.\n\n## Summary\n",
     );
     let sets: [(&str, Keep); 5] = [
         ("The level family (seeds 0-15)", in_family),

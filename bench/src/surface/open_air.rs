@@ -146,7 +146,7 @@ fn relative_errors(points: &[usize], truth: &[ShRgb], got: &[ShRgb]) -> Vec<f64>
 fn markdown(rows: &[Row]) -> String {
     let mut s = String::from(
         "# Open air: the coarse tier against the fine grid (`prt-bench open-air`)\n\n\
-         Each case baked uniform and `--sparse` at its default spacing, relit on the CPU with \
+         Each case baked `--uniform` and sparse (the default) at its default spacing, relit on the CPU with \
          its rig; at each grid point the sparse bake fills from the coarse tier, the filled SH \
          against the uniform bake's probe there: the relative irradiance error summed over the \
          six axis normals, mean and p95 over those points (`bench/src/surface/open_air.rs`).\n\n\
