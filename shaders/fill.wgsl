@@ -3,8 +3,9 @@
 // its level (its flags' FILL_LEVEL_SHIFT bits) around it, each weighted by its trilinear weight
 // times its validity and renormalised, written to probe_sh and, with validity 1, to its seven
 // volume texels in the gather's layout. Validation guarantees that a filled point reads no
-// filled point, so the threads are independent. Every update that gathers runs it over every
-// filled point: a point's texels follow its coarse points' latest gather.
+// filled point, so the threads are independent. Every recorded update runs it over every
+// filled point (its cost does not shrink with the gather's budget): a point's texels follow
+// its coarse points' latest gather.
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> probes: array<Probe>;
@@ -34,7 +35,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     let n = params.grid_counts;
     let ijk = vec3<u32>(p % n.x, (p / n.x) % n.y, p / (n.x * n.y));
     // prt_format::tier::span along each axis, at the point's level.
-    let stride = 1u << ((probes[p].flags >> FILL_LEVEL_SHIFT) & 0xfu);
+    let stride = 1u << ((probes[p].flags >> FILL_LEVEL_SHIFT) & FILL_LEVEL_MASK);
     let last = n - 1u;
     let lo = min(ijk / stride * stride, last);
     let hi = min(lo + stride, last);

@@ -7,7 +7,7 @@
 // prt_runtime::surface (sample_irradiance) and prt_runtime::sample (prt_sample_sh).
 //
 // The textures hold SH premultiplied by each probe's validity (texture 0's alpha: 1 for a valid
-// or dilated probe and a grid point filled from the coarse tier, 0 for an invalid one).
+// or dilated probe and a grid point filled from a coarse level, 0 for an invalid one).
 //
 // Both functions sample at world_pos + normal * normal_bias (metres; RuntimeSettings::normal_bias
 // in probe spacings): probes just behind a surface see its back faces, and moving the point off
@@ -149,7 +149,7 @@ fn prt_depth_weight(slot: u32, probe: vec3<f32>, surface: vec3<f32>, x: vec3<f32
     let dir = v / len;
     let behind = clamp(dot(probe - surface, n) / prt_volume.spacing / PRT_FACING_DEPTH + 1.0, 0.0, 1.0);
     var w = behind * behind + PRT_FACING_FLOOR;
-    // A grid point filled from the coarse tier has no depth moments: its facing term alone.
+    // A grid point filled from a coarse level has no depth moments: its facing term alone.
     if slot == PRT_NO_SLOT {
         return w;
     }

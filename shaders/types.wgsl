@@ -179,7 +179,7 @@ struct Params {
     surfel_spread_sq: f32,
     // Probes the gather visits (gather_list: the valid ones); its window wraps around them.
     gather_count: u32,
-    // Grid points the coarse tier fills (fill_list, prt_format::tier).
+    // Grid points the coarse levels fill (fill_list, prt_format::tier).
     fill_count: u32,
     _pad1: u32,
     _pad2: u32,

@@ -74,9 +74,11 @@ pub(crate) fn bake_in_pool(
     let valid = validity(&traced.rays, settings, &built, scene, &mut report);
     let placed: Vec<bool> = traced.rays.iter().map(|r| r.placed).collect();
     // Sparse: holes are filled only in cells a surface passes through.
-    let cells = (settings.sparse && settings.dilate)
-        .then(|| placement::surface_cells(&grid, &scene.triangles));
-    let layout = (&valid[..], &placed[..], cells.as_deref());
+    let cells = plan
+        .as_ref()
+        .filter(|_| settings.dilate)
+        .map(placement::Plan::surface_cells);
+    let layout = (&valid[..], &placed[..], cells);
     let (from, lens) = carried_layout(&grid, layout, settings, &traced.rows)?;
     let carried = encode::Carried {
         from: &from,

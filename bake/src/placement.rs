@@ -14,9 +14,8 @@
 //! box beside a triangle's corner may be kept; none a surface needs is dropped); its twin
 //! [`surface_cells`] marks the grid cells a surface passes through. [`plan`] builds the coarse
 //! levels of `prt_format::tier` over those cells, as Unity's adaptive probe volumes refine bricks
-//! only where geometry is: it traces every point of the smallest cells (2 steps wide) surfaces
-//! pass through and ever fewer points in the larger empty cells (4 and 8 steps wide) around
-//! them. The others keep a record with no data ([`prt_format::NO_SLOT`]); [`mark_filled`]
+//! only where geometry is: it traces the points surfaces need, the points 2 steps apart in
+//! the 4-step cells surfaces pass through, 4 apart in the 8-step ones, and 8 apart everywhere. The others keep a record with no data ([`prt_format::NO_SLOT`]); [`mark_filled`]
 //! flags those the runtime fills from their level after every gather, so that a point in open
 //! air gets the light of the probes around it, interpolated without a seam where the levels
 //! meet.
@@ -33,7 +32,7 @@ use rayon::prelude::*;
 /// Spacings beyond a grid point's cells within which a surface keeps it: covers the lookup's
 /// default normal bias (0.2 spacings, `prt_runtime::LookupSettings::normal_bias`) with room to
 /// spare. A surface point sampled with a larger bias can land in a cell whose far corners were
-/// not placed; those weigh 0 and the lookup renormalises over the rest.
+/// not traced: they are filled from a coarse level (or, inside geometry, weigh 0).
 pub const REACH: f32 = 0.25;
 
 /// Spacings added to every box of the placement's tests, so that a triangle exactly on a box's
@@ -54,15 +53,23 @@ pub fn surface_probes(grid: &Grid, triangles: &[[Vec3; 3]]) -> Vec<bool> {
 #[derive(Clone, Debug)]
 pub struct Plan {
     /// Per grid point: 0 to trace it, else the level it is filled from.
-    pub level: Vec<u8>,
+    level: Vec<u8>,
     /// Per level 1..=[`tier::LEVELS`]: how many of its cells a surface passes through.
-    pub busy_cells: Vec<usize>,
+    busy_cells: [usize; tier::LEVELS as usize],
+    /// The grid cells surfaces pass through ([`surface_cells`]), which sparse bakes also
+    /// dilate into.
+    cells: Vec<bool>,
 }
 
 impl Plan {
     /// Per grid point, whether the bake traces it.
     pub fn traced(&self) -> Vec<bool> {
         self.level.iter().map(|&l| l == 0).collect()
+    }
+
+    /// Per grid cell (indexed by its lowest corner), whether a surface passes through it.
+    pub fn surface_cells(&self) -> &[bool] {
+        &self.cells
     }
 }
 
@@ -110,11 +117,12 @@ pub fn plan(grid: &Grid, triangles: &[[Vec3; 3]]) -> Plan {
             }
         })
         .collect();
-    let busy_cells = busy
-        .iter()
-        .map(|b| b.iter().filter(|&&b| b).count())
-        .collect();
-    Plan { level, busy_cells }
+    let busy_cells = std::array::from_fn(|l| busy[l].iter().filter(|&&b| b).count());
+    Plan {
+        level,
+        busy_cells,
+        cells,
+    }
 }
 
 /// Whether a cell of `level` holding grid point `ijk` (on its boundary too) is in `busy`
@@ -144,7 +152,7 @@ pub fn summary(plan: &Plan) -> (crate::Placed, Option<String>) {
     let placed = crate::Placed {
         grid: plan.level.len(),
         traced,
-        busy_cells: std::array::from_fn(|l| plan.busy_cells[l]),
+        busy_cells: plan.busy_cells,
         filled: [0; tier::LEVELS as usize],
     };
     let warning = (plan.busy_cells[0] == 0).then(|| {
@@ -171,7 +179,7 @@ pub fn mark_filled(
     let fill: Vec<u8> = (0..probes.len())
         .into_par_iter()
         .map(|index| {
-            let level = plan.level[index];
+            let level = plan.level.get(index).copied().unwrap_or(0);
             let lit = level > 0
                 && tier::corners(grid, tier::ijk(grid, index), u32::from(level))
                     .iter()
@@ -387,7 +395,7 @@ mod tests {
     fn without_surfaces_the_top_level_fills_the_rest() {
         let grid = Grid::cubic([0.0; 3], 1.0, [17, 9, 6]);
         let plan = plan(&grid, &[]);
-        assert_eq!(plan.busy_cells, vec![0; tier::LEVELS as usize]);
+        assert_eq!(plan.busy_cells, [0; tier::LEVELS as usize]);
         for k in 0..6 {
             for j in 0..9 {
                 for i in 0..17 {
@@ -405,8 +413,8 @@ mod tests {
                 ..Probe::default()
             })
             .collect();
-        // The cell x in 8..16 loses its valid corners: points strictly inside it stay dark,
-        // points on its face x = 8 shared with the valid cell are filled.
+        // The cell x in 8..16 loses its valid corners: points inside it, and on its face x = 8
+        // whose only corners are there, stay dark; points of the cell x in 0..8 are filled.
         for (i, j, k) in [(8, 0, 0), (16, 0, 0), (8, 8, 0), (16, 8, 0)] {
             for k in [k, 5] {
                 probes[grid.index(i, j, k)].flags = 0;
@@ -452,7 +460,7 @@ mod tests {
         assert_eq!((at(4, 8, 4), at(2, 6, 2), at(5, 6, 1)), (0, 2, 2));
         // Above: only level-3 points traced, the rest filled from level 3.
         assert_eq!((at(8, 16, 8), at(4, 12, 4), at(1, 9, 1)), (0, 3, 3));
-        assert_eq!(plan.busy_cells, vec![64, 16, 4]);
+        assert_eq!(plan.busy_cells, [64, 16, 4]);
     }
 
     /// A triangle whose plane test overflows f32 keeps the points it may touch (a huge quad

@@ -52,7 +52,7 @@ enum Kind {
     /// Bake seconds and runtime bytes against surface error over probe spacings and ray
     /// counts, on the level family and Sponza: tables and plots with their fronts.
     Frontier(surface::frontier::FrontierArgs),
-    /// The coarse tier of sparse placement against the fine grid in open air: at every grid
+    /// The coarse levels of sparse placement against the fine grid in open air: at every grid
     /// point a sparse bake fills, the filled SH against a uniform bake's probe there.
     OpenAir(surface::open_air::OpenAirArgs),
     /// Mutation fuzzing of the glTF path or the asset loader for a fixed time (issue 8).

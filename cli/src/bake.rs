@@ -184,15 +184,7 @@ pub fn run(args: BakeArgs) -> Result<()> {
     }
     println!("{}", prt_format::Summary::of(&asset, report.file_bytes));
     if let Some(p) = report.placed {
-        let filled: usize = p.filled.iter().sum();
-        println!(
-            "placement        sparse: {} grid points traced; {} filled from coarse levels 1 / 2 / 3 (probes 2 / 4 / 8 steps apart: {:?}); {} left dark (inside geometry); cells surfaces pass through per level: {:?}",
-            p.traced,
-            filled,
-            p.filled,
-            p.grid - p.traced - filled,
-            p.busy_cells
-        );
+        println!("{}", placement_line(&p));
     }
     let times: Vec<String> = report
         .timings
@@ -216,4 +208,18 @@ pub fn run(args: BakeArgs) -> Result<()> {
     // `prt-bench bake --runs` times a bake to this line: keep its first word.
     println!("wrote            {}", output.display());
     Ok(())
+}
+
+/// The summary line of what sparse placement placed where.
+fn placement_line(p: &prt_bake::Placed) -> String {
+    let filled: usize = p.filled.iter().sum();
+    format!(
+        "placement        sparse: {} grid points traced; {filled} filled from coarse levels \
+         1 / 2 / 3 (probes 2 / 4 / 8 steps apart: {:?}); {} without light (not traced, and \
+         their level's probes all inside geometry); cells surfaces pass through per level: {:?}",
+        p.traced,
+        p.filled,
+        p.grid - p.traced - filled,
+        p.busy_cells
+    )
 }

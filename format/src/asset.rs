@@ -201,6 +201,8 @@ pub const PROBE_FILLED: u32 = 8;
 /// Where a filled probe's level ([`crate::tier`], 1..=[`crate::tier::LEVELS`]) sits in its
 /// flags: four bits.
 pub const FILL_LEVEL_SHIFT: u32 = 8;
+/// The bits of a filled probe's level, after shifting by [`FILL_LEVEL_SHIFT`].
+pub const FILL_LEVEL_MASK: u32 = 0xf;
 /// Side of the octahedral visibility map.
 pub const DEPTH_MAP_SIDE: u32 = 16;
 /// Texels of a visibility map (two bytes each: mean and standard deviation of distance).
@@ -218,7 +220,7 @@ pub const NO_SLOT: u32 = u32::MAX;
 /// only the points surfaces need and leaves the others out; those, and probes inside geometry
 /// with no valid neighbour to copy, have no data: [`NO_SLOT`], not valid, no factors, no sky or
 /// visibility data, never gathered, and weighted 0 by every lookup, except the points the
-/// coarse tier fills ([`PROBE_FILLED`]).
+/// coarse levels fill ([`PROBE_FILLED`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable, Serialize, Deserialize)]
 #[repr(C)]
 pub struct Probe {
@@ -259,7 +261,7 @@ impl Probe {
 
     /// The level a filled probe is interpolated from ([`FILL_LEVEL_SHIFT`]).
     pub fn fill_level(&self) -> u32 {
-        self.flags >> FILL_LEVEL_SHIFT & 0xf
+        self.flags >> FILL_LEVEL_SHIFT & FILL_LEVEL_MASK
     }
 
     /// Weight of the probe when the volume is sampled: 1 for a valid (or dilated) probe and a

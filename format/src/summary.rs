@@ -22,7 +22,7 @@ pub struct Summary {
     pub valid_probe_count: usize,
     /// Probes inside geometry whose table was copied from a valid neighbour.
     pub dilated_probe_count: usize,
-    /// Grid points without data the runtime fills from the coarse tier of a sparse bake
+    /// Grid points without data the runtime fills from a coarse level of a sparse bake
     /// ([`crate::tier`]).
     pub filled_probe_count: usize,
     /// Probes moved off a surface they lay on, or out of geometry by the virtual offset.
@@ -196,7 +196,7 @@ impl std::fmt::Display for Summary {
         )?;
         writeln!(
             f,
-            "probes           {} with data of {} grid points ({} valid, {} inside geometry with a neighbour's data; the other {} left out by the placement or inside geometry: no data, {} of them filled from the coarse tier), {} moved off a surface or out of geometry, {} rays each",
+            "probes           {} with data of {} grid points ({} valid, {} inside geometry with a neighbour's data; the other {} left out by the placement or inside geometry: no data, {} of them filled from a coarse level), {} moved off a surface or out of geometry, {} rays each",
             self.probes_with_data,
             self.probe_count,
             self.valid_probe_count,

@@ -1,10 +1,10 @@
-//! # The coarse tiers of sparse placement: open air lit from lattices 2, 4 and 8 steps apart
+//! # The coarse levels of sparse placement: open air lit from lattices 2, 4 and 8 steps apart
 //!
 //! Level `l` of the grid (1..=[`LEVELS`]) is its sub-lattice of every `2^l`-th index along each
 //! axis plus each axis's last index ([`on_level`]); its cells ([`span`]) are `2^l` grid steps
-//! wide (less at the last). A sparse bake (`prt_bake::placement`) traces every point of the
-//! level-1 cells a surface passes through, the level-`l` points of the level-`l + 1` cells a
-//! surface passes through, and every point of the top level. A grid point it does not trace is
+//! wide (less at the last). A sparse bake (`prt_bake::placement`) traces the grid points
+//! surfaces need, the level-`l` points of the level-`l + 1` cells a surface passes through, and
+//! every point of the top level. A grid point it does not trace is
 //! *filled* ([`crate::PROBE_FILLED`], with its level): after every gather the runtime sets its
 //! SH to the trilinear interpolation of the level's cell around it ([`corners`]), renormalised
 //! over the corners a lookup may use (valid or dilated). Its level is the lowest whose next
@@ -45,20 +45,10 @@ pub fn on_level_point(grid: &Grid, ijk: [u32; 3], level: u32) -> bool {
     (0..3).all(|a| on_level(grid.counts[a], ijk[a], level))
 }
 
-/// How many indices of an axis of `n` points are on `level`.
-pub fn level_count(n: u32, level: u32) -> u32 {
-    match n {
-        0 => 0,
-        n => {
-            let s = stride(level);
-            (n - 1) / s + 1 + u32::from(!(n - 1).is_multiple_of(s))
-        }
-    }
-}
-
 /// The cell of `level` around index `i` (below `n`) along an axis of `n` points: its lower and
-/// upper indices and `i`'s fraction between them, `(i - lo) / max(hi - lo, 1)` in f32 (as the
-/// WGSL twin divides). An index on the level is its own cell's lower end, fraction 0, except
+/// upper indices and `i`'s fraction between them, `(i - lo) / max(hi - lo, 1)` in f32 (the
+/// WGSL twin's division may differ in the last bits where `hi - lo` is not a power of two; 0
+/// and 1, which decide which corners count, are exact in both). An index on the level is its own cell's lower end, fraction 0, except
 /// the last index, the upper end of the cell below it, fraction 1.
 pub fn span(n: u32, i: u32, level: u32) -> (u32, u32, f32) {
     let s = stride(level);
@@ -71,9 +61,8 @@ pub fn span(n: u32, i: u32, level: u32) -> (u32, u32, f32) {
 
 /// Grid index `index` of `grid` as `(i, j, k)`.
 pub fn ijk(grid: &Grid, index: usize) -> [u32; 3] {
-    let n = grid.counts;
-    let i = index as u32;
-    [i % n[0], i / n[0] % n[1], i / (n[0] * n[1])]
+    let n = grid.counts.map(|c| c.max(1) as usize);
+    [index % n[0], index / n[0] % n[1], index / (n[0] * n[1])].map(|v| v as u32)
 }
 
 /// The eight points of `level` around grid point `ijk` (grid indices) and their trilinear
@@ -103,8 +92,6 @@ mod tests {
     fn spans_cover_every_index() {
         for level in 0..=LEVELS {
             for n in 1..20u32 {
-                let on: u32 = (0..n).map(|i| u32::from(on_level(n, i, level))).sum();
-                assert_eq!(level_count(n, level), on, "n {n} level {level}");
                 for i in 0..n {
                     let (lo, hi, t) = span(n, i, level);
                     let at = format!("n {n} i {i} level {level}");

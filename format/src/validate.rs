@@ -149,9 +149,10 @@ fn probe_sections(asset: &Asset) -> Result<(), FormatError> {
 }
 
 /// Each probe's record: a finite position, a sky ray count within the header's `ray_count`,
-/// dilated only if valid, slots numbering the probes with data in grid order (a probe without
-/// has no flags but `PROBE_OFFSET`, no factors and no sky rays), and factor runs that follow one another and add up to
-/// the factor table's length.
+/// dilated only if valid, slots numbering the probes with data in grid order (a probe with
+/// data is not filled; a probe without has no flags but `PROBE_OFFSET` and `PROBE_FILLED`
+/// with its level, no factors and no sky rays), and factor runs that follow one another and
+/// add up to the factor table's length.
 fn probe_records(asset: &Asset) -> Result<(), FormatError> {
     let h = &asset.header;
     let factors = &asset.factors;
@@ -167,7 +168,7 @@ fn probe_records(asset: &Asset) -> Result<(), FormatError> {
             ));
         }
         if p.has_data() {
-            if p.is_filled() {
+            if p.is_filled() || p.fill_level() != 0 {
                 return Err(FormatError::invalid(
                     "probes",
                     i,
@@ -185,7 +186,8 @@ fn probe_records(asset: &Asset) -> Result<(), FormatError> {
                 ));
             }
             next_slot += 1;
-        } else if p.flags & !(PROBE_OFFSET | PROBE_FILLED | 0xf << FILL_LEVEL_SHIFT) != 0
+        } else if p.flags & !(PROBE_OFFSET | PROBE_FILLED | FILL_LEVEL_MASK << FILL_LEVEL_SHIFT)
+            != 0
             || (p.is_filled() != (p.fill_level() != 0))
             || p.factor_count != 0
             || p.sky_rays != 0
@@ -250,19 +252,21 @@ fn filled_points(asset: &Asset) -> Result<(), FormatError> {
             ));
         }
         let ijk = crate::tier::ijk(grid, index);
-        let used = crate::tier::corners(grid, ijk, level)
+        let used: Vec<(usize, Probe)> = crate::tier::corners(grid, ijk, level)
             .into_iter()
             .filter(|&(_, w)| w > 0.0)
-            .map(|(c, _)| (c, asset.probes[c]));
+            .map(|(c, _)| (c, asset.probes[c]))
+            .collect();
+        let corners: Vec<String> = used.iter().map(|(c, _)| c.to_string()).collect();
         let mut valid = false;
-        for (c, corner) in used {
+        for &(c, corner) in &used {
             if corner.is_filled() {
                 return Err(FormatError::invalid(
                     "probes",
                     index,
                     format!(
-                        "filled from probe {c}, which is filled itself (flags {:#x})",
-                        p.flags
+                        "filled from level {level} and probe {c}, which is filled itself (flags {:#x})",
+                        corner.flags
                     ),
                 ));
             }
@@ -272,7 +276,10 @@ fn filled_points(asset: &Asset) -> Result<(), FormatError> {
             return Err(FormatError::invalid(
                 "probes",
                 index,
-                "filled, but no coarse point around it is valid".to_string(),
+                format!(
+                    "filled from level {level}, but none of the level's probes around it ({}) is valid",
+                    corners.join(", ")
+                ),
             ));
         }
     }

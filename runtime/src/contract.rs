@@ -196,7 +196,7 @@ pub struct Params {
     pub surfel_spread_sq: f32,
     /// Probes the gather visits (`gather_list`: the valid ones); its window wraps around it.
     pub gather_count: u32,
-    /// Grid points the coarse tier fills (`fill_list`, `prt_format::tier`).
+    /// Grid points the coarse levels fill (`fill_list`, `prt_format::tier`).
     pub fill_count: u32,
     pub _pad: [u32; 2],
 }
@@ -339,6 +339,10 @@ pub fn wgsl_constants() -> Vec<(&'static str, String)> {
         (
             "FILL_LEVEL_SHIFT",
             format!("{}u", prt_format::FILL_LEVEL_SHIFT),
+        ),
+        (
+            "FILL_LEVEL_MASK",
+            format!("{}u", prt_format::FILL_LEVEL_MASK),
         ),
         ("SKY_BLACK", format!("{SKY_BLACK}u")),
         ("SKY_CONSTANT", format!("{SKY_CONSTANT}u")),

@@ -1,4 +1,4 @@
-//! # Filling the coarse tier's grid points: the CPU twin of `shaders/fill.wgsl`
+//! # Filling the coarse levels' grid points: the CPU twin of `shaders/fill.wgsl`
 //!
 //! A sparse bake leaves the grid points away from surfaces untraced and flags them as filled
 //! from a coarse level (`prt_format::tier` says which, and why this is seam-free). After every

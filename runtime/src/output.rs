@@ -1,6 +1,7 @@
 //! The relight JSON of docs/conventions.md section 6: `{"probes": [{"index": i, "position":
 //! [x,y,z], "valid": true, "dilated": false, "sh": [[r,g,b] x 9]}, ...]}`. `valid` is what the
-//! runtime gathers and samples; `dilated` marks the valid probes that carry a copy of their
+//! runtime gathers (it also samples the grid points sparse placement filled, which are not
+//! valid, with the SH of the coarse level they are filled from); `dilated` marks the valid probes that carry a copy of their
 //! nearest measured neighbour's data, so that a tool can tell them from measured ones.
 
 use prt_format::sh::ShRgb;

@@ -8,7 +8,7 @@
 //! 3. **Brick radiance**: the weighted mean of its surfels'.
 //! 4. **Gather**: probe SH9 = sum over its factors of transfer x brick radiance, plus the sky
 //!    term. Invalid probes are skipped (zero, flagged invalid); then the grid points a sparse
-//!    bake left to the coarse tier are filled from it ([`crate::fill`]).
+//!    bake left to the coarse levels are filled from it ([`crate::fill`]).
 //! 5. **Bounces** (optional, `bounces > 1`): surfels also receive the irradiance of the probe
 //!    volume from the previous iteration, sampled at the surfel with its normal through the
 //!    engine's lookup (`sample_irradiance`: normal bias, validity and depth-moment weights), and

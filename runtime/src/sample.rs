@@ -11,7 +11,7 @@
 //!   grid: outside it the nearest face's probes are used, as the sampler's `ClampToEdge` does;
 //! - each of the eight probes around the point gets its trilinear weight times its validity
 //!   (`Probe::sample_weight`: 1 for a valid or dilated probe and a grid point filled from the
-//!   coarse tier, `prt_format::tier`; 0 for an invalid one), and **with
+//!   coarse levels, `prt_format::tier`; 0 for an invalid one), and **with
 //!   depth moments** (the runtime's default) also the facing term `clamp(1 + h / FACING_DEPTH,
 //!   0, 1)^2 + FACING_FLOOR` (`h`: the probe's signed distance in spacings from the plane
 //!   through the unmoved surface point) and the Chebyshev term `max(crush(cheb^3),

@@ -13,7 +13,7 @@ pub const BRICK_RADIANCE: &str = include_str!("../brick_radiance.wgsl");
 pub const COARSE_RADIANCE: &str = include_str!("../coarse_radiance.wgsl");
 /// `cull_lights.wgsl`: Runtime stage 1: per-brick light masks, dirty bricks, shadow-ray cache room.
 pub const CULL_LIGHTS: &str = include_str!("../cull_lights.wgsl");
-/// `fill.wgsl`: Runtime stage 9: grid points the coarse tier fills, from its probes.
+/// `fill.wgsl`: Runtime stage 9: grid points the coarse levels fill, from its probes.
 pub const FILL: &str = include_str!("../fill.wgsl");
 /// `gather.wgsl`: Runtime stage 8: factors and sky reduced into probe SH, written to the volume.
 pub const GATHER: &str = include_str!("../gather.wgsl");

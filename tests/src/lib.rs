@@ -55,7 +55,8 @@ pub fn cornell() -> PathBuf {
 }
 
 /// Settings with `rays` rays and otherwise the fast preset's ([`BakeSettings::fast`]: every hit
-/// in its own brick's factor, no coarse bricks unless a test asks for them).
+/// in its own brick's factor, no coarse bricks unless a test asks for them; sparse placement,
+/// as every preset but the exact one).
 pub fn rays(rays: u32) -> BakeSettings {
     BakeSettings {
         rays,

@@ -116,7 +116,7 @@ fn gpu_equals_cpu_on_cornell() {
             VolumeFormat::F32,
         ),
         // Sky masks and transfers in slot order, probes left out never gathered but filled
-        // from the coarse tier (stage 9).
+        // from a coarse level (stage 9).
         (
             BakeSettings {
                 sparse: true,
@@ -687,7 +687,7 @@ fn sample_points_matches_the_cpu_sampler() {
         assert!(mixed > 0, "no point beside a probe inside geometry");
     }
     // Sparse placement: depth moments in slot order, points beside grid points left out and
-    // filled from the coarse tier (no depth moments: the facing term alone).
+    // filled from a coarse level (no depth moments: the facing term alone).
     let sparse = BakeSettings {
         sparse: true,
         ..cornell

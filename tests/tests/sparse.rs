@@ -1,6 +1,6 @@
 //! Sparse placement (`BakeSettings::sparse`, `prt_bake::placement`; issue 32, item 2): probes
-//! only at the grid points surfaces need and on a coarse tier, the rest recorded without data
-//! and filled from the coarse tier at runtime (`prt_format::tier`).
+//! only at the grid points surfaces need and on coarse levels, the rest recorded without data
+//! and filled from a coarse level at runtime (`prt_format::tier`).
 
 // SH maths index parallel arrays with one index; range loops read best.
 #![allow(clippy::needless_range_loop)]
@@ -70,7 +70,7 @@ fn sparse_placement_keeps_every_probe_surfaces_read() {
     let filled = asset.probes.iter().filter(|p| p.is_filled()).count();
     assert!(
         filled > 0,
-        "the coarse tier fills the air between the rooms"
+        "the coarse levels fill the air between the rooms"
     );
     assert_eq!(
         asset.probe_depth.len(),
@@ -246,7 +246,7 @@ fn dilated_probes_keep_their_own_visibility_maps() {
 }
 
 /// A 2 m box lit by a point light, a spot, a sun and a sky, baked sparse in bounds that reach
-/// 3.75 m past it: the fine tier around the box, the coarse tier and its fills beyond.
+/// 3.75 m past it: the fine tier around the box, the coarse levels and their fills beyond.
 fn box_in_the_open() -> (Asset, Vec<prt_format::sh::ShRgb>) {
     let settings = BakeSettings {
         bounds: Some([-1.25, -1.25, -1.25, 4.75, 4.75, 4.75]),
@@ -266,7 +266,7 @@ fn box_in_the_open() -> (Asset, Vec<prt_format::sh::ShRgb>) {
 /// Where a coarse level alone covers a point, the lookup returns the trilinear interpolation
 /// of that level's probes, exactly: the fills between them reproduce it (`prt_format::tier`).
 #[test]
-fn the_coarse_tier_is_interpolated_exactly() {
+fn a_coarse_level_is_interpolated_exactly() {
     let (asset, sh) = box_in_the_open();
     let g = asset.header.grid;
     assert_eq!(g.counts, [13, 13, 13]);
@@ -322,7 +322,7 @@ fn the_coarse_tier_is_interpolated_exactly() {
 }
 
 /// No seam where the fine tier meets the coarse one: along lines from the box's faces out
-/// into the coarse tier's air, the trilinear lookup is continuous at every grid face it
+/// into the air the coarse levels fill, the trilinear lookup is continuous at every grid face it
 /// crosses (a jump would be a seam), and the default lookup finds probes everywhere.
 #[test]
 fn the_lookup_is_seam_free_across_the_tier_boundary() {
@@ -429,7 +429,10 @@ fn broken_fills_are_invalid() {
             p.flags = 0;
         }
     });
-    assert!(e.contains("no coarse point around it is valid"), "{e}");
+    assert!(
+        e.contains("none of the level's probes around it (0, 4) is valid"),
+        "{e}"
+    );
     // The last coarse point (the last probe with data; no factors in an empty scene) left out
     // and marked filled: it would be filled from itself, and its neighbours from it.
     let e = message(&|a| {

@@ -7,8 +7,9 @@
 //! log-log plots with their Pareto fronts: the settings users pick from. The family's figures
 //! are medians over its levels (and the worst level), so that no level's size dominates.
 //!
-//! Placement is the uniform grid or the sparse one (`--placement`; `prt bake --uniform` or the default sparse, issue
-//! 32, item 2): probes only at the grid points surfaces need.
+//! Placement is the uniform grid or the sparse one (`--placement`; `prt bake --uniform` or the
+//! bake's default, issue 32, item 2): the grid points surfaces need and coarse levels around
+//! them.
 
 use std::fmt::Write as _;
 use std::path::PathBuf;

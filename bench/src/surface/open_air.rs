@@ -1,11 +1,11 @@
-//! `prt-bench open-air` (issue 32, item 2): what the coarse tier of sparse placement costs
+//! `prt-bench open-air` (issue 32, item 2): what the coarse levels of sparse placement costs
 //! away from surfaces. Each case is baked uniform and sparse at the same spacing and relit on
-//! the CPU with its rig; at every grid point the sparse bake fills from the coarse tier
+//! the CPU with its rig; at every grid point the sparse bake fills from a coarse level
 //! (`prt_format::tier`), the filled SH is compared with the uniform bake's own probe there,
 //! traced with the same ray lattice. That probe is the best the fine grid knows (the 2048-ray
 //! default sits near the Monte Carlo floor at probe centres, docs/results/coarse.md), so the
 //! difference is the error a point in open air (a dynamic object, a particle) gets from the
-//! coarse tier instead of the fine grid.
+//! coarse levels instead of the fine grid.
 //!
 //! Per point: the irradiance of both SH on the six axis-aligned normals, mean RGB; its
 //! relative error is `sum |E_sparse - E_uniform| / max(sum E_uniform, 1e-3 median)` over the
@@ -145,9 +145,9 @@ fn relative_errors(points: &[usize], truth: &[ShRgb], got: &[ShRgb]) -> Vec<f64>
 
 fn markdown(rows: &[Row]) -> String {
     let mut s = String::from(
-        "# Open air: the coarse tier against the fine grid (`prt-bench open-air`)\n\n\
+        "# Open air: the coarse levels against the fine grid (`prt-bench open-air`)\n\n\
          Each case baked `--uniform` and sparse (the default) at its default spacing, relit on the CPU with \
-         its rig; at each grid point the sparse bake fills from the coarse tier, the filled SH \
+         its rig; at each grid point the sparse bake fills from a coarse level, the filled SH \
          against the uniform bake's probe there: the relative irradiance error summed over the \
          six axis normals, mean and p95 over those points (`bench/src/surface/open_air.rs`).\n\n\
          | case | set | spacing m | grid points | probes with data, uniform / sparse | runtime MB, uniform / sparse | bake s, uniform / sparse | filled | compared | error mean | p95 |\n\

@@ -46,7 +46,7 @@ pub(super) enum Binding {
     ProbeSh,
     /// The probes the gather visits (`gather_list`).
     GatherList,
-    /// The grid points the coarse tier fills (`fill_list`).
+    /// The grid points the coarse levels fill (`fill_list`).
     FillList,
     Counters,
     SkyTransfer,

@@ -32,7 +32,7 @@
 //! 8. **gather** (one workgroup per probe of this update's window, per factor chunk): the probe's factors and sky
 //!    term reduced into SH9 RGB (subgroup adds where the adapter has them, a shared-memory tree
 //!    otherwise), written with its validity into the seven volume textures at once.
-//! 9. **fill** (per grid point a sparse bake left to the coarse tier, every one): its SH is
+//! 9. **fill** (per grid point a sparse bake left to the coarse levels, every one): its SH is
 //!    the trilinear interpolation of the coarse probes around it (`prt_format::tier`), written
 //!    with validity 1 like a gathered probe's.
 //!
@@ -45,8 +45,10 @@
 //! [`Bounces::Feedback`] there is always one: it feeds back for ever). With a
 //! budget of B probes, the gather visits B probes per update round robin over the P valid ones
 //! (a grid point without data, or an invalid probe, costs no window slot: a sparse asset's
-//! cycle is as short as its probes with data make it); a probe's texels always hold one
-//! complete gather, and a cycle of `ceil(P / B)` updates converges exactly to the full update.
+//! cycle is as short as its probes with data make it); a gathered probe's texels always hold
+//! one complete gather (a filled point's follow its corners as they are gathered), and a cycle
+//! of `ceil(P / B)` updates converges exactly to the full update. The fill (stage 9) runs over
+//! every filled point in every recorded update, whatever the budget.
 //! With [`Bounces`] beyond one, each such cycle adds one bounce.
 
 pub use sample::sample_points;
@@ -247,7 +249,7 @@ pub struct PrtRuntime {
     probe_count: u32,
     /// Valid probes: what the gather's round robin cycles over (`resources::gather_list`).
     gather_count: u32,
-    /// Grid points the coarse tier fills (`resources::fill_list`).
+    /// Grid points the coarse levels fill (`resources::fill_list`).
     fill_count: u32,
     brick_count: u32,
     coarse_count: u32,

@@ -61,7 +61,7 @@ pub struct AssetBuffers {
     /// one word, so that the buffer binds; `gather_count` of them count).
     pub gather_list: wgpu::Buffer,
     pub gather_count: u32,
-    /// The grid points the coarse tier fills, in grid order (`prt_format::tier`; at least one
+    /// The grid points the coarse levels fill, in grid order (`prt_format::tier`; at least one
     /// word, `fill_count` of them count).
     pub fill_list: wgpu::Buffer,
     pub fill_count: u32,

@@ -46,7 +46,7 @@ pub(super) enum Dispatch {
     ChunkProbes,
     /// A workgroup per probe of the update's window, one dispatch per factor chunk.
     Window,
-    /// A thread per grid point the coarse tier fills, every one in one dispatch.
+    /// A thread per grid point the coarse levels fill, every one in one dispatch.
     Fills,
 }
 
@@ -150,7 +150,7 @@ pub(super) const STAGES: [Stage; 9] = [
         runs: |_| true,
         bounces_only: false,
     },
-    // 9. Per grid point the coarse tier fills: its SH from the coarse probes around it.
+    // 9. Per grid point the coarse levels fill: its SH from the coarse probes around it.
     Stage {
         label: "prt fill",
         wgsl: &[Part::File(FILL)],
@@ -169,7 +169,7 @@ pub(super) struct Counts {
     pub(super) groups: u32,
     /// Coarse bricks (`prt_format::coarse`).
     pub(super) coarse: u32,
-    /// Grid points the coarse tier fills (`prt_format::tier`).
+    /// Grid points the coarse levels fill (`prt_format::tier`).
     pub(super) fills: u32,
 }
 
