@@ -254,11 +254,33 @@ fn amortised_updates_and_skipped_work() {
         let report = amortised.update(&mut encoder, &b, Some(budget)).unwrap();
         queue.submit([encoder.finish()]);
         updates += 1;
-        for (p, texel) in volume_sh(&amortised).iter().enumerate() {
+        let texels = volume_sh(&amortised);
+        for (p, texel) in texels.iter().enumerate() {
             assert!(
                 asset.probes[p].is_filled() || *texel == volume_a[p] || *texel == volume_b[p],
                 "update {updates}: probe {p} mixes two updates"
             );
+        }
+        // A filled point holds the interpolation of its corners as they are now.
+        let mut filled: Vec<ShRgb> = texels.iter().map(|t| t.unwrap_or_default()).collect();
+        prt_runtime::fill::fill(&asset, &mut filled);
+        for (p, _) in asset
+            .probes
+            .iter()
+            .enumerate()
+            .filter(|(_, q)| q.is_filled())
+        {
+            let got = texels[p].unwrap_or_default();
+            for k in 0..9 {
+                for c in 0..3 {
+                    let (a, b) = (got[k][c], filled[p][k][c]);
+                    let tol = 1e-6 * filled[p][0][c].abs() + 1e-9;
+                    assert!(
+                        (a - b).abs() <= tol,
+                        "update {updates}: filled {p} k {k}: {a} vs {b}"
+                    );
+                }
+            }
         }
         if report.pending_windows == 0 {
             break;
