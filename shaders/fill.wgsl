@@ -3,15 +3,18 @@
 // its level (its flags' FILL_LEVEL_SHIFT bits) around it, each weighted by its trilinear weight
 // times its validity and renormalised, written to probe_sh and, with validity 1, to its seven
 // volume texels in the gather's layout. Validation guarantees that a filled point reads no
-// filled point, so the threads are independent. Every recorded update runs it over every
-// filled point (its cost does not shrink with the gather's budget): a point's texels follow
-// its coarse points' latest gather.
+// filled point, so the threads are independent. Every recorded update runs a thread per filled
+// point, but only a point with a corner this update gathered (its dirty word holds the update's
+// serial) reads and writes SH: an amortised update redoes the points beside its window, and a
+// point's texels follow its corners' latest gather.
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> probes: array<Probe>;
 @group(0) @binding(2) var<storage, read_write> probe_sh: array<vec4<f32>>;
 // The filled grid points, in grid order.
 @group(0) @binding(3) var<storage, read> fill_list: array<u32>;
+// Per probe: 1 while it waits for a gather, else the serial of the update that last gathered it.
+@group(0) @binding(4) var<storage, read> probe_dirty: array<u32>;
 
 @group(1) @binding(0) var volume0: texture_storage_3d<VOLUME_FORMAT, write>;
 @group(1) @binding(1) var volume1: texture_storage_3d<VOLUME_FORMAT, write>;
@@ -40,6 +43,16 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     let lo = min(ijk / stride * stride, last);
     let hi = min(lo + stride, last);
     let t = vec3<f32>(ijk - lo) / vec3<f32>(max(hi - lo, vec3<u32>(1u)));
+    // Only a point beside a probe this update gathered can change.
+    var changed = false;
+    for (var corner = 0u; corner < 8u; corner = corner + 1u) {
+        let upper = vec3<bool>((corner & 1u) != 0u, (corner & 2u) != 0u, (corner & 4u) != 0u);
+        let at = select(lo, hi, upper);
+        changed = changed || probe_dirty[at.x + n.x * (at.y + n.y * at.z)] == params.update_serial;
+    }
+    if !changed {
+        return;
+    }
     var c: array<vec3<f32>, 9>;
     var total = 0.0;
     for (var corner = 0u; corner < 8u; corner = corner + 1u) {

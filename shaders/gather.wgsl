@@ -50,7 +50,7 @@ fn workgroup_probe(wg: vec3<u32>, lid: u32) -> u32 {
     if lid == 0u {
         var flag = 0u;
         if p != PROBE_NONE && p >= chunk.probe_begin && p < chunk.probe_end {
-            if (probes[p].flags & PROBE_VALID) != 0u && probe_dirty[p] != 0u {
+            if (probes[p].flags & PROBE_VALID) != 0u && probe_dirty[p] == 1u {
                 flag = 1u;
             }
         }
@@ -154,7 +154,8 @@ fn finish(p: u32, c: array<vec3<f32>, 9>) {
     textureStore(volume4, at, texel(vec4<f32>(c[5], c[6].x)));
     textureStore(volume5, at, texel(vec4<f32>(c[6].yz, c[7].xy)));
     textureStore(volume6, at, texel(vec4<f32>(c[7].z, c[8])));
-    probe_dirty[p] = 0u;
+    // Clean, and gathered by this update (the fill redoes the points beside it).
+    probe_dirty[p] = params.update_serial;
     atomicAdd(&counters.probes_gathered, 1u);
     var peak = 0.0;
     for (var k = 0u; k < 9u; k = k + 1u) {

@@ -181,7 +181,8 @@ struct Params {
     gather_count: u32,
     // Grid points the coarse levels fill (fill_list, prt_format::tier).
     fill_count: u32,
-    _pad1: u32,
+    // This update's number: the gather leaves it in the dirty word of each probe it gathers.
+    update_serial: u32,
     _pad2: u32,
 }
 

@@ -198,7 +198,10 @@ pub struct Params {
     pub gather_count: u32,
     /// Grid points the coarse levels fill (`fill_list`, `prt_format::tier`).
     pub fill_count: u32,
-    pub _pad: [u32; 2],
+    /// This update's number: the gather leaves it in the dirty word of each probe it gathers,
+    /// and the fill redoes only the points with such a probe among their corners.
+    pub update_serial: u32,
+    pub _pad: u32,
 }
 const _: () = assert!(std::mem::size_of::<Params>() == 128);
 

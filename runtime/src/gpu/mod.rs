@@ -47,8 +47,9 @@
 //! (a grid point without data, or an invalid probe, costs no window slot: a sparse asset's
 //! cycle is as short as its probes with data make it); a gathered probe's texels always hold
 //! one complete gather (a filled point's follow its corners as they are gathered), and a cycle
-//! of `ceil(P / B)` updates converges exactly to the full update. The fill (stage 9) runs over
-//! every filled point in every recorded update, whatever the budget.
+//! of `ceil(P / B)` updates converges exactly to the full update. The fill (stage 9) checks
+//! every filled point in every recorded update but redoes only those beside a probe the
+//! update gathered.
 //! With [`Bounces`] beyond one, each such cycle adds one bounce.
 
 pub use sample::sample_points;
@@ -242,6 +243,11 @@ fn dispatch_size(groups: u32) -> (u32, u32) {
     (x, groups.div_ceil(x).max(1))
 }
 
+/// The first update serial (`Params::update_serial`): a probe's dirty word is 0 before its
+/// first gather, 1 while it waits for one (`mark_probes`), and the serial of the update that
+/// last gathered it after.
+const GATHERED_FIRST: u32 = 2;
+
 /// The GPU relighting runtime of one asset.
 pub struct PrtRuntime {
     device: wgpu::Device,
@@ -274,6 +280,9 @@ pub struct PrtRuntime {
     cycle_gathered: u32,
     /// Cycles completed since the last change of lights or sky.
     cycles_done: u32,
+    /// This update's number (`Params::update_serial`): what the gather leaves in a probe's
+    /// dirty word, so that the fill redoes only the points beside probes it gathered.
+    serial: u32,
 }
 
 impl PrtRuntime {
@@ -375,6 +384,7 @@ impl PrtRuntime {
             cursor: 0,
             cycle_gathered: 0,
             cycles_done: 0,
+            serial: GATHERED_FIRST,
         })
     }
 
@@ -404,6 +414,8 @@ impl PrtRuntime {
                 ..UpdateReport::default()
             });
         };
+        // Serials from GATHERED_FIRST up, wrapping past the dirty word's other values.
+        self.serial = self.serial.checked_add(1).unwrap_or(GATHERED_FIRST);
         let params = self.params(&new, changed, light_words, &plan);
         if plan.relight() {
             self.cache_parity = params.cache_parity;
@@ -513,7 +525,8 @@ impl PrtRuntime {
             surfel_spread_sq: self.surfel_spread_sq,
             gather_count: self.gather_count,
             fill_count: self.fill_count,
-            _pad: [0; 2],
+            update_serial: self.serial,
+            _pad: 0,
         }
     }
 
