@@ -196,6 +196,9 @@ impl Setup<'_> {
             spacing: Some(spacing),
             cell_size: Some(self.cell),
             far_ratio: self.far_ratio,
+            // Every grid point traced: the cost per probe is measured against the prior art's,
+            // whose probes are all real (and the published rows were uniform).
+            sparse: false,
             ..BakeSettings::default()
         };
         let (asset, _) = prt_bake::bake(self.scene, &settings, &NoProgress)?;

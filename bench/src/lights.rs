@@ -80,6 +80,8 @@ pub fn table(args: &LightsArgs) -> Result<String> {
         rays: args.rays,
         spacing: args.spacing,
         double_sided: args.double_sided,
+        // The grid's probe count, as the published rows (uniform) were measured.
+        sparse: false,
         ..BakeSettings::default()
     };
     let (asset, _) = prt_bake::bake(&args.scene, &settings, &NoProgress)?;
