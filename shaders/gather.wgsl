@@ -4,14 +4,10 @@
 // Threads stride over the factor table, so a probe with more factors than threads loops and
 // nothing is ever dropped. Factor tables larger than one storage binding are split into chunks of
 // whole probes; the window is dispatched once per chunk, and each workgroup gathers only a probe
-// of its chunk. Thread 0 then writes the probe's SH to `probe_sh` and all seven
-// volume texels of the probe at once: a texel never holds half of an update.
-//
-// Volume layout (premultiplied by validity, so hardware trilinear filtering weights valid
-// probes only): texture 0 = (c0.rgb, validity); textures 1..6 = the 24 values c1.r, c1.g, c1.b,
-// c2.r, ... c8.b in order, four per texel. Invalid probes are never gathered: their texels stay
-// zero, validity included. Dilated probes (inside geometry, carrying a neighbour's table) are
-// gathered like valid ones.
+// of its chunk. Thread 0 then writes the probe's SH to `probe_sh` and all seven volume texels
+// of the probe at once (store_probe.wgsl, which holds the volume's layout and bindings).
+// Invalid probes are never gathered: their texels stay zero, validity included. Dilated probes
+// (inside geometry, carrying a neighbour's table) are gathered like valid ones.
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> probes: array<Probe>;
@@ -28,14 +24,6 @@
 // The probes the gather visits, in grid order: the valid ones (a grid point without data, or an
 // invalid probe, is never gathered, so a window of the round robin spends no work on them).
 @group(0) @binding(11) var<storage, read> gather_list: array<u32>;
-
-@group(1) @binding(0) var volume0: texture_storage_3d<VOLUME_FORMAT, write>;
-@group(1) @binding(1) var volume1: texture_storage_3d<VOLUME_FORMAT, write>;
-@group(1) @binding(2) var volume2: texture_storage_3d<VOLUME_FORMAT, write>;
-@group(1) @binding(3) var volume3: texture_storage_3d<VOLUME_FORMAT, write>;
-@group(1) @binding(4) var volume4: texture_storage_3d<VOLUME_FORMAT, write>;
-@group(1) @binding(5) var volume5: texture_storage_3d<VOLUME_FORMAT, write>;
-@group(1) @binding(6) var volume6: texture_storage_3d<VOLUME_FORMAT, write>;
 
 var<workgroup> go: u32;
 
@@ -136,24 +124,9 @@ fn accumulate(p: u32, lid: u32) -> array<vec3<f32>, 9> {
     return acc;
 }
 
-fn texel(v: vec4<f32>) -> vec4<f32> {
-    return clamp(v, vec4<f32>(-params.texel_limit), vec4<f32>(params.texel_limit));
-}
-
 // Thread 0: store the finished probe.
 fn finish(p: u32, c: array<vec3<f32>, 9>) {
-    for (var k = 0u; k < 9u; k = k + 1u) {
-        probe_sh[9u * p + k] = vec4<f32>(c[k], 0.0);
-    }
-    let n = params.grid_counts;
-    let at = vec3<i32>(vec3<u32>(p % n.x, (p / n.x) % n.y, p / (n.x * n.y)));
-    textureStore(volume0, at, texel(vec4<f32>(c[0], 1.0)));
-    textureStore(volume1, at, texel(vec4<f32>(c[1], c[2].x)));
-    textureStore(volume2, at, texel(vec4<f32>(c[2].yz, c[3].xy)));
-    textureStore(volume3, at, texel(vec4<f32>(c[3].z, c[4])));
-    textureStore(volume4, at, texel(vec4<f32>(c[5], c[6].x)));
-    textureStore(volume5, at, texel(vec4<f32>(c[6].yz, c[7].xy)));
-    textureStore(volume6, at, texel(vec4<f32>(c[7].z, c[8])));
+    store_probe(p, c);
     // Clean, and gathered by this update (the fill redoes the points beside it).
     probe_dirty[p] = params.update_serial;
     atomicAdd(&counters.probes_gathered, 1u);

@@ -93,7 +93,7 @@ pub fn plan(grid: &Grid, triangles: &[[Vec3; 3]]) -> Plan {
     // Per level, per cell by its lowest corner's grid index: whether a surface passes through.
     let mut busy = vec![vec![false; cells.len()]; levels];
     for (index, _) in cells.iter().enumerate().filter(|(_, &c)| c) {
-        let c = tier::ijk(grid, index);
+        let c = grid.ijk(index);
         for (l, busy) in busy.iter_mut().enumerate() {
             let lo: [u32; 3] =
                 std::array::from_fn(|a| tier::span(grid.counts[a], c[a], l as u32 + 1).0);
@@ -103,7 +103,7 @@ pub fn plan(grid: &Grid, triangles: &[[Vec3; 3]]) -> Plan {
     let level = (0..cells.len())
         .into_par_iter()
         .map(|index| {
-            let ijk = tier::ijk(grid, index);
+            let ijk = grid.ijk(index);
             // Whether a busy cell of level `l` (1..=LEVELS) holds the point.
             let in_busy = |l: u32| in_busy_cell(grid, ijk, l, &busy[l as usize - 1]);
             let traced = near[index]
@@ -181,7 +181,7 @@ pub fn mark_filled(
         .map(|index| {
             let level = plan.level.get(index).copied().unwrap_or(0);
             let lit = level > 0
-                && tier::corners(grid, tier::ijk(grid, index), u32::from(level))
+                && tier::corners(grid, grid.ijk(index), u32::from(level))
                     .iter()
                     .any(|&(c, w)| w > 0.0 && probes[c].is_valid());
             if lit {

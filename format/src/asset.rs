@@ -141,6 +141,12 @@ impl Grid {
         (i as usize) + self.counts[0] as usize * (j as usize + self.counts[1] as usize * k as usize)
     }
 
+    /// Probe `(i, j, k)` of linear index `index`: the inverse of [`Grid::index`].
+    pub fn ijk(&self, index: usize) -> [u32; 3] {
+        let n = self.counts.map(|c| c.max(1) as usize);
+        [index % n[0], index / n[0] % n[1], index / (n[0] * n[1])].map(|v| v as u32)
+    }
+
     /// Position of probe (i, j, k).
     pub fn position(&self, i: u32, j: u32, k: u32) -> [f32; 3] {
         [

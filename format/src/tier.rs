@@ -59,12 +59,6 @@ pub fn span(n: u32, i: u32, level: u32) -> (u32, u32, f32) {
     (lo, hi, t)
 }
 
-/// Grid index `index` of `grid` as `(i, j, k)`.
-pub fn ijk(grid: &Grid, index: usize) -> [u32; 3] {
-    let n = grid.counts.map(|c| c.max(1) as usize);
-    [index % n[0], index / n[0] % n[1], index / (n[0] * n[1])].map(|v| v as u32)
-}
-
 /// The eight points of `level` around grid point `ijk` (grid indices) and their trilinear
 /// weights, corner `c` taking the upper end along axis `a` when bit `a` of `c` is set (the
 /// order `shaders/fill.wgsl` visits them in). Weights of corners the point does not lie
@@ -118,13 +112,13 @@ mod tests {
         };
         let value: Vec<f32> = (0..grid.probe_count() as usize)
             .map(|index| {
-                let [i, j, k] = ijk(&grid, index);
+                let [i, j, k] = grid.ijk(index);
                 f(grid.position(i, j, k))
             })
             .collect();
         for level in 1..=LEVELS {
             for (index, &truth) in value.iter().enumerate() {
-                let filled: f32 = corners(&grid, ijk(&grid, index), level)
+                let filled: f32 = corners(&grid, grid.ijk(index), level)
                     .iter()
                     .map(|&(c, w)| w * value[c])
                     .sum();

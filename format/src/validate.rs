@@ -251,7 +251,7 @@ fn filled_points(asset: &Asset) -> Result<(), FormatError> {
                 ),
             ));
         }
-        let ijk = crate::tier::ijk(grid, index);
+        let ijk = grid.ijk(index);
         let used: Vec<(usize, Probe)> = crate::tier::corners(grid, ijk, level)
             .into_iter()
             .filter(|&(_, w)| w > 0.0)

@@ -19,7 +19,7 @@ pub fn fill(asset: &Asset, sh: &mut [ShRgb]) {
         if !probe.is_filled() || index >= sh.len() {
             continue;
         }
-        let ijk = tier::ijk(grid, index);
+        let ijk = grid.ijk(index);
         let mut acc = [[0.0f32; 3]; SH_COUNT];
         let mut total = 0.0f32;
         for (c, w) in tier::corners(grid, ijk, probe.fill_level()) {

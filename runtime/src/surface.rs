@@ -134,8 +134,8 @@ impl<'a> SurfaceSampler<'a> {
             return self.fallback.sample(position, normal);
         };
         let terms = &self.asset.surface.surfels[surfel];
-        let [nx, ny, _] = self.asset.header.grid.counts.map(|c| c as usize);
-        let ijk = |i: usize| [i % nx, i / nx % ny, i / (nx * ny)].map(|v| v as i32);
+        let grid = &self.asset.header.grid;
+        let ijk = |i: usize| grid.ijk(i).map(|v| v as i32);
         let centre = ijk(terms.centre as usize);
         let seen = std::cell::Cell::new(false);
         let mut out = self.trilinear.sample_weighted(position, normal, |i, _| {

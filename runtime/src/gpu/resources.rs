@@ -177,20 +177,8 @@ impl AssetBuffers {
                 [x, y, z, p.slot]
             })
             .collect();
-        let mut gather_list: Vec<u32> = (0..asset.probes.len() as u32)
-            .filter(|&p| asset.probes[p as usize].is_valid())
-            .collect();
-        let valid_probes = gather_list.len() as u32;
-        if gather_list.is_empty() {
-            gather_list.push(0);
-        }
-        let mut fill_list: Vec<u32> = (0..asset.probes.len() as u32)
-            .filter(|&p| asset.probes[p as usize].is_filled())
-            .collect();
-        let fill_count = fill_list.len() as u32;
-        if fill_list.is_empty() {
-            fill_list.push(0);
-        }
+        let (gather_list, valid_probes) = probe_list(asset, prt_format::Probe::is_valid);
+        let (fill_list, fill_count) = probe_list(asset, prt_format::Probe::is_filled);
         Ok(AssetBuffers {
             probes: upload("prt probes", bytemuck::cast_slice(&asset.probes))?,
             bricks: upload("prt bricks", bytemuck::cast_slice(&asset.bricks))?,
@@ -237,6 +225,19 @@ impl AssetBuffers {
             )?,
         })
     }
+}
+
+/// The indices of `asset`'s probes that `keep`, in grid order, and how many: at least one word
+/// (a zero when none), so that the buffer binds.
+fn probe_list(asset: &Asset, keep: fn(&prt_format::Probe) -> bool) -> (Vec<u32>, u32) {
+    let mut list: Vec<u32> = (0..asset.probes.len() as u32)
+        .filter(|&p| keep(&asset.probes[p as usize]))
+        .collect();
+    let count = list.len() as u32;
+    if list.is_empty() {
+        list.push(0);
+    }
+    (list, count)
 }
 
 impl StateBuffers {

@@ -6,7 +6,8 @@
 
 use prt_shaders::{
     BOUNCE_SURFELS, BRICK_RADIANCE, COARSE_RADIANCE, CULL_LIGHTS, FILL, GATHER, GATHER_SUBGROUP,
-    GATHER_TREE, LIGHT_SAMPLE, MARK_PROBES, NEAR_RADIANCE, RELIGHT_SURFELS, SHADOW_RAYS, TYPES,
+    GATHER_TREE, LIGHT_SAMPLE, MARK_PROBES, NEAR_RADIANCE, RELIGHT_SURFELS, SHADOW_RAYS,
+    STORE_PROBE, TYPES,
 };
 
 use super::bindings::{bind_groups, declared_bindings, Set};
@@ -145,7 +146,7 @@ pub(super) const STAGES: [Stage; 9] = [
     // 8. A workgroup per probe of the window: SH9 RGB into the volume textures.
     Stage {
         label: "prt gather",
-        wgsl: &[Part::File(GATHER), Part::Reduction],
+        wgsl: &[Part::File(GATHER), Part::File(STORE_PROBE), Part::Reduction],
         dispatch: Dispatch::Window,
         runs: |_| true,
         bounces_only: false,
@@ -153,7 +154,7 @@ pub(super) const STAGES: [Stage; 9] = [
     // 9. Per grid point the coarse levels fill: its SH from the coarse probes around it.
     Stage {
         label: "prt fill",
-        wgsl: &[Part::File(FILL)],
+        wgsl: &[Part::File(FILL), Part::File(STORE_PROBE)],
         dispatch: Dispatch::Fills,
         runs: |_| true,
         bounces_only: false,
