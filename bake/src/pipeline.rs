@@ -1,27 +1,30 @@
-//! The bake's stages in order, from the scene file to the validated asset: load, BVH, trace
-//! (merging as it goes, [`crate::stream`]), bricks (numbering them and encoding the factor
-//! tables), assemble. [`crate::bake`] runs them in its thread pool, then [`validate`]s the
-//! asset; each stage's time goes into the report.
+//! The bake's stages in order, from the scene file to the validated asset: load, BVH,
+//! placement (sparse bakes), trace (merging as it goes, [`crate::stream`]), bricks (validity,
+//! dilation, numbering the bricks and encoding the factor tables, [`bricks`]), surface terms,
+//! assemble ([`assemble`]). [`crate::bake`] runs them in its thread pool, then [`validate`]s
+//! the asset; each stage's time goes into the report.
 
 use std::path::Path;
 use std::time::Instant;
 
 use glam::Vec3;
-use prt_format::coarse::CoarseBricks;
-use prt_format::{
-    directions, Asset, BakeSettingsRecord, BakeStats, Factors, Header, Probe, TransferPrecision,
-    DEPTH_WORDS, NO_SLOT, PROBE_DILATED, PROBE_OFFSET, PROBE_VALID, U8_MAX_BRICK,
-};
-
+use prt_format::surface::SurfaceTerms;
+use prt_format::{directions, Asset};
 use prt_scene::Scene;
 
+mod assemble;
+mod bricks;
+
+use assemble::Assembled;
+use bricks::Bricks;
+
 use crate::accel::bvh;
-use crate::merge::{coarse, fold, snap};
+use crate::merge::{coarse, fold};
 use crate::surface_terms;
-use crate::tables::{encode, factors};
+use crate::tables::encode;
 use crate::{
-    diagnostics, dilate, offset, placement, probes, stream, trace, BakeError, BakeReport,
-    BakeSettings, Progress,
+    diagnostics, offset, placement, probes, stream, trace, BakeError, BakeReport, BakeSettings,
+    Progress,
 };
 
 /// The bake's stages, in the current thread pool: the asset, not yet validated, and the report.
@@ -54,99 +57,59 @@ pub(crate) fn bake_in_pool(
     let built = bvh_stage(&loaded, ploc_memory, &grid, settings, &mut report)?;
     lap(&mut report, "bvh", None);
 
-    let plan = settings
-        .sparse
-        .then(|| placement::plan(&grid, &loaded.scene.triangles));
-    if let Some(plan) = &plan {
-        let (placed, warning) = placement::summary(plan);
-        report.placed = Some(placed);
-        report.warnings.extend(warning);
-    }
-    let placed = plan.as_ref().map(placement::Plan::traced);
+    let plan = placement_stage(&grid, &loaded.scene.triangles, settings, &mut report);
+    // Per grid point, whether it is traced.
+    let placed = plan.as_ref().map_or_else(
+        || vec![true; grid.probe_count() as usize],
+        placement::Plan::traced,
+    );
     progress.start("trace", grid.probe_count());
     let cell_size = settings.cell_size_for(spacing);
-    let stage = (&grid, placed.as_deref());
+    let stage = (&grid, &placed[..]);
     let traced = trace_stage(&loaded, &built.bvh, stage, settings, cell_size, progress)?;
     report.rows_spilled = traced.rows.spilled_bytes();
     lap(&mut report, "trace", Some("bricks"));
 
-    let scene = &loaded.scene;
-    let valid = validity(&traced.rays, settings, &built, scene, &mut report);
-    let placed: Vec<bool> = traced.rays.iter().map(|r| r.placed).collect();
-    // Sparse: holes are filled only in cells a surface passes through.
-    let cells = plan
-        .as_ref()
-        .filter(|_| settings.dilate)
-        .map(placement::Plan::surface_cells);
-    let layout = (&valid[..], &placed[..], cells);
-    let (from, lens) = carried_layout(&grid, layout, settings, &traced.rows)?;
+    let plan_cells = (&grid, plan.as_ref(), &placed[..]);
+    let bricks = bricks::bricks_stage(
+        traced,
+        plan_cells,
+        (settings, cell_size),
+        (&loaded, &built),
+        &mut report,
+    )?;
+    let Bricks {
+        positions,
+        rays: traced,
+        from,
+        lens,
+        depth: probe_depth,
+        mut bricked,
+        coarse,
+        factors,
+    } = bricks;
     let carried = encode::Carried {
         from: &from,
         lens: &lens,
     };
-    let stream::Traced {
-        positions,
-        rays: traced,
-        rows: tables,
-        depth: probe_depth,
-        folder,
-        far_levels,
-    } = traced;
-    let probe_depth = with_data(probe_depth, &traced, &from);
-    let surfaces = snap::Surfaces {
-        bvh: &built.bvh,
-        triangles: &loaded.scene.triangles,
-        cell_size,
-        double_sided: settings.double_sided,
-    };
-    let (mut bricked, coarse, factors) = bricks_and_tables(
-        (folder, tables),
-        carried,
-        settings,
-        (cell_size, &far_levels),
-        &surfaces,
-    )?;
     lap(&mut report, "bricks", Some("surface"));
 
     let probe_positions: Vec<Vec3> = positions.iter().map(|&(p, _)| p).collect();
-    let inputs = surface_terms::Inputs {
-        bricks: &bricked.bricks,
-        grid: &grid,
-        probes: &probe_positions,
-        bvh: &built.bvh,
-        triangles: &scene.triangles,
-        // No cells: no terms (`surface_terms::surface_terms`).
-        cell_size: if settings.surface_terms {
-            cell_size
-        } else {
-            0.0
-        },
-    };
-    let surface = surface_terms::surface_terms(&inputs, &mut bricked.surfels);
-    if settings.surface_terms && cell_size > 0.0 && surface.is_empty() && !bricked.bricks.is_empty()
-    {
-        report.warnings.push(format!(
-            "no surface terms: {} bricks and their near groups overflow the lookup's tables \
-             (at most {} bricks, {} groups); surfaces are sampled from the probe volume alone",
-            bricked.bricks.len(),
-            prt_format::surface::MAX_TABLE_BRICKS,
-            prt_format::surface::MAX_GROUPS
-        ));
-    }
-    if let Some(w) = diagnostics::blind_warning(&surface) {
-        report.warnings.push(w);
-    }
+    let probes = (&grid, &probe_positions[..]);
+    let geometry = (&built.bvh, &loaded.scene.triangles[..]);
+    let cells = settings.surface_terms.then_some(cell_size);
+    let surface = surface_stage(probes, geometry, cells, &mut bricked, &mut report);
     lap(&mut report, "surface", Some("assemble"));
 
     let Assembled {
         probes: mut probes_out,
         sky_mask,
         sky_transfer,
-    } = assemble_probes(&traced, &positions, carried);
+    } = assemble::assemble_probes(&traced, &positions, carried);
     if let (Some(plan), Some(sparse)) = (&plan, &mut report.placed) {
         sparse.filled = placement::mark_filled(&grid, &mut probes_out, plan);
     }
-    let header = header(scene_path, &loaded, grid, settings, cell_size, &traced);
+    let header = assemble::header(scene_path, &loaded, grid, settings, cell_size, &traced);
     let asset = Asset {
         header,
         probes: probes_out,
@@ -166,21 +129,54 @@ pub(crate) fn bake_in_pool(
     Ok((asset, report))
 }
 
-/// The visibility maps of the probes with data (those that carry a table, `from`) out of
-/// `depth`, one map per traced probe of `traced`.
-fn with_data(mut depth: Vec<u32>, traced: &[trace::ProbeRays], from: &[Option<usize>]) -> Vec<u32> {
-    let mut kept = 0;
-    let maps = traced.iter().zip(from).filter(|(r, _)| r.placed);
-    for (map, (_, from)) in maps.enumerate() {
-        if from.is_some() {
-            let words = map * DEPTH_WORDS..(map + 1) * DEPTH_WORDS;
-            depth.copy_within(words, kept * DEPTH_WORDS);
-            kept += 1;
-        }
+/// The placement stage of a sparse bake (`None` for a uniform one): which grid points of
+/// `grid` the `triangles` need traced ([`placement::plan`]), summed up in the report.
+fn placement_stage(
+    grid: &prt_format::Grid,
+    triangles: &[[Vec3; 3]],
+    settings: &BakeSettings,
+    report: &mut BakeReport,
+) -> Option<placement::Plan> {
+    let plan = settings.sparse.then(|| placement::plan(grid, triangles))?;
+    let (placed, warning) = placement::summary(&plan);
+    report.placed = Some(placed);
+    report.warnings.extend(warning);
+    Some(plan)
+}
+
+/// The surface stage: the surface terms of the `bricked` surfels (written into them) against
+/// the probes of `grid` at `positions`, traced through `scene`'s BVH, with surfel cells of
+/// `cell_size` (`None`: no terms, [`surface_terms::surface_terms`]); warns when the lookup's
+/// tables cannot hold them or when most surfels see none of their probes.
+fn surface_stage(
+    (grid, positions): (&prt_format::Grid, &[Vec3]),
+    (bvh, triangles): (&bvh::SceneBvh, &[[Vec3; 3]]),
+    cell_size: Option<f32>,
+    bricked: &mut fold::Bricked,
+    report: &mut BakeReport,
+) -> SurfaceTerms {
+    let inputs = surface_terms::Inputs {
+        bricks: &bricked.bricks,
+        grid,
+        probes: positions,
+        bvh,
+        triangles,
+        cell_size: cell_size.unwrap_or(0.0),
+    };
+    let surface = surface_terms::surface_terms(&inputs, &mut bricked.surfels);
+    if cell_size.is_some_and(|c| c > 0.0) && surface.is_empty() && !bricked.bricks.is_empty() {
+        report.warnings.push(format!(
+            "no surface terms: {} bricks and their near groups overflow the lookup's tables \
+             (at most {} bricks, {} groups); surfaces are sampled from the probe volume alone",
+            bricked.bricks.len(),
+            prt_format::surface::MAX_TABLE_BRICKS,
+            prt_format::surface::MAX_GROUPS
+        ));
     }
-    depth.truncate(kept * DEPTH_WORDS);
-    depth.shrink_to_fit();
-    depth
+    if let Some(w) = diagnostics::blind_warning(&surface) {
+        report.warnings.push(w);
+    }
+    surface
 }
 
 /// Whether a probe was traced and its rays say it lies outside geometry ([`inside`]).
@@ -290,8 +286,8 @@ impl Lattice {
 struct ProbeTrace<'a> {
     tracer: &'a trace::Tracer<'a>,
     settings: &'a BakeSettings,
-    /// Per grid point, whether the placement keeps it ([`placement`]); `None`: every one.
-    placed: Option<&'a [bool]>,
+    /// Per grid point, whether the placement keeps it ([`placement`]).
+    placed: &'a [bool],
     /// The grid points, and how many along each axis.
     positions: &'a [Vec3],
     counts: [u32; 3],
@@ -308,7 +304,7 @@ impl ProbeTrace<'_> {
     fn trace(&self, index: usize) -> (Vec3, trace::ProbeRays, bool) {
         let settings = self.settings;
         let grid_p = self.positions[index];
-        if self.placed.is_some_and(|placed| !placed[index]) {
+        if !self.placed[index] {
             return (grid_p, trace::ProbeRays::not_placed(), false);
         }
         let [nx, ny, nz] = self.counts;
@@ -340,13 +336,13 @@ impl ProbeTrace<'_> {
     }
 }
 
-/// The trace stage: every probe of `grid` the placement keeps (all of them with `None`) traced
+/// The trace stage: every probe of `grid` the placement keeps (`placed`) traced
 /// through `bvh` over the `loaded` scene and its hits folded into bricks of cells of
 /// `cell_size` as they come ([`stream::trace_and_fold`]).
 fn trace_stage(
     loaded: &Loaded,
     bvh: &bvh::SceneBvh,
-    (grid, placed): (&prt_format::Grid, Option<&[bool]>),
+    (grid, placed): (&prt_format::Grid, &[bool]),
     settings: &BakeSettings,
     cell_size: f32,
     progress: &dyn Progress,
@@ -383,65 +379,6 @@ fn trace_stage(
         },
         progress,
     )
-}
-
-/// The asset's header: what was baked (`scene_path`, as `loaded`) on which `grid`, how
-/// (`settings`, cells of `cell_size`), and the counts of the `traced` rays.
-fn header(
-    scene_path: &Path,
-    loaded: &Loaded,
-    grid: prt_format::Grid,
-    settings: &BakeSettings,
-    cell_size: f32,
-    traced: &[trace::ProbeRays],
-) -> Header {
-    Header {
-        generator: format!("prt-bake {}", env!("CARGO_PKG_VERSION")),
-        source_name: prt_scene::source_name(scene_path),
-        source_hash: loaded.source_hash,
-        ray_count: settings.rays,
-        settings: settings_record(settings, grid.spacing, cell_size),
-        stats: stats(&loaded.scene, traced, settings),
-        grid,
-    }
-}
-
-/// The settings as the asset records them.
-fn settings_record(settings: &BakeSettings, spacing: f32, cell_size: f32) -> BakeSettingsRecord {
-    BakeSettingsRecord {
-        spacing,
-        bounds: settings.bounds,
-        cell_size,
-        merge_distance: cell_size,
-        merge_normal_cos: settings.merge_normal_cos,
-        double_sided_override: settings.double_sided,
-        invalid_backface_fraction: settings.invalid_backface_fraction,
-        transfer_precision: settings.transfer_precision,
-        far_ratio: if cell_size > 0.0 {
-            settings.far_ratio
-        } else {
-            0.0
-        },
-    }
-}
-
-/// The bake's counts for the asset's header: `traced` probes of `settings.rays` rays each over
-/// `scene`. Hits of probes inside geometry make no surfels (`stream::fold_block`), so the
-/// unmerged surfels are the other probes' hits.
-fn stats(scene: &Scene, traced: &[trace::ProbeRays], settings: &BakeSettings) -> BakeStats {
-    let n = settings.rays;
-    let traced = || traced.iter().filter(|r| r.placed);
-    // Every ray hits a surface or the sky.
-    let hits_of = |r: &trace::ProbeRays| u64::from(n - r.sky_rays);
-    let hits: u64 = traced().map(hits_of).sum();
-    BakeStats {
-        triangles: scene.triangles.len() as u64,
-        degenerate_triangles_skipped: scene.degenerate_skipped,
-        rays: traced().count() as u64 * u64::from(n),
-        ray_hits: hits,
-        backface_hits: traced().map(|r| u64::from(r.backface_rays)).sum(),
-        surfels_unmerged: traced().filter(|r| !inside(settings, r)).map(hits_of).sum(),
-    }
 }
 
 /// Validates a baked asset (`scene_path` names the scene in the error): a failure here is a bug
@@ -518,172 +455,4 @@ fn load(
         winding_warning_at,
     };
     Ok((loaded, memory))
-}
-
-/// The bricks stage: numbers the bricks and finishes their surfels (those behind their
-/// surface put back on it, [`snap`]), then encodes the factor tables the probes carry into the
-/// asset's table ([`encode::encode_tables`]), freeing the rows as it goes; fails when u8
-/// factors cannot address the bricks.
-fn bricks_and_tables(
-    (folder, tables): (fold::BrickFolder, factors::Rows),
-    carried: encode::Carried,
-    settings: &BakeSettings,
-    (cell_size, far_levels): (f32, &[u8]),
-    surfaces: &snap::Surfaces,
-) -> Result<(fold::Bricked, CoarseBricks, Factors), BakeError> {
-    let (bricked, remap) = folder.finish_placed(&|s, cell| surfaces.place(s, cell));
-    let mut used = vec![0u8; bricked.bricks.len()];
-    for (&b, &l) in remap.iter().zip(far_levels) {
-        used[b as usize] |= l;
-    }
-    let (coarse, placement) = coarse::build(&bricked.keys, &bricked.fits, &used);
-    let u8_rows = settings.transfer_precision == TransferPrecision::U8;
-    let all = bricked.bricks.len() + coarse.bricks.len();
-    if u8_rows && all > U8_MAX_BRICK as usize + 1 {
-        return Err(BakeError::Setting {
-            name: "precision",
-            value: format!(
-                "u8 with {} bricks and {} coarse bricks",
-                bricked.bricks.len(),
-                coarse.bricks.len()
-            ),
-            reason: "the 8-bit factor encoding addresses at most 16,777,216 bricks; use f16",
-        });
-    }
-    let encoding = (settings.transfer_precision, 4.0 * cell_size);
-    let numbering = (&remap[..], &bricked.bricks[..], &placement);
-    let factors = encode::encode_tables(tables, carried, numbering, encoding)?;
-    Ok((bricked, coarse, factors))
-}
-
-/// Per probe, whether it is valid (placed and not inside geometry, [`valid`]); warns when most
-/// placed probes are not, with the winding hint when the BVH stage found inconsistent winding
-/// (counting it now if it did not run then).
-fn validity(
-    rays: &[trace::ProbeRays],
-    settings: &BakeSettings,
-    built: &Built,
-    scene: &Scene,
-    report: &mut BakeReport,
-) -> Vec<bool> {
-    let valid: Vec<bool> = rays.iter().map(|r| valid(settings, r)).collect();
-    let placed: Vec<bool> = (rays.iter().zip(&valid))
-        .filter(|(r, _)| r.placed)
-        .map(|(_, &v)| v)
-        .collect();
-    let count_winding = || {
-        built
-            .winding
-            .unwrap_or_else(|| diagnostics::winding(&scene.triangles))
-    };
-    let hint = built.winding_hint;
-    if let Some(w) = diagnostics::inside_warning(&placed, settings, count_winding, hint) {
-        report.warnings.push(w);
-    }
-    valid
-}
-
-/// Per probe of `grid`: whose factor table it carries (its own when valid, else, placed, its
-/// dilation source's when the settings dilate, into holes of `cells` if given, else none) and
-/// how many factors that is; fails when they pass 2^32 in all.
-fn carried_layout(
-    grid: &prt_format::Grid,
-    (valid, placed, cells): (&[bool], &[bool], Option<&[bool]>),
-    settings: &BakeSettings,
-    tables: &factors::Rows,
-) -> Result<(Vec<Option<usize>>, Vec<usize>), BakeError> {
-    let sources = if settings.dilate {
-        dilate::sources(grid, valid, cells)
-    } else {
-        vec![None; valid.len()]
-    };
-    let from: Vec<Option<usize>> = valid
-        .iter()
-        .zip(&sources)
-        .enumerate()
-        .map(|(p, (&valid, &source))| match valid {
-            true => Some(p),
-            false => source.filter(|_| placed[p]),
-        })
-        .collect();
-    let lens: Vec<usize> = from
-        .iter()
-        .map(|f| f.map_or(0, |q| tables.len(q)))
-        .collect();
-    let factor_count: u64 = lens.iter().map(|&len| len as u64).sum();
-    if factor_count > u64::from(u32::MAX) {
-        return Err(BakeError::Setting {
-            name: "spacing",
-            value: format!("{factor_count} factors"),
-            reason: "more than 2^32 factors (dilation copies tables into probes inside geometry): use fewer probes or rays, or --no-dilation",
-        });
-    }
-    Ok((from, lens))
-}
-
-/// Per probe, in probe order: its record, and the sky mask and sky transfer it carries with
-/// its factor table (`carried`). A dilated probe carries its source's table, sky and ray counts
-/// (the record describes the data it carries); only its position is its own. An invalid probe
-/// that is not dilated, like a grid point the placement left out, carries nothing: no table,
-/// flags or slot in the sky and visibility sections ([`prt_format::Probe::slot`]).
-fn assemble_probes(
-    traced: &[trace::ProbeRays],
-    positions: &[(Vec3, bool)],
-    carried: encode::Carried,
-) -> Assembled {
-    let mut probes = Vec::with_capacity(traced.len());
-    let placed = carried.from.iter().filter(|f| f.is_some()).count();
-    let mask_words = traced
-        .iter()
-        .find(|r| r.placed)
-        .map_or(0, |r| r.sky_mask.len());
-    let mut sky_mask = Vec::with_capacity(mask_words * placed);
-    let mut sky_transfer = Vec::with_capacity(placed);
-    let mut first_factor = 0u32;
-    let mut slot = 0u32;
-    for (p, &(pos, moved)) in positions.iter().enumerate() {
-        // Left out by the placement, or invalid with nothing to copy: never gathered, weighed
-        // 0 by every lookup, so its sky and visibility data would never be read.
-        let (flags, from) = match carried.from[p] {
-            Some(q) if q == p => (PROBE_VALID, p),
-            Some(q) => (PROBE_VALID | PROBE_DILATED, q),
-            None => {
-                probes.push(Probe {
-                    position: pos.to_array(),
-                    flags: if moved { PROBE_OFFSET } else { 0 },
-                    slot: NO_SLOT,
-                    first_factor,
-                    ..Probe::default()
-                });
-                continue;
-            }
-        };
-        let len = carried.lens[p] as u32;
-        probes.push(Probe {
-            position: pos.to_array(),
-            flags: flags | if moved { PROBE_OFFSET } else { 0 },
-            first_factor,
-            factor_count: len,
-            sky_rays: traced[from].sky_rays,
-            slot,
-        });
-        // At most 2^32 - 1 factors in all (checked before the tables were encoded), and as
-        // many placed probes as grid points.
-        first_factor += len;
-        slot += 1;
-        sky_mask.extend_from_slice(&traced[from].sky_mask);
-        sky_transfer.push(traced[from].sky_transfer);
-    }
-    Assembled {
-        probes,
-        sky_mask,
-        sky_transfer,
-    }
-}
-
-/// The per-probe sections of the asset, before encoding.
-struct Assembled {
-    probes: Vec<Probe>,
-    sky_mask: Vec<u32>,
-    sky_transfer: Vec<[f32; prt_format::sh::SH_COUNT]>,
 }

@@ -168,8 +168,8 @@ pub fn summary(plan: &Plan) -> (crate::Placed, Option<String>) {
 
 /// Flags [`PROBE_FILLED`] and its level ([`prt_format::FILL_LEVEL_SHIFT`]) on every grid point
 /// of `grid` the plan leaves out that has a valid point of its level with a positive weight
-/// ([`tier::corners`]), and returns how many per level (1..=[`tier::LEVELS`]). Those points are
-/// all traced, so none is filled itself (as validation requires). A point whose level's points
+/// ([`tier::used_corners`]), and returns how many per level (1..=[`tier::LEVELS`]). Those
+/// points are all traced, so none is filled itself (as validation requires). A point whose level's points
 /// are all inside geometry stays without light, as a point inside geometry should.
 pub fn mark_filled(
     grid: &Grid,
@@ -181,9 +181,8 @@ pub fn mark_filled(
         .map(|index| {
             let level = plan.level.get(index).copied().unwrap_or(0);
             let lit = level > 0
-                && tier::corners(grid, grid.ijk(index), u32::from(level))
-                    .iter()
-                    .any(|&(c, w)| w > 0.0 && probes[c].is_valid());
+                && tier::used_corners(grid, grid.ijk(index), u32::from(level))
+                    .any(|(c, _)| probes[c].is_valid());
             if lit {
                 level
             } else {

@@ -5,7 +5,7 @@
 //!
 //! What a probe keeps once its block is folded is what the asset needs from it: its sky mask,
 //! sky transfer and ray counts, its visibility map, and its factor rows (keyed by provisional
-//! brick until [`BrickFolder::finish`] numbers the bricks). Blocks are folded in probe order and
+//! brick until [`BrickFolder::finish_placed`] numbers the bricks). Blocks are folded in probe order and
 //! a probe's hits in the order its rays were traced (`crate::trace::coherent_order`), so the
 //! result is the same for any block size or thread count.
 

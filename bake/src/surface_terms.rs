@@ -13,7 +13,7 @@
 //!    no longer than [`REACH`] spacings. An escaping ray adds its SH9 basis values to the
 //!    surfel's `open`; a ray that hits finds the brick of the surface it hits (its key, facing
 //!    axis; else the nearest centroid of that axis among the 26 neighbouring keys) and adds one
-//!    hit there to its near group's field ([`brick_terms`] says why groups).
+//!    hit there to its near group's field (`group_surfels` says why groups).
 //!
 //! [`RAYS`] and [`REACH`] were chosen on the level family's tuning seeds with `prt-bench
 //! surface` (`docs/results/surface_candidates.md`): 64 rays measure as 256 do (median level

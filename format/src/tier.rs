@@ -78,6 +78,14 @@ pub fn corners(grid: &Grid, ijk: [u32; 3], level: u32) -> [(usize, f32); 8] {
     })
 }
 
+/// The [`corners`] with a positive weight: the points a filled point at `ijk` is interpolated
+/// from (what the runtime's fill reads, the bake's marking and validation check).
+pub fn used_corners(grid: &Grid, ijk: [u32; 3], level: u32) -> impl Iterator<Item = (usize, f32)> {
+    corners(grid, ijk, level)
+        .into_iter()
+        .filter(|&(_, w)| w > 0.0)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -229,8 +229,8 @@ fn probe_records(asset: &Asset) -> Result<(), FormatError> {
 
 /// Each filled grid point ([`PROBE_FILLED`], no data by [`probe_records`]): its level is one of
 /// the tiers', among the points of that level it is interpolated from with a positive weight
-/// ([`crate::tier::corners`]) one is valid, and none is filled itself (the runtime fills every
-/// point in one pass, reading only gathered probes).
+/// ([`crate::tier::used_corners`]) one is valid, and none is filled itself (the runtime fills
+/// every point in one pass, reading only gathered probes).
 fn filled_points(asset: &Asset) -> Result<(), FormatError> {
     let grid = &asset.header.grid;
     for (index, p) in asset
@@ -252,9 +252,7 @@ fn filled_points(asset: &Asset) -> Result<(), FormatError> {
             ));
         }
         let ijk = grid.ijk(index);
-        let used: Vec<(usize, Probe)> = crate::tier::corners(grid, ijk, level)
-            .into_iter()
-            .filter(|&(_, w)| w > 0.0)
+        let used: Vec<(usize, Probe)> = crate::tier::used_corners(grid, ijk, level)
             .map(|(c, _)| (c, asset.probes[c]))
             .collect();
         let corners: Vec<String> = used.iter().map(|(c, _)| c.to_string()).collect();

@@ -22,9 +22,9 @@ pub fn fill(asset: &Asset, sh: &mut [ShRgb]) {
         let ijk = grid.ijk(index);
         let mut acc = [[0.0f32; 3]; SH_COUNT];
         let mut total = 0.0f32;
-        for (c, w) in tier::corners(grid, ijk, probe.fill_level()) {
+        for (c, w) in tier::used_corners(grid, ijk, probe.fill_level()) {
             let valid = asset.probes.get(c).is_some_and(|p| p.is_valid());
-            if w <= 0.0 || !valid || c >= sh.len() {
+            if !valid || c >= sh.len() {
                 continue;
             }
             total += w;

@@ -37,7 +37,7 @@ pub struct Bricked {
     pub fits: Vec<BrickFit>,
 }
 
-/// The sums behind a brick's linear radiance fit ([`brick_of`]), in f64: the surfels' weight,
+/// The sums behind a brick's linear radiance fit (`brick_of`), in f64: the surfels' weight,
 /// their weighted mean position, and the weighted second moment of their positions about it.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct BrickFit {
@@ -51,7 +51,7 @@ pub struct BrickFit {
 /// carries). Hits must come in the bake's order (probe by probe, each probe's in the order its
 /// rays were traced): a surfel is the running mean
 /// of the hits that joined it, and a hit joins the first surfel of its cell, in creation order,
-/// whose first normal agrees with its own. [`BrickFolder::finish`] numbers the bricks by key,
+/// whose first normal agrees with its own. [`BrickFolder::finish_placed`] numbers the bricks by key,
 /// so the result depends only on the hits and their order, never on how they were blocked or
 /// on the thread count (`tests::blocking_does_not_change_the_result`).
 ///
@@ -259,7 +259,7 @@ impl BrickFolder {
         self.surfel_counts[b as usize] += 1;
     }
 
-    /// Asks for what [`BrickFolder::finish`] reads next: the first surfel of each of brick `b`'s
+    /// Asks for what [`BrickFolder::finish_placed`] reads next: the first surfel of each of brick `b`'s
     /// cells, and the cell heads of the brick after it, `next`. Bricks are finished in key
     /// order, their surfels were made in arrival order, so each is a cache miss; the loads do
     /// not depend on each other, but the walk of the cells would wait for each in turn.
@@ -423,7 +423,7 @@ fn brick_of(surfels: &mut [Surfel], flags: u32, first_surfel: u32) -> (Brick, Br
     (brick, fit)
 }
 
-/// The regularisation of a fit's moment ([`brick_of`]): a thousandth of its trace on the
+/// The regularisation of a fit's moment (`brick_of`): a thousandth of its trace on the
 /// diagonal.
 pub fn regularised(moment: DMat3) -> DMat3 {
     let trace = moment.x_axis.x + moment.y_axis.y + moment.z_axis.z;

@@ -84,7 +84,7 @@ pub fn probe_rows(
 /// Where a row of sums keeps its level ([`crate::merge::coarse`]) above its provisional brick:
 /// far hits go to coarse bricks only in merged bakes, whose provisional bricks are below
 /// [`crate::merge::index::MAX_BRICKS`], 2^28 (an unmerged bake's use all 32 bits and carry no
-/// level: [`Placement::sums_brick`]).
+/// level: `tables::encode::Placement::sums_brick`).
 const LEVEL_SHIFT: u32 = 28;
 const BRICK_BITS: u32 = (1 << LEVEL_SHIFT) - 1;
 
@@ -143,8 +143,8 @@ pub enum ProbeRows {
 /// A u8 factor waiting for its brick's final number and centroid, in 28 bytes: the provisional
 /// brick waits in the factor's own brick field, which [`FactorU8::place`] overwrites (a row
 /// beside it took 32 bytes; the rows are the bake's largest working set). A provisional brick
-/// past [`U8_MAX_BRICK`] loses its high bits here, but such a bake is refused before
-/// `encode_u8` reads them (`pipeline::bricks_and_tables`; provisional and final bricks are as
+/// past [`prt_format::U8_MAX_BRICK`] loses its high bits here, but such a bake is refused before
+/// `encode_u8` reads them (`pipeline::bricks::bricks_and_tables`; provisional and final bricks are as
 /// many).
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 #[repr(C)]
@@ -237,7 +237,7 @@ impl ProbeRows {
 }
 
 /// Encodes a finished row ([`ProbeRows::of`]) into `rows`, split into rows of at most
-/// [`U8_MAX_RAYS`] rays, for a lattice whose rays carry `dc_per_ray` ([`FactorU8::dc_per_ray`]:
+/// [`prt_format::U8_MAX_RAYS`] rays, for a lattice whose rays carry `dc_per_ray` ([`FactorU8::dc_per_ray`]:
 /// worked out once per probe, an f64 division a row otherwise).
 fn push_u8(rows: &mut Vec<RowU8>, row: FactorRow, dc_per_ray: f32) {
     let (brick, rays, sh, sum) = row;

@@ -5,7 +5,7 @@
 //! count alone (about as large as the asset).
 //! They cannot be encoded as they arrive: a factor names its brick's final number and is placed
 //! from its brick's centroid, both known only once every probe is folded
-//! ([`crate::merge::fold::BrickFolder::finish`]). So past the budget the oldest chunks are written
+//! ([`crate::merge::fold::BrickFolder::finish_placed`]). So past the budget the oldest chunks are written
 //! to a file and read back one at a time when the tables are encoded, which is also in probe
 //! order: the memory the rows hold stays within the budget whatever the probe count, and the
 //! asset's bytes do not change. Past the budget, two more chunks are held: the one being

@@ -1,0 +1,186 @@
+//! The bricks stage: which traced probes are valid and whose factor table each carries
+//! (dilation into holes), then the bricks numbered, their surfels finished and the factor
+//! tables encoded.
+
+use glam::Vec3;
+use prt_format::coarse::CoarseBricks;
+use prt_format::{Factors, TransferPrecision, U8_MAX_BRICK};
+use prt_scene::Scene;
+
+use super::{assemble, valid, Built, Loaded};
+use crate::merge::{coarse, fold, snap};
+use crate::tables::{encode, factors};
+use crate::{diagnostics, dilate, placement, stream, trace, BakeError, BakeReport, BakeSettings};
+
+/// What the bricks stage gives the bake.
+pub(super) struct Bricks {
+    /// Per grid point, where its probe's rays started and whether it left its grid point.
+    pub(super) positions: Vec<(Vec3, bool)>,
+    /// Per grid point, what its rays saw ([`trace::ProbeRays::not_placed`] where not traced).
+    pub(super) rays: Vec<trace::ProbeRays>,
+    /// Per grid point, whose factor table it carries, and how many factors that is
+    /// ([`carried_layout`]).
+    pub(super) from: Vec<Option<usize>>,
+    pub(super) lens: Vec<usize>,
+    /// The visibility maps of the probes with data, in slot order.
+    pub(super) depth: Vec<u32>,
+    pub(super) bricked: fold::Bricked,
+    pub(super) coarse: CoarseBricks,
+    pub(super) factors: Factors,
+}
+
+/// The bricks stage over what the trace stage gave (`traced`): which probes are valid
+/// ([`validity`]) and whose table each carries ([`carried_layout`]: on a sparse bake, of
+/// `plan`, holes are filled only in cells a surface passes through), then the bricks and the
+/// encoded factor tables ([`bricks_and_tables`]).
+pub(super) fn bricks_stage(
+    traced: stream::Traced,
+    (grid, plan, placed): (&prt_format::Grid, Option<&placement::Plan>, &[bool]),
+    (settings, cell_size): (&BakeSettings, f32),
+    (loaded, built): (&Loaded, &Built),
+    report: &mut BakeReport,
+) -> Result<Bricks, BakeError> {
+    let valid = validity(&traced.rays, settings, built, &loaded.scene, report);
+    let cells = plan
+        .filter(|_| settings.dilate)
+        .map(placement::Plan::surface_cells);
+    let layout = (&valid[..], placed, cells);
+    let (from, lens) = carried_layout(grid, layout, settings, &traced.rows)?;
+    let stream::Traced {
+        positions,
+        rays,
+        rows: tables,
+        depth,
+        folder,
+        far_levels,
+    } = traced;
+    let depth = assemble::with_data(depth, &rays, &from);
+    let surfaces = snap::Surfaces {
+        bvh: &built.bvh,
+        triangles: &loaded.scene.triangles,
+        cell_size,
+        double_sided: settings.double_sided,
+    };
+    let carried = encode::Carried {
+        from: &from,
+        lens: &lens,
+    };
+    let (bricked, coarse, factors) = bricks_and_tables(
+        (folder, tables),
+        carried,
+        settings,
+        (cell_size, &far_levels),
+        &surfaces,
+    )?;
+    Ok(Bricks {
+        positions,
+        rays,
+        from,
+        lens,
+        depth,
+        bricked,
+        coarse,
+        factors,
+    })
+}
+
+/// The bricks stage: numbers the bricks and finishes their surfels (those behind their
+/// surface put back on it, [`snap`]), then encodes the factor tables the probes carry into the
+/// asset's table ([`encode::encode_tables`]), freeing the rows as it goes; fails when u8
+/// factors cannot address the bricks.
+fn bricks_and_tables(
+    (folder, tables): (fold::BrickFolder, factors::Rows),
+    carried: encode::Carried,
+    settings: &BakeSettings,
+    (cell_size, far_levels): (f32, &[u8]),
+    surfaces: &snap::Surfaces,
+) -> Result<(fold::Bricked, CoarseBricks, Factors), BakeError> {
+    let (bricked, remap) = folder.finish_placed(&|s, cell| surfaces.place(s, cell));
+    let mut used = vec![0u8; bricked.bricks.len()];
+    for (&b, &l) in remap.iter().zip(far_levels) {
+        used[b as usize] |= l;
+    }
+    let (coarse, placement) = coarse::build(&bricked.keys, &bricked.fits, &used);
+    let u8_rows = settings.transfer_precision == TransferPrecision::U8;
+    let all = bricked.bricks.len() + coarse.bricks.len();
+    if u8_rows && all > U8_MAX_BRICK as usize + 1 {
+        return Err(BakeError::Setting {
+            name: "precision",
+            value: format!(
+                "u8 with {} bricks and {} coarse bricks",
+                bricked.bricks.len(),
+                coarse.bricks.len()
+            ),
+            reason: "the 8-bit factor encoding addresses at most 16,777,216 bricks; use f16",
+        });
+    }
+    let encoding = (settings.transfer_precision, 4.0 * cell_size);
+    let numbering = (&remap[..], &bricked.bricks[..], &placement);
+    let factors = encode::encode_tables(tables, carried, numbering, encoding)?;
+    Ok((bricked, coarse, factors))
+}
+
+/// Per probe, whether it is valid (placed and not inside geometry, [`valid`]); warns when most
+/// placed probes are not, with the winding hint when the BVH stage found inconsistent winding
+/// (counting it now if it did not run then).
+fn validity(
+    rays: &[trace::ProbeRays],
+    settings: &BakeSettings,
+    built: &Built,
+    scene: &Scene,
+    report: &mut BakeReport,
+) -> Vec<bool> {
+    let valid: Vec<bool> = rays.iter().map(|r| valid(settings, r)).collect();
+    let placed: Vec<bool> = (rays.iter().zip(&valid))
+        .filter(|(r, _)| r.placed)
+        .map(|(_, &v)| v)
+        .collect();
+    let count_winding = || {
+        built
+            .winding
+            .unwrap_or_else(|| diagnostics::winding(&scene.triangles))
+    };
+    let hint = built.winding_hint;
+    if let Some(w) = diagnostics::inside_warning(&placed, settings, count_winding, hint) {
+        report.warnings.push(w);
+    }
+    valid
+}
+
+/// Per probe of `grid`: whose factor table it carries (its own when valid, else, placed, its
+/// dilation source's when the settings dilate, into holes of `cells` if given, else none) and
+/// how many factors that is; fails when they pass 2^32 in all.
+fn carried_layout(
+    grid: &prt_format::Grid,
+    (valid, placed, cells): (&[bool], &[bool], Option<&[bool]>),
+    settings: &BakeSettings,
+    tables: &factors::Rows,
+) -> Result<(Vec<Option<usize>>, Vec<usize>), BakeError> {
+    let sources = if settings.dilate {
+        dilate::sources(grid, valid, cells)
+    } else {
+        vec![None; valid.len()]
+    };
+    let from: Vec<Option<usize>> = valid
+        .iter()
+        .zip(&sources)
+        .enumerate()
+        .map(|(p, (&valid, &source))| match valid {
+            true => Some(p),
+            false => source.filter(|_| placed[p]),
+        })
+        .collect();
+    let lens: Vec<usize> = from
+        .iter()
+        .map(|f| f.map_or(0, |q| tables.len(q)))
+        .collect();
+    let factor_count: u64 = lens.iter().map(|&len| len as u64).sum();
+    if factor_count > u64::from(u32::MAX) {
+        return Err(BakeError::Setting {
+            name: "spacing",
+            value: format!("{factor_count} factors"),
+            reason: "more than 2^32 factors (dilation copies tables into probes inside geometry): use fewer probes or rays, or --no-dilation",
+        });
+    }
+    Ok((from, lens))
+}
