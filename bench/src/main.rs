@@ -9,6 +9,7 @@ mod bake;
 mod fuzz;
 mod gpu;
 mod lights;
+mod path_lookup;
 mod plot;
 mod ray_lookup;
 mod render;

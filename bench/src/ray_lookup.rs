@@ -104,6 +104,8 @@ pub struct NearLight {
     radiance: Vec<BrickRadiance>,
     centroids: Vec<Vec3>,
     axes: Vec<u32>,
+    /// Back-face bricks of single-sided surfaces (black; [`Self::find`] passes them over).
+    backface: Vec<bool>,
     /// Bricks by cell of `size` metres (a brick's extent), each in every cell its bounds touch.
     cells: HashMap<(i32, i32, i32), Vec<u32>>,
     size: f32,
@@ -122,9 +124,6 @@ impl NearLight {
     pub fn new(bricks: &[Brick], size: f32, radiance: Vec<BrickRadiance>) -> Self {
         let mut cells: HashMap<(i32, i32, i32), Vec<u32>> = Default::default();
         for (i, b) in bricks.iter().enumerate() {
-            if b.flags & BRICK_BACKFACE != 0 {
-                continue;
-            }
             let lo = (Vec3::from(b.min) / size).floor().as_ivec3();
             let hi = (Vec3::from(b.max) / size).floor().as_ivec3();
             for x in lo.x..=hi.x {
@@ -139,6 +138,10 @@ impl NearLight {
             radiance,
             centroids: bricks.iter().map(|b| Vec3::from(b.centroid)).collect(),
             axes: bricks.iter().map(|b| b.flags & BRICK_AXIS_MASK).collect(),
+            backface: bricks
+                .iter()
+                .map(|b| b.flags & BRICK_BACKFACE != 0)
+                .collect(),
             cells,
             size,
         }
@@ -162,16 +165,23 @@ impl NearLight {
     /// What a ray from `o` along `d` sees where it hits triangle `tri` of `geo` at distance
     /// `t`: the radiance of the nearest brick of the triangle's side that faces the ray.
     fn hit_radiance(&self, geo: &Geometry, o: Vec3, d: Vec3, t: f32, tri: usize) -> [f32; 3] {
-        let tri = &geo.triangles[tri];
-        let (v0, v1, v2) = (Vec3::from(tri.v0), Vec3::from(tri.v1), Vec3::from(tri.v2));
-        let normal = (v1 - v0).cross(v2 - v0);
-        let facing = if normal.dot(d) > 0.0 { -normal } else { normal };
+        let facing = facing_normal(geo, tri, d);
         self.radiance_at(o + d * t, dominant_axis(facing))
     }
 
-    /// The brick of dominant axis `axis` whose centroid is nearest `p`, among those in `p`'s
-    /// cell and its 26 neighbours.
+    /// The front-face brick of dominant axis `axis` whose centroid is nearest `p`, among those
+    /// in `p`'s cell and its 26 neighbours.
     pub fn find(&self, p: Vec3, axis: u32) -> Option<u32> {
+        self.nearest(p, axis, false)
+    }
+
+    /// [`Self::find`] among back-face bricks too, and whether the one found is one.
+    pub fn find_side(&self, p: Vec3, axis: u32) -> Option<(u32, bool)> {
+        self.nearest(p, axis, true)
+            .map(|b| (b, self.backface[b as usize]))
+    }
+
+    fn nearest(&self, p: Vec3, axis: u32, backface: bool) -> Option<u32> {
         let c = (p / self.size).floor().as_ivec3();
         let mut best: Option<(f32, u32)> = None;
         for dx in -1..=1 {
@@ -181,7 +191,8 @@ impl NearLight {
                         continue;
                     };
                     for &b in list {
-                        if self.axes[b as usize] != axis {
+                        if self.axes[b as usize] != axis || (!backface && self.backface[b as usize])
+                        {
                             continue;
                         }
                         let d = self.centroids[b as usize].distance_squared(p);
@@ -193,6 +204,18 @@ impl NearLight {
             }
         }
         best.map(|(_, b)| b)
+    }
+}
+
+/// The unit geometric normal of triangle `tri` of `geo` on the side a ray along `d` hits.
+pub(crate) fn facing_normal(geo: &Geometry, tri: usize, d: Vec3) -> Vec3 {
+    let tri = &geo.triangles[tri];
+    let (v0, v1, v2) = (Vec3::from(tri.v0), Vec3::from(tri.v1), Vec3::from(tri.v2));
+    let normal = (v1 - v0).cross(v2 - v0).normalize_or_zero();
+    if normal.dot(d) > 0.0 {
+        -normal
+    } else {
+        normal
     }
 }
 

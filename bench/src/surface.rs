@@ -48,6 +48,7 @@ use prt_format::{Asset, Summary};
 use prt_runtime::{Lighting, Sample};
 use rayon::prelude::*;
 
+use crate::path_lookup::PathLookup;
 use crate::ray_lookup::{NearLight, RayLookup};
 use crate::results::Out;
 use crate::surfel_lookup::SurfelLookup;
@@ -79,6 +80,10 @@ pub struct SurfaceArgs {
     /// runtime's is 0.2].
     #[arg(long)]
     normal_bias: Option<f32>,
+    /// Near-field reach of the ray lookups that have one (rays, rays_light) in probe spacings
+    /// [default: each lookup's own: 0.75 and 1].
+    #[arg(long)]
+    reach: Option<f32>,
     /// Bake at this spacing in metres instead of the default, and at half of it [default: the
     /// bake's default for each case].
     #[arg(long)]
@@ -111,6 +116,8 @@ struct Baked {
     sh: Vec<ShRgb>,
     /// The relit surfels' irradiance (the surface lookup's near field).
     irradiance: Vec<[f32; 3]>,
+    /// The rig it was relit with (the path lookup lights its hits with it).
+    lighting: Lighting,
     bake_s: f64,
     relight_s: f64,
 }
@@ -122,7 +129,7 @@ pub fn run(args: SurfaceArgs) -> Result<()> {
         .normal_bias
         .map(|b| prt_cli::options::normal_bias(Some(b)))
         .transpose()?;
-    let lookups = Lookups::parse(&args.lookups, bias)?;
+    let lookups = Lookups::parse(&args.lookups, bias, args.reach)?;
     let picked = cases::pick(&args.cases, cases::all(&args.root)?)?;
     let mut rows = Vec::new();
     let mut oracle = Vec::new();
@@ -214,6 +221,7 @@ fn bake(case: &Case, settings: &BakeSettings, lighting: &Lighting, bricks: bool)
         .then(|| NearLight::for_asset(&asset, relighter.brick_radiance(&relit.surfel_irradiance)));
     Ok(Baked {
         asset,
+        lighting: lighting.clone(),
         sh: relit.sh,
         irradiance: relit.surfel_irradiance,
         near,
@@ -227,6 +235,7 @@ enum Sampler<'a> {
     Runtime(SurfaceSampler<'a>),
     Rays(RayLookup<'a>),
     Surfels(SurfelLookup<'a>),
+    Path(PathLookup<'a>),
 }
 
 impl<'a> Sampler<'a> {
@@ -250,6 +259,12 @@ impl<'a> Sampler<'a> {
                 })
             }
             Kind::Surfels => Sampler::Surfels(SurfelLookup::new(asset, sh, near()?, settings)),
+            Kind::Path => Sampler::Path(PathLookup::new(
+                asset,
+                near()?,
+                &baked.lighting.rig,
+                &baked.lighting.sky,
+            )),
         })
     }
 
@@ -258,6 +273,7 @@ impl<'a> Sampler<'a> {
             Sampler::Runtime(s) => s.sample(p, n),
             Sampler::Rays(s) => s.sample(p, n),
             Sampler::Surfels(s) => s.sample(p, n),
+            Sampler::Path(s) => s.sample(p, n),
         }
     }
 }
@@ -306,6 +322,7 @@ fn sample(
         spacing: baked.asset.header.grid.spacing,
         lookup: *lookup,
         probes: summary.probes_with_data,
+        grid_points: baked.asset.probes.len(),
         surface_probes: placement::surface_probes(&baked.asset),
         valid: summary.valid_probe_count,
         dilated: summary.dilated_probe_count,

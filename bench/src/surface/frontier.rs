@@ -168,7 +168,7 @@ pub fn run(args: FrontierArgs) -> Result<()> {
         );
     }
     let picked = cases::pick(&args.cases, cases::all(&args.root)?)?;
-    let lookup = Lookups::parse(&["default".to_owned()], None)?.for_set(Set::Bundled)[0];
+    let lookup = Lookups::parse(&["default".to_owned()], None, None)?.for_set(Set::Bundled)[0];
     let mut rows = Vec::new();
     for case in &picked {
         let refs = Refs {

@@ -20,6 +20,8 @@ pub enum Kind {
     Rays(RaySettings),
     /// `crate::surfel_lookup::SurfelLookup`: `rays_light`'s terms traced from the point's surfel.
     Surfels,
+    /// `crate::path_lookup::PathLookup`: one-bounce path tracing at the point, no probes.
+    Path,
 }
 
 /// A lookup's name and how to make it.
@@ -40,7 +42,7 @@ fn trilinear() -> LookupSettings {
 }
 
 /// Every lookup `--lookup` knows, by name, in table order.
-const LOOKUPS: [Variant; 6] = [
+const LOOKUPS: [Variant; 7] = [
     // Hardware trilinear over the probes' validity only: what depth moments are measured against.
     ("trilinear", || (trilinear(), Kind::Runtime)),
     // The probe volume with depth moments (DDGI's Chebyshev test), normal bias 0.2 spacings:
@@ -58,6 +60,9 @@ const LOOKUPS: [Variant; 6] = [
     // rays_light's terms decided per surfel, traced at lookup time (the bound the bake's
     // terms were designed against); points without a surfel fall back to `moments`.
     ("surfels", || (volume(true), Kind::Surfels)),
+    // The one-bounce truth traced at the point with the rays' count, the probes left out: what
+    // the benchmark itself and the probes' radiance cost (settings unused).
+    ("path", || (trilinear(), Kind::Path)),
 ];
 
 /// A named lookup.
@@ -102,6 +107,13 @@ impl Lookup {
                     "are dark"
                 }
             ),
+            Kind::Path => format!(
+                "{}: one-bounce path tracing at the point, no probes: {} cosine rays through \
+                 the asset's BVH, hits lit by the rig behind shadow rays, escapes the sky's \
+                 radiance (bench/src/path_lookup.rs)",
+                self.name,
+                crate::path_lookup::PATH_RAYS
+            ),
             Kind::Surfels => format!(
                 "{}: rays_light's visibility and near field decided per surfel, as a bake would \
                  store them (the point's nearest surfel of its normal's nearest brick; none: the \
@@ -116,7 +128,7 @@ impl Lookup {
         match self.kind {
             Kind::Runtime => false,
             Kind::Rays(r) => r.near_light,
-            Kind::Surfels => true,
+            Kind::Surfels | Kind::Path => true,
         }
     }
 }
@@ -125,12 +137,19 @@ impl Lookup {
 pub struct Lookups {
     chosen: Option<Vec<Lookup>>,
     normal_bias: Option<f32>,
+    reach: Option<f32>,
 }
 
 impl Lookups {
     /// `names` (none: each case's defaults), each lookup's normal bias replaced by `normal_bias`
     /// (probe spacings) when given.
-    pub fn parse(names: &[String], normal_bias: Option<f32>) -> Result<Lookups> {
+    /// `reach` (probe spacings), when given, replaces the near-field reach of the ray lookups
+    /// that have one (`rays`, `rays_light`).
+    pub fn parse(
+        names: &[String],
+        normal_bias: Option<f32>,
+        reach: Option<f32>,
+    ) -> Result<Lookups> {
         let chosen = match names {
             [] => None,
             _ => Some(names.iter().map(|n| by_name(n)).collect::<Result<_>>()?),
@@ -138,6 +157,7 @@ impl Lookups {
         Ok(Lookups {
             chosen,
             normal_bias,
+            reach,
         })
     }
 
@@ -169,6 +189,11 @@ impl Lookups {
             .map(|mut l| {
                 if let Some(bias) = self.normal_bias {
                     l.settings.normal_bias = bias;
+                }
+                if let (Kind::Rays(r), Some(reach)) = (&mut l.kind, self.reach) {
+                    if r.near_field.is_some() {
+                        r.near_field = Some(reach);
+                    }
                 }
                 l
             })
@@ -204,7 +229,7 @@ mod tests {
 
     #[test]
     fn defaults_per_set_and_the_bias_override() {
-        let none = Lookups::parse(&[], None).unwrap();
+        let none = Lookups::parse(&[], None, None).unwrap();
         let names = |ls: Vec<Lookup>| ls.iter().map(|l| l.name).collect::<Vec<_>>();
         assert_eq!(
             names(none.for_set(Set::Bundled)),
@@ -227,14 +252,18 @@ mod tests {
             LookupSettings::default()
         );
         assert!(!none.for_set(Set::Tuning)[0].settings.surface_terms);
-        let picked = Lookups::parse(&["trilinear".into()], Some(0.1)).unwrap();
+        let picked =
+            Lookups::parse(&["trilinear".into(), "rays".into()], Some(0.1), Some(2.0)).unwrap();
         let l = picked.for_set(Set::Tuning);
         assert_eq!((l[0].name, l[0].settings.normal_bias), ("trilinear", 0.1));
         assert!(!l[0].settings.depth_moments);
-        let err = Lookups::parse(&["nearest".into()], None).err().unwrap();
+        assert!(matches!(l[1].kind, Kind::Rays(r) if r.near_field == Some(2.0)));
+        let err = Lookups::parse(&["nearest".into()], None, None)
+            .err()
+            .unwrap();
         assert!(
             err.to_string()
-                .contains("known: trilinear, moments, default, rays, rays_light, surfels"),
+                .contains("known: trilinear, moments, default, rays, rays_light, surfels, path"),
             "{err}"
         );
     }

@@ -33,8 +33,12 @@ pub struct Row {
     pub setting: Setting,
     pub spacing: f32,
     pub lookup: Lookup,
+    /// Probes with data (a sparse bake's filled grid points and the points it left without
+    /// data are not counted).
     pub probes: usize,
-    /// Probes at a corner of a cell holding a surfel (`placement::surface_probes`).
+    /// The grid's points, with data or not.
+    pub grid_points: usize,
+    /// Grid points at a corner of a cell holding a surfel (`placement::surface_probes`).
     pub surface_probes: usize,
     pub valid: usize,
     pub dilated: usize,
@@ -129,6 +133,10 @@ fn definitions(md: &mut String, rows: &[Row]) -> Result<()> {
          - Image rel L1 (levels, Sponza): over the camera view's hit pixels, sum of |E - E_sh| over sum \
          of E_sh; over-lit pixels: hit pixels lit over 1.5x their truth and by over 5% of the \
          median hit pixel's truth.\n\
+         - Probes (valid, dilated): probes with data (a sparse bake's filled grid points and \
+         the traced points inside geometry that carry nothing are not counted). Grid points at \
+         surfaces: the grid points the lookup reads at the bake's surfels (at each surfel and \
+         moved by the normal bias), as a share of all grid points.\n\
          - Runtime MB: the asset's sections an engine keeps and uploads (probes, sky mask and \
          transfer, visibility maps, factors, bricks, surfels, BVH and triangles, surface terms), \
          10^6 bytes.\n\
@@ -254,7 +262,7 @@ fn cases(md: &mut String, rows: &[Row]) -> Result<()> {
     writeln!(
         md,
         "\n## Per case\n\n| case | set | spacing | lookup | probes (valid, dilated) | runtime MB \
-         | probes at surfaces | open mean | open p95 | open leaks | pocket mean (points) | image \
+         | grid points at surfaces (of the grid) | open mean | open p95 | open leaks | pocket mean (points) | image \
          rel L1 | over-lit pixels | black / holes |\n|---|---|---:|---|---:|---:|---:|---:|---:|---:\
          |---:|---:|---:|---:|"
     )?;
@@ -273,7 +281,7 @@ fn cases(md: &mut String, rows: &[Row]) -> Result<()> {
             r.dilated,
             r.runtime_bytes as f64 / 1e6,
             r.surface_probes,
-            100.0 * r.surface_probes as f64 / r.probes.max(1) as f64,
+            100.0 * r.surface_probes as f64 / r.grid_points.max(1) as f64,
             100.0 * p.open_mean,
             pct(p.open_p95),
             p.open_leaks,

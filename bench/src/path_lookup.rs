@@ -1,0 +1,116 @@
+//! `path` (`prt-bench surface --lookup path`): the one-bounce irradiance at a surface point by
+//! path tracing, with no probe taking part. [`PATH_RAYS`] cosine-distributed rays leave the
+//! point (the near-field spiral of the other ray lookups) through the asset's BVH. A ray that
+//! hits brings the radiance leaving what it hits under docs/conventions.md section 5 (emission
+//! plus albedo / pi times each light's irradiance there, behind a shadow ray, as the CPU relight
+//! lights a surfel); one that escapes brings the sky's. The irradiance is pi / N times their sum.
+//! The albedo and emission are those of the surfel nearest the hit in the brick of the side the
+//! ray hits ([`NearLight::find_side`]; a back face of a single-sided surface is black).
+//!
+//! What it is for: it checks the benchmark against the oracle with nothing of the probes
+//! involved (its error is the Monte Carlo noise of [`PATH_RAYS`] rays), and it shows what the
+//! probes cost a lookup: where a lookup that reads them does worse than this at the same ray
+//! count, the radiance they carry (L2, a spacing away from the point) is the limit, not the
+//! lookup's visibility (docs/results/surface_candidates.md, stop 42).
+
+use glam::Vec3;
+use prt_bake::merge::key::dominant_axis;
+use prt_format::Asset;
+use prt_runtime::lights::PreparedLight;
+use prt_runtime::shadow_rays::{closest_hit, occluded, ray_offset};
+use prt_runtime::{Sample, SkyModel};
+
+use crate::ray_lookup::{facing_normal, ray_start, NearLight, NEAR_FIELD_RAYS};
+
+/// Rays per point: the other ray lookups' near-field count, so that their errors compare.
+pub const PATH_RAYS: u32 = NEAR_FIELD_RAYS;
+
+/// The path tracer over one bake and one rig.
+pub struct PathLookup<'a> {
+    asset: &'a Asset,
+    bricks: &'a NearLight,
+    lights: Vec<PreparedLight>,
+    sky: &'a SkyModel,
+    /// Longer than any ray inside the level: the BVH root's diagonal, and at least 1 m.
+    far: f32,
+}
+
+impl<'a> PathLookup<'a> {
+    /// The lookup of `asset` lit by `lights` and `sky`; `bricks` finds what a ray hits.
+    pub fn new(
+        asset: &'a Asset,
+        bricks: &'a NearLight,
+        lights: &prt_format::LightRig,
+        sky: &'a SkyModel,
+    ) -> Self {
+        let far = asset.geometry.nodes.first().map_or(1.0, |root| {
+            (Vec3::from(root.max) - Vec3::from(root.min)).length() * 2.0 + 1.0
+        });
+        PathLookup {
+            asset,
+            bricks,
+            lights: lights.lights.iter().map(PreparedLight::new).collect(),
+            sky,
+            far,
+        }
+    }
+
+    /// The irradiance at `position` on a surface with unit normal `normal`.
+    pub fn sample(&self, position: [f32; 3], normal: [f32; 3]) -> Sample {
+        let n = Vec3::from(normal);
+        let start = ray_start(Vec3::from(position), n, self.asset.header.grid.spacing);
+        let (t, b) = n.any_orthonormal_pair();
+        let mut sum = Vec3::ZERO;
+        for k in 0..PATH_RAYS {
+            let d = prt_bake::surface_terms::cosine_spiral(k, PATH_RAYS, t, b, n);
+            sum += match closest_hit(&self.asset.geometry, start, d, self.far) {
+                Some((t, tri)) => {
+                    let facing = facing_normal(&self.asset.geometry, tri, d);
+                    self.leaving(start + d * t, facing)
+                }
+                None => Vec3::from(self.sky.radiance(d.to_array())),
+            };
+        }
+        Sample {
+            irradiance: (sum * std::f32::consts::PI / PATH_RAYS as f32).to_array(),
+            validity: 1.0,
+            ..Sample::default()
+        }
+    }
+
+    /// One-bounce radiance leaving `h` on the side with unit normal `n`.
+    fn leaving(&self, h: Vec3, n: Vec3) -> Vec3 {
+        let Some((brick, false)) = self.bricks.find_side(h, dominant_axis(n)) else {
+            return Vec3::ZERO;
+        };
+        let b = &self.asset.bricks[brick as usize];
+        let surfels = &self.asset.surfels
+            [b.first_surfel as usize..(b.first_surfel + b.surfel_count) as usize];
+        let Some(s) = surfels.iter().min_by(|a, b| {
+            let d = |s: &prt_format::Surfel| Vec3::from(s.position).distance_squared(h);
+            d(a).total_cmp(&d(b))
+        }) else {
+            return Vec3::ZERO;
+        };
+        let spacing = self.asset.header.grid.spacing;
+        let mut e = Vec3::ZERO;
+        for light in &self.lights {
+            let (el, l, dist) = light.irradiance(h, n);
+            if el.max_element() <= 0.0 {
+                continue;
+            }
+            let off = ray_offset(h, spacing);
+            let o = h + n * off;
+            // f32::MAX for directional lights, as the CPU relight's shadow rays.
+            let tmax = if dist.is_finite() {
+                (light.position - o).length() - off
+            } else {
+                f32::MAX
+            };
+            if !occluded(&self.asset.geometry, o, l, tmax) {
+                e += el;
+            }
+        }
+        Vec3::from(s.emission) + Vec3::from(s.albedo) * std::f32::consts::FRAC_1_PI * e
+    }
+}
