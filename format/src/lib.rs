@@ -33,6 +33,7 @@ pub mod coarse;
 pub mod depth;
 pub mod directions;
 pub mod error;
+pub mod factors;
 pub mod io;
 pub mod rig;
 mod sections;
@@ -45,6 +46,7 @@ pub mod validate;
 
 pub use asset::*;
 pub use error::FormatError;
+pub use factors::*;
 pub use io::{
     decode, encode, read_asset, read_regular_file, stage_asset, write_asset_atomic, Staged,
     FORMAT_VERSION, MAGIC,

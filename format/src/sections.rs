@@ -14,9 +14,10 @@ use std::io::Write;
 use bytemuck::Pod;
 use serde::Serialize;
 
-use crate::asset::{Asset, Factors, Geometry};
+use crate::asset::{Asset, Geometry};
 use crate::coarse::CoarseBricks;
 use crate::error::FormatError;
+use crate::factors::Factors;
 use crate::surface::SurfaceTerms;
 
 /// Bincode's variant indices of [`Factors`] (its declaration order).
@@ -242,6 +243,7 @@ fn too_early(additional: usize) -> String {
 mod tests {
     use super::*;
     use crate::asset::*;
+    use crate::factors::*;
 
     /// An asset with a few of everything (not a valid one: the sections only need to be
     /// non-empty and distinct), factors in `factors`.

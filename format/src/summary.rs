@@ -4,6 +4,7 @@
 use serde::Serialize;
 
 use crate::asset::*;
+use crate::factors::TransferPrecision;
 use crate::io::FORMAT_VERSION;
 use crate::sh::SH_COUNT;
 

@@ -5,6 +5,7 @@
 
 use crate::asset::*;
 use crate::error::FormatError;
+use crate::factors::Factors;
 
 mod coarse;
 mod surface;

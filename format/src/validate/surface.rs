@@ -2,8 +2,9 @@
 //! unchecked, on the CPU and in WGSL, so an asset is refused unless every index, range and
 //! search bound holds.
 
-use crate::asset::{f16_to_f32, Asset};
+use crate::asset::Asset;
 use crate::error::FormatError;
+use crate::factors::f16_to_f32;
 use crate::surface::{
     near_entry, slot_hash, SurfaceTerms, CELL_WORDS, NO_SURFEL, PROBE_BITS, SLOT_AXIS_SHIFT,
     TERMS_TRACED,

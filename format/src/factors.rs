@@ -1,0 +1,389 @@
+//! A probe's factor table as stored: one factor per brick its rays hit (the brick, the ray
+//! count, the SH transfer k = 1..9 and the rays' mean hit offset), in three precisions. The
+//! runtime uploads the table as it is; `shaders/gather.wgsl` decodes the same layouts
+//! (`FACTOR_FORMAT`, `FACTOR_WORDS`).
+
+use bytemuck::{Pod, Zeroable};
+use serde::{Deserialize, Serialize};
+
+use crate::sh::SH_COUNT;
+use crate::snorm::{snorm8_div4, snorm8_div8};
+
+/// How factor transfer coefficients are stored.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum TransferPrecision {
+    /// 8 x f32 transfer and 3 x f32 offset per factor (56 bytes with brick index and ray count).
+    F32,
+    /// 8 + 3 IEEE halves per factor (32 bytes with brick index and ray count).
+    F16,
+    /// 16 bytes per factor: 24-bit brick index, 8-bit ray count, SH terms 1..8 as 8-bit snorm
+    /// relative to the factor's DC term, offset as 8-bit snorm of the brick size. Half the
+    /// bytes of `F16` at no measurable accuracy cost (README accuracy table): the default.
+    #[default]
+    U8,
+}
+
+/// One factor, f32 transfer: brick `brick` contributes its radiance times the SH9 transfer
+/// `4pi/N sum_{probe rays i into the brick} Y_k(w_i)` to its probe. `k = 0` is stored exactly as
+/// the ray count (`Y_0` is constant), so a probe's bookkeeping (rays into bricks + sky rays = N)
+/// is exact whatever the precision; `sh[k-1]` holds `k = 1..9`. `offset` is the mean hit point
+/// of those rays relative to the brick's centroid: the radiance the probe sees is the brick's
+/// linear model evaluated there, `max(0, L_mean + G . offset)`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable, Serialize, Deserialize)]
+#[repr(C)]
+pub struct FactorF32 {
+    pub brick: u32,
+    pub rays: u32,
+    pub sh: [f32; 8],
+    pub offset: [f32; 3],
+    pub _pad: u32,
+}
+const _: () = assert!(std::mem::size_of::<FactorF32>() == 56);
+
+impl FactorF32 {
+    /// One finished row (brick, rays, transfer k = 1..9, offset) as an f32 factor.
+    pub fn of(&(brick, rays, sh, offset): &FactorRow) -> FactorF32 {
+        FactorF32 {
+            brick,
+            rays,
+            sh,
+            offset,
+            _pad: 0,
+        }
+    }
+}
+
+/// One factor, half-float transfer: as [`FactorF32`]; `sh` packs the 8 halves two per word and
+/// `offset` the 3 offset halves (and a zero), low half first (WGSL `unpack2x16float` order).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable, Serialize, Deserialize)]
+#[repr(C)]
+pub struct FactorF16 {
+    pub brick: u32,
+    pub rays: u32,
+    pub sh: [u32; 4],
+    pub offset: [u32; 2],
+}
+const _: () = assert!(std::mem::size_of::<FactorF16>() == 32);
+
+impl FactorF16 {
+    /// One finished row (brick, rays, transfer k = 1..9, offset) as a half-float factor.
+    pub fn of(&(brick, rays, sh, o): &FactorRow) -> FactorF16 {
+        FactorF16 {
+            brick,
+            rays,
+            sh: std::array::from_fn(|w| pack2(sh[2 * w], sh[2 * w + 1])),
+            offset: [pack2(o[0], o[1]), pack2(o[2], 0.0)],
+        }
+    }
+}
+
+/// One factor, 8-bit encoding ([`TransferPrecision::U8`]): `brick_rays` = brick << 8 | rays
+/// (1..=255; the baker splits larger counts over several factors of the same brick);
+/// `packed` holds 12 snorm8 bytes, low byte first: offset x, y, z (times
+/// the `offset_scale` of [`Factors::U8`]), then SH terms 1..8 (times `U8_SH_RANGE` times the DC term
+/// `rays * 4pi/N * Y00`), then a zero.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable, Serialize, Deserialize)]
+#[repr(C)]
+pub struct FactorU8 {
+    pub brick_rays: u32,
+    pub packed: [u32; 3],
+}
+const _: () = assert!(std::mem::size_of::<FactorU8>() == 16);
+
+impl FactorU8 {
+    /// The 8-bit transfer of `rays` (at most [`U8_MAX_RAYS`]) of a probe's `ray_count` rays with
+    /// transfer `sh` (k = 1..9), brick and offset left zero for [`FactorU8::place`]. The baker
+    /// encodes a probe's transfers as it is traced, before its bricks are numbered.
+    #[inline]
+    pub fn transfer(rays: u32, sh: [f32; 8], ray_count: u32) -> FactorU8 {
+        FactorU8::transfer_with(rays, sh, FactorU8::dc_per_ray(ray_count))
+    }
+
+    /// The DC term of one ray of a lattice of `ray_count` rays, `4pi / ray_count * Y00`, the
+    /// unit of [`FactorU8::transfer_with`].
+    #[inline]
+    pub fn dc_per_ray(ray_count: u32) -> f32 {
+        crate::directions::direction_weight(ray_count) * crate::sh::Y00
+    }
+
+    /// [`FactorU8::transfer`] with the lattice's [`FactorU8::dc_per_ray`] worked out once for
+    /// all of a probe's rows (an f64 division a row otherwise). The eight terms are quantised
+    /// together (SSE2, in the crate's `snorm` module); one at a time, the baker spent about
+    /// 50 ns a row here.
+    #[inline]
+    pub fn transfer_with(rays: u32, sh: [f32; 8], dc_per_ray: f32) -> FactorU8 {
+        let dc = rays as f32 * dc_per_ray;
+        // Terms 1..8 in bytes 3..10 of `packed`.
+        let q = snorm8_div8(sh, U8_SH_RANGE * dc);
+        FactorU8 {
+            brick_rays: rays,
+            packed: [
+                q[0] << 24,
+                q[1] | q[2] << 8 | q[3] << 16 | q[4] << 24,
+                q[5] | q[6] << 8 | q[7] << 16,
+            ],
+        }
+    }
+
+    /// This transfer from brick `brick` (at most [`U8_MAX_BRICK`]) whose rays' mean hit point
+    /// is `offset` from its centroid (metres; `offset_scale` as in [`Factors::U8`]).
+    #[inline]
+    pub fn place(self, brick: u32, offset: [f32; 3], offset_scale: f32) -> FactorU8 {
+        let mut packed = self.packed;
+        let q = snorm8_div4([offset[0], offset[1], offset[2], 0.0], offset_scale);
+        packed[0] |= q[0] | q[1] << 8 | q[2] << 16;
+        FactorU8 {
+            brick_rays: (brick << 8) | (self.brick_rays & 0xff),
+            packed,
+        }
+    }
+}
+
+/// Metres per unit of the 8-bit offsets of factors of bricks `brick_size` metres wide.
+pub fn u8_offset_scale(brick_size: f32) -> f32 {
+    if brick_size > 0.0 {
+        brick_size
+    } else {
+        1.0
+    }
+}
+
+/// Largest |Y_k / Y_0| of L2 SH (band 2, m = 0: 0.315392 * 2 / 0.282095 = 2.236): the range of
+/// 8-bit SH terms relative to the DC term.
+pub const U8_SH_RANGE: f32 = 2.24;
+/// Largest brick index of the 8-bit encoding (24 bits).
+pub const U8_MAX_BRICK: u32 = (1 << 24) - 1;
+/// Largest ray count of one 8-bit factor.
+pub const U8_MAX_RAYS: u32 = 255;
+
+fn unsnorm8(b: u32) -> f32 {
+    ((b & 0xff) as u8 as i8 as f32 / 127.0).max(-1.0)
+}
+
+/// A factor row as the baker produces it: brick, rays, transfer k = 1..9, offset.
+pub type FactorRow = (u32, u32, [f32; 8], [f32; 3]);
+
+/// Splits a row with more than [`U8_MAX_RAYS`] rays into several rows of the same brick and
+/// offset whose rays and transfers add up to the original (the gather is linear, so the probe's
+/// SH is unchanged); a row of fewer rays comes back as it is, without the division for its
+/// share (exactly 1, so the same bits): nearly every row is one, and the baker's encoding of
+/// each waited for that division (2.3% of a bake's samples at Sponza's 1.0 m; skipping it, the
+/// rows of the first 16,000 probes were made in 291-329 ms of CPU time against 286-343 ms,
+/// medians 307 and 326 ms, five alternating release bakes).
+pub fn split_row_for_u8(row: FactorRow) -> impl Iterator<Item = FactorRow> {
+    let (brick, rays, sh, offset) = row;
+    let mut left = rays;
+    std::iter::from_fn(move || {
+        (left > 0).then(|| {
+            let part = left.min(U8_MAX_RAYS);
+            left -= part;
+            if part == rays {
+                return row;
+            }
+            let share = part as f32 / rays as f32;
+            (brick, part, sh.map(|v| v * share), offset)
+        })
+    })
+}
+
+fn pack2(a: f32, b: f32) -> u32 {
+    u32::from(f32_to_f16(a)) | (u32::from(f32_to_f16(b)) << 16)
+}
+
+fn unpack2(w: u32) -> (f32, f32) {
+    (f16_to_f32(w as u16), f16_to_f32((w >> 16) as u16))
+}
+
+/// The factor tables of all probes, concatenated, in one of the [`TransferPrecision`]s.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum Factors {
+    F32(Vec<FactorF32>),
+    F16(Vec<FactorF16>),
+    U8 {
+        factors: Vec<FactorU8>,
+        /// Metres of offset per unit of the snorm8 offset (the brick size).
+        offset_scale: f32,
+    },
+}
+
+impl Default for Factors {
+    fn default() -> Self {
+        Factors::U8 {
+            factors: Vec::new(),
+            offset_scale: 1.0,
+        }
+    }
+}
+
+impl Factors {
+    pub fn len(&self) -> usize {
+        match self {
+            Factors::F32(f) => f.len(),
+            Factors::F16(f) => f.len(),
+            Factors::U8 { factors, .. } => factors.len(),
+        }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    pub fn precision(&self) -> TransferPrecision {
+        match self {
+            Factors::F32(_) => TransferPrecision::F32,
+            Factors::F16(_) => TransferPrecision::F16,
+            Factors::U8 { .. } => TransferPrecision::U8,
+        }
+    }
+
+    /// Brick index and ray count of factor `f`.
+    #[inline]
+    pub fn brick_and_rays(&self, f: usize) -> (u32, u32) {
+        match self {
+            Factors::F32(t) => (t[f].brick, t[f].rays),
+            Factors::F16(t) => (t[f].brick, t[f].rays),
+            Factors::U8 { factors, .. } => {
+                (factors[f].brick_rays >> 8, factors[f].brick_rays & 0xff)
+            }
+        }
+    }
+
+    /// Full SH9 transfer of factor `f` for a bake of `ray_count` rays.
+    pub fn transfer(&self, f: usize, ray_count: u32) -> [f32; SH_COUNT] {
+        let (_, rays) = self.brick_and_rays(f);
+        let mut t = [0.0; SH_COUNT];
+        t[0] = rays as f32 * crate::directions::direction_weight(ray_count) * crate::sh::Y00;
+        match self {
+            Factors::F32(v) => t[1..].copy_from_slice(&v[f].sh),
+            Factors::F16(v) => {
+                for (w, &word) in v[f].sh.iter().enumerate() {
+                    (t[1 + 2 * w], t[2 + 2 * w]) = unpack2(word);
+                }
+            }
+            Factors::U8 { factors, .. } => {
+                let p = factors[f].packed;
+                for k in 1..SH_COUNT {
+                    let byte = k + 2;
+                    t[k] = unsnorm8(p[byte / 4] >> (8 * (byte % 4))) * U8_SH_RANGE * t[0];
+                }
+            }
+        }
+        t
+    }
+
+    /// Offset of factor `f`'s mean hit point from its brick's centroid.
+    pub fn offset(&self, f: usize) -> [f32; 3] {
+        match self {
+            Factors::F32(v) => v[f].offset,
+            Factors::F16(v) => {
+                let (x, y) = unpack2(v[f].offset[0]);
+                let (z, _) = unpack2(v[f].offset[1]);
+                [x, y, z]
+            }
+            Factors::U8 {
+                factors,
+                offset_scale,
+            } => {
+                let w = factors[f].packed[0];
+                std::array::from_fn(|a| unsnorm8(w >> (8 * a)) * offset_scale)
+            }
+        }
+    }
+
+    /// Builds the table in the requested precision for a bake of `ray_count` rays.
+    /// `brick_size` (metres) scales 8-bit offsets; for `U8`, rows must have at most
+    /// [`U8_MAX_RAYS`] rays and bricks up to [`U8_MAX_BRICK`] (see [`split_row_for_u8`]).
+    pub fn build(
+        rows: &[FactorRow],
+        precision: TransferPrecision,
+        ray_count: u32,
+        brick_size: f32,
+    ) -> Self {
+        match precision {
+            TransferPrecision::U8 => {
+                let offset_scale = u8_offset_scale(brick_size);
+                let factors = rows
+                    .iter()
+                    .map(|&(brick, rays, sh, offset)| {
+                        FactorU8::transfer(rays, sh, ray_count).place(brick, offset, offset_scale)
+                    })
+                    .collect();
+                Factors::U8 {
+                    factors,
+                    offset_scale,
+                }
+            }
+            TransferPrecision::F32 => Factors::F32(rows.iter().map(FactorF32::of).collect()),
+            TransferPrecision::F16 => Factors::F16(rows.iter().map(FactorF16::of).collect()),
+        }
+    }
+
+    /// Bytes one factor takes.
+    pub fn bytes_per_factor(&self) -> usize {
+        match self {
+            Factors::F32(_) => std::mem::size_of::<FactorF32>(),
+            Factors::F16(_) => std::mem::size_of::<FactorF16>(),
+            Factors::U8 { .. } => std::mem::size_of::<FactorU8>(),
+        }
+    }
+}
+
+/// IEEE 754 binary16 bits from f32, round to nearest even (values beyond the half range become
+/// infinity; transfers stay far inside it: |transfer| <= 4pi * Y00).
+pub fn f32_to_f16(x: f32) -> u16 {
+    half::f16::from_f32(x).to_bits()
+}
+
+/// f32 from IEEE 754 binary16 bits.
+pub fn f16_to_f32(h: u16) -> f32 {
+    half::f16::from_bits(h).to_f32()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The factor's bytes as the loops before the quantiser took several terms at a time put
+    /// them: term k of the transfer in byte 3 + k, offset axis a in byte a.
+    #[test]
+    fn transfer_and_offset_bytes_keep_their_places() {
+        let q = |v: f32| crate::snorm::snorm8_div4([v; 4], 1.0)[0];
+        for (rays, n) in [(1, 512), (37, 512), (255, 4096)] {
+            let sh = std::array::from_fn(|k| (k as f32 - 3.5) * 0.01 * rays as f32);
+            let dc = rays as f32 * FactorU8::dc_per_ray(n);
+            let mut packed = [0u32; 3];
+            for k in 0..8 {
+                let b = 3 + k;
+                packed[b / 4] |= q(sh[k] / (U8_SH_RANGE * dc)) << (8 * (b % 4));
+            }
+            let offset = [0.3, -0.7, 0.05];
+            let scale = 0.8;
+            for (a, &o) in offset.iter().enumerate() {
+                packed[0] |= q(o / scale) << (8 * a);
+            }
+            let got = FactorU8::transfer(rays, sh, n).place(99, offset, scale);
+            assert_eq!(got.packed, packed, "{rays} rays of {n}");
+            assert_eq!(got.brick_rays, 99 << 8 | rays);
+        }
+    }
+
+    #[test]
+    fn half_round_trip() {
+        for &x in &[
+            0.0f32,
+            1.0,
+            -2.5,
+            0.000_061_035_156,
+            1e-7,
+            65504.0,
+            3.544_907_7,
+            -0.123_456,
+        ] {
+            let y = f16_to_f32(f32_to_f16(x));
+            assert!((x - y).abs() <= x.abs() * 1e-3 + 6e-8, "{x} -> {y}");
+        }
+        assert_eq!(f16_to_f32(f32_to_f16(1e6)), f32::INFINITY);
+        assert_eq!(f32_to_f16(1.0), 0x3c00);
+        assert_eq!(f32_to_f16(-2.0), 0xc000);
+    }
+}
