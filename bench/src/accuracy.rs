@@ -6,9 +6,8 @@
 //! `--previous` it is set beside the front of earlier sweeps (their `accuracy.md`, for example
 //! from an older build run in the same sitting).
 
-use std::collections::BTreeMap;
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
@@ -17,7 +16,11 @@ use prt_eval::{compare, ErrorStats};
 use prt_format::{Asset, Factors, TransferPrecision};
 use prt_runtime::{CpuRelighter, Lighting};
 
-use crate::plot::escape;
+mod previous;
+mod svg;
+
+use previous::read_previous;
+use svg::plot;
 
 #[derive(clap::Args)]
 pub struct AccuracyArgs {
@@ -311,124 +314,6 @@ fn fronts(new: &[Point], previous: &[Point]) -> Result<String> {
     Ok(md)
 }
 
-/// Every setting of earlier sweeps' tables (`accuracy.md` as this bench writes it) with its least
-/// bake time over the files.
-fn read_previous(paths: &[PathBuf]) -> Result<Vec<Point>> {
-    let mut best: BTreeMap<String, Point> = BTreeMap::new();
-    for path in paths {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("reading the previous sweep {}", path.display()))?;
-        for point in parse_table(&text, path)? {
-            match best.get_mut(&point.setting) {
-                Some(p) if p.bake_ms <= point.bake_ms => {}
-                _ => {
-                    best.insert(point.setting.clone(), point);
-                }
-            }
-        }
-    }
-    Ok(best.into_values().collect())
-}
-
-/// The cells of a Markdown table row.
-fn cells(line: &str) -> Vec<String> {
-    line.trim()
-        .trim_matches('|')
-        .split('|')
-        .map(|c| c.trim().to_owned())
-        .collect()
-}
-
-/// The columns of a previous sweep's table that [`parse_table`] reads, by their index.
-struct Columns {
-    rays: usize,
-    merge: usize,
-    precision: usize,
-    encoding: usize,
-    bake: usize,
-    error: usize,
-}
-
-/// The settings of the first table in `text` (columns found by their headers).
-fn parse_table(text: &str, path: &Path) -> Result<Vec<Point>> {
-    let mut lines = text
-        .lines()
-        .enumerate()
-        .map(|(i, l)| (i + 1, l))
-        .skip_while(|(_, l)| !l.starts_with('|'))
-        .take_while(|(_, l)| l.starts_with('|'));
-    let Some((header_line, header)) = lines.next() else {
-        bail!("{}: no table (a line starting with '|')", path.display());
-    };
-    let at = |line: usize| format!("{} line {line}", path.display());
-    let header = cells(header);
-    let column = |name: &str| {
-        header
-            .iter()
-            .position(|h| h == name)
-            .with_context(|| format!("{}: no column '{name}' in the header", at(header_line)))
-    };
-    let columns = Columns {
-        rays: column("rays")?,
-        merge: column("brick cells")?,
-        precision: column("transfer")?,
-        encoding: column("encoding")?,
-        bake: column("bake ms")?,
-        error: column("mean err")?,
-    };
-    let separator = |c: &String| !c.is_empty() && c.trim_matches(':').chars().all(|x| x == '-');
-    match lines.next() {
-        Some((_, l)) if cells(l).iter().all(separator) => {}
-        Some((n, l)) => bail!("{}: '{l}' is not the header's separator row", at(n)),
-        None => bail!("{}: a header and no rows", at(header_line)),
-    }
-    let points = lines
-        .map(|(n, line)| point_of(&cells(line), &header, &columns, &at(n)))
-        .collect::<Result<Vec<_>>>()?;
-    if points.is_empty() {
-        bail!("{}: a header and no rows", at(header_line));
-    }
-    Ok(points)
-}
-
-/// The setting in the cells `c` of a table row (`at` names its file and line).
-fn point_of(c: &[String], header: &[String], columns: &Columns, at: &str) -> Result<Point> {
-    let get = |i: usize| {
-        c.get(i).map(String::as_str).with_context(|| {
-            let (have, want) = (c.len(), header.len());
-            format!(
-                "{at}: no cell for column '{}' ({have} cells, the header has {want})",
-                header[i]
-            )
-        })
-    };
-    let bad = |i: usize, what: &str| {
-        anyhow::anyhow!("{at}: column '{}' is '{}', not {what}", header[i], c[i])
-    };
-    let number = |i: usize| -> Result<f64> {
-        match get(i)?.trim_end_matches('%').parse::<f64>() {
-            Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
-            _ => Err(bad(i, "a non-negative number")),
-        }
-    };
-    let ray_count = get(columns.rays)?
-        .parse::<u32>()
-        .map_err(|_| bad(columns.rays, "a ray count"))?;
-    let (merge, encoding) = (get(columns.merge)?, get(columns.encoding)?);
-    Ok(Point {
-        setting: setting(
-            &ray_count.to_string(),
-            merge,
-            get(columns.precision)?,
-            encoding,
-        ),
-        merge: merge.to_owned(),
-        flat: encoding == "sh9, flat brick",
-        bake_ms: number(columns.bake)?,
-        error: number(columns.error)?,
-    })
-}
-
 /// Probe SH with Hanning-window deringing applied (`prt_format::sh::hanning_window`, width 4).
 fn windowed(
     ours: &[([f32; 3], bool, prt_format::sh::ShRgb)],
@@ -448,166 +333,11 @@ fn without_offsets(mut asset: Asset) -> Asset {
     asset
 }
 
-/// Log-log axes of a plot: data ranges mapped into a `w` x `h` canvas with margin `m`.
-struct Axes {
-    x: (f64, f64),
-    y: (f64, f64),
-    w: f64,
-    h: f64,
-    m: f64,
-}
-
-impl Axes {
-    fn sx(&self, ms: f64) -> f64 {
-        let (x0, x1) = self.x;
-        self.m + (ms.log10() - x0) / (x1 - x0).max(1e-9) * (self.w - 2.0 * self.m)
-    }
-
-    fn sy(&self, percent: f64) -> f64 {
-        let (y0, y1) = self.y;
-        self.h - self.m - (percent.log10() - y0) / (y1 - y0).max(1e-9) * (self.h - 2.0 * self.m)
-    }
-
-    /// Axis lines and ticks at 1, 2 and 5 times the powers of ten inside the ranges.
-    fn draw(&self, s: &mut String) {
-        let (w, h, m) = (self.w, self.h, self.m);
-        let _ = writeln!(s, "<line x1='{m}' y1='{}' x2='{}' y2='{}' stroke='black'/><line x1='{m}' y1='{m}' x2='{m}' y2='{}' stroke='black'/>", h - m, w - m, h - m, h - m);
-        // Over more than three decades, 2 and 5 crowd the labels: powers of ten only.
-        let ticks = |(lo, hi): (f64, f64)| {
-            let steps: &[f64] = if hi - lo > 3.0 {
-                &[1.0]
-            } else {
-                &[1.0, 2.0, 5.0]
-            };
-            (lo.floor() as i32..=hi.ceil() as i32)
-                .flat_map(move |e| steps.iter().map(move |k| k * 10f64.powi(e)))
-                .filter(move |v| (lo..=hi).contains(&v.log10()))
-        };
-        for v in ticks(self.x) {
-            let x = self.sx(v);
-            let label = if v >= 1000.0 {
-                format!("{} s", v / 1000.0)
-            } else {
-                format!("{v} ms")
-            };
-            let _ = writeln!(s, "<line x1='{x:.1}' y1='{}' x2='{x:.1}' y2='{}' stroke='#ddd'/><text x='{x:.1}' y='{}' text-anchor='middle'>{label}</text>", m, h - m, h - m + 16.0);
-        }
-        for v in ticks(self.y) {
-            let y = self.sy(v);
-            let _ = writeln!(s, "<line x1='{m}' y1='{y:.1}' x2='{}' y2='{y:.1}' stroke='#ddd'/><text x='{}' y='{:.1}' text-anchor='end'>{v}%</text>", w - m, m - 4.0, y + 4.0);
-        }
-    }
-
-    /// The front of `points` as a polyline.
-    fn polyline(&self, points: &[&Point], style: &str) -> String {
-        let xy: Vec<String> = points
-            .iter()
-            .map(|p| format!("{:.1},{:.1}", self.sx(p.bake_ms), self.sy(p.error)))
-            .collect();
-        format!(
-            "<polyline points='{}' fill='none' {style}/>\n",
-            xy.join(" ")
-        )
-    }
-}
-
-/// SVG scatter of mean error against bake time, log-log, with the Pareto front, and the front
-/// of the previous sweeps (grey) when given.
-fn plot(new: &[Point], previous: &[Point], caption: &str) -> String {
-    let range = |f: fn(&Point) -> f64| {
-        new.iter()
-            .chain(previous)
-            .map(f)
-            .filter(|v| *v > 0.0)
-            .fold((f64::MAX, f64::MIN), |(a, b), v| {
-                (a.min(v.log10()), b.max(v.log10()))
-            })
-    };
-    // A margin of a few hundredths of a decade keeps the extreme points inside the frame.
-    let pad = |(lo, hi): (f64, f64), by: f64| (lo - by, hi + by);
-    let axes = Axes {
-        x: pad(range(|p| p.bake_ms), 0.03),
-        y: pad(range(|p| p.error), 0.04),
-        w: 760.0,
-        h: 480.0,
-        m: 60.0,
-    };
-    let (w, m) = (axes.w, axes.m);
-    let mut s = format!("<svg xmlns='http://www.w3.org/2000/svg' width='{w}' height='{}' font-family='sans-serif' font-size='12'>\n<rect width='100%' height='100%' fill='white'/>\n", axes.h);
-    let _ = writeln!(s, "<text x='{}' y='20' text-anchor='middle' font-size='14'>Mean irradiance error against bake time (log-log)</text>", w / 2.0);
-    let _ = writeln!(
-        s,
-        "<text x='{}' y='38' text-anchor='middle' font-size='10' fill='#555'>{}</text>",
-        w / 2.0,
-        escape(caption)
-    );
-    axes.draw(&mut s);
-    let shown = |p: &&Point| p.bake_ms > 0.0 && p.error > 0.0;
-    let previous_front: Vec<&Point> = front(previous).into_iter().filter(shown).collect();
-    if !previous_front.is_empty() {
-        s.push_str(&axes.polyline(
-            &previous_front,
-            "stroke='#999' stroke-width='2' stroke-dasharray='6 4'",
-        ));
-        for p in &previous_front {
-            let _ = writeln!(s, "<rect x='{:.1}' y='{:.1}' width='7' height='7' fill='#999'><title>previous: {}: {:.1} ms, {:.2}%</title></rect>", axes.sx(p.bake_ms) - 3.5, axes.sy(p.error) - 3.5, escape(&p.setting), p.bake_ms, p.error);
-        }
-    }
-    let new_front: Vec<&Point> = front(new).into_iter().filter(shown).collect();
-    s.push_str(&axes.polyline(&new_front, "stroke='#222' stroke-width='1.5'"));
-    for p in new.iter().filter(shown) {
-        let shape = if p.flat {
-            "fill='none' stroke-width='1.5' stroke"
-        } else {
-            "fill"
-        };
-        let _ = writeln!(s, "<circle cx='{:.1}' cy='{:.1}' r='4' {shape}='{}'><title>{}: {:.1} ms, {:.2}%</title></circle>", axes.sx(p.bake_ms), axes.sy(p.error), merge_color(&p.merge), escape(&p.setting), p.bake_ms, p.error);
-    }
-    legend(&mut s, w - 200.0, m, !previous_front.is_empty());
-    s.push_str("</svg>\n");
-    s
-}
-
-/// The plot's legend, its left edge at `x`, from `top` down.
-fn legend(s: &mut String, x: f64, top: f64, previous: bool) {
-    for (i, (merge, ..)) in MERGES.iter().enumerate() {
-        let y = top + 16.0 * i as f64;
-        let _ = writeln!(
-            s,
-            "<circle cx='{x}' cy='{y}' r='4' fill='{}'/><text x='{}' y='{}'>bricks: {merge}</text>",
-            merge_color(merge),
-            x + 10.0,
-            y + 4.0
-        );
-    }
-    let mut lines = vec!["hollow: flat brick radiance", "solid line: Pareto front"];
-    if previous {
-        lines.push("grey dashed: previous front");
-    }
-    for (i, text) in lines.iter().enumerate() {
-        let _ = writeln!(
-            s,
-            "<text x='{x}' y='{}'>{text}</text>",
-            top + 16.0 * (MERGES.len() + 1 + i) as f64
-        );
-    }
-}
-
-/// The colour of a brick size's points.
-fn merge_color(merge: &str) -> &'static str {
-    // "spacing/8 (default)": the size without the note.
-    match merge.split(' ').next().unwrap_or(merge) {
-        "none" => "#d62728",
-        "spacing/24" => "#1f77b4",
-        "spacing/6" => "#2ca02c",
-        "spacing/12" => "#9467bd",
-        _ => "#ff7f0e",
-    }
-}
-
 #[cfg(test)]
 mod tests {
+    use super::previous::parse_table;
     use super::*;
+    use std::path::Path;
 
     fn point(ms: f64, error: f64) -> Point {
         Point {
