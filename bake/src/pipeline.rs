@@ -145,9 +145,9 @@ fn placement_stage(
 }
 
 /// The surface stage: the surface terms of the `bricked` surfels (written into them) against
-/// the probes of `grid` at `positions`, traced through `scene`'s BVH, with surfel cells of
-/// `cell_size` (`None`: no terms, [`surface_terms::surface_terms`]); warns when the lookup's
-/// tables cannot hold them or when most surfels see none of their probes.
+/// the probes of `grid` at `positions`, traced through `bvh` over `triangles`, with surfel
+/// cells of `cell_size` (`None`: no terms, [`surface_terms::surface_terms`]); warns when the
+/// lookup's tables cannot hold them or when most surfels see none of their probes.
 fn surface_stage(
     (grid, positions): (&prt_format::Grid, &[Vec3]),
     (bvh, triangles): (&bvh::SceneBvh, &[[Vec3; 3]]),

@@ -166,10 +166,10 @@ pub fn summary(plan: &Plan) -> (crate::Placed, Option<String>) {
     (placed, warning)
 }
 
-/// Flags [`PROBE_FILLED`] and its level ([`prt_format::FILL_LEVEL_SHIFT`]) on every grid point
-/// of `grid` the plan leaves out that has a valid point of its level with a positive weight
-/// ([`tier::used_corners`]), and returns how many per level (1..=[`tier::LEVELS`]). Those
-/// points are all traced, so none is filled itself (as validation requires). A point whose level's points
+/// Flags [`PROBE_FILLED`] and its level ([`prt_format::FILL_LEVEL_SHIFT`]) on every grid point of
+/// `grid` the plan leaves out that has a valid point of its level with a positive weight
+/// ([`tier::used_corners`]), and returns how many per level (1..=[`tier::LEVELS`]). Those points
+/// are all traced, so none is filled itself (as validation requires). A point whose level's points
 /// are all inside geometry stays without light, as a point inside geometry should.
 pub fn mark_filled(
     grid: &Grid,

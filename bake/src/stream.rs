@@ -3,11 +3,11 @@
 //! most two blocks of ray hits, never all of them: the hits grow with probes times rays, past
 //! any machine's memory on large grids.
 //!
-//! What a probe keeps once its block is folded is what the asset needs from it: its sky mask,
-//! sky transfer and ray counts, its visibility map, and its factor rows (keyed by provisional
-//! brick until [`BrickFolder::finish_placed`] numbers the bricks). Blocks are folded in probe order and
-//! a probe's hits in the order its rays were traced (`crate::trace::coherent_order`), so the
-//! result is the same for any block size or thread count.
+//! What a probe keeps once its block is folded is what the asset needs from it: its sky mask, sky
+//! transfer and ray counts, its visibility map, and its factor rows (keyed by provisional brick
+//! until [`BrickFolder::finish_placed`] numbers the bricks). Blocks are folded in probe order and a
+//! probe's hits in the order its rays were traced (`crate::trace::coherent_order`), so the result
+//! is the same for any block size or thread count.
 
 use std::sync::{Mutex, PoisonError};
 

@@ -54,7 +54,7 @@ use crate::results::Out;
 use crate::surfel_lookup::SurfelLookup;
 use cases::Case;
 use image::View;
-use lookups::{Kind, Lookup, Lookups};
+use lookups::{Kind, Lookup, Lookups, Overrides};
 use prt_runtime::surface::SurfaceSampler;
 use refs::Reference;
 use report::{Row, Setting};
@@ -84,6 +84,10 @@ pub struct SurfaceArgs {
     /// [default: each lookup's own: 0.75 and 1].
     #[arg(long)]
     reach: Option<f32>,
+    /// Rays per point of the path lookup (`--lookup path`) [default: 256; its figures against
+    /// the probes' in docs/results/surface_candidates.md took 4096].
+    #[arg(long)]
+    path_rays: Option<u32>,
     /// Bake at this spacing in metres instead of the default, and at half of it [default: the
     /// bake's default for each case].
     #[arg(long)]
@@ -129,7 +133,22 @@ pub fn run(args: SurfaceArgs) -> Result<()> {
         .normal_bias
         .map(|b| prt_cli::options::normal_bias(Some(b)))
         .transpose()?;
-    let lookups = Lookups::parse(&args.lookups, bias, args.reach)?;
+    if let Some(reach) = args.reach {
+        anyhow::ensure!(
+            reach.is_finite() && reach > 0.0,
+            "--reach {reach}: expected a finite number of probe spacings > 0"
+        );
+    }
+    anyhow::ensure!(
+        args.path_rays != Some(0),
+        "--path-rays 0: expected at least one ray per point"
+    );
+    let overrides = Overrides {
+        normal_bias: bias,
+        reach: args.reach,
+        path_rays: args.path_rays,
+    };
+    let lookups = Lookups::parse(&args.lookups, overrides)?;
     let picked = cases::pick(&args.cases, cases::all(&args.root)?)?;
     let mut rows = Vec::new();
     let mut oracle = Vec::new();
@@ -259,12 +278,10 @@ impl<'a> Sampler<'a> {
                 })
             }
             Kind::Surfels => Sampler::Surfels(SurfelLookup::new(asset, sh, near()?, settings)),
-            Kind::Path => Sampler::Path(PathLookup::new(
-                asset,
-                near()?,
-                &baked.lighting.rig,
-                &baked.lighting.sky,
-            )),
+            Kind::Path(rays) => {
+                let light = (&baked.lighting.rig, &baked.lighting.sky);
+                Sampler::Path(PathLookup::new(asset, near()?, light, rays))
+            }
         })
     }
 

@@ -78,10 +78,9 @@ impl FactorF16 {
 }
 
 /// One factor, 8-bit encoding ([`TransferPrecision::U8`]): `brick_rays` = brick << 8 | rays
-/// (1..=255; the baker splits larger counts over several factors of the same brick);
-/// `packed` holds 12 snorm8 bytes, low byte first: offset x, y, z (times
-/// the `offset_scale` of [`Factors::U8`]), then SH terms 1..8 (times `U8_SH_RANGE` times the DC term
-/// `rays * 4pi/N * Y00`), then a zero.
+/// (1..=255; the baker splits larger counts over several factors of the same brick); `packed` holds
+/// 12 snorm8 bytes, low byte first: offset x, y, z (times the `offset_scale` of [`Factors::U8`]),
+/// then SH terms 1..8 (times `U8_SH_RANGE` times the DC term `rays * 4pi/N * Y00`), then a zero.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable, Serialize, Deserialize)]
 #[repr(C)]
 pub struct FactorU8 {

@@ -27,7 +27,7 @@ use crate::lights::{
 };
 use crate::rig::Lighting;
 use crate::settings::{LookupSettings, MAX_BOUNCES};
-use crate::shadow_rays::{occluded, ray_offset};
+use crate::shadow_rays::lit;
 use crate::surface::SurfaceSampler;
 
 /// Why an asset cannot be relit.
@@ -251,16 +251,9 @@ impl<'a> CpuRelighter<'a> {
                                     continue;
                                 }
                                 st.shadow_rays += 1;
-                                let off = ray_offset(p, self.asset.header.grid.spacing);
-                                let o = p + n * off;
-                                // f32::MAX, not infinity, for directional lights: the
-                                // same slab arithmetic as the WGSL twin.
-                                let tmax = if dist.is_finite() {
-                                    (light.position - o).length() - off
-                                } else {
-                                    f32::MAX
-                                };
-                                if !occluded(&asset.geometry, o, l, tmax) {
+                                let spacing = self.asset.header.grid.spacing;
+                                let at = dist.is_finite().then_some(light.position);
+                                if lit(&asset.geometry, p, n, spacing, l, at) {
                                     for c in 0..3 {
                                         out[c] += el[c];
                                     }

@@ -143,6 +143,24 @@ pub fn ray_offset(p: Vec3, scale: f32) -> f32 {
     (RAY_OFFSET_MAGNITUDE * p.abs().max_element()).max(RAY_OFFSET_SCALE * scale)
 }
 
+/// Whether light reaches the surface point `p` (unit normal `n`, in an asset of probe
+/// `spacing`) along unit `l`: a shadow ray from [`ray_offset`] off the surface, up to the
+/// light at `light_at`, or without end for a directional light (`None`; `f32::MAX`, not
+/// infinity: the same slab arithmetic as the WGSL twin, `shaders/shadow_rays.wgsl`).
+pub fn lit(
+    geo: &Geometry,
+    p: Vec3,
+    n: Vec3,
+    spacing: f32,
+    l: Vec3,
+    light_at: Option<Vec3>,
+) -> bool {
+    let off = ray_offset(p, spacing);
+    let o = p + n * off;
+    let tmax = light_at.map_or(f32::MAX, |at| (at - o).length() - off);
+    !occluded(geo, o, l, tmax)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -421,25 +421,8 @@ impl Loader<'_> {
 
 #[cfg(test)]
 mod tests {
-    use super::accessors::{le_f32s, plain_elements, plain_indices};
     use super::*;
     use glam::Vec4;
-
-    #[test]
-    fn lists_strips_and_fans_follow_gltf_order() {
-        assert_eq!(
-            triangulate(Mode::Triangles, &[0, 1, 2, 3, 4, 5, 6]),
-            vec![[0, 1, 2], [3, 4, 5]]
-        );
-        assert_eq!(
-            triangulate(Mode::TriangleStrip, &[0, 1, 2, 3]),
-            vec![[0, 1, 2], [2, 1, 3]]
-        );
-        assert_eq!(
-            triangulate(Mode::TriangleFan, &[0, 1, 2, 3]),
-            vec![[1, 2, 0], [2, 3, 0]]
-        );
-    }
 
     /// A glTF of two one-triangle primitives, primitive `colored` (if any) with COLOR_0, the
     /// first one's triangle degenerate (collinear corners) when `degenerate`.
@@ -520,87 +503,5 @@ mod tests {
         assert!(lost.has_vertex_colors);
         let colors: Vec<[Vec4; 3]> = lost.attributes.iter().map(|a| a.color).collect();
         assert_eq!(colors, [[Vec4::ONE; 3]]);
-    }
-
-    /// The plain accessor path reads what the glTF reader reads: positions interleaved (stride
-    /// 20, offset 4), indices of every width at an offset, and a sparse accessor left to the
-    /// reader.
-    #[test]
-    fn plain_accessors_read_as_the_gltf_reader_does() {
-        let mut buffer: Vec<u8> = Vec::new();
-        for v in 0..4u8 {
-            buffer.extend([0xee; 4]);
-            for x in [f32::from(v), 0.5 * f32::from(v), -1.25] {
-                buffer.extend(x.to_le_bytes());
-            }
-            buffer.extend([0xdd; 4]);
-        }
-        buffer.extend([0xcc, 0xcc, 0, 0, 1, 0, 2, 0, 0, 0, 2, 0, 3, 0]); // u16 from 82
-        buffer.extend([9, 0, 1, 2, 0, 2, 3, 0, 0, 0]); // u8 from 95, padded
-        for i in [0u32, 3, 2, 2, 1, 0] {
-            buffer.extend(i.to_le_bytes()); // u32 from 104
-        }
-        buffer.extend(1u32.to_le_bytes()); // sparse index, from 128
-        for x in [7.0f32, 8.0, 9.0] {
-            buffer.extend(x.to_le_bytes()); // sparse value, from 132
-        }
-        let json = format!(
-            r#"{{"asset":{{"version":"2.0"}},"scenes":[{{"nodes":[0]}}],"nodes":[{{"mesh":0}}],
-            "meshes":[{{"primitives":[
-                {{"attributes":{{"POSITION":0}},"indices":1}},
-                {{"attributes":{{"POSITION":0}},"indices":2}},
-                {{"attributes":{{"POSITION":4}},"indices":3}}]}}],
-            "buffers":[{{"byteLength":{},"uri":"data:application/octet-stream;base64,{}"}}],
-            "bufferViews":[{{"buffer":0,"byteLength":80,"byteStride":20}},
-                {{"buffer":0,"byteOffset":80,"byteLength":14}},
-                {{"buffer":0,"byteOffset":94,"byteLength":8}},
-                {{"buffer":0,"byteOffset":104,"byteLength":24}},
-                {{"buffer":0,"byteOffset":128,"byteLength":4}},
-                {{"buffer":0,"byteOffset":132,"byteLength":12}}],
-            "accessors":[
-                {{"bufferView":0,"byteOffset":4,"componentType":5126,"count":4,"type":"VEC3",
-                  "min":[0,0,-1.25],"max":[3,1.5,-1.25]}},
-                {{"bufferView":1,"byteOffset":2,"componentType":5123,"count":6,"type":"SCALAR"}},
-                {{"bufferView":2,"byteOffset":1,"componentType":5121,"count":6,"type":"SCALAR"}},
-                {{"bufferView":3,"componentType":5125,"count":6,"type":"SCALAR"}},
-                {{"bufferView":0,"byteOffset":4,"componentType":5126,"count":4,"type":"VEC3",
-                  "min":[0,0,-1.25],"max":[7,8,9],
-                  "sparse":{{"count":1,"indices":{{"bufferView":4,"componentType":5125}},
-                    "values":{{"bufferView":5}}}}}}]}}"#,
-            buffer.len(),
-            base64::encode(&buffer)
-        );
-        let (doc, buffers, _) = gltf::import_slice(json.as_bytes()).unwrap();
-        let (mut sparse, mut indices) = (0, Vec::new());
-        for prim in doc
-            .meshes()
-            .flat_map(|m| m.primitives().collect::<Vec<_>>())
-        {
-            let reader = prim.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
-            let expected: Vec<[f32; 3]> = reader.read_positions().unwrap().collect();
-            let a = prim.get(&gltf::Semantic::Positions).unwrap();
-            match plain_elements(&a, &buffers, 12) {
-                Some(e) => assert_eq!(e.map(le_f32s::<3>).collect::<Vec<_>>(), expected),
-                None => {
-                    assert!(a.sparse().is_some(), "accessor {}", a.index());
-                    assert_eq!(expected[1], [7.0, 8.0, 9.0]);
-                    sparse += 1;
-                }
-            }
-            let expected: Vec<u32> = reader.read_indices().unwrap().into_u32().collect();
-            let got = plain_indices(&prim.indices().unwrap(), &buffers);
-            assert_eq!(
-                got.as_ref(),
-                Some(&expected),
-                "{:?}",
-                prim.indices().unwrap()
-            );
-            indices.push(expected);
-        }
-        assert_eq!(
-            indices,
-            [[0, 1, 2, 0, 2, 3], [0, 1, 2, 0, 2, 3], [0, 3, 2, 2, 1, 0]]
-        );
-        assert_eq!(sparse, 1);
     }
 }

@@ -48,12 +48,12 @@ pub struct BrickFit {
 
 /// Merges ray hits into bricks as they arrive, so that the bake never holds every hit at once
 /// (the working set is one block of probes; what grows is the bricks and surfels the asset
-/// carries). Hits must come in the bake's order (probe by probe, each probe's in the order its
-/// rays were traced): a surfel is the running mean
-/// of the hits that joined it, and a hit joins the first surfel of its cell, in creation order,
-/// whose first normal agrees with its own. [`BrickFolder::finish_placed`] numbers the bricks by key,
-/// so the result depends only on the hits and their order, never on how they were blocked or
-/// on the thread count (`tests::blocking_does_not_change_the_result`).
+/// carries). Hits must come in the bake's order (probe by probe, each probe's in the order its rays
+/// were traced): a surfel is the running mean of the hits that joined it, and a hit joins the first
+/// surfel of its cell, in creation order, whose first normal agrees with its own.
+/// [`BrickFolder::finish_placed`] numbers the bricks by key, so the result depends only on the hits
+/// and their order, never on how they were blocked or on the thread count
+/// (`tests::blocking_does_not_change_the_result`).
 ///
 /// A brick is found by hashing its key (`BrickIndex`, seeded per process), then its cell's
 /// surfels through a list per cell: no sort of every hit's key (which held every hit, its key
@@ -259,10 +259,10 @@ impl BrickFolder {
         self.surfel_counts[b as usize] += 1;
     }
 
-    /// Asks for what [`BrickFolder::finish_placed`] reads next: the first surfel of each of brick `b`'s
-    /// cells, and the cell heads of the brick after it, `next`. Bricks are finished in key
-    /// order, their surfels were made in arrival order, so each is a cache miss; the loads do
-    /// not depend on each other, but the walk of the cells would wait for each in turn.
+    /// Asks for what [`BrickFolder::finish_placed`] reads next: the first surfel of each of brick
+    /// `b`'s cells, and the cell heads of the brick after it, `next`. Bricks are finished in key
+    /// order, their surfels were made in arrival order, so each is a cache miss; the loads do not
+    /// depend on each other, but the walk of the cells would wait for each in turn.
     fn prefetch_brick(&self, b: u32, next: Option<u32>) {
         if self.cell_size == 0.0 {
             return;

@@ -5,8 +5,7 @@ use std::path::Path;
 
 use glam::Vec3;
 use prt_format::{
-    BakeSettingsRecord, BakeStats, Header, Probe, DEPTH_WORDS, NO_SLOT, PROBE_DILATED,
-    PROBE_OFFSET, PROBE_VALID,
+    BakeSettingsRecord, BakeStats, Header, Probe, NO_SLOT, PROBE_DILATED, PROBE_OFFSET, PROBE_VALID,
 };
 use prt_scene::Scene;
 
@@ -79,27 +78,6 @@ pub(super) struct Assembled {
     pub probes: Vec<Probe>,
     pub sky_mask: Vec<u32>,
     pub sky_transfer: Vec<[f32; prt_format::sh::SH_COUNT]>,
-}
-
-/// The visibility maps of the probes with data (those that carry a table, `from`) out of
-/// `depth`, one map per traced probe of `traced`.
-pub(super) fn with_data(
-    mut depth: Vec<u32>,
-    traced: &[trace::ProbeRays],
-    from: &[Option<usize>],
-) -> Vec<u32> {
-    let mut kept = 0;
-    let maps = traced.iter().zip(from).filter(|(r, _)| r.placed);
-    for (map, (_, from)) in maps.enumerate() {
-        if from.is_some() {
-            let words = map * DEPTH_WORDS..(map + 1) * DEPTH_WORDS;
-            depth.copy_within(words, kept * DEPTH_WORDS);
-            kept += 1;
-        }
-    }
-    depth.truncate(kept * DEPTH_WORDS);
-    depth.shrink_to_fit();
-    depth
 }
 
 /// The asset's header: what was baked (`scene_path`, as `loaded`) on which `grid`, how

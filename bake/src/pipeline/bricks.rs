@@ -4,10 +4,10 @@
 
 use glam::Vec3;
 use prt_format::coarse::CoarseBricks;
-use prt_format::{Factors, TransferPrecision, U8_MAX_BRICK};
+use prt_format::{Factors, TransferPrecision, DEPTH_WORDS, U8_MAX_BRICK};
 use prt_scene::Scene;
 
-use super::{assemble, valid, Built, Loaded};
+use super::{valid, Built, Loaded};
 use crate::merge::{coarse, fold, snap};
 use crate::tables::{encode, factors};
 use crate::{diagnostics, dilate, placement, stream, trace, BakeError, BakeReport, BakeSettings};
@@ -54,7 +54,7 @@ pub(super) fn bricks_stage(
         folder,
         far_levels,
     } = traced;
-    let depth = assemble::with_data(depth, &rays, &from);
+    let depth = with_data(depth, &rays, &from);
     let surfaces = snap::Surfaces {
         bvh: &built.bvh,
         triangles: &loaded.scene.triangles,
@@ -183,4 +183,21 @@ fn carried_layout(
         });
     }
     Ok((from, lens))
+}
+
+/// The visibility maps of the probes with data (those that carry a table, `from`) out of
+/// `depth`, one map per traced probe of `traced`.
+fn with_data(mut depth: Vec<u32>, traced: &[trace::ProbeRays], from: &[Option<usize>]) -> Vec<u32> {
+    let mut kept = 0;
+    let maps = traced.iter().zip(from).filter(|(r, _)| r.placed);
+    for (map, (_, from)) in maps.enumerate() {
+        if from.is_some() {
+            let words = map * DEPTH_WORDS..(map + 1) * DEPTH_WORDS;
+            depth.copy_within(words, kept * DEPTH_WORDS);
+            kept += 1;
+        }
+    }
+    depth.truncate(kept * DEPTH_WORDS);
+    depth.shrink_to_fit();
+    depth
 }

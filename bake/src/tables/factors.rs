@@ -141,11 +141,11 @@ pub enum ProbeRows {
 }
 
 /// A u8 factor waiting for its brick's final number and centroid, in 28 bytes: the provisional
-/// brick waits in the factor's own brick field, which [`FactorU8::place`] overwrites (a row
-/// beside it took 32 bytes; the rows are the bake's largest working set). A provisional brick
-/// past [`prt_format::U8_MAX_BRICK`] loses its high bits here, but such a bake is refused before
-/// `encode_u8` reads them (`pipeline::bricks::bricks_and_tables`; provisional and final bricks are as
-/// many).
+/// brick waits in the factor's own brick field, which [`FactorU8::place`] overwrites (a row beside
+/// it took 32 bytes; the rows are the bake's largest working set). A provisional brick past
+/// [`prt_format::U8_MAX_BRICK`] loses its high bits here, but such a bake is refused before
+/// `encode_u8` reads them (`pipeline::bricks::bricks_and_tables`; provisional and final bricks are
+/// as many).
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 #[repr(C)]
 pub struct RowU8 {
@@ -237,8 +237,8 @@ impl ProbeRows {
 }
 
 /// Encodes a finished row ([`ProbeRows::of`]) into `rows`, split into rows of at most
-/// [`prt_format::U8_MAX_RAYS`] rays, for a lattice whose rays carry `dc_per_ray` ([`FactorU8::dc_per_ray`]:
-/// worked out once per probe, an f64 division a row otherwise).
+/// [`prt_format::U8_MAX_RAYS`] rays, for a lattice whose rays carry `dc_per_ray`
+/// ([`FactorU8::dc_per_ray`]: worked out once per probe, an f64 division a row otherwise).
 fn push_u8(rows: &mut Vec<RowU8>, row: FactorRow, dc_per_ray: f32) {
     let (brick, rays, sh, sum) = row;
     let mean = Vec3::from(sum) / rays as f32;

@@ -5,13 +5,13 @@
 //! count alone (about as large as the asset).
 //! They cannot be encoded as they arrive: a factor names its brick's final number and is placed
 //! from its brick's centroid, both known only once every probe is folded
-//! ([`crate::merge::fold::BrickFolder::finish_placed`]). So past the budget the oldest chunks are written
-//! to a file and read back one at a time when the tables are encoded, which is also in probe
-//! order: the memory the rows hold stays within the budget whatever the probe count, and the
-//! asset's bytes do not change. Past the budget, two more chunks are held: the one being
-//! written and the writer's page-aligned copy of it. Once any chunk is in the file, the rest
-//! follow when the trace ends, before the bricks are finished (the bake's peak, with the
-//! surfels under merge and the final ones both held).
+//! ([`crate::merge::fold::BrickFolder::finish_placed`]). So past the budget the oldest chunks are
+//! written to a file and read back one at a time when the tables are encoded, which is also in
+//! probe order: the memory the rows hold stays within the budget whatever the probe count, and the
+//! asset's bytes do not change. Past the budget, two more chunks are held: the one being written
+//! and the writer's page-aligned copy of it. Once any chunk is in the file, the rest follow when
+//! the trace ends, before the bricks are finished (the bake's peak, with the surfels under merge
+//! and the final ones both held).
 //!
 //! The file is made in [`std::env::temp_dir`] (`TMPDIR`) and, on Unix, unlinked at once, so
 //! nothing is left behind however the bake ends. On Linux it is opened for direct I/O where

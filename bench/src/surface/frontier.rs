@@ -19,7 +19,7 @@ use prt_bake::BakeSettings;
 use prt_format::Summary;
 
 use super::cases::{self, Set};
-use super::lookups::Lookups;
+use super::lookups::{Lookups, Overrides};
 use super::refs;
 use super::report::Setting;
 use super::{image, Refs};
@@ -168,7 +168,8 @@ pub fn run(args: FrontierArgs) -> Result<()> {
         );
     }
     let picked = cases::pick(&args.cases, cases::all(&args.root)?)?;
-    let lookup = Lookups::parse(&["default".to_owned()], None, None)?.for_set(Set::Bundled)[0];
+    let default = ["default".to_owned()];
+    let lookup = Lookups::parse(&default, Overrides::default())?.for_set(Set::Bundled)[0];
     let mut rows = Vec::new();
     for case in &picked {
         let refs = Refs {

@@ -20,8 +20,9 @@ pub enum Kind {
     Rays(RaySettings),
     /// `crate::surfel_lookup::SurfelLookup`: `rays_light`'s terms traced from the point's surfel.
     Surfels,
-    /// `crate::path_lookup::PathLookup`: one-bounce path tracing at the point, no probes.
-    Path,
+    /// `crate::path_lookup::PathLookup`: one-bounce path tracing at the point with this many
+    /// rays, no probes.
+    Path(u32),
 }
 
 /// A lookup's name and how to make it.
@@ -62,7 +63,9 @@ const LOOKUPS: [Variant; 7] = [
     ("surfels", || (volume(true), Kind::Surfels)),
     // The one-bounce truth traced at the point with the rays' count, the probes left out: what
     // the benchmark itself and the probes' radiance cost (settings unused).
-    ("path", || (trilinear(), Kind::Path)),
+    ("path", || {
+        (trilinear(), Kind::Path(crate::path_lookup::PATH_RAYS))
+    }),
 ];
 
 /// A named lookup.
@@ -107,12 +110,11 @@ impl Lookup {
                     "are dark"
                 }
             ),
-            Kind::Path => format!(
-                "{}: one-bounce path tracing at the point, no probes: {} cosine rays through \
-                 the asset's BVH, hits lit by the rig behind shadow rays, escapes the sky's \
-                 radiance (bench/src/path_lookup.rs)",
-                self.name,
-                crate::path_lookup::PATH_RAYS
+            Kind::Path(rays) => format!(
+                "{}: one-bounce path tracing at the point, no probes: {rays} cosine rays \
+                 through the asset's BVH, hits lit by the rig behind shadow rays, escapes the \
+                 sky's radiance (bench/src/path_lookup.rs)",
+                self.name
             ),
             Kind::Surfels => format!(
                 "{}: rays_light's visibility and near field decided per surfel, as a bake would \
@@ -128,37 +130,37 @@ impl Lookup {
         match self.kind {
             Kind::Runtime => false,
             Kind::Rays(r) => r.near_light,
-            Kind::Surfels | Kind::Path => true,
+            Kind::Surfels | Kind::Path(_) => true,
         }
     }
+}
+
+/// What a run changes in every lookup it samples with, where given.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Overrides {
+    /// Each lookup's normal bias (probe spacings).
+    pub normal_bias: Option<f32>,
+    /// The near-field reach of the ray lookups that have one (`rays`, `rays_light`; probe
+    /// spacings).
+    pub reach: Option<f32>,
+    /// The path lookup's rays per point.
+    pub path_rays: Option<u32>,
 }
 
 /// The lookups of a run: `--lookup`'s, or each case's defaults.
 pub struct Lookups {
     chosen: Option<Vec<Lookup>>,
-    normal_bias: Option<f32>,
-    reach: Option<f32>,
+    overrides: Overrides,
 }
 
 impl Lookups {
-    /// `names` (none: each case's defaults), each lookup's normal bias replaced by `normal_bias`
-    /// (probe spacings) when given.
-    /// `reach` (probe spacings), when given, replaces the near-field reach of the ray lookups
-    /// that have one (`rays`, `rays_light`).
-    pub fn parse(
-        names: &[String],
-        normal_bias: Option<f32>,
-        reach: Option<f32>,
-    ) -> Result<Lookups> {
+    /// `names` (none: each case's defaults), with `overrides`.
+    pub fn parse(names: &[String], overrides: Overrides) -> Result<Lookups> {
         let chosen = match names {
             [] => None,
             _ => Some(names.iter().map(|n| by_name(n)).collect::<Result<_>>()?),
         };
-        Ok(Lookups {
-            chosen,
-            normal_bias,
-            reach,
-        })
+        Ok(Lookups { chosen, overrides })
     }
 
     /// The lookups of a case of `set`. Without `--lookup`: the bundled cases keep the two rows
@@ -187,13 +189,16 @@ impl Lookups {
         lookups
             .into_iter()
             .map(|mut l| {
-                if let Some(bias) = self.normal_bias {
+                let o = self.overrides;
+                if let Some(bias) = o.normal_bias {
                     l.settings.normal_bias = bias;
                 }
-                if let (Kind::Rays(r), Some(reach)) = (&mut l.kind, self.reach) {
-                    if r.near_field.is_some() {
-                        r.near_field = Some(reach);
+                match &mut l.kind {
+                    Kind::Rays(r) if r.near_field.is_some() => {
+                        r.near_field = o.reach.or(r.near_field);
                     }
+                    Kind::Path(rays) => *rays = o.path_rays.unwrap_or(*rays),
+                    _ => {}
                 }
                 l
             })
@@ -228,8 +233,8 @@ mod tests {
     use super::*;
 
     #[test]
-    fn defaults_per_set_and_the_bias_override() {
-        let none = Lookups::parse(&[], None, None).unwrap();
+    fn defaults_per_set_and_the_overrides() {
+        let none = Lookups::parse(&[], Overrides::default()).unwrap();
         let names = |ls: Vec<Lookup>| ls.iter().map(|l| l.name).collect::<Vec<_>>();
         assert_eq!(
             names(none.for_set(Set::Bundled)),
@@ -252,13 +257,19 @@ mod tests {
             LookupSettings::default()
         );
         assert!(!none.for_set(Set::Tuning)[0].settings.surface_terms);
-        let picked =
-            Lookups::parse(&["trilinear".into(), "rays".into()], Some(0.1), Some(2.0)).unwrap();
+        let overrides = Overrides {
+            normal_bias: Some(0.1),
+            reach: Some(2.0),
+            path_rays: Some(64),
+        };
+        let names = ["trilinear".into(), "rays".into(), "path".into()];
+        let picked = Lookups::parse(&names, overrides).unwrap();
         let l = picked.for_set(Set::Tuning);
         assert_eq!((l[0].name, l[0].settings.normal_bias), ("trilinear", 0.1));
         assert!(!l[0].settings.depth_moments);
         assert!(matches!(l[1].kind, Kind::Rays(r) if r.near_field == Some(2.0)));
-        let err = Lookups::parse(&["nearest".into()], None, None)
+        assert_eq!(l[2].kind, Kind::Path(64));
+        let err = Lookups::parse(&["nearest".into()], Overrides::default())
             .err()
             .unwrap();
         assert!(

@@ -38,7 +38,8 @@ pub struct Row {
     pub probes: usize,
     /// The grid's points, with data or not.
     pub grid_points: usize,
-    /// Grid points at a corner of a cell holding a surfel (`placement::surface_probes`).
+    /// Grid points the lookup reads at a front-face surfel, at it and moved by the runtime's
+    /// default normal bias (`placement::surface_probes`).
     pub surface_probes: usize,
     pub valid: usize,
     pub dilated: usize,
@@ -135,8 +136,9 @@ fn definitions(md: &mut String, rows: &[Row]) -> Result<()> {
          median hit pixel's truth.\n\
          - Probes (valid, dilated): probes with data (a sparse bake's filled grid points and \
          the traced points inside geometry that carry nothing are not counted). Grid points at \
-         surfaces: the grid points the lookup reads at the bake's surfels (at each surfel and \
-         moved by the normal bias), as a share of all grid points.\n\
+         surfaces: the grid points the lookup reads at the bake's front-face surfels (at each \
+         surfel and moved by the runtime's default normal bias, 0.2 spacings, whatever the \
+         row's lookup), as a share of all grid points.\n\
          - Runtime MB: the asset's sections an engine keeps and uploads (probes, sky mask and \
          transfer, visibility maps, factors, bricks, surfels, BVH and triangles, surface terms), \
          10^6 bytes.\n\

@@ -18,10 +18,10 @@ use crate::BakeError;
 pub(super) struct Writer<T> {
     /// At most one chunk waits while one is written (a rendezvous: `push` waits for the
     /// writer rather than hold more than the budget and two chunks). `None` once finishing.
-    pub(super) chunks: Option<SyncSender<Vec<T>>>,
+    chunks: Option<SyncSender<Vec<T>>>,
     /// Buffers of written chunks.
     pub(super) done: Receiver<Vec<T>>,
-    pub(super) thread: Option<JoinHandle<Result<SpillFile, BakeError>>>,
+    thread: Option<JoinHandle<Result<SpillFile, BakeError>>>,
 }
 
 impl<T: Pod + Send> Writer<T> {
@@ -195,7 +195,7 @@ impl SpillFile {
         Ok(())
     }
 
-    pub(super) fn write_at(&self, at: u64, bytes: &[u8]) -> std::io::Result<()> {
+    fn write_at(&self, at: u64, bytes: &[u8]) -> std::io::Result<()> {
         let mut file = &self.file;
         file.seek(SeekFrom::Start(at))?;
         file.write_all(bytes)
@@ -235,7 +235,7 @@ impl SpillFile {
 }
 
 /// The first `bytes` of `pages`, rounded up to whole pages (grown to that if shorter).
-pub(super) fn staged(pages: &mut Vec<Page>, bytes: usize) -> &mut [u8] {
+fn staged(pages: &mut Vec<Page>, bytes: usize) -> &mut [u8] {
     let count = bytes.div_ceil(PAGE);
     if pages.len() < count {
         pages.resize(count, Page([0; PAGE]));
@@ -250,7 +250,7 @@ impl Drop for SpillFile {
     }
 }
 
-pub(super) fn spill_error(path: &std::path::Path, error: std::io::Error) -> BakeError {
+fn spill_error(path: &std::path::Path, error: std::io::Error) -> BakeError {
     BakeError::Spill {
         path: path.to_owned(),
         error,

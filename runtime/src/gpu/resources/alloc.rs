@@ -48,7 +48,7 @@ pub(super) struct Alloc<'a> {
 }
 
 impl Alloc<'_> {
-    pub(super) fn check(&self, label: &'static str, size: u64) -> Result<(), GpuError> {
+    fn check(&self, label: &'static str, size: u64) -> Result<(), GpuError> {
         if size > self.max_binding {
             return Err(GpuError::Limit {
                 what: label,
