@@ -205,8 +205,14 @@ fn measure(
     let (asset, bytes) = baked.context("--repeats 0: no bake")?;
     let summary = prt_format::Summary::of(&asset, bytes as u64);
     let mut encodings = vec![("sh9 + gradient", asset.clone())];
-    if settings.cell_size != Some(0.0) && precision == TransferPrecision::F16 {
+    let merged = settings.cell_size != Some(0.0);
+    if merged && precision == TransferPrecision::F16 {
         encodings.push(("sh9, flat brick", without_offsets(asset)));
+    } else if merged && precision == TransferPrecision::U8 {
+        // What an 8-byte factor could hold (issue 32, item 1): brick and rays, three L1 bytes.
+        let mut l1 = asset;
+        keep_l1(&mut l1.factors);
+        encodings.push(("l1, flat brick", l1));
     }
     let mut rows = Vec::new();
     for (encoding, asset) in encodings {
@@ -248,7 +254,7 @@ impl Row {
                 self.encoding,
             ),
             merge: self.merge.to_owned(),
-            flat: self.encoding == "sh9, flat brick",
+            flat: self.encoding.ends_with("flat brick"),
             bake_ms: self.bake_s * 1e3,
             // As the table prints it, so that the new front and an earlier one (read from its
             // table) are compared at one precision.
@@ -333,6 +339,20 @@ fn without_offsets(mut asset: Asset) -> Asset {
     asset
 }
 
+/// Zeroes every u8 factor's offset and L2 transfer (SH terms 4..8), keeping what an 8-byte
+/// factor (24-bit brick, 8-bit rays, three snorm8 L1 terms) would hold, to measure what it
+/// costs before building it (issue 32, item 1). Other precisions are left as they are.
+fn keep_l1(factors: &mut Factors) {
+    if let Factors::U8 { factors, .. } = factors {
+        // Bytes 0-2 offset, 3-10 SH terms 1..8, 11 zero (`prt_format::FactorU8`): keep 3-5.
+        for f in factors.iter_mut() {
+            f.packed[0] &= 0xff00_0000;
+            f.packed[1] &= 0x0000_ffff;
+            f.packed[2] = 0;
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::previous::parse_table;
@@ -407,5 +427,24 @@ mod tests {
             e.contains("d.md line 4: column 'rays' is '5l2', not a ray count"),
             "{e}"
         );
+    }
+
+    /// `keep_l1` keeps a u8 factor's rays and L1 terms exactly and zeroes its offset and L2.
+    #[test]
+    fn keep_l1_keeps_rays_and_l1_only() {
+        let sh = [0.3, -0.2, 0.1, 0.25, -0.15, 0.05, 0.2, -0.1];
+        let f = prt_format::FactorU8::transfer(40, sh, 2048).place(7, [0.3, -0.2, 0.1], 1.0);
+        let mut factors = Factors::U8 {
+            factors: vec![f],
+            offset_scale: 1.0,
+        };
+        let before = factors.transfer(0, 2048);
+        keep_l1(&mut factors);
+        let after = factors.transfer(0, 2048);
+        assert_eq!(after[..4], before[..4], "rays (k = 0) and L1 kept");
+        assert!(before[4..].iter().any(|&t| t != 0.0));
+        assert!(after[4..].iter().all(|&t| t == 0.0), "{after:?}");
+        assert_eq!(factors.offset(0), [0.0; 3]);
+        assert_eq!(factors.brick_and_rays(0), (7, 40));
     }
 }

@@ -120,7 +120,7 @@ fn point_of(c: &[String], header: &[String], columns: &Columns, at: &str) -> Res
             encoding,
         ),
         merge: merge.to_owned(),
-        flat: encoding == "sh9, flat brick",
+        flat: encoding.ends_with("flat brick"),
         bake_ms: number(columns.bake)?,
         error: number(columns.error)?,
     })
