@@ -24,7 +24,7 @@ use prt_runtime::lights::PreparedLight;
 use prt_runtime::shadow_rays::{closest_hit, lit};
 use prt_runtime::{Sample, SkyModel};
 
-use crate::ray_lookup::{facing_normal, ray_start, NearLight, NEAR_FIELD_RAYS};
+use crate::ray_lookup::{facing_normal, nearest_surfel, ray_start, NearLight, NEAR_FIELD_RAYS};
 
 /// Rays per point by default (`--path-rays`): the other ray lookups' near-field count, which
 /// keeps a run over the family to minutes.
@@ -36,8 +36,6 @@ pub struct PathLookup<'a> {
     bricks: &'a NearLight,
     lights: Vec<PreparedLight>,
     sky: &'a SkyModel,
-    /// Longer than any ray inside the level: twice the BVH root's diagonal, plus 1 m.
-    far: f32,
     rays: u32,
 }
 
@@ -50,15 +48,11 @@ impl<'a> PathLookup<'a> {
         (lights, sky): (&prt_format::LightRig, &'a SkyModel),
         rays: u32,
     ) -> Self {
-        let far = asset.geometry.nodes.first().map_or(1.0, |root| {
-            (Vec3::from(root.max) - Vec3::from(root.min)).length() * 2.0 + 1.0
-        });
         PathLookup {
             asset,
             bricks,
             lights: lights.lights.iter().map(PreparedLight::new).collect(),
             sky,
-            far,
             rays,
         }
     }
@@ -71,7 +65,9 @@ impl<'a> PathLookup<'a> {
         let mut sum = Vec3::ZERO;
         for k in 0..self.rays {
             let d = prt_bake::surface_terms::cosine_spiral(k, self.rays, t, b, n);
-            sum += match closest_hit(&self.asset.geometry, start, d, self.far) {
+            // Without end (f32::MAX, as a directional light's shadow ray): whatever the level
+            // holds along the ray is nearer.
+            sum += match closest_hit(&self.asset.geometry, start, d, f32::MAX) {
                 Some((t, tri)) => {
                     let facing = facing_normal(&self.asset.geometry, tri, d);
                     self.leaving(start + d * t, facing)
@@ -91,13 +87,7 @@ impl<'a> PathLookup<'a> {
         let Some((brick, false)) = self.bricks.find_side(h, dominant_axis(n)) else {
             return Vec3::ZERO;
         };
-        let b = &self.asset.bricks[brick as usize];
-        let surfels = &self.asset.surfels
-            [b.first_surfel as usize..(b.first_surfel + b.surfel_count) as usize];
-        let Some(s) = surfels.iter().min_by(|a, b| {
-            let d = |s: &prt_format::Surfel| Vec3::from(s.position).distance_squared(h);
-            d(a).total_cmp(&d(b))
-        }) else {
+        let Some(s) = nearest_surfel(self.asset, brick, h) else {
             return Vec3::ZERO;
         };
         let spacing = self.asset.header.grid.spacing;

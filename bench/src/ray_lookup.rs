@@ -207,6 +207,16 @@ impl NearLight {
     }
 }
 
+/// The surfel of brick `brick` of `asset` nearest `p` (none in an empty brick).
+pub(crate) fn nearest_surfel(asset: &Asset, brick: u32, p: Vec3) -> Option<&prt_format::Surfel> {
+    let b = &asset.bricks[brick as usize];
+    let range = b.first_surfel as usize..(b.first_surfel + b.surfel_count) as usize;
+    let d = |s: &&prt_format::Surfel| Vec3::from(s.position).distance_squared(p);
+    asset.surfels[range]
+        .iter()
+        .min_by(|a, b| d(a).total_cmp(&d(b)))
+}
+
 /// The unit geometric normal of triangle `tri` of `geo` on the side a ray along `d` hits.
 pub(crate) fn facing_normal(geo: &Geometry, tri: usize, d: Vec3) -> Vec3 {
     let tri = &geo.triangles[tri];

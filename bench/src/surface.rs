@@ -112,8 +112,8 @@ struct Refs {
     pictures: Option<PathBuf>,
 }
 
-/// One bake of a case, relit.
-struct Baked {
+/// One bake of a case, relit with `lighting`.
+struct Baked<'l> {
     asset: Asset,
     /// The relit bricks, for the near-field hits of the reference lookups that need them.
     near: Option<NearLight>,
@@ -121,7 +121,7 @@ struct Baked {
     /// The relit surfels' irradiance (the surface lookup's near field).
     irradiance: Vec<[f32; 3]>,
     /// The rig it was relit with (the path lookup lights its hits with it).
-    lighting: Lighting,
+    lighting: &'l Lighting,
     bake_s: f64,
     relight_s: f64,
 }
@@ -210,7 +210,7 @@ fn measure(
 /// A row per lookup, each reported on stderr as it is made.
 fn sample_all(
     case: &Case,
-    baked: &Baked,
+    baked: &Baked<'_>,
     setting: Setting,
     refs: &Refs,
     lookups: &[Lookup],
@@ -225,7 +225,12 @@ fn sample_all(
 
 /// Bakes `case` with `settings`, relights it with `lighting`, and with `bricks` keeps the relit
 /// bricks for the reference lookups' near field (outside the relight's time).
-fn bake(case: &Case, settings: &BakeSettings, lighting: &Lighting, bricks: bool) -> Result<Baked> {
+fn bake<'l>(
+    case: &Case,
+    settings: &BakeSettings,
+    lighting: &'l Lighting,
+    bricks: bool,
+) -> Result<Baked<'l>> {
     let t = Instant::now();
     let (asset, _) = prt_bake::bake(&case.scene, settings, &NoProgress)
         .with_context(|| format!("{}: baking {}", case.name, case.scene.display()))?;
@@ -240,7 +245,7 @@ fn bake(case: &Case, settings: &BakeSettings, lighting: &Lighting, bricks: bool)
         .then(|| NearLight::for_asset(&asset, relighter.brick_radiance(&relit.surfel_irradiance)));
     Ok(Baked {
         asset,
-        lighting: lighting.clone(),
+        lighting,
         sh: relit.sh,
         irradiance: relit.surfel_irradiance,
         near,
@@ -258,7 +263,7 @@ enum Sampler<'a> {
 }
 
 impl<'a> Sampler<'a> {
-    fn new(baked: &'a Baked, lookup: &Lookup) -> Result<Self> {
+    fn new(baked: &'a Baked<'_>, lookup: &Lookup) -> Result<Self> {
         let (asset, sh, settings) = (&baked.asset, &baked.sh[..], &lookup.settings);
         let near = || {
             baked
@@ -298,7 +303,7 @@ impl<'a> Sampler<'a> {
 /// Samples `baked` with `lookup` at the reference points and pixels, and scores it.
 fn sample(
     case: &Case,
-    baked: &Baked,
+    baked: &Baked<'_>,
     setting: Setting,
     refs: &Refs,
     lookup: &Lookup,

@@ -33,7 +33,8 @@ use prt_runtime::surface::scale_by_near_field;
 use prt_runtime::{LookupSettings, Sample, VolumeSampler};
 
 use crate::ray_lookup::{
-    cosine_spiral, ray_start, sees, NearLight, RaySettings, BLOCKED_WEIGHT, NEAR_FIELD_RAYS,
+    cosine_spiral, nearest_surfel, ray_start, sees, NearLight, RaySettings, BLOCKED_WEIGHT,
+    NEAR_FIELD_RAYS,
 };
 
 /// The ray terms of [`RaySettings::with_near_light`], decided per surfel.
@@ -79,14 +80,7 @@ impl<'a> SurfelLookup<'a> {
         let surfel = self
             .near
             .find(p, dominant_axis(normal.into()))
-            .and_then(|b| {
-                let b = &self.asset.bricks[b as usize];
-                let range = b.first_surfel as usize..(b.first_surfel + b.surfel_count) as usize;
-                let d = |s: &&Surfel| Vec3::from(s.position).distance_squared(p);
-                self.asset.surfels[range]
-                    .iter()
-                    .min_by(|a, b| d(a).total_cmp(&d(b)))
-            });
+            .and_then(|b| nearest_surfel(self.asset, b, p));
         let Some(surfel) = surfel else {
             return self.fallback.sample(position, normal);
         };

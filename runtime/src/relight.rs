@@ -219,6 +219,7 @@ impl<'a> CpuRelighter<'a> {
     pub fn direct_irradiance(&self, lights: &[PreparedLight]) -> (Vec<[f32; 3]>, RelightStats) {
         let asset = self.asset;
         let spread_sq = surfel_spread_sq(asset.header.settings.cell_size);
+        let spacing = asset.header.grid.spacing;
         let per_brick: Vec<(Vec<[f32; 3]>, RelightStats)> = asset
             .bricks
             .par_iter()
@@ -251,7 +252,6 @@ impl<'a> CpuRelighter<'a> {
                                     continue;
                                 }
                                 st.shadow_rays += 1;
-                                let spacing = self.asset.header.grid.spacing;
                                 let at = dist.is_finite().then_some(light.position);
                                 if lit(&asset.geometry, p, n, spacing, l, at) {
                                     for c in 0..3 {
