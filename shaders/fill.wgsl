@@ -1,7 +1,8 @@
 // Stage 9, one thread per grid point a coarse level fills (prt_format::tier; CPU twin
 // prt_runtime::fill): after the gather, its SH is the trilinear interpolation of the points of
 // its level (its flags' FILL_LEVEL_SHIFT bits) around it, each weighted by its trilinear weight
-// times its validity and renormalised, written as the gather writes a probe (store_probe.wgsl,
+// times its validity and renormalised (corners in its FILL_HIDDEN_SHIFT bits left out: the bake
+// found a wall between them and the point), written as the gather writes a probe (store_probe.wgsl,
 // validity 1). Validation guarantees that a filled point reads no filled point, so the threads
 // are independent. Every recorded update runs a thread per filled point, but only a point with a corner this update gathered (its dirty word holds the update's
 // serial) reads and writes SH: an amortised update redoes the points beside its window, and a
@@ -58,7 +59,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         let w3 = select(1.0 - t, t, upper);
         let w = w3.x * w3.y * w3.z;
         let q = grid_index(select(lo, hi, upper));
-        if w <= 0.0 || (probes[q].flags & PROBE_VALID) == 0u {
+        let hidden = ((probes[p].flags >> FILL_HIDDEN_SHIFT) >> corner & 1u) != 0u;
+        if w <= 0.0 || hidden || (probes[q].flags & PROBE_VALID) == 0u {
             continue;
         }
         total = total + w;

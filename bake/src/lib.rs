@@ -37,6 +37,7 @@ pub mod offset;
 mod pipeline;
 pub mod placement;
 pub mod probes;
+pub mod refine;
 mod settings;
 pub mod stream;
 pub mod surface_terms;
@@ -83,6 +84,9 @@ pub struct BakeReport {
     pub rows_spilled: u64,
     /// With sparse placement ([`BakeSettings::sparse`]): what it placed where.
     pub placed: Option<Placed>,
+    /// With a probe budget ([`BakeSettings::probe_budget`]) the grid exceeded: what
+    /// [`refine::prune`] dropped.
+    pub refined: Option<refine::Refined>,
 }
 
 /// What sparse placement ([`placement`]) placed, of a grid's points.

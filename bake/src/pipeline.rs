@@ -23,8 +23,8 @@ use crate::merge::{coarse, fold};
 use crate::surface_terms;
 use crate::tables::encode;
 use crate::{
-    diagnostics, offset, placement, probes, stream, trace, BakeError, BakeReport, BakeSettings,
-    Progress,
+    diagnostics, offset, placement, probes, refine, stream, trace, BakeError, BakeReport,
+    BakeSettings, Progress,
 };
 
 /// The bake's stages, in the current thread pool: the asset, not yet validated, and the report.
@@ -110,7 +110,7 @@ pub(crate) fn bake_in_pool(
         sparse.filled = placement::mark_filled(&grid, &mut probes_out, plan);
     }
     let header = assemble::header(scene_path, &loaded, grid, settings, cell_size, &traced);
-    let asset = Asset {
+    let mut asset = Asset {
         header,
         probes: probes_out,
         sky_mask,
@@ -120,12 +120,25 @@ pub(crate) fn bake_in_pool(
         bricks: bricked.bricks,
         coarse,
         surfels: bricked.surfels,
-        geometry: built.bvh.geometry,
+        // Set once the refine stage has traced through the BVH it belongs to.
+        geometry: prt_format::Geometry::default(),
         lights: loaded.scene.lights,
         surface,
     };
+    lap(&mut report, "assemble", Some("refine"));
+    let threshold = if settings.sparse {
+        settings.prune_error
+    } else {
+        0.0
+    };
+    let refine = (threshold, settings.probe_budget);
+    report.refined = refine::prune(&mut asset, refine, &built.bvh);
+    report
+        .warnings
+        .extend(report.refined.as_ref().and_then(refine::budget_warning));
+    asset.geometry = built.bvh.geometry;
     report.warnings.extend(diagnostics::gap_warning(&asset));
-    lap(&mut report, "assemble", None);
+    lap(&mut report, "refine", None);
     Ok((asset, report))
 }
 

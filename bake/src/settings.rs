@@ -84,6 +84,19 @@ pub struct BakeSettings {
     /// on a room's walls) 5% of a spacing off it before tracing: a probe on a wall sees both of
     /// its sides and mixes the rooms it separates.
     pub surface_offset: bool,
+    /// At most this many probes with data: past it the bake drops the probes between the
+    /// points of level 1 (every other grid point) whose light that level's interpolation
+    /// predicts best ([`crate::refine`]), and the runtime fills them from it. `None` keeps every
+    /// probe.
+    pub probe_budget: Option<usize>,
+    /// Sparse bakes drop the probes between the points of level 1 whose prediction error
+    /// ([`crate::refine`]) is below this, whatever the budget; 0 keeps them. 0.15 was chosen
+    /// on the level family's tuning seeds (`prt-bench surface --case tuning --prune-error E`,
+    /// docs/results/refine.md): 3-31% fewer probes with data per level at both spacings
+    /// (median 6.5%), and the same median / worst level (6.6% / 8.6% at the default spacing,
+    /// 4.0% / 4.9% at half); with the test's first version 0.2 cost a little (8.7%, 4.1%) and
+    /// 0.3 much (worst level 11.9%, leaks 1.7%).
+    pub prune_error: f32,
     /// Storage precision of factor transfers.
     pub transfer_precision: TransferPrecision,
     /// Move probes that are inside geometry out of it (virtual offset, on by default): through
@@ -121,6 +134,8 @@ impl Default for BakeSettings {
             dilate: true,
             surface_terms: true,
             surface_offset: true,
+            probe_budget: None,
+            prune_error: 0.15,
             transfer_precision: TransferPrecision::U8,
             virtual_offset: true,
             threads: None,
@@ -140,12 +155,14 @@ impl BakeSettings {
     /// the size of an eighth-cell brick (half of a twelfth-cell one) and no coarse bricks. On
     /// the Cornell reference (27 probes at 0.6 m) it brought the mean irradiance error from
     /// 4.0% (512 rays, cells of a twelfth) to 0.5% (p95 1.3%), at 5.6x the factors per probe
-    /// (runtime gather work and asset size) and 8x the trace time.
+    /// (runtime gather work and asset size) and 8x the trace time. It keeps every traced probe
+    /// (no [`BakeSettings::prune_error`]).
     pub fn high_quality() -> Self {
         BakeSettings {
             rays: 4096,
             cells_per_spacing: 24.0,
             far_ratio: 0.0,
+            prune_error: 0.0,
             ..Self::default()
         }
     }
@@ -168,6 +185,7 @@ impl BakeSettings {
     pub fn exact() -> Self {
         BakeSettings {
             sparse: false,
+            prune_error: 0.0,
             cell_size: Some(0.0),
             transfer_precision: TransferPrecision::F32,
             virtual_offset: false,
@@ -219,6 +237,16 @@ impl BakeSettings {
                 self.far_ratio.to_string(),
                 "must be finite and at least 0 (0: no coarse bricks)",
             );
+        }
+        if !(self.prune_error.is_finite() && self.prune_error >= 0.0) {
+            return bad(
+                "prune_error",
+                self.prune_error.to_string(),
+                "must be finite and at least 0 (0: drop probes only past the budget)",
+            );
+        }
+        if self.probe_budget == Some(0) {
+            return bad("probe_budget", "0".into(), "must be at least 1 probe");
         }
         if !(self.cells_per_spacing.is_finite() && self.cells_per_spacing > 0.0) {
             return bad(

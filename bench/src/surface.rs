@@ -95,6 +95,13 @@ pub struct SurfaceArgs {
     /// Bake on the uniform grid (`prt bake --uniform`) instead of the default sparse placement.
     #[arg(long)]
     uniform: bool,
+    /// At most this many probes with data (`prt bake --probe-budget`), twice as many in the
+    /// second bake, at half the spacing [default: no budget].
+    #[arg(long)]
+    probe_budget: Option<usize>,
+    /// Drop probes whose prediction error is below this (`prt bake --prune-error`).
+    #[arg(long)]
+    prune_error: Option<f32>,
     /// Write each camera view (the levels') per spacing and lookup to DIR as a PNG: reference,
     /// lookup, over-lit (red) and under-lit (blue) pixels (`surface/pictures.rs`).
     #[arg(long, value_name = "DIR")]
@@ -171,7 +178,8 @@ pub fn run(args: SurfaceArgs) -> Result<()> {
             case,
             &refs,
             &lookups.for_set(case.set),
-            (args.spacing, !args.uniform),
+            (args.spacing, !args.uniform, args.probe_budget),
+            args.prune_error,
         )?);
     }
     args.out
@@ -184,7 +192,8 @@ fn measure(
     case: &Case,
     refs: &Refs,
     lookups: &[Lookup],
-    (spacing, sparse): (Option<f32>, bool),
+    (spacing, sparse, probe_budget): (Option<f32>, bool, Option<usize>),
+    prune_error: Option<f32>,
 ) -> Result<Vec<Row>> {
     let lighting = prt_runtime::load_rig(&case.rig)
         .with_context(|| format!("{}: loading the rig {}", case.name, case.rig.display()))?;
@@ -192,6 +201,8 @@ fn measure(
         double_sided: case.double_sided,
         spacing,
         sparse,
+        probe_budget,
+        prune_error: prune_error.unwrap_or(BakeSettings::default().prune_error),
         ..BakeSettings::default()
     };
     let bricks = lookups.iter().any(Lookup::needs_bricks);
@@ -199,6 +210,7 @@ fn measure(
     let mut rows = sample_all(case, &baked, Setting::Default, refs, lookups)?;
     let half = BakeSettings {
         spacing: Some(baked.asset.header.grid.spacing / 2.0),
+        probe_budget: probe_budget.map(|b| 2 * b),
         ..base
     };
     drop(baked);
@@ -232,8 +244,11 @@ fn bake<'l>(
     bricks: bool,
 ) -> Result<Baked<'l>> {
     let t = Instant::now();
-    let (asset, _) = prt_bake::bake(&case.scene, settings, &NoProgress)
+    let (asset, report) = prt_bake::bake(&case.scene, settings, &NoProgress)
         .with_context(|| format!("{}: baking {}", case.name, case.scene.display()))?;
+    if let Some(r) = report.refined {
+        eprintln!("{}: {r:?}", case.name);
+    }
     let bake_s = t.elapsed().as_secs_f64();
     let t = Instant::now();
     let relighter = prt_runtime::CpuRelighter::new(&asset)?;

@@ -69,6 +69,16 @@ pub struct BakeArgs {
     /// Refuse grids with more probes than this.
     #[arg(long, default_value_t = 1 << 20)]
     max_probes: u64,
+    /// At most this many probes with data: past it the bake drops the probes between every
+    /// other grid point whose light those points predict best, and the runtime fills them
+    /// from those points [default: no budget].
+    #[arg(long)]
+    probe_budget: Option<usize>,
+    /// Drop the probes between every other grid point whose light those points predict
+    /// within this error (in units of pi, under test lightings of stripes and sky) whatever
+    /// the budget (not with --uniform); 0 keeps them.
+    #[arg(long, default_value_t = BakeSettings::default().prune_error)]
+    prune_error: f32,
     /// Surfel cell size in metres (bricks are 4x4x4 cells) [default: spacing / 8, or / 24 with --quality high]; 0 = no merging.
     #[arg(long)]
     cell_size: Option<f32>,
@@ -131,6 +141,8 @@ pub fn run(args: BakeArgs) -> Result<()> {
         quality,
         threads,
         max_probes,
+        probe_budget,
+        prune_error,
         cell_size,
         no_merge,
         far_ratio,
@@ -156,6 +168,8 @@ pub fn run(args: BakeArgs) -> Result<()> {
         sparse: !uniform,
         bounds,
         max_probes,
+        probe_budget,
+        prune_error,
         cell_size: if no_merge { Some(0.0) } else { cell_size },
         far_ratio: far_ratio.unwrap_or(preset.far_ratio),
         double_sided,
@@ -186,6 +200,9 @@ pub fn run(args: BakeArgs) -> Result<()> {
     if let Some(p) = report.placed {
         println!("{}", placement_line(&p));
     }
+    if let Some(r) = report.refined {
+        println!("{}", refine_line(&r));
+    }
     let times: Vec<String> = report
         .timings
         .iter()
@@ -208,6 +225,16 @@ pub fn run(args: BakeArgs) -> Result<()> {
     // `prt-bench bake --runs` times a bake to this line: keep its first word.
     println!("wrote            {}", output.display());
     Ok(())
+}
+
+/// The summary line of what the refine stage dropped.
+fn refine_line(r: &prt_bake::refine::Refined) -> String {
+    let budget = r.budget.map_or(String::new(), |b| format!(" (budget {b})"));
+    format!(
+        "refine           {} of {} probes between every other grid point dropped (prediction \
+         error up to {:.3}), filled from those points; {} of {} probes with data kept{budget}",
+        r.dropped, r.candidates, r.worst_dropped, r.after, r.before
+    )
 }
 
 /// The summary line of what sparse placement placed where.

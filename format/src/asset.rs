@@ -209,6 +209,15 @@ pub const PROBE_FILLED: u32 = 8;
 pub const FILL_LEVEL_SHIFT: u32 = 8;
 /// The bits of a filled probe's level, after shifting by [`FILL_LEVEL_SHIFT`].
 pub const FILL_LEVEL_MASK: u32 = 0xf;
+/// Where a filled probe's *hidden corners* sit in its flags ([`Probe::fill_hidden`]): bit `c`
+/// set when a wall stands between the point and corner `c` of its level's cell
+/// ([`crate::tier::corners`]' order), which its fill then leaves out. Sparse placement fills
+/// only points no surface separates from their corners (none hidden); a budgeted bake also
+/// fills probes it traced beside surfaces (`prt_bake::refine`), and traces which corners they
+/// see.
+pub const FILL_HIDDEN_SHIFT: u32 = 16;
+/// The bits of a filled probe's hidden corners, after shifting by [`FILL_HIDDEN_SHIFT`].
+pub const FILL_HIDDEN_MASK: u32 = 0xff;
 /// Side of the octahedral visibility map.
 pub const DEPTH_MAP_SIDE: u32 = 16;
 /// Texels of a visibility map (two bytes each: mean and standard deviation of distance).
@@ -263,6 +272,11 @@ impl Probe {
     /// Filled from a coarse level at runtime ([`PROBE_FILLED`]).
     pub fn is_filled(&self) -> bool {
         self.flags & PROBE_FILLED != 0
+    }
+
+    /// The corners of its level's cell a filled probe leaves out ([`FILL_HIDDEN_SHIFT`]).
+    pub fn fill_hidden(&self) -> u32 {
+        self.flags >> FILL_HIDDEN_SHIFT & FILL_HIDDEN_MASK
     }
 
     /// The level a filled probe is interpolated from ([`FILL_LEVEL_SHIFT`]).

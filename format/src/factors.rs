@@ -317,6 +317,27 @@ impl Factors {
         }
     }
 
+    /// The factors of `ranges`, concatenated in their order, in the same precision.
+    pub fn select(&self, ranges: &[std::ops::Range<usize>]) -> Self {
+        fn pick<T: Copy>(v: &[T], ranges: &[std::ops::Range<usize>]) -> Vec<T> {
+            ranges
+                .iter()
+                .flat_map(|r| v[r.clone()].iter().copied())
+                .collect()
+        }
+        match self {
+            Factors::F32(v) => Factors::F32(pick(v, ranges)),
+            Factors::F16(v) => Factors::F16(pick(v, ranges)),
+            Factors::U8 {
+                factors,
+                offset_scale,
+            } => Factors::U8 {
+                factors: pick(factors, ranges),
+                offset_scale: *offset_scale,
+            },
+        }
+    }
+
     /// Bytes one factor takes.
     pub fn bytes_per_factor(&self) -> usize {
         match self {

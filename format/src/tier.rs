@@ -86,6 +86,21 @@ pub fn used_corners(grid: &Grid, ijk: [u32; 3], level: u32) -> impl Iterator<Ite
         .filter(|&(_, w)| w > 0.0)
 }
 
+/// The [`used_corners`] a filled point reads: those not in its `hidden` bits
+/// ([`crate::Probe::fill_hidden`], bit `c` for corner `c`).
+pub fn fill_corners(
+    grid: &Grid,
+    ijk: [u32; 3],
+    level: u32,
+    hidden: u32,
+) -> impl Iterator<Item = (usize, f32)> {
+    corners(grid, ijk, level)
+        .into_iter()
+        .enumerate()
+        .filter(move |&(c, (_, w))| w > 0.0 && hidden >> c & 1 == 0)
+        .map(|(_, corner)| corner)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -133,6 +148,21 @@ mod tests {
                 assert!((filled - truth).abs() < 1e-4, "{index} level {level}");
             }
         }
+    }
+
+    /// A filled point's hidden corners drop out of what it reads, and no other.
+    #[test]
+    fn hidden_corners_are_left_out() {
+        let grid = Grid::cubic([0.0; 3], 1.0, [5, 5, 5]);
+        let ijk = [1, 1, 1];
+        let all: Vec<(usize, f32)> = used_corners(&grid, ijk, 1).collect();
+        assert_eq!(all.len(), 8);
+        assert_eq!(fill_corners(&grid, ijk, 1, 0).collect::<Vec<_>>(), all);
+        let corner_5 = grid.index(2, 0, 2);
+        let seen: Vec<usize> = fill_corners(&grid, ijk, 1, 1 << 5).map(|c| c.0).collect();
+        assert_eq!(seen.len(), 7);
+        assert!(!seen.contains(&corner_5));
+        assert_eq!(fill_corners(&grid, ijk, 1, 0xff).count(), 0);
     }
 
     #[test]

@@ -187,9 +187,14 @@ fn probe_records(asset: &Asset) -> Result<(), FormatError> {
                 ));
             }
             next_slot += 1;
-        } else if p.flags & !(PROBE_OFFSET | PROBE_FILLED | FILL_LEVEL_MASK << FILL_LEVEL_SHIFT)
+        } else if p.flags
+            & !(PROBE_OFFSET
+                | PROBE_FILLED
+                | FILL_LEVEL_MASK << FILL_LEVEL_SHIFT
+                | FILL_HIDDEN_MASK << FILL_HIDDEN_SHIFT)
             != 0
             || (p.is_filled() != (p.fill_level() != 0))
+            || (!p.is_filled() && p.fill_hidden() != 0)
             || p.factor_count != 0
             || p.sky_rays != 0
         {
@@ -257,6 +262,9 @@ fn filled_points(asset: &Asset) -> Result<(), FormatError> {
             .map(|(c, _)| (c, asset.probes[c]))
             .collect();
         let corners: Vec<String> = used.iter().map(|(c, _)| c.to_string()).collect();
+        let seen: Vec<usize> = crate::tier::fill_corners(grid, ijk, level, p.fill_hidden())
+            .map(|(c, _)| c)
+            .collect();
         let mut valid = false;
         for &(c, corner) in &used {
             if corner.is_filled() {
@@ -269,15 +277,16 @@ fn filled_points(asset: &Asset) -> Result<(), FormatError> {
                     ),
                 ));
             }
-            valid |= corner.is_valid();
+            valid |= corner.is_valid() && seen.contains(&c);
         }
         if !valid {
             return Err(FormatError::invalid(
                 "probes",
                 index,
                 format!(
-                    "filled from level {level}, but none of the level's probes around it ({}) is valid",
-                    corners.join(", ")
+                    "filled from level {level}, but none of the level's probes around it ({}) is valid among those it sees (hidden corners {:#x})",
+                    corners.join(", "),
+                    p.fill_hidden()
                 ),
             ));
         }

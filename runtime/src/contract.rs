@@ -347,6 +347,10 @@ pub fn wgsl_constants() -> Vec<(&'static str, String)> {
             "FILL_LEVEL_MASK",
             format!("{}u", prt_format::FILL_LEVEL_MASK),
         ),
+        (
+            "FILL_HIDDEN_SHIFT",
+            format!("{}u", prt_format::FILL_HIDDEN_SHIFT),
+        ),
         ("SKY_BLACK", format!("{SKY_BLACK}u")),
         ("SKY_CONSTANT", format!("{SKY_CONSTANT}u")),
         ("SKY_DIRECTIONS", format!("{SKY_DIRECTIONS}u")),

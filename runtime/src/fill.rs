@@ -4,7 +4,8 @@
 //! from a coarse level (`prt_format::tier` says which, and why this is seam-free). After every
 //! gather each filled point gets the trilinear interpolation of the SH of its level's points
 //! around it, each weighted by its trilinear weight times its validity and renormalised, so
-//! that a coarse point inside geometry drops out as it does from any lookup. Validation
+//! that a coarse point inside geometry drops out as it does from any lookup, and so does a
+//! corner the bake found hidden from the point (`prt_format::FILL_HIDDEN_SHIFT`). Validation
 //! guarantees every filled point has a valid coarse point with a positive weight and reads no
 //! filled one, so the order of the fills does not matter.
 
@@ -22,7 +23,7 @@ pub fn fill(asset: &Asset, sh: &mut [ShRgb]) {
         let ijk = grid.ijk(index);
         let mut acc = [[0.0f32; 3]; SH_COUNT];
         let mut total = 0.0f32;
-        for (c, w) in tier::used_corners(grid, ijk, probe.fill_level()) {
+        for (c, w) in tier::fill_corners(grid, ijk, probe.fill_level(), probe.fill_hidden()) {
             let valid = asset.probes.get(c).is_some_and(|p| p.is_valid());
             if !valid || c >= sh.len() {
                 continue;

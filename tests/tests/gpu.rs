@@ -124,8 +124,20 @@ fn gpu_equals_cpu_on_cornell() {
             },
             VolumeFormat::F32,
         ),
+        // Probes a budget dropped, filled from level 1 without the corners walls hide from them.
+        (
+            BakeSettings {
+                probe_budget: Some(1000),
+                ..BakeSettings::default()
+            },
+            VolumeFormat::F32,
+        ),
     ] {
         let asset = bake(&scene, &settings);
+        if settings.probe_budget.is_some() {
+            let hidden = asset.probes.iter().filter(|p| p.fill_hidden() != 0).count();
+            assert!(hidden > 0, "no filled probe with hidden corners to test");
+        }
         assert_eq!(
             asset.coarse.bricks.is_empty(),
             settings.far_ratio == 0.0,

@@ -1,0 +1,332 @@
+//! # Refinement by prediction: fine probes only where the coarser lattice would be wrong
+//!
+//! A probe between the points of level 1 of the grid (`prt_format::tier`, every other grid
+//! point along each axis) is worth its data only where the trilinear interpolation of those
+//! points would light the surfaces around it differently: beside a gallery whose ceiling hides
+//! the sunlit court the coarse points see, at a wall's foot, in a niche. In the open field of a
+//! flat wall the interpolation is as good as the probe. Unreal's volumetric lightmaps drop the
+//! bricks "the coarser level already predicts" with the baked lighting; lights here are dynamic,
+//! so the prediction is tested under fixed test lightings instead:
+//!
+//! - [`FIELDS`] stripes of radiance 0 and 1, [`PERIODS`] grid spacings wide in three
+//!   directions laid from the grid's origin (sun patches and shadow edges at the scales a probe
+//!   can resolve), half of them under a sky of radiance 1;
+//! - a point light at the probe's grid point, lighting every surface within a spacing with
+//!   radiance 1 and farther ones with the inverse square of the distance (a hotspot the points
+//!   around see from aside).
+//!
+//! A probe's SH under such a lighting is its factor table applied to it, as the runtime's
+//! gather does, each factor's radiance the field's value at its mean hit point.
+//!
+//! The error of the prediction at a probe is the largest difference, over the lightings and the
+//! six axis normals, between its irradiance and the level-1 interpolation's, in units of the
+//! irradiance of radiance 1 from every direction (pi). The interpolation leaves out the corners
+//! a ray from the probe does not reach ([`prt_format::FILL_HIDDEN_SHIFT`]) and renormalises
+//! over the valid others, as `prt_runtime::fill` does. [`prune`] drops the probes whose error is
+//! below a threshold (sparse bakes: [`crate::BakeSettings::prune_error`]) and then, in order of
+//! error, more until a budget of probes with data holds ([`crate::BakeSettings::probe_budget`]),
+//! and flags them filled from level 1 ([`prt_format::PROBE_FILLED`]): the runtime fills them
+//! after every gather, so the lookup reads the coarse interpolation there, continuous where kept
+//! and dropped probes meet (the argument of `prt_format::tier`). Only probes off level 1 are
+//! dropped, so every probe a dropped one is filled from keeps its data.
+//!
+//! What it buys and costs (`docs/results/refine.md`): on the level family's tuning seeds 5-27%
+//! fewer probes with data at an unchanged surface error; past that, under a budget, a probe
+//! filled beside a surface reads the corners it sees, not those the surface sees, and the error
+//! grows quickly (Sponza at 1.2 m cut to 3,400 probes: 23.7%, against 21.1% for a 2.4 m grid).
+
+use std::f32::consts::PI;
+use std::ops::Range;
+
+use glam::Vec3;
+use prt_format::sh::{self, SH_COUNT};
+use prt_format::{
+    tier, Asset, Probe, DEPTH_WORDS, FILL_HIDDEN_SHIFT, FILL_LEVEL_SHIFT, NO_SLOT, PROBE_FILLED,
+};
+use rayon::prelude::*;
+
+use crate::accel::bvh::SceneBvh;
+
+/// Widths of the test stripes (one lit and one dark band), in grid spacings.
+pub const PERIODS: [f32; 4] = [1.0, 2.0, 4.0, 8.0];
+
+/// Test lightings: three stripe directions per period.
+pub const FIELDS: usize = 3 * PERIODS.len();
+
+/// Normals the irradiance is compared at.
+const NORMALS: [[f32; 3]; 6] = [
+    [1.0, 0.0, 0.0],
+    [-1.0, 0.0, 0.0],
+    [0.0, 1.0, 0.0],
+    [0.0, -1.0, 0.0],
+    [0.0, 0.0, 1.0],
+    [0.0, 0.0, -1.0],
+];
+
+/// Stripe directions, none along an axis (a wall on a grid layer would sit on a stripe edge
+/// at every period), fixed so that bakes are deterministic.
+const DIRECTIONS: [[f32; 3]; 3] = [[0.80, 0.36, 0.48], [-0.28, 0.86, 0.43], [0.52, -0.31, 0.80]];
+
+/// What [`prune`] did.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Refined {
+    /// The budget of probes with data, if any.
+    pub budget: Option<usize>,
+    /// Probes with data before and after.
+    pub before: usize,
+    pub after: usize,
+    /// Probes off level 1 that could be dropped (valid, not dilated, their level-1 corners
+    /// with data), and how many were.
+    pub candidates: usize,
+    pub dropped: usize,
+    /// The largest prediction error among the dropped probes ([module docs](self)), 0 if none.
+    pub worst_dropped: f32,
+}
+
+/// Test irradiance of one probe: per lighting, per normal.
+type Response = [[f32; NORMALS.len()]; FIELDS];
+
+/// Drops the probes of `asset` whose prediction error ([module docs](self)) is below
+/// `threshold`, then, in order of error, more until at most `budget` carry data; `None` when
+/// there was nothing to do.
+pub fn prune(
+    asset: &mut Asset,
+    (threshold, budget): (f32, Option<usize>),
+    bvh: &SceneBvh,
+) -> Option<Refined> {
+    let before = asset.probes.iter().filter(|p| p.has_data()).count();
+    if before <= budget.unwrap_or(usize::MAX) && threshold <= 0.0 {
+        return None;
+    }
+    let response: Vec<Option<Response>> = (0..asset.probes.len())
+        .into_par_iter()
+        .map(|p| asset.probes[p].is_valid().then(|| respond(asset, p)))
+        .collect();
+    let mut scored: Vec<(f32, usize, u32)> = (0..asset.probes.len())
+        .into_par_iter()
+        .filter_map(|p| prediction_error(asset, &response, bvh, p).map(|(e, h)| (e, p, h)))
+        .collect();
+    let candidates = scored.len();
+    scored.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    let below = scored.partition_point(|s| s.0 < threshold);
+    let over = budget.map_or(0, |b| before.saturating_sub(b));
+    scored.truncate(below.max(over));
+    let mut drop = vec![None; asset.probes.len()];
+    for &(_, p, hidden) in &scored {
+        drop[p] = Some(hidden);
+    }
+    rewrite(asset, &drop);
+    Some(Refined {
+        budget,
+        before,
+        after: before - scored.len(),
+        candidates,
+        dropped: scored.len(),
+        worst_dropped: scored.last().map_or(0.0, |s| s.0),
+    })
+}
+
+/// The warning for a budget the refine stage could not meet: only probes between the points of
+/// level 1 can be dropped.
+pub fn budget_warning(r: &Refined) -> Option<String> {
+    let budget = r.budget.filter(|&b| r.after > b)?;
+    Some(format!(
+        "probe budget {budget} not met: {} probes with data remain, of which only the {} \
+         between every other grid point could be dropped (and were); a larger --spacing \
+         places fewer",
+        r.after, r.candidates
+    ))
+}
+
+/// The largest difference between probe `p`'s test irradiance and its level-1 interpolation's,
+/// in units of pi, and the corners it leaves out ([`prt_format::Probe::fill_hidden`]: those a
+/// ray from the probe through `bvh` does not reach); `None` unless `p` may be dropped (valid and
+/// not dilated, off level 1, no level-1 corner with a weight filled, one it sees valid).
+fn prediction_error(
+    asset: &Asset,
+    response: &[Option<Response>],
+    bvh: &SceneBvh,
+    p: usize,
+) -> Option<(f32, u32)> {
+    let probe = &asset.probes[p];
+    let own = response[p].as_ref()?;
+    let grid = &asset.header.grid;
+    let ijk = grid.ijk(p);
+    if probe.is_dilated() || !probe.has_data() || tier::on_level_point(grid, ijk, 1) {
+        return None;
+    }
+    let hidden = hidden_corners(asset, bvh, p);
+    let mut mean = [[0.0f32; NORMALS.len()]; FIELDS];
+    let mut total = 0.0;
+    if tier::used_corners(grid, ijk, 1).any(|(c, _)| asset.probes[c].is_filled()) {
+        return None;
+    }
+    for (c, w) in tier::fill_corners(grid, ijk, 1, hidden) {
+        let Some(r) = response[c].as_ref() else {
+            continue;
+        };
+        total += w;
+        for (m, r) in mean.iter_mut().zip(r) {
+            for (m, r) in m.iter_mut().zip(r) {
+                *m += w * r;
+            }
+        }
+    }
+    if total <= 0.0 {
+        return None;
+    }
+    // A point light at the probe's grid point: a hotspot the points around it see from aside.
+    let [i, j, k] = ijk;
+    let at = Vec3::from(grid.position(i, j, k));
+    let mut lit = [0.0f32; NORMALS.len()];
+    for (c, w) in tier::fill_corners(grid, ijk, 1, hidden) {
+        if response[c].is_some() {
+            let r = point_response(asset, c, at);
+            for (l, r) in lit.iter_mut().zip(r) {
+                *l += w * r;
+            }
+        }
+    }
+    let own_lit = point_response(asset, p, at);
+    let worst = own
+        .iter()
+        .flatten()
+        .chain(&own_lit)
+        .zip(mean.iter().flatten().chain(&lit))
+        .map(|(e, m)| (e - m / total).abs())
+        .fold(0.0f32, f32::max);
+    Some((worst / PI, hidden))
+}
+
+/// Probe `q`'s irradiance at the six axis normals with every surface within a grid spacing of
+/// `light` of radiance 1, and farther ones falling off with the inverse square of the distance.
+fn point_response(asset: &Asset, q: usize, light: Vec3) -> [f32; NORMALS.len()] {
+    let probe = &asset.probes[q];
+    let spacing_sq = asset.header.grid.spacing * asset.header.grid.spacing;
+    let mut sh = [0.0f32; SH_COUNT];
+    let first = probe.first_factor as usize;
+    for f in first..first + probe.factor_count as usize {
+        let d_sq = hit_point(asset, f).distance_squared(light);
+        let radiance = (spacing_sq / d_sq.max(spacing_sq)).min(1.0);
+        let t = asset.factors.transfer(f, asset.header.ray_count);
+        for (s, t) in sh.iter_mut().zip(&t) {
+            *s += radiance * t;
+        }
+    }
+    let rgb = sh.map(|v| [v, 0.0, 0.0]);
+    NORMALS.map(|n| sh::irradiance(&rgb, n)[0])
+}
+
+/// The corners of probe `p`'s level-1 cell ([`tier::corners`]' order) that a ray from where
+/// its rays started does not reach through `bvh`.
+fn hidden_corners(asset: &Asset, bvh: &SceneBvh, p: usize) -> u32 {
+    let grid = &asset.header.grid;
+    let from = Vec3::from(asset.probes[p].position);
+    let corners = tier::corners(grid, grid.ijk(p), 1);
+    let to: Vec<(usize, Vec3)> = (corners.iter().enumerate())
+        .filter(|(_, &(_, w))| w > 0.0)
+        .map(|(c, &(q, _))| (c, Vec3::from(asset.probes[q].position) - from))
+        .filter(|(_, d)| d.length_squared() > 0.0)
+        .collect();
+    let dirs: Vec<Vec3> = to.iter().map(|&(_, d)| d).collect();
+    // Rays of their corner's length: a hit before `t = 1` stands between.
+    let hits = bvh.closest_hits(from, &dirs, 1.0);
+    to.iter()
+        .zip(hits)
+        .filter(|(_, hit)| hit.is_some())
+        .fold(0, |mask, (&(c, _), _)| mask | 1 << c)
+}
+
+/// Probe `p`'s irradiance at the six axis normals under each test lighting.
+fn respond(asset: &Asset, p: usize) -> Response {
+    let probe = &asset.probes[p];
+    let grid = &asset.header.grid;
+    let mut sh = [[0.0f32; SH_COUNT]; FIELDS];
+    let factors = &asset.factors;
+    let first = probe.first_factor as usize;
+    for f in first..first + probe.factor_count as usize {
+        let at = hit_point(asset, f);
+        let t = factors.transfer(f, asset.header.ray_count);
+        for (k, sh) in sh.iter_mut().enumerate() {
+            if field(k, at, grid) {
+                for (s, t) in sh.iter_mut().zip(&t) {
+                    *s += t;
+                }
+            }
+        }
+    }
+    if let Some(sky) = asset.sky_transfer.get(probe.slot as usize) {
+        // Half the lightings have a sky of radiance 1.
+        for sh in sh.iter_mut().skip(1).step_by(2) {
+            for (s, t) in sh.iter_mut().zip(sky) {
+                *s += t;
+            }
+        }
+    }
+    sh.map(|c| {
+        let rgb = c.map(|v| [v, 0.0, 0.0]);
+        NORMALS.map(|n| sh::irradiance(&rgb, n)[0])
+    })
+}
+
+/// Whether test lighting `k` lights the point `at` of `grid`. The stripes are laid from the
+/// grid's origin, so that a level moved far from the world's origin is pruned as it is there.
+fn field(k: usize, at: Vec3, grid: &prt_format::Grid) -> bool {
+    let period = PERIODS[k / DIRECTIONS.len()] * grid.spacing;
+    let d = Vec3::from(DIRECTIONS[k % DIRECTIONS.len()]);
+    (d.dot(at - Vec3::from(grid.origin)) / period).rem_euclid(1.0) < 0.5
+}
+
+/// Where factor `f`'s rays hit: its brick's (or coarse brick's) centroid plus its offset.
+fn hit_point(asset: &Asset, f: usize) -> Vec3 {
+    let (brick, _) = asset.factors.brick_and_rays(f);
+    let offset = Vec3::from(asset.factors.offset(f));
+    let b = brick as usize;
+    match asset.bricks.get(b) {
+        Some(brick) => Vec3::from(brick.centroid) + offset,
+        None => asset
+            .coarse
+            .bricks
+            .get(b - asset.bricks.len())
+            .map_or(Vec3::ZERO, |c| {
+                Vec3::from(c.centroid) + offset * tier::stride(c.level) as f32
+            }),
+    }
+}
+
+/// Rewrites `asset` without the data of the probes marked in `drop`, which become filled from
+/// level 1 at their grid positions; slots and factor ranges of the others follow in grid order.
+fn rewrite(asset: &mut Asset, drop: &[Option<u32>]) {
+    let grid = asset.header.grid;
+    let mask_words = asset.header.sky_mask_words();
+    let mut ranges: Vec<Range<usize>> = Vec::new();
+    let (mut sky_mask, mut sky_transfer, mut depth) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut first_factor, mut slot) = (0u32, 0u32);
+    for (p, probe) in asset.probes.iter_mut().enumerate() {
+        if let Some(hidden) = drop[p] {
+            let [i, j, k] = grid.ijk(p);
+            *probe = Probe {
+                position: grid.position(i, j, k),
+                flags: PROBE_FILLED | 1 << FILL_LEVEL_SHIFT | hidden << FILL_HIDDEN_SHIFT,
+                slot: NO_SLOT,
+                first_factor,
+                ..Probe::default()
+            };
+            continue;
+        }
+        let start = probe.first_factor as usize;
+        ranges.push(start..start + probe.factor_count as usize);
+        probe.first_factor = first_factor;
+        first_factor += probe.factor_count;
+        if probe.has_data() {
+            let s = probe.slot as usize;
+            sky_mask.extend_from_slice(&asset.sky_mask[s * mask_words..(s + 1) * mask_words]);
+            sky_transfer.push(asset.sky_transfer[s]);
+            depth.extend_from_slice(&asset.probe_depth[s * DEPTH_WORDS..(s + 1) * DEPTH_WORDS]);
+            probe.slot = slot;
+            slot += 1;
+        }
+    }
+    asset.factors = asset.factors.select(&ranges);
+    (asset.sky_mask, asset.sky_transfer, asset.probe_depth) = (sky_mask, sky_transfer, depth);
+}

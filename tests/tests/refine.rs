@@ -1,0 +1,171 @@
+//! Refinement by prediction (`prt_bake::refine`; issues 31 and 32): a bake drops the probes
+//! between every other grid point that those points predict, within a probe budget, and the
+//! runtime fills them from those points, leaving out the corners a wall hides.
+
+use prt_bake::{BakeSettings, NoProgress};
+use prt_format::{
+    decode, encode, tier, Asset, FILL_HIDDEN_MASK, FILL_HIDDEN_SHIFT, FILL_LEVEL_SHIFT,
+    PROBE_FILLED,
+};
+use prt_runtime::surface::SurfaceSampler;
+use prt_runtime::{load_rig, CpuRelighter, LookupSettings};
+use prt_tests::{bake_ok, fixture, rays};
+
+/// The two-room fixture (a thin shared wall between a lit and a dark room) at 0.25 m, 256
+/// rays, with `budget` probes with data at most and no threshold of its own.
+fn two_rooms(budget: Option<usize>) -> (Asset, prt_bake::BakeReport) {
+    let settings = BakeSettings {
+        spacing: Some(0.25),
+        probe_budget: budget,
+        prune_error: 0.0,
+        ..rays(256)
+    };
+    prt_bake::bake(&fixture("two_rooms.gltf"), &settings, &NoProgress).unwrap()
+}
+
+fn with_data(asset: &Asset) -> usize {
+    asset.probes.iter().filter(|p| p.has_data()).count()
+}
+
+/// A budget of 60% of the probes with data is met exactly by dropping probes off level 1,
+/// each filled from level 1 with the corners a ray from it did not reach left out (some of them
+/// beside the shared wall); the asset validates, round-trips and reports what was dropped.
+#[test]
+fn a_budget_drops_probes_off_level_one() {
+    let (full, report) = two_rooms(None);
+    assert!(report.refined.is_none(), "nothing to do without a budget");
+    let budget = with_data(&full) * 6 / 10;
+    let (asset, report) = two_rooms(Some(budget));
+    assert_eq!(with_data(&asset), budget);
+    let r = report.refined.unwrap();
+    assert_eq!((r.before, r.after), (with_data(&full), budget));
+    assert_eq!(r.dropped, r.before - budget);
+    assert!(r.candidates >= r.dropped && r.worst_dropped > 0.0, "{r:?}");
+    let g = asset.header.grid;
+    let mut hidden = 0;
+    for (p, probe) in asset.probes.iter().enumerate() {
+        if full.probes[p].has_data() && !probe.has_data() {
+            assert!(
+                !tier::on_level_point(&g, g.ijk(p), 1),
+                "probe {p} on level 1 dropped"
+            );
+            assert_eq!(probe.fill_level(), 1, "probe {p}: {probe:?}");
+            let [i, j, k] = g.ijk(p);
+            assert_eq!(probe.position, g.position(i, j, k));
+            hidden += usize::from(probe.fill_hidden() != 0);
+        }
+    }
+    assert!(
+        hidden > 0,
+        "some dropped probe sees past the shared wall to no corner"
+    );
+    assert_eq!(decode(&encode(&asset).unwrap()).unwrap(), asset);
+    assert!(prt_format::Summary::of(&asset, 0)
+        .to_string()
+        .contains(&format!("{budget} with data of")));
+}
+
+/// The probes dropped are those the coarse points predict: with the rig of the two rooms, the
+/// surfels of both rooms sample within a few per cent of the bake that keeps every probe, and
+/// the dark room gets no more light than there (no leak through the fill).
+#[test]
+fn dropped_probes_keep_the_surfaces_lit_as_before() {
+    let (full, _) = two_rooms(None);
+    let (pruned, _) = two_rooms(Some(with_data(&full) * 6 / 10));
+    let lighting = load_rig(&fixture("rigs/two_rooms.json")).unwrap();
+    let lookup = LookupSettings::default();
+    let relit = |a: &Asset| CpuRelighter::new(a).unwrap().relight(&lighting, 1).unwrap();
+    let (rf, rp) = (relit(&full), relit(&pruned));
+    let sf = SurfaceSampler::new(&full, &rf.sh, &rf.surfel_irradiance, &lookup);
+    let sp = SurfaceSampler::new(&pruned, &rp.sh, &rp.surfel_irradiance, &lookup);
+    let (mut diff, mut total) = (0.0f64, 0.0f64);
+    let surfels = full
+        .surfels
+        .iter()
+        .filter(|s| s.flags & prt_format::BRICK_BACKFACE == 0);
+    for s in surfels.step_by(5) {
+        let (a, b) = (
+            sf.sample(s.position, s.normal),
+            sp.sample(s.position, s.normal),
+        );
+        for c in 0..3 {
+            assert!(b.irradiance[c].is_finite(), "at {:?}", s.position);
+            diff += f64::from((a.irradiance[c] - b.irradiance[c]).abs());
+            total += f64::from(a.irradiance[c].abs());
+        }
+    }
+    let rel = diff / total;
+    assert!(rel < 0.05, "mean relative difference {rel}");
+}
+
+/// Pruned bakes are byte-identical on one thread and two.
+#[test]
+fn pruned_bakes_are_identical_at_any_thread_count() {
+    let bake = |threads: usize| {
+        let settings = BakeSettings {
+            spacing: Some(0.4),
+            probe_budget: Some(150),
+            threads: Some(threads),
+            ..rays(128)
+        };
+        encode(&bake_ok(&fixture("two_rooms.gltf"), &settings)).unwrap()
+    };
+    assert!(bake(1) == bake(2));
+}
+
+/// A budget below what level 1 alone needs is met as far as it can be, with a warning that
+/// says so; a budget of 0 and a negative or NaN threshold are refused.
+#[test]
+fn an_unreachable_budget_warns() {
+    let (asset, report) = two_rooms(Some(1));
+    let r = report.refined.unwrap();
+    assert_eq!(r.dropped, r.candidates);
+    assert_eq!(with_data(&asset), r.after);
+    let warned = report.warnings.iter().any(|w| {
+        w.contains("probe budget 1 not met") && w.contains(&format!("{} probes", r.after))
+    });
+    assert!(warned, "{:?}", report.warnings);
+    for (budget, error, name) in [
+        (Some(0), 0.15, "probe_budget"),
+        (None, -1.0, "prune_error"),
+        (None, f32::NAN, "prune_error"),
+    ] {
+        let settings = BakeSettings {
+            probe_budget: budget,
+            prune_error: error,
+            ..rays(64)
+        };
+        let e = prt_tests::bake_err(&fixture("two_rooms.gltf"), &settings).to_string();
+        assert!(e.contains(name), "{e}");
+    }
+}
+
+/// Validation refuses hidden corners on a point that is not filled, and a filled point whose
+/// valid corners are all hidden.
+#[test]
+fn broken_hidden_corners_are_invalid() {
+    let (asset, _) = two_rooms(Some(400));
+    let message = |damage: &dyn Fn(&mut Asset)| {
+        let mut a = asset.clone();
+        damage(&mut a);
+        match prt_format::validate::validate(&a) {
+            Err(e) => e.to_string(),
+            Ok(()) => panic!("accepted"),
+        }
+    };
+    let empty = asset
+        .probes
+        .iter()
+        .position(|p| !p.has_data() && !p.is_filled());
+    if let Some(p) = empty {
+        let e = message(&|a| a.probes[p].flags |= 1 << FILL_HIDDEN_SHIFT);
+        assert!(e.contains("no data"), "{e}");
+    }
+    let filled = asset.probes.iter().position(|p| p.is_filled()).unwrap();
+    let e = message(&|a| {
+        a.probes[filled].flags = PROBE_FILLED
+            | a.probes[filled].fill_level() << FILL_LEVEL_SHIFT
+            | FILL_HIDDEN_MASK << FILL_HIDDEN_SHIFT
+    });
+    assert!(e.contains("is valid among those it sees"), "{e}");
+}
