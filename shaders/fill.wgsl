@@ -59,7 +59,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         let w3 = select(1.0 - t, t, upper);
         let w = w3.x * w3.y * w3.z;
         let q = grid_index(select(lo, hi, upper));
-        let hidden = ((probes[p].flags >> FILL_HIDDEN_SHIFT) >> corner & 1u) != 0u;
+        let hidden = (((probes[p].flags >> FILL_HIDDEN_SHIFT) >> corner) & 1u) != 0u;
         if w <= 0.0 || hidden || (probes[q].flags & PROBE_VALID) == 0u {
             continue;
         }

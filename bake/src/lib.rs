@@ -84,8 +84,9 @@ pub struct BakeReport {
     pub rows_spilled: u64,
     /// With sparse placement ([`BakeSettings::sparse`]): what it placed where.
     pub placed: Option<Placed>,
-    /// With a probe budget ([`BakeSettings::probe_budget`]) the grid exceeded: what
-    /// [`refine::prune`] dropped.
+    /// What the refine stage dropped ([`refine::prune`]): `None` when it had nothing to do (no
+    /// threshold, [`BakeSettings::prune_error`], and no budget exceeded,
+    /// [`BakeSettings::probe_budget`]).
     pub refined: Option<refine::Refined>,
 }
 

@@ -126,16 +126,7 @@ pub(crate) fn bake_in_pool(
         surface,
     };
     lap(&mut report, "assemble", Some("refine"));
-    let threshold = if settings.sparse {
-        settings.prune_error
-    } else {
-        0.0
-    };
-    let refine = (threshold, settings.probe_budget);
-    report.refined = refine::prune(&mut asset, refine, &built.bvh);
-    report
-        .warnings
-        .extend(report.refined.as_ref().and_then(refine::budget_warning));
+    refine_stage(&mut asset, settings, &built.bvh, &mut report);
     asset.geometry = built.bvh.geometry;
     report.warnings.extend(diagnostics::gap_warning(&asset));
     lap(&mut report, "refine", None);
@@ -155,6 +146,25 @@ fn placement_stage(
     report.placed = Some(placed);
     report.warnings.extend(warning);
     Some(plan)
+}
+
+/// The refine stage: drops the probes of `asset` that level 1 predicts ([`refine::prune`]: under
+/// the threshold on sparse bakes, and past the budget), tracing through `bvh`, and reports it.
+fn refine_stage(
+    asset: &mut Asset,
+    settings: &BakeSettings,
+    bvh: &bvh::SceneBvh,
+    report: &mut BakeReport,
+) {
+    let threshold = if settings.sparse {
+        settings.prune_error
+    } else {
+        0.0
+    };
+    report.refined = refine::prune(asset, (threshold, settings.probe_budget), bvh);
+    report
+        .warnings
+        .extend(report.refined.as_ref().and_then(refine::budget_warning));
 }
 
 /// The surface stage: the surface terms of the `bricked` surfels (written into them) against

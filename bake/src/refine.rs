@@ -8,9 +8,10 @@
 //! bricks "the coarser level already predicts" with the baked lighting; lights here are dynamic,
 //! so the prediction is tested under fixed test lightings instead:
 //!
-//! - [`FIELDS`] stripes of radiance 0 and 1, [`PERIODS`] grid spacings wide in three
-//!   directions laid from the grid's origin (sun patches and shadow edges at the scales a probe
-//!   can resolve), half of them under a sky of radiance 1;
+//! - [`FIELDS`] stripes of radiance 0 and 1 (a lit and a dark band per period of [`PERIODS`]
+//!   grid spacings) in three directions, laid from the grid's origin: sun patches and shadow
+//!   edges at the scales a probe can resolve; every other one of them by index,
+//!   under a sky of radiance 1, the others under a black sky;
 //! - a point light at the probe's grid point, lighting every surface within a spacing with
 //!   radiance 1 and farther ones with the inverse square of the distance (a hotspot the points
 //!   around see from aside).
@@ -23,17 +24,21 @@
 //! irradiance of radiance 1 from every direction (pi). The interpolation leaves out the corners
 //! a ray from the probe does not reach ([`prt_format::FILL_HIDDEN_SHIFT`]) and renormalises
 //! over the valid others, as `prt_runtime::fill` does. [`prune`] drops the probes whose error is
-//! below a threshold (sparse bakes: [`crate::BakeSettings::prune_error`]) and then, in order of
-//! error, more until a budget of probes with data holds ([`crate::BakeSettings::probe_budget`]),
-//! and flags them filled from level 1 ([`prt_format::PROBE_FILLED`]): the runtime fills them
+//! below a threshold and whose corners are all in sight (sparse bakes:
+//! [`crate::BakeSettings::prune_error`]; a filled point has no visibility map for the lookups
+//! without surface terms), then, in order of error, more until a budget of probes with data
+//! holds ([`crate::BakeSettings::probe_budget`]). It keeps every probe that was moved off a
+//! surface or out of a wall. The dropped ones are flagged filled from level 1
+//! ([`prt_format::PROBE_FILLED`]): the runtime fills them
 //! after every gather, so the lookup reads the coarse interpolation there, continuous where kept
 //! and dropped probes meet (the argument of `prt_format::tier`). Only probes off level 1 are
 //! dropped, so every probe a dropped one is filled from keeps its data.
 //!
-//! What it buys and costs (`docs/results/refine.md`): on the level family's tuning seeds 5-27%
-//! fewer probes with data at an unchanged surface error; past that, under a budget, a probe
-//! filled beside a surface reads the corners it sees, not those the surface sees, and the error
-//! grows quickly (Sponza at 1.2 m cut to 3,400 probes: 23.7%, against 21.1% for a 2.4 m grid).
+//! What it buys and costs (`docs/results/refine.md`): on the level family's tuning seeds 3-30%
+//! fewer probes with data per level at an unchanged surface error; past that, under a budget,
+//! a probe filled beside a surface reads the corners it sees, not those the surface sees, and
+//! the error grows quickly (with the test's first version, Sponza at 1.2 m cut to 3,400
+//! probes: 23.7%, against 21.1% for a 2.4 m grid).
 
 use std::f32::consts::PI;
 use std::ops::Range;
@@ -42,6 +47,7 @@ use glam::Vec3;
 use prt_format::sh::{self, SH_COUNT};
 use prt_format::{
     tier, Asset, Probe, DEPTH_WORDS, FILL_HIDDEN_SHIFT, FILL_LEVEL_SHIFT, NO_SLOT, PROBE_FILLED,
+    PROBE_OFFSET,
 };
 use rayon::prelude::*;
 
@@ -108,9 +114,20 @@ pub fn prune(
         .collect();
     let candidates = scored.len();
     scored.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-    let below = scored.partition_point(|s| s.0 < threshold);
+    // The threshold drops only probes that see all their corners: a filled point has no
+    // visibility map, so where a wall hides a corner the lookups without surface terms (points
+    // with no surfel) would weigh it by its facing term alone. A budget may drop those too.
+    let (mut free, mut walled): (Vec<_>, Vec<_>) = scored.into_iter().partition(|s| s.2 == 0);
+    let below = free.partition_point(|s| s.0 < threshold);
     let over = budget.map_or(0, |b| before.saturating_sub(b));
-    scored.truncate(below.max(over));
+    let mut dropped: Vec<_> = free.drain(..below).collect();
+    if over > dropped.len() {
+        free.append(&mut walled);
+        free.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        free.truncate(over - dropped.len());
+        dropped.append(&mut free);
+    }
+    let scored = dropped;
     let mut drop = vec![None; asset.probes.len()];
     for &(_, p, hidden) in &scored {
         drop[p] = Some(hidden);
@@ -122,7 +139,7 @@ pub fn prune(
         after: before - scored.len(),
         candidates,
         dropped: scored.len(),
-        worst_dropped: scored.last().map_or(0.0, |s| s.0),
+        worst_dropped: scored.iter().map(|s| s.0).fold(0.0, f32::max),
     })
 }
 
@@ -152,15 +169,18 @@ fn prediction_error(
     let own = response[p].as_ref()?;
     let grid = &asset.header.grid;
     let ijk = grid.ijk(p);
-    if probe.is_dilated() || !probe.has_data() || tier::on_level_point(grid, ijk, 1) {
+    // A probe moved off a surface or out of a wall stands where its grid point would see
+    // through it: kept.
+    let moved = probe.flags & PROBE_OFFSET != 0;
+    if moved || probe.is_dilated() || !probe.has_data() || tier::on_level_point(grid, ijk, 1) {
+        return None;
+    }
+    if tier::used_corners(grid, ijk, 1).any(|(c, _)| asset.probes[c].is_filled()) {
         return None;
     }
     let hidden = hidden_corners(asset, bvh, p);
     let mut mean = [[0.0f32; NORMALS.len()]; FIELDS];
     let mut total = 0.0;
-    if tier::used_corners(grid, ijk, 1).any(|(c, _)| asset.probes[c].is_filled()) {
-        return None;
-    }
     for (c, w) in tier::fill_corners(grid, ijk, 1, hidden) {
         let Some(r) = response[c].as_ref() else {
             continue;
@@ -269,7 +289,8 @@ fn respond(asset: &Asset, p: usize) -> Response {
     })
 }
 
-/// Whether test lighting `k` lights the point `at` of `grid`. The stripes are laid from the
+/// Whether test lighting `k` lights the point `at` of `grid`: stripes of the period
+/// `PERIODS[k / 3]` along direction `k % 3`. The stripes are laid from the
 /// grid's origin, so that a level moved far from the world's origin is pruned as it is there.
 fn field(k: usize, at: Vec3, grid: &prt_format::Grid) -> bool {
     let period = PERIODS[k / DIRECTIONS.len()] * grid.spacing;
@@ -281,16 +302,15 @@ fn field(k: usize, at: Vec3, grid: &prt_format::Grid) -> bool {
 fn hit_point(asset: &Asset, f: usize) -> Vec3 {
     let (brick, _) = asset.factors.brick_and_rays(f);
     let offset = Vec3::from(asset.factors.offset(f));
+    // Validated: the index names a brick or, past them, a coarse brick, whose offsets are
+    // stored divided by its 2^level (`prt_format::coarse`).
     let b = brick as usize;
     match asset.bricks.get(b) {
         Some(brick) => Vec3::from(brick.centroid) + offset,
-        None => asset
-            .coarse
-            .bricks
-            .get(b - asset.bricks.len())
-            .map_or(Vec3::ZERO, |c| {
-                Vec3::from(c.centroid) + offset * tier::stride(c.level) as f32
-            }),
+        None => {
+            let c = &asset.coarse.bricks[b - asset.bricks.len()];
+            Vec3::from(c.centroid) + offset * (1u32 << c.level) as f32
+        }
     }
 }
 

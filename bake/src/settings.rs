@@ -92,8 +92,8 @@ pub struct BakeSettings {
     /// Sparse bakes drop the probes between the points of level 1 whose prediction error
     /// ([`crate::refine`]) is below this, whatever the budget; 0 keeps them. 0.15 was chosen
     /// on the level family's tuning seeds (`prt-bench surface --case tuning --prune-error E`,
-    /// docs/results/refine.md): 3-31% fewer probes with data per level at both spacings
-    /// (median 6.5%), and the same median / worst level (6.6% / 8.6% at the default spacing,
+    /// docs/results/refine.md): 3-30% fewer probes with data per level at both spacings
+    /// (median 6%), and the same median / worst level (6.6% / 8.6% at the default spacing,
     /// 4.0% / 4.9% at half); with the test's first version 0.2 cost a little (8.7%, 4.1%) and
     /// 0.3 much (worst level 11.9%, leaks 1.7%).
     pub prune_error: f32,

@@ -178,8 +178,12 @@ pub fn run(args: SurfaceArgs) -> Result<()> {
             case,
             &refs,
             &lookups.for_set(case.set),
-            (args.spacing, !args.uniform, args.probe_budget),
-            args.prune_error,
+            (
+                args.spacing,
+                !args.uniform,
+                args.probe_budget,
+                args.prune_error,
+            ),
         )?);
     }
     args.out
@@ -192,8 +196,7 @@ fn measure(
     case: &Case,
     refs: &Refs,
     lookups: &[Lookup],
-    (spacing, sparse, probe_budget): (Option<f32>, bool, Option<usize>),
-    prune_error: Option<f32>,
+    (spacing, sparse, probe_budget, prune_error): (Option<f32>, bool, Option<usize>, Option<f32>),
 ) -> Result<Vec<Row>> {
     let lighting = prt_runtime::load_rig(&case.rig)
         .with_context(|| format!("{}: loading the rig {}", case.name, case.rig.display()))?;
@@ -247,7 +250,11 @@ fn bake<'l>(
     let (asset, report) = prt_bake::bake(&case.scene, settings, &NoProgress)
         .with_context(|| format!("{}: baking {}", case.name, case.scene.display()))?;
     if let Some(r) = report.refined {
-        eprintln!("{}: {r:?}", case.name);
+        eprintln!(
+            "  {}: refine dropped {} of {} candidates (error up to {:.3}); {} of {} probes with \
+             data kept",
+            case.name, r.dropped, r.candidates, r.worst_dropped, r.after, r.before
+        );
     }
     let bake_s = t.elapsed().as_secs_f64();
     let t = Instant::now();

@@ -76,9 +76,10 @@ pub struct BakeArgs {
     probe_budget: Option<usize>,
     /// Drop the probes between every other grid point whose light those points predict
     /// within this error (in units of pi, under test lightings of stripes and sky) whatever
-    /// the budget (not with --uniform); 0 keeps them.
-    #[arg(long, default_value_t = BakeSettings::default().prune_error)]
-    prune_error: f32,
+    /// the budget; 0 keeps them [default: the --quality preset's: 0.15, high 0; sparse bakes
+    /// only].
+    #[arg(long)]
+    prune_error: Option<f32>,
     /// Surfel cell size in metres (bricks are 4x4x4 cells) [default: spacing / 8, or / 24 with --quality high]; 0 = no merging.
     #[arg(long)]
     cell_size: Option<f32>,
@@ -162,6 +163,12 @@ pub fn run(args: BakeArgs) -> Result<()> {
         Quality::Default => BakeSettings::default(),
         Quality::High => BakeSettings::high_quality(),
     };
+    if uniform && prune_error.is_some() {
+        anyhow::bail!(
+            "--prune-error applies to sparse bakes; --uniform keeps every traced probe \
+             (--probe-budget still caps the count)"
+        );
+    }
     let settings = BakeSettings {
         rays: rays.unwrap_or(preset.rays),
         spacing,
@@ -169,7 +176,7 @@ pub fn run(args: BakeArgs) -> Result<()> {
         bounds,
         max_probes,
         probe_budget,
-        prune_error,
+        prune_error: prune_error.unwrap_or(preset.prune_error),
         cell_size: if no_merge { Some(0.0) } else { cell_size },
         far_ratio: far_ratio.unwrap_or(preset.far_ratio),
         double_sided,

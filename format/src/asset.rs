@@ -212,9 +212,9 @@ pub const FILL_LEVEL_MASK: u32 = 0xf;
 /// Where a filled probe's *hidden corners* sit in its flags ([`Probe::fill_hidden`]): bit `c`
 /// set when a wall stands between the point and corner `c` of its level's cell
 /// ([`crate::tier::corners`]' order), which its fill then leaves out. Sparse placement fills
-/// only points no surface separates from their corners (none hidden); a budgeted bake also
-/// fills probes it traced beside surfaces (`prt_bake::refine`), and traces which corners they
-/// see.
+/// only points no surface separates from their corners (none hidden); the bake's refine stage
+/// also fills probes it traced beside surfaces where the level's points predict them
+/// (`prt_bake::refine`), and traces which corners they see.
 pub const FILL_HIDDEN_SHIFT: u32 = 16;
 /// The bits of a filled probe's hidden corners, after shifting by [`FILL_HIDDEN_SHIFT`].
 pub const FILL_HIDDEN_MASK: u32 = 0xff;

@@ -9,7 +9,9 @@
 //! SH to the trilinear interpolation of the level's cell around it ([`corners`]), renormalised
 //! over the corners a lookup may use (valid or dilated). Its level is the lowest whose next
 //! level's cell around it holds a surface, so its corners are traced and no surface lies in its
-//! own cell: no wall stands between a filled point and the probes it is interpolated from.
+//! own cell: no wall stands between a filled point and the probes it is interpolated from. A
+//! probe the bake traced and then dropped because level 1 predicts it (`prt_bake::refine`) may
+//! stand beside a wall: it leaves out the corners the wall hides ([`fill_corners`]).
 //!
 //! Why fill grid points instead of coarser volumes and an indirection: a trilinear function on
 //! a cell, restricted to one of its grid cells, is trilinear there too, so the lookup over

@@ -951,7 +951,8 @@ fn scene_diagnostics_warn_about_winding_and_invalid_probes() {
         &sponza,
         &BakeSettings {
             spacing: Some(3.0),
-            // The warning counts the traced probes, before any is dropped.
+            // The inside warning counts the traced probes at the validity stage, before the
+            // refine stage drops any.
             prune_error: 0.0,
             ..rays(64)
         },
