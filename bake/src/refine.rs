@@ -60,14 +60,7 @@ pub const PERIODS: [f32; 4] = [1.0, 2.0, 4.0, 8.0];
 pub const FIELDS: usize = 3 * PERIODS.len();
 
 /// Normals the irradiance is compared at.
-const NORMALS: [[f32; 3]; 6] = [
-    [1.0, 0.0, 0.0],
-    [-1.0, 0.0, 0.0],
-    [0.0, 1.0, 0.0],
-    [0.0, -1.0, 0.0],
-    [0.0, 0.0, 1.0],
-    [0.0, 0.0, -1.0],
-];
+const NORMALS: [[f32; 3]; 6] = sh::AXIS_NORMALS;
 
 /// Stripe directions, none along an axis (a wall on a grid layer would sit on a stripe edge
 /// at every period), fixed so that bakes are deterministic.

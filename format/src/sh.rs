@@ -39,6 +39,17 @@ pub const COSINE_LOBE: [f32; SH_COUNT] = [
     PI / 4.0,
 ];
 
+/// The six axis directions, where benchmarks and the bake compare irradiance without a normal of
+/// their own.
+pub const AXIS_NORMALS: [[f32; 3]; 6] = [
+    [1.0, 0.0, 0.0],
+    [-1.0, 0.0, 0.0],
+    [0.0, 1.0, 0.0],
+    [0.0, -1.0, 0.0],
+    [0.0, 0.0, 1.0],
+    [0.0, 0.0, -1.0],
+];
+
 /// All 9 basis functions at unit direction `d`.
 #[inline]
 pub fn basis(d: [f32; 3]) -> [f32; SH_COUNT] {

@@ -136,3 +136,47 @@ impl Drop for ScratchDir {
         let _ = std::fs::remove_dir_all(&self.0);
     }
 }
+
+/// A surface point and its unit normal.
+pub type SurfacePoint = ([f32; 3], [f32; 3]);
+
+/// Front-face surfels of `asset`: where the lookup reads the probes at surfaces.
+pub fn surfel_points(asset: &Asset) -> Vec<SurfacePoint> {
+    asset
+        .surfels
+        .iter()
+        .filter(|s| s.flags & prt_format::BRICK_BACKFACE == 0)
+        .map(|s| (s.position, s.normal))
+        .collect()
+}
+
+/// Both bakes relit with the rig at `rig` and sampled with the default surface lookup at every
+/// `step`-th of `points`: the mean relative difference of `b`'s irradiance from `a`'s, after
+/// `check` has seen each pair of samples (a's, b's) and its point.
+pub fn surface_difference(
+    (a, b): (&Asset, &Asset),
+    rig: &Path,
+    (points, step): (&[SurfacePoint], usize),
+    check: impl Fn(&prt_runtime::Sample, &prt_runtime::Sample, [f32; 3]),
+) -> f64 {
+    let lighting = prt_runtime::load_rig(rig).unwrap();
+    let lookup = prt_runtime::LookupSettings::default();
+    let relit = |x: &Asset| {
+        let relighter = prt_runtime::CpuRelighter::new(x).unwrap();
+        relighter.relight(&lighting, 1).unwrap()
+    };
+    let (ra, rb) = (relit(a), relit(b));
+    let surface = prt_runtime::surface::SurfaceSampler::new;
+    let sa = surface(a, &ra.sh, &ra.surfel_irradiance, &lookup);
+    let sb = surface(b, &rb.sh, &rb.surfel_irradiance, &lookup);
+    let (mut diff, mut total) = (0.0f64, 0.0f64);
+    for &(p, n) in points.iter().step_by(step) {
+        let (x, y) = (sa.sample(p, n), sb.sample(p, n));
+        check(&x, &y, p);
+        for c in 0..3 {
+            diff += f64::from((x.irradiance[c] - y.irradiance[c]).abs());
+            total += f64::from(x.irradiance[c].abs());
+        }
+    }
+    diff / total
+}

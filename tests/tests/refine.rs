@@ -7,9 +7,7 @@ use prt_format::{
     decode, encode, tier, Asset, FILL_HIDDEN_MASK, FILL_HIDDEN_SHIFT, FILL_LEVEL_SHIFT,
     PROBE_FILLED,
 };
-use prt_runtime::surface::SurfaceSampler;
-use prt_runtime::{load_rig, CpuRelighter, LookupSettings};
-use prt_tests::{bake_ok, fixture, rays};
+use prt_tests::{bake_ok, fixture, rays, surface_difference, surfel_points};
 
 /// The two-room fixture (a thin shared wall between a lit and a dark room) at 0.25 m, 256
 /// rays, with `budget` probes with data at most and no threshold of its own.
@@ -72,29 +70,13 @@ fn a_budget_drops_probes_off_level_one() {
 fn dropped_probes_keep_the_surfaces_lit_as_before() {
     let (full, _) = two_rooms(None);
     let (pruned, _) = two_rooms(Some(with_data(&full) * 6 / 10));
-    let lighting = load_rig(&fixture("rigs/two_rooms.json")).unwrap();
-    let lookup = LookupSettings::default();
-    let relit = |a: &Asset| CpuRelighter::new(a).unwrap().relight(&lighting, 1).unwrap();
-    let (rf, rp) = (relit(&full), relit(&pruned));
-    let sf = SurfaceSampler::new(&full, &rf.sh, &rf.surfel_irradiance, &lookup);
-    let sp = SurfaceSampler::new(&pruned, &rp.sh, &rp.surfel_irradiance, &lookup);
-    let (mut diff, mut total) = (0.0f64, 0.0f64);
-    let surfels = full
-        .surfels
-        .iter()
-        .filter(|s| s.flags & prt_format::BRICK_BACKFACE == 0);
-    for s in surfels.step_by(5) {
-        let (a, b) = (
-            sf.sample(s.position, s.normal),
-            sp.sample(s.position, s.normal),
-        );
-        for c in 0..3 {
-            assert!(b.irradiance[c].is_finite(), "at {:?}", s.position);
-            diff += f64::from((a.irradiance[c] - b.irradiance[c]).abs());
-            total += f64::from(a.irradiance[c].abs());
-        }
-    }
-    let rel = diff / total;
+    let points = surfel_points(&full);
+    let rel = surface_difference(
+        (&full, &pruned),
+        &fixture("rigs/two_rooms.json"),
+        (&points, 5),
+        |_, b, p| assert!(b.irradiance.iter().all(|v| v.is_finite()), "at {p:?}"),
+    );
     assert!(rel < 0.05, "mean relative difference {rel}");
 }
 

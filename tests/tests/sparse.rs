@@ -14,7 +14,7 @@ use prt_format::{
 use prt_runtime::sample::corners;
 use prt_runtime::surface::SurfaceSampler;
 use prt_runtime::{load_rig, CpuRelighter, LookupSettings};
-use prt_tests::{bake_ok, fixture, rays};
+use prt_tests::{bake_ok, fixture, rays, surface_difference, surfel_points};
 
 /// The two-room fixture (a thin shared wall, a door) at a spacing that leaves air between the
 /// rooms' floors and ceilings, 256 rays: uniform and sparse, placement alone (no probe
@@ -27,16 +27,6 @@ fn two_rooms(sparse: bool) -> Asset {
         ..rays(256)
     };
     bake_ok(&fixture("two_rooms.gltf"), &settings)
-}
-
-/// Front-face surfels: where the lookup reads the probes at surfaces.
-fn surfel_points(asset: &Asset) -> Vec<([f32; 3], [f32; 3])> {
-    asset
-        .surfels
-        .iter()
-        .filter(|s| s.flags & prt_format::BRICK_BACKFACE == 0)
-        .map(|s| (s.position, s.normal))
-        .collect()
 }
 
 /// A sparse bake places fewer probes than its grid has, keeps every probe the lookup reads at
@@ -96,23 +86,13 @@ fn sparse_placement_keeps_every_probe_surfaces_read() {
 #[test]
 fn sparse_and_uniform_bakes_agree_at_surfaces() {
     let (uniform, sparse) = (two_rooms(false), two_rooms(true));
-    let lighting = load_rig(&fixture("rigs/two_rooms.json")).unwrap();
-    let lookup = LookupSettings::default();
-    let relit = |a: &Asset| CpuRelighter::new(a).unwrap().relight(&lighting, 1).unwrap();
-    let (ru, rs) = (relit(&uniform), relit(&sparse));
-    let su = SurfaceSampler::new(&uniform, &ru.sh, &ru.surfel_irradiance, &lookup);
-    let ss = SurfaceSampler::new(&sparse, &rs.sh, &rs.surfel_irradiance, &lookup);
     let points = surfel_points(&uniform);
-    let (mut diff, mut total) = (0.0f64, 0.0f64);
-    for &(p, n) in points.iter().step_by(7) {
-        let (a, b) = (su.sample(p, n), ss.sample(p, n));
-        assert!(b.validity >= a.validity - 1e-6, "at {p:?}: {b:?} vs {a:?}");
-        for c in 0..3 {
-            diff += f64::from((a.irradiance[c] - b.irradiance[c]).abs());
-            total += f64::from(a.irradiance[c].abs());
-        }
-    }
-    let rel = diff / total;
+    let rel = surface_difference(
+        (&uniform, &sparse),
+        &fixture("rigs/two_rooms.json"),
+        (&points, 7),
+        |a, b, p| assert!(b.validity >= a.validity - 1e-6, "at {p:?}: {b:?} vs {a:?}"),
+    );
     assert!(rel < 0.03, "mean relative difference {rel}");
 }
 

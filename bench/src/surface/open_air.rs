@@ -115,14 +115,7 @@ fn measure(case: &Case, spacing: Option<f32>) -> Result<Row> {
 /// Per point of `points`: the relative irradiance error of `got` against `truth` over the six
 /// axis normals (module docs).
 fn relative_errors(points: &[usize], truth: &[ShRgb], got: &[ShRgb]) -> Vec<f64> {
-    const NORMALS: [[f32; 3]; 6] = [
-        [1.0, 0.0, 0.0],
-        [-1.0, 0.0, 0.0],
-        [0.0, 1.0, 0.0],
-        [0.0, -1.0, 0.0],
-        [0.0, 0.0, 1.0],
-        [0.0, 0.0, -1.0],
-    ];
+    const NORMALS: [[f32; 3]; 6] = prt_format::sh::AXIS_NORMALS;
     let e = |sh: &ShRgb, n| {
         let v = prt_format::sh::irradiance(sh, n);
         f64::from(v[0] + v[1] + v[2]) / 3.0
