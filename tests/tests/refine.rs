@@ -7,7 +7,7 @@ use prt_format::{
     decode, encode, tier, Asset, FILL_HIDDEN_MASK, FILL_HIDDEN_SHIFT, FILL_LEVEL_SHIFT,
     PROBE_FILLED,
 };
-use prt_tests::{bake_ok, fixture, rays, surface_difference, surfel_points};
+use prt_tests::{fixture, rays, surface_difference, surfel_points};
 
 /// The two-room fixture (a thin shared wall between a lit and a dark room) at 0.25 m, 256
 /// rays, with `budget` probes with data at most and no threshold of its own.
@@ -78,21 +78,6 @@ fn dropped_probes_keep_the_surfaces_lit_as_before() {
         |_, b, p| assert!(b.irradiance.iter().all(|v| v.is_finite()), "at {p:?}"),
     );
     assert!(rel < 0.05, "mean relative difference {rel}");
-}
-
-/// Pruned bakes are byte-identical on one thread and two.
-#[test]
-fn pruned_bakes_are_identical_at_any_thread_count() {
-    let bake = |threads: usize| {
-        let settings = BakeSettings {
-            spacing: Some(0.4),
-            probe_budget: Some(150),
-            threads: Some(threads),
-            ..rays(128)
-        };
-        encode(&bake_ok(&fixture("two_rooms.gltf"), &settings)).unwrap()
-    };
-    assert!(bake(1) == bake(2));
 }
 
 /// A budget below what level 1 alone needs is met as far as it can be, with a warning that

@@ -96,13 +96,15 @@ fn sparse_and_uniform_bakes_agree_at_surfaces() {
     assert!(rel < 0.03, "mean relative difference {rel}");
 }
 
-/// Sparse bakes are byte-identical on one thread and two.
+/// Sparse bakes, with the probes the refine stage drops under its threshold and a budget
+/// (`prt_bake::refine`), are byte-identical on one thread and two.
 #[test]
 fn sparse_bakes_are_identical_at_any_thread_count() {
     let bake = |threads: usize| {
         let settings = BakeSettings {
             spacing: Some(0.4),
             sparse: true,
+            probe_budget: Some(150),
             threads: Some(threads),
             ..rays(128)
         };
