@@ -180,3 +180,13 @@ pub fn surface_difference(
     }
     diff / total
 }
+
+/// The validation error of `asset` after `damage`; panics when validation accepts it.
+pub fn refused(asset: &Asset, damage: &dyn Fn(&mut Asset)) -> String {
+    let mut a = asset.clone();
+    damage(&mut a);
+    match prt_format::validate::validate(&a) {
+        Err(e) => e.to_string(),
+        Ok(()) => panic!("accepted"),
+    }
+}
