@@ -855,3 +855,65 @@ fn row_memory_spills_to_tmpdir_or_says_why_not() {
     assert!(stderr.contains("TMPDIR"), "{stderr:?}");
     assert!(dir.entries().is_empty(), "left {:?}", dir.entries());
 }
+
+/// `--probe-budget` caps the probes with data and the bake says what it dropped (and warns when
+/// it cannot);
+/// `--prune-error` is refused with `--uniform` before any work, and `--quality high` drops
+/// nothing.
+#[test]
+fn probe_budget_and_prune_error() {
+    let dir = Scratch::new("refine");
+    let scene = cornell();
+    let bake = |name: &str, extra: &[&str]| {
+        let asset = dir.0.join(name);
+        let mut args: Vec<&std::ffi::OsStr> = vec![
+            "bake".as_ref(),
+            scene.as_os_str(),
+            "-o".as_ref(),
+            asset.as_os_str(),
+            "--spacing".as_ref(),
+            "0.25".as_ref(),
+            "--rays".as_ref(),
+            "64".as_ref(),
+        ];
+        args.extend(extra.iter().map(std::ffi::OsStr::new));
+        (prt(&args, None), asset)
+    };
+    let (out, asset) = bake("budget.prt", &["--probe-budget", "500"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let stdout = text(&out.stdout);
+    let line = stdout
+        .lines()
+        .find(|l| l.starts_with("refine"))
+        .unwrap_or_else(|| {
+            panic!("no refine line: {stdout}");
+        });
+    assert!(
+        line.contains("500 of") && line.contains("(budget 500)"),
+        "{line}"
+    );
+    let asset = prt_format::read_asset(&asset).unwrap();
+    assert_eq!(asset.probes.iter().filter(|p| p.has_data()).count(), 500);
+    // Below what every other grid point alone needs: as far as it goes, with a warning.
+    let (out, _) = bake("small.prt", &["--probe-budget", "200"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let stderr = text(&out.stderr);
+    assert!(
+        stderr.contains("warning: probe budget 200 not met"),
+        "{stderr}"
+    );
+
+    let (out, asset) = bake("uniform.prt", &["--uniform", "--prune-error", "0.1"]);
+    assert!(!out.status.success());
+    let stderr = text(&out.stderr);
+    assert!(
+        stderr.contains("--prune-error") && stderr.contains("--uniform"),
+        "{stderr}"
+    );
+    assert!(!asset.exists());
+
+    let (out, _) = bake("high.prt", &["--quality", "high"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let stdout = text(&out.stdout);
+    assert!(!stdout.lines().any(|l| l.starts_with("refine")), "{stdout}");
+}
