@@ -109,18 +109,12 @@ pub fn prune(
     scored.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
     // The threshold drops only probes that see all their corners: a filled point has no
     // visibility map, so where a wall hides a corner the lookups without surface terms (points
-    // with no surfel) would weigh it by its facing term alone. A budget may drop those too.
-    let (mut free, mut walled): (Vec<_>, Vec<_>) = scored.into_iter().partition(|s| s.2 == 0);
-    let below = free.partition_point(|s| s.0 < threshold);
+    // with no surfel) would weigh it by its facing term alone. A budget may drop those too, the
+    // best predicted of the rest first (both parts keep the order of error).
+    let (mut scored, rest): (Vec<_>, Vec<_>) =
+        (scored.into_iter()).partition(|&(error, _, hidden)| hidden == 0 && error < threshold);
     let over = budget.map_or(0, |b| before.saturating_sub(b));
-    let mut dropped: Vec<_> = free.drain(..below).collect();
-    if over > dropped.len() {
-        free.append(&mut walled);
-        free.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-        free.truncate(over - dropped.len());
-        dropped.append(&mut free);
-    }
-    let scored = dropped;
+    scored.extend(rest.into_iter().take(over.saturating_sub(scored.len())));
     let mut drop = vec![None; asset.probes.len()];
     for &(_, p, hidden) in &scored {
         drop[p] = Some(hidden);
@@ -172,7 +166,12 @@ fn prediction_error(
         return None;
     }
     let hidden = hidden_corners(asset, bvh, p);
+    // The point light of the test sits at the probe's grid point: a hotspot the points around
+    // it see from aside.
+    let [i, j, k] = ijk;
+    let at = Vec3::from(grid.position(i, j, k));
     let mut mean = [[0.0f32; NORMALS.len()]; FIELDS];
+    let mut lit = [0.0f32; NORMALS.len()];
     let mut total = 0.0;
     for (c, w) in tier::fill_corners(grid, ijk, 1, hidden) {
         let Some(r) = response[c].as_ref() else {
@@ -184,21 +183,12 @@ fn prediction_error(
                 *m += w * r;
             }
         }
+        for (l, r) in lit.iter_mut().zip(point_response(asset, c, at)) {
+            *l += w * r;
+        }
     }
     if total <= 0.0 {
         return None;
-    }
-    // A point light at the probe's grid point: a hotspot the points around it see from aside.
-    let [i, j, k] = ijk;
-    let at = Vec3::from(grid.position(i, j, k));
-    let mut lit = [0.0f32; NORMALS.len()];
-    for (c, w) in tier::fill_corners(grid, ijk, 1, hidden) {
-        if response[c].is_some() {
-            let r = point_response(asset, c, at);
-            for (l, r) in lit.iter_mut().zip(r) {
-                *l += w * r;
-            }
-        }
     }
     let own_lit = point_response(asset, p, at);
     let worst = own
@@ -226,7 +216,12 @@ fn point_response(asset: &Asset, q: usize, light: Vec3) -> [f32; NORMALS.len()] 
             *s += radiance * t;
         }
     }
-    let rgb = sh.map(|v| [v, 0.0, 0.0]);
+    axis_irradiance(sh)
+}
+
+/// The irradiance of one channel's SH `c` at the six axis normals.
+fn axis_irradiance(c: [f32; SH_COUNT]) -> [f32; NORMALS.len()] {
+    let rgb = c.map(|v| [v, 0.0, 0.0]);
     NORMALS.map(|n| sh::irradiance(&rgb, n)[0])
 }
 
@@ -276,10 +271,7 @@ fn respond(asset: &Asset, p: usize) -> Response {
             }
         }
     }
-    sh.map(|c| {
-        let rgb = c.map(|v| [v, 0.0, 0.0]);
-        NORMALS.map(|n| sh::irradiance(&rgb, n)[0])
-    })
+    sh.map(axis_irradiance)
 }
 
 /// Whether test lighting `k` lights the point `at` of `grid`: stripes of the period

@@ -328,18 +328,23 @@ fn relight_json_flags_dilated_probes() {
 /// and the CPU by up to 3.4e-3 of SH0: surfels' light decisions, not yet explained; with the sky
 /// alone, or at 512 rays, none does.)
 fn bake_cornell(dir: &Scratch) -> PathBuf {
-    let asset = dir.0.join("cornell.prt");
-    let out = prt(
-        &[
-            "bake".as_ref(),
-            cornell().as_os_str(),
-            "-o".as_ref(),
-            asset.as_os_str(),
-        ],
-        None,
-    );
+    let (out, asset) = bake_cornell_with(dir, "cornell.prt", &[]);
     assert!(out.status.success(), "{}", text(&out.stderr));
     asset
+}
+
+/// `prt bake` of the Cornell reference room into `dir`'s `name` with the options `extra`: what
+/// it printed, and the asset's path.
+fn bake_cornell_with(dir: &Scratch, name: &str, extra: &[&str]) -> (Output, PathBuf) {
+    let (scene, asset) = (cornell(), dir.0.join(name));
+    let mut args: Vec<&std::ffi::OsStr> = vec![
+        "bake".as_ref(),
+        scene.as_os_str(),
+        "-o".as_ref(),
+        asset.as_os_str(),
+    ];
+    args.extend(extra.iter().map(std::ffi::OsStr::new));
+    (prt(&args, None), asset)
 }
 
 fn cornell_rig() -> PathBuf {
@@ -790,19 +795,9 @@ fn sigterm_during_the_write_leaves_no_temporary_file() {
 #[test]
 fn quality_fast_is_512_rays_without_coarse_bricks() {
     let dir = Scratch::new("quality-fast");
-    let scene = cornell();
     let bake = |name: &str, extra: &[&str]| {
-        let asset = dir.0.join(name);
-        let mut args: Vec<&std::ffi::OsStr> = vec![
-            "bake".as_ref(),
-            scene.as_os_str(),
-            "-o".as_ref(),
-            asset.as_os_str(),
-            "--spacing".as_ref(),
-            "0.5".as_ref(),
-        ];
-        args.extend(extra.iter().map(std::ffi::OsStr::new));
-        let out = prt(&args, None);
+        let args = [&["--spacing", "0.5"], extra].concat();
+        let (out, asset) = bake_cornell_with(&dir, name, &args);
         assert!(out.status.success(), "{}", text(&out.stderr));
         std::fs::read(asset).unwrap()
     };
@@ -863,21 +858,9 @@ fn row_memory_spills_to_tmpdir_or_says_why_not() {
 #[test]
 fn probe_budget_and_prune_error() {
     let dir = Scratch::new("refine");
-    let scene = cornell();
     let bake = |name: &str, extra: &[&str]| {
-        let asset = dir.0.join(name);
-        let mut args: Vec<&std::ffi::OsStr> = vec![
-            "bake".as_ref(),
-            scene.as_os_str(),
-            "-o".as_ref(),
-            asset.as_os_str(),
-            "--spacing".as_ref(),
-            "0.25".as_ref(),
-            "--rays".as_ref(),
-            "64".as_ref(),
-        ];
-        args.extend(extra.iter().map(std::ffi::OsStr::new));
-        (prt(&args, None), asset)
+        let args = [&["--spacing", "0.25", "--rays", "64"], extra].concat();
+        bake_cornell_with(&dir, name, &args)
     };
     let (out, asset) = bake("budget.prt", &["--probe-budget", "500"]);
     assert!(out.status.success(), "{}", text(&out.stderr));

@@ -262,10 +262,6 @@ fn filled_points(asset: &Asset) -> Result<(), FormatError> {
             .map(|(c, _)| (c, asset.probes[c]))
             .collect();
         let corners: Vec<String> = used.iter().map(|(c, _)| c.to_string()).collect();
-        let seen: Vec<usize> = crate::tier::fill_corners(grid, ijk, level, p.fill_hidden())
-            .map(|(c, _)| c)
-            .collect();
-        let mut valid = false;
         for &(c, corner) in &used {
             if corner.is_filled() {
                 return Err(FormatError::invalid(
@@ -277,8 +273,9 @@ fn filled_points(asset: &Asset) -> Result<(), FormatError> {
                     ),
                 ));
             }
-            valid |= corner.is_valid() && seen.contains(&c);
         }
+        let valid = crate::tier::fill_corners(grid, ijk, level, p.fill_hidden())
+            .any(|(c, _)| asset.probes[c].is_valid());
         if !valid {
             return Err(FormatError::invalid(
                 "probes",
