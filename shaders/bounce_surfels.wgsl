@@ -7,7 +7,7 @@
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> bricks: array<Brick>;
-@group(0) @binding(2) var<storage, read> surfels: array<Surfel>;
+@group(0) @binding(2) var<storage, read> surfels: array<u32>;
 @group(0) @binding(3) var<storage, read_write> surfel_bounce: array<vec4<f32>>;
 @group(0) @binding(4) var<storage, read_write> brick_dirty: array<u32>;
 // surfels and surfel_bounce hold this chunk's surfels only (dispatched once per chunk).
@@ -19,7 +19,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     if c >= chunk.surfel_end - chunk.surfel_begin {
         return;
     }
-    let surfel = surfels[c];
+    let surfel = surfel_at(c);
     if (bricks[surfel.brick].flags & BRICK_BACKFACE) != 0u {
         return;
     }

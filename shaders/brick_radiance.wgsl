@@ -7,7 +7,7 @@
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> bricks: array<Brick>;
-@group(0) @binding(2) var<storage, read> surfels: array<Surfel>;
+@group(0) @binding(2) var<storage, read> surfels: array<u32>;
 @group(0) @binding(3) var<storage, read> brick_dirty: array<u32>;
 @group(0) @binding(4) var<storage, read> surfel_radiance: array<vec4<f32>>;
 @group(0) @binding(5) var<storage, read_write> brick_radiance: array<vec4<f32>>;
@@ -46,7 +46,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     let first = brick.first_surfel - chunk.surfel_begin;
     for (var s = first; s < first + brick.surfel_count; s = s + 1u) {
         let l = surfel_radiance_at(s);
-        let surfel = surfels[s];
+        let surfel = surfel_at(s);
         mean = mean + surfel.weight * l;
         gr = gr + surfel.gradient * l.x;
         gg = gg + surfel.gradient * l.y;
@@ -68,8 +68,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         var sum = vec3<f32>(0.0);
         var w = 0.0;
         for (var s = begin; s < begin + surface_groups[at + 1u]; s = s + 1u) {
-            sum = sum + surfels[s].weight * surfel_radiance_at(s);
-            w = w + surfels[s].weight;
+            sum = sum + surfel_at(s).weight * surfel_radiance_at(s);
+            w = w + surfel_at(s).weight;
         }
         group_radiance[g] = vec4<f32>(sum / w, 0.0);
     }

@@ -8,7 +8,7 @@
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> lights: array<Light>;
-@group(0) @binding(2) var<storage, read> surfels: array<Surfel>;
+@group(0) @binding(2) var<storage, read> surfels: array<u32>;
 @group(0) @binding(3) var<storage, read> bricks: array<Brick>;
 @group(0) @binding(4) var<storage, read> brick_lights: array<u32>;
 @group(0) @binding(5) var<storage, read> brick_dirty: array<u32>;
@@ -30,7 +30,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         return;
     }
     let s = chunk.surfel_begin + c;
-    let surfel = surfels[c];
+    let surfel = surfel_at(c);
     let b = surfel.brick;
     let brick = bricks[b];
     if (brick.flags & BRICK_BACKFACE) != 0u {

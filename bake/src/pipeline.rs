@@ -110,6 +110,11 @@ pub(crate) fn bake_in_pool(
         sparse.filled = placement::mark_filled(&grid, &mut probes_out, plan);
     }
     let header = assemble::header(scene_path, &loaded, grid, settings, cell_size, &traced);
+    // The surfels as the asset keeps them, so that it equals itself read back.
+    let precision = header.settings.surfel_precision;
+    for s in &mut bricked.surfels {
+        *s = precision.quantize(s);
+    }
     let mut asset = Asset {
         header,
         probes: probes_out,

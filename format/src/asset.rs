@@ -168,6 +168,8 @@ pub struct BakeSettingsRecord {
     pub double_sided_override: bool,
     pub invalid_backface_fraction: f32,
     pub transfer_precision: TransferPrecision,
+    /// How the surfels are stored ([`crate::surfel`]).
+    pub surfel_precision: crate::surfel::SurfelPrecision,
     /// Hits farther than this many brick sizes from their probe went to coarse bricks
     /// ([`crate::coarse`]); 0: none did.
     pub far_ratio: f32,

@@ -41,6 +41,7 @@ pub mod sh;
 mod snorm;
 pub mod summary;
 pub mod surface;
+pub mod surfel;
 pub mod tier;
 pub mod validate;
 
@@ -53,3 +54,4 @@ pub use io::{
 };
 pub use rig::{Light, LightKind, LightRig, Sky};
 pub use summary::Summary;
+pub use surfel::{PackedSurfel, SurfelPrecision};

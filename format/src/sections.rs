@@ -14,7 +14,8 @@ use std::io::Write;
 use bytemuck::Pod;
 use serde::Serialize;
 
-use crate::asset::{Asset, Geometry};
+use crate::asset::{Asset, Geometry, Header, Surfel};
+use crate::surfel::{PackedSurfel, SurfelPrecision};
 use crate::coarse::CoarseBricks;
 use crate::error::FormatError;
 use crate::factors::Factors;
@@ -71,7 +72,10 @@ pub(crate) fn write_payload<W: Write>(asset: &Asset, out: &mut W) -> Result<(), 
     pod(out, &asset.coarse.bricks)?;
     pod(out, &asset.coarse.children)?;
     pod(out, &asset.coarse.moments)?;
-    pod(out, &asset.surfels)?;
+    match asset.header.settings.surfel_precision {
+        SurfelPrecision::F32 => pod(out, &asset.surfels)?,
+        SurfelPrecision::Packed => pod(out, &PackedSurfel::pack_all(&asset.surfels))?,
+    }
     pod(out, &asset.geometry.nodes)?;
     pod(out, &asset.geometry.triangles)?;
     via_serde(out, &asset.lights)?;
@@ -139,8 +143,10 @@ pub(crate) struct Sections<'a> {
 impl Sections<'_> {
     /// The whole asset, section after section.
     pub fn asset(&mut self) -> Result<Asset, FormatError> {
+        let header: Header = self.via_serde("header")?;
+        let surfel_precision = header.settings.surfel_precision;
         Ok(Asset {
-            header: self.via_serde("header")?,
+            header,
             probes: self.pod("probes")?,
             sky_mask: self.pod("sky_mask")?,
             sky_transfer: self.pod("sky_transfer")?,
@@ -152,7 +158,7 @@ impl Sections<'_> {
                 children: self.pod("coarse")?,
                 moments: self.pod("coarse")?,
             },
-            surfels: self.pod("surfels")?,
+            surfels: self.surfels(surfel_precision)?,
             geometry: Geometry {
                 nodes: self.pod("geometry")?,
                 triangles: self.pod("geometry")?,
@@ -168,6 +174,18 @@ impl Sections<'_> {
                 near_ranges: self.pod("surface")?,
                 near: self.pod("surface")?,
             },
+        })
+    }
+
+    /// The surfels, stored at `precision` ([`crate::surfel`]).
+    fn surfels(&mut self, precision: SurfelPrecision) -> Result<Vec<Surfel>, FormatError> {
+        Ok(match precision {
+            SurfelPrecision::F32 => self.pod("surfels")?,
+            SurfelPrecision::Packed => self
+                .pod::<PackedSurfel>("surfels")?
+                .iter()
+                .map(PackedSurfel::surfel)
+                .collect(),
         })
     }
 
@@ -264,6 +282,7 @@ mod tests {
                     double_sided_override: true,
                     invalid_backface_fraction: 0.1,
                     transfer_precision: TransferPrecision::U8,
+                    surfel_precision: crate::SurfelPrecision::F32,
                     far_ratio: 2.0,
                 },
                 stats: BakeStats::default(),
@@ -366,7 +385,8 @@ mod tests {
         Sections { payload, at: 0 }.asset()
     }
 
-    /// The section writer writes serde's bytes, and the reader reads them back.
+    /// The section writer writes serde's bytes, and the reader reads them back; packed
+    /// surfels are serde's bytes of their packing, read back as they were quantised.
     #[test]
     fn payload_is_serdes() {
         for asset in every_encoding() {
@@ -376,6 +396,27 @@ mod tests {
             assert_eq!(ours, serde, "{:?}", asset.factors);
             assert_eq!(payload_size(&asset).unwrap(), serde.len());
             assert_eq!(read(&serde).unwrap(), asset);
+
+            let mut packed = asset.clone();
+            packed.header.settings.surfel_precision = SurfelPrecision::Packed;
+            let surfels = std::mem::take(&mut packed.surfels);
+            let mut ours = Vec::new();
+            assert!(write_payload(&packed, &mut ours).is_ok());
+            let sizes = |a: &Asset| serde_bytes(a).len() - 80 * a.surfels.len();
+            assert_eq!(sizes(&packed), ours.len());
+            packed.surfels = surfels;
+            let mut ours = Vec::new();
+            assert!(write_payload(&packed, &mut ours).is_ok());
+            assert_eq!(ours.len(), sizes(&packed) + 48 * packed.surfels.len());
+            assert_eq!(payload_size(&packed).unwrap(), ours.len());
+            let back = read(&ours).unwrap();
+            assert_eq!(back.surfels[0].weight, 3.0);
+            packed.surfels = packed
+                .surfels
+                .iter()
+                .map(|s| SurfelPrecision::Packed.quantize(s))
+                .collect();
+            assert_eq!(back, packed);
         }
     }
 

@@ -93,7 +93,8 @@ impl Summary {
             coarse: bytes(&asset.coarse.bricks)
                 + bytes(&asset.coarse.children)
                 + bytes(&asset.coarse.moments),
-            surfels: bytes(&asset.surfels),
+            surfels: (asset.surfels.len() * 4 * asset.header.settings.surfel_precision.words())
+                as u64,
             bvh_nodes: bytes(&asset.geometry.nodes),
             triangles: bytes(&asset.geometry.triangles),
             surface: surface_bytes(&asset.surface),

@@ -334,6 +334,10 @@ pub fn wgsl_constants() -> Vec<(&'static str, String)> {
         ("MIN_DISTANCE_SQ", format!("{MIN_DISTANCE_SQ:e}")),
         ("BRICK_BACKFACE", format!("{BRICK_BACKFACE}u")),
         (
+            "PACKED_BACKFACE",
+            format!("{}u", prt_format::surfel::PACKED_BACKFACE),
+        ),
+        (
             "NEAR_WEIGHT_BITS",
             format!("{}u", prt_format::surface::NEAR_WEIGHT_BITS),
         ),

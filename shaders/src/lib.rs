@@ -39,6 +39,8 @@ pub const RENDER_TYPES: &str = include_str!("../render_types.wgsl");
 pub const SAMPLE_IRRADIANCE: &str = include_str!("../sample_irradiance.wgsl");
 /// `store_probe.wgsl`: Stages 8 and 9: a probe's SH to `probe_sh` and its seven volume texels.
 pub const STORE_PROBE: &str = include_str!("../store_probe.wgsl");
+/// `surfel.wgsl`: The asset's surfels as stored, decoded (`surfel_at`) for the stages that read them.
+pub const SURFEL: &str = include_str!("../surfel.wgsl");
 /// `types.wgsl`: Structs and helpers every runtime stage shares (Params, Counters, the asset's arrays).
 pub const TYPES: &str = include_str!("../types.wgsl");
 /// `shadow_rays.wgsl`: The any-hit shadow-ray BVH traversal (`occluded`, `ray_offset`).

@@ -466,7 +466,7 @@ impl Cluster {
         self.emission += Vec3::from(h.emission);
     }
 
-    /// The merged surfel: means of its hits, weight their count, back face as its brick (a
+    /// The merged surfel: means of its hits, weight their count (rounded to a half), back face as its brick (a
     /// brick's hits all have the same flags). An unmerged hit keeps its unit normal bit for bit
     /// (renormalising could move the last bit).
     fn surfel(&self, renormalise: bool, backface: bool) -> Surfel {
@@ -479,7 +479,9 @@ impl Cluster {
             position: (self.position / self.count).to_array(),
             brick: 0,
             normal: n.to_array(),
-            weight: self.count,
+            // A half's value, as packed surfels keep it (exact to 2048 hits), so that the
+            // brick fits use the weight the runtime reads.
+            weight: prt_format::surfel::half_weight(self.count),
             albedo: (self.albedo / self.count).to_array(),
             flags: if backface { BRICK_BACKFACE } else { 0 },
             emission: (self.emission / self.count).to_array(),

@@ -341,6 +341,7 @@ impl PrtRuntime {
         let subgroups = device.features().contains(wgpu::Features::SUBGROUP);
         let config = ShaderConfig {
             factors: asset.factors.precision(),
+            surfels: asset.header.settings.surfel_precision,
             volume_format: settings.volume_format.wgsl(),
             subgroups,
             mask_stride,

@@ -14,6 +14,8 @@ use crate::contract;
 pub struct ShaderConfig {
     /// Storage of the asset's factors.
     pub factors: prt_format::TransferPrecision,
+    /// Storage of the asset's surfels (`SURFEL_WORDS`, `shaders/surfel.wgsl`).
+    pub surfels: prt_format::SurfelPrecision,
     /// Volume texel format: `rgba16float` or `rgba32float`.
     pub volume_format: &'static str,
     /// Reduce with subgroup operations (the adapter has `Features::SUBGROUP`).
@@ -31,9 +33,10 @@ pub fn prelude(config: &ShaderConfig) -> String {
         s.push_str(&format!("const {name} = {value};\n"));
     }
     s.push_str(&format!(
-        "const FACTOR_WORDS = {}u;\nconst FACTOR_FORMAT = {}u;\nconst MASK_STRIDE = {}u;\nconst BOUNCES = {};\n",
+        "const FACTOR_WORDS = {}u;\nconst FACTOR_FORMAT = {}u;\nconst SURFEL_WORDS = {}u;\nconst MASK_STRIDE = {}u;\nconst BOUNCES = {};\n",
         contract::factor_words(config.factors),
         contract::factor_format_code(config.factors),
+        config.surfels.words(),
         config.mask_stride,
         config.bounces
     ));
@@ -47,6 +50,7 @@ pub fn prelude(config: &ShaderConfig) -> String {
 pub fn light_model_source() -> String {
     let config = ShaderConfig {
         factors: prt_format::TransferPrecision::U8,
+        surfels: prt_format::SurfelPrecision::Packed,
         volume_format: "rgba16float",
         subgroups: false,
         mask_stride: 1,
@@ -160,6 +164,12 @@ pub(crate) mod tests {
                 for subgroups in [false, true] {
                     out.push(ShaderConfig {
                         factors,
+                        // f32 surfels with f32 transfers, as the bake stores them.
+                        surfels: if factors == prt_format::TransferPrecision::F32 {
+                            prt_format::SurfelPrecision::F32
+                        } else {
+                            prt_format::SurfelPrecision::Packed
+                        },
                         volume_format,
                         subgroups,
                         mask_stride: 32,

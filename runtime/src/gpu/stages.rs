@@ -7,7 +7,7 @@
 use prt_shaders::{
     BOUNCE_SURFELS, BRICK_RADIANCE, COARSE_RADIANCE, CULL_LIGHTS, FILL, GATHER, GATHER_SUBGROUP,
     GATHER_TREE, LIGHT_SAMPLE, MARK_PROBES, NEAR_RADIANCE, RELIGHT_SURFELS, SHADOW_RAYS,
-    STORE_PROBE, TYPES,
+    STORE_PROBE, SURFEL, TYPES,
 };
 
 use super::bindings::{bind_groups, declared_bindings, Set};
@@ -97,6 +97,7 @@ pub(super) const STAGES: [Stage; 9] = [
         wgsl: &[
             Part::File(LIGHT_SAMPLE),
             Part::File(SHADOW_RAYS),
+            Part::File(SURFEL),
             Part::File(RELIGHT_SURFELS),
         ],
         dispatch: Dispatch::ChunkSurfels,
@@ -106,7 +107,7 @@ pub(super) const STAGES: [Stage; 9] = [
     // 3. Per surfel, at the start of a bounce cycle: the volume's irradiance, fed back.
     Stage {
         label: "prt bounce_surfels",
-        wgsl: &[Part::File(BOUNCE_SURFELS), Part::Snippet],
+        wgsl: &[Part::File(SURFEL), Part::File(BOUNCE_SURFELS), Part::Snippet],
         dispatch: Dispatch::ChunkSurfels,
         runs: |plan| plan.bounce,
         bounces_only: true,
@@ -114,7 +115,7 @@ pub(super) const STAGES: [Stage; 9] = [
     // 4. Per dirty brick: mean and gradient of its radiance, direct plus bounce.
     Stage {
         label: "prt brick_radiance",
-        wgsl: &[Part::File(BRICK_RADIANCE)],
+        wgsl: &[Part::File(SURFEL), Part::File(BRICK_RADIANCE)],
         dispatch: Dispatch::ChunkBricks,
         runs: |plan| plan.relight() || plan.bounce || plan.fixed_restart,
         bounces_only: false,

@@ -62,7 +62,7 @@ pub(super) fn surfel_buffers(
             Ok([
                 alloc.storage(
                     "prt surfels",
-                    bytemuck::cast_slice(&asset.surfels[range]),
+                    bytemuck::cast_slice(&asset.header.settings.surfel_precision.encode(&asset.surfels[range])),
                     none,
                 )?,
                 alloc.zeroed("prt surfel radiance", 16 * n, none)?,
@@ -148,7 +148,7 @@ pub fn surfel_chunks(asset: &Asset, limit: u64) -> Result<Vec<SurfelChunk>, GpuE
             .bricks
             .iter()
             .map(|b| (b.first_surfel, b.surfel_count)),
-        std::mem::size_of::<prt_format::Surfel>() as u64,
+        4 * asset.header.settings.surfel_precision.words() as u64,
         limit,
         "one brick's surfels",
     )?;
