@@ -60,6 +60,19 @@ fn factor_radiance(brick: u32, offset: vec3<f32>) -> vec3<f32> {
     return max(mean + g, vec3<f32>(0.0));
 }
 
+// Term k = 1..8 of a packed factor (bits lo, hi), in steps: the 5 bits at bit 24 + 5 (k - 1)
+// of the 64-bit word, sign-extended (FactorPacked::term times SH5_LEVELS).
+fn sh5_term(lo: u32, hi: u32, k: u32) -> f32 {
+    let p = 19u + 5u * k;
+    var b: u32;
+    if p >= 32u {
+        b = hi >> (p - 32u);
+    } else {
+        b = (lo >> p) | (hi << (32u - p));
+    }
+    return f32(extractBits(bitcast<i32>(b), 0u, 5u));
+}
+
 // This thread's share of the probe's SH: factors lid, lid + WORKGROUP, ... and sky rays likewise.
 fn accumulate(p: u32, lid: u32) -> array<vec3<f32>, 9> {
     var acc: array<vec3<f32>, 9>;
@@ -70,15 +83,15 @@ fn accumulate(p: u32, lid: u32) -> array<vec3<f32>, 9> {
         var brick = factors[base];
         var offset: vec3<f32>;
         if FACTOR_FORMAT == FACTOR_U8 {
+            // prt_format::FactorPacked: offset bytes, then SH terms 1..8 as 5-bit snorm.
             brick = brick >> 8u;
             t[0] = f32(factors[base] & 0xffu) * params.ray_weight * SH_Y00;
-            let p0 = unpack4x8snorm(factors[base + 1u]);
-            let p1 = unpack4x8snorm(factors[base + 2u]);
-            let p2 = unpack4x8snorm(factors[base + 3u]);
-            offset = p0.xyz * params.offset_scale;
-            let q = array<f32, 8>(p0.w, p1.x, p1.y, p1.z, p1.w, p2.x, p2.y, p2.z);
+            let lo = factors[base + 1u];
+            let hi = factors[base + 2u];
+            offset = unpack4x8snorm(lo).xyz * params.offset_scale;
+            var range = SH5_RANGE;
             for (var k = 1u; k < 9u; k = k + 1u) {
-                t[k] = q[k - 1u] * U8_SH_RANGE * t[0];
+                t[k] = sh5_term(lo, hi, k) / SH5_LEVELS * range[k - 1u] * t[0];
             }
         } else if FACTOR_FORMAT == FACTOR_F16 {
             t[0] = f32(factors[base + 1u]) * params.ray_weight * SH_Y00;

@@ -334,21 +334,21 @@ fn without_offsets(mut asset: Asset) -> Asset {
     match &mut asset.factors {
         Factors::F32(f) => f.iter_mut().for_each(|f| f.offset = [0.0; 3]),
         Factors::F16(f) => f.iter_mut().for_each(|f| f.offset = [0; 2]),
-        Factors::U8 { factors, .. } => factors.iter_mut().for_each(|f| f.packed[0] &= 0xff00_0000),
+        Factors::U8 { factors, .. } => factors.iter_mut().for_each(|f| f.bits[0] &= 0xff00_0000),
     }
     asset
 }
 
 /// Zeroes every u8 factor's offset and L2 transfer (SH terms 4..8), keeping what an 8-byte
-/// factor (24-bit brick, 8-bit rays, three snorm8 L1 terms) would hold, to measure what it
-/// costs before building it (issue 32, item 1). Other precisions are left as they are.
+/// factor (24-bit brick, 8-bit rays, three L1 terms) would hold, to measure what it costs
+/// before building it (issue 32, item 1). Other precisions are left as they are.
 fn keep_l1(factors: &mut Factors) {
     if let Factors::U8 { factors, .. } = factors {
-        // Bytes 0-2 offset, 3-10 SH terms 1..8, 11 zero (`prt_format::FactorU8`): keep 3-5.
+        // Bits 0-23 offset, then 5 bits per SH term from bit 24 (`prt_format::FactorPacked`):
+        // keep terms 1..3, bits 24-38.
         for f in factors.iter_mut() {
-            f.packed[0] &= 0xff00_0000;
-            f.packed[1] &= 0x0000_ffff;
-            f.packed[2] = 0;
+            f.bits[0] &= 0xff00_0000;
+            f.bits[1] &= 0x0000_007f;
         }
     }
 }
@@ -433,7 +433,11 @@ mod tests {
     #[test]
     fn keep_l1_keeps_rays_and_l1_only() {
         let sh = [0.3, -0.2, 0.1, 0.25, -0.15, 0.05, 0.2, -0.1];
-        let f = prt_format::FactorU8::transfer(40, sh, 2048).place(7, [0.3, -0.2, 0.1], 1.0);
+        let f = prt_format::FactorPacked::of(&prt_format::FactorU8::transfer(40, sh, 2048).place(
+            7,
+            [0.3, -0.2, 0.1],
+            1.0,
+        ));
         let mut factors = Factors::U8 {
             factors: vec![f],
             offset_scale: 1.0,

@@ -15,11 +15,11 @@ use bytemuck::Pod;
 use serde::Serialize;
 
 use crate::asset::{Asset, Geometry, Header, Surfel};
-use crate::surfel::{PackedSurfel, SurfelPrecision};
 use crate::coarse::CoarseBricks;
 use crate::error::FormatError;
 use crate::factors::Factors;
 use crate::surface::SurfaceTerms;
+use crate::surfel::{PackedSurfel, SurfelPrecision};
 
 /// Bincode's variant indices of [`Factors`] (its declaration order).
 const F32: u32 = 0;
@@ -359,9 +359,9 @@ mod tests {
             brick: 77,
             ..FactorF16::default()
         };
-        let u8 = FactorU8 {
+        let u8 = FactorPacked {
             brick_rays: 0xdead_beef,
-            packed: [1, 2, 3],
+            bits: [1, 2],
         };
         vec![
             sample(Factors::F32(vec![f32, f32])),

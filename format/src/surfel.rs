@@ -51,7 +51,9 @@ impl SurfelPrecision {
     pub fn encode(self, surfels: &[Surfel]) -> Vec<u32> {
         match self {
             SurfelPrecision::F32 => bytemuck::cast_slice(surfels).to_vec(),
-            SurfelPrecision::Packed => bytemuck::cast_slice(&PackedSurfel::pack_all(surfels)).to_vec(),
+            SurfelPrecision::Packed => {
+                bytemuck::cast_slice(&PackedSurfel::pack_all(surfels)).to_vec()
+            }
         }
     }
 }

@@ -14,7 +14,6 @@ use prt_format::depth::{MAX_DEPTH, MAX_DEVIATION};
 use prt_format::surface::{BLOCKED_WEIGHT, NO_SURFEL, SLOT_AXIS_SHIFT, TERMS_TRACED};
 use prt_format::{
     LightKind, TransferPrecision, BRICK_BACKFACE, DEPTH_MAP_SIDE, DEPTH_WORDS, PROBE_VALID,
-    U8_SH_RANGE,
 };
 
 /// Threads per workgroup of the per-brick, per-surfel and per-probe stages.
@@ -370,7 +369,14 @@ pub fn wgsl_constants() -> Vec<(&'static str, String)> {
             "FACTOR_U8",
             format!("{}u", factor_format_code(TransferPrecision::U8)),
         ),
-        ("U8_SH_RANGE", format!("{U8_SH_RANGE:?}")),
+        (
+            "SH5_RANGE",
+            format!(
+                "array<f32, 8>({})",
+                prt_format::SH5_RANGE.map(|r| format!("{r:?}")).join(", ")
+            ),
+        ),
+        ("SH5_LEVELS", format!("{:?}", prt_format::SH5_LEVELS)),
         ("SH_Y00", format!("{Y00:?}")),
         ("SH_Y1", format!("{Y1:?}")),
         ("SH_Y2_OFF", format!("{Y2_OFF:?}")),
@@ -384,7 +390,7 @@ pub fn factor_words(precision: TransferPrecision) -> u32 {
     let bytes = match precision {
         TransferPrecision::F32 => std::mem::size_of::<prt_format::FactorF32>(),
         TransferPrecision::F16 => std::mem::size_of::<prt_format::FactorF16>(),
-        TransferPrecision::U8 => std::mem::size_of::<prt_format::FactorU8>(),
+        TransferPrecision::U8 => std::mem::size_of::<prt_format::FactorPacked>(),
     };
     (bytes / 4) as u32
 }

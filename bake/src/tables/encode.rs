@@ -6,8 +6,8 @@
 use bytemuck::Pod;
 use glam::Vec3;
 use prt_format::{
-    u8_offset_scale, Brick, FactorF16, FactorF32, FactorRow, FactorU8, Factors, TransferPrecision,
-    U8_MAX_BRICK, U8_MAX_RAYS,
+    u8_offset_scale, Brick, FactorF16, FactorF32, FactorPacked, FactorRow, Factors,
+    TransferPrecision, U8_MAX_BRICK, U8_MAX_RAYS,
 };
 use rayon::prelude::*;
 
@@ -50,7 +50,7 @@ impl Placement<'_> {
 
 /// u8 rows encoded into `out` (one factor each): bricks renumbered, offsets from the bricks'
 /// centroids, sorted by brick (a split row's parts in order).
-fn encode_u8(rows: &[RowU8], out: &mut [FactorU8], at: Placement, offset_scale: f32) {
+fn encode_u8(rows: &[RowU8], out: &mut [FactorPacked], at: Placement, offset_scale: f32) {
     debug_assert!(
         at.placed.len() <= U8_MAX_BRICK as usize + 1,
         "every provisional brick fits the row's brick field"
@@ -82,7 +82,7 @@ fn encode_u8(rows: &[RowU8], out: &mut [FactorU8], at: Placement, offset_scale: 
         let i = o as u32 as usize;
         let (r, (b, centroid, scale)) = (&rows[i], located[i]);
         let offset = (Vec3::from(r.mean) - centroid) / scale;
-        *f = r.factor().place(b, offset.to_array(), offset_scale);
+        *f = FactorPacked::of(&r.factor().place(b, offset.to_array(), offset_scale));
     }
 }
 

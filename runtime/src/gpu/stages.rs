@@ -107,7 +107,11 @@ pub(super) const STAGES: [Stage; 9] = [
     // 3. Per surfel, at the start of a bounce cycle: the volume's irradiance, fed back.
     Stage {
         label: "prt bounce_surfels",
-        wgsl: &[Part::File(SURFEL), Part::File(BOUNCE_SURFELS), Part::Snippet],
+        wgsl: &[
+            Part::File(SURFEL),
+            Part::File(BOUNCE_SURFELS),
+            Part::Snippet,
+        ],
         dispatch: Dispatch::ChunkSurfels,
         runs: |plan| plan.bounce,
         bounces_only: true,

@@ -62,7 +62,13 @@ pub(super) fn surfel_buffers(
             Ok([
                 alloc.storage(
                     "prt surfels",
-                    bytemuck::cast_slice(&asset.header.settings.surfel_precision.encode(&asset.surfels[range])),
+                    bytemuck::cast_slice(
+                        &asset
+                            .header
+                            .settings
+                            .surfel_precision
+                            .encode(&asset.surfels[range]),
+                    ),
                     none,
                 )?,
                 alloc.zeroed("prt surfel radiance", 16 * n, none)?,
