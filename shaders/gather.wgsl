@@ -60,17 +60,23 @@ fn factor_radiance(brick: u32, offset: vec3<f32>) -> vec3<f32> {
     return max(mean + g, vec3<f32>(0.0));
 }
 
-// Term k = 1..8 of a packed factor (bits lo, hi), in steps: the 5 bits at bit 24 + 5 (k - 1)
-// of the 64-bit word, sign-extended (FactorPacked::term times SH5_LEVELS).
-fn sh5_term(lo: u32, hi: u32, k: u32) -> f32 {
-    let p = 19u + 5u * k;
+// The signed field of `w` bits at bit `p` of a packed factor's 64 bits (lo, hi), as a float
+// (FactorPacked::field).
+fn packed_field(lo: u32, hi: u32, p: u32, w: u32) -> f32 {
     var b: u32;
     if p >= 32u {
         b = hi >> (p - 32u);
+    } else if p + w <= 32u {
+        b = lo >> p;
     } else {
         b = (lo >> p) | (hi << (32u - p));
     }
-    return f32(extractBits(bitcast<i32>(b), 0u, 5u));
+    return f32(extractBits(bitcast<i32>(b), 0u, w));
+}
+
+// Steps on each side of zero of a signed field of `w` bits (prt_format::levels).
+fn field_levels(w: u32) -> f32 {
+    return f32((1u << (w - 1u)) - 1u);
 }
 
 // This thread's share of the probe's SH: factors lid, lid + WORKGROUP, ... and sky rays likewise.
@@ -83,15 +89,23 @@ fn accumulate(p: u32, lid: u32) -> array<vec3<f32>, 9> {
         var brick = factors[base];
         var offset: vec3<f32>;
         if FACTOR_FORMAT == FACTOR_U8 {
-            // prt_format::FactorPacked: offset bytes, then SH terms 1..8 as 5-bit snorm.
+            // prt_format::FactorPacked: three offsets, then SH terms 1..8, as signed fields.
             brick = brick >> 8u;
             t[0] = f32(factors[base] & 0xffu) * params.ray_weight * SH_Y00;
             let lo = factors[base + 1u];
             let hi = factors[base + 2u];
-            offset = unpack4x8snorm(lo).xyz * params.offset_scale;
-            var range = SH5_RANGE;
+            let ol = params.offset_scale / field_levels(OFFSET_BITS);
+            offset = vec3<f32>(
+                packed_field(lo, hi, 0u, OFFSET_BITS),
+                packed_field(lo, hi, OFFSET_BITS, OFFSET_BITS),
+                packed_field(lo, hi, 2u * OFFSET_BITS, OFFSET_BITS),
+            ) * ol;
+            var range = SH_RANGE;
+            var bits = SH_BITS;
+            var at = SH_AT;
             for (var k = 1u; k < 9u; k = k + 1u) {
-                t[k] = sh5_term(lo, hi, k) / SH5_LEVELS * range[k - 1u] * t[0];
+                let w = bits[k - 1u];
+                t[k] = packed_field(lo, hi, at[k - 1u], w) / field_levels(w) * range[k - 1u] * t[0];
             }
         } else if FACTOR_FORMAT == FACTOR_F16 {
             t[0] = f32(factors[base + 1u]) * params.ray_weight * SH_Y00;

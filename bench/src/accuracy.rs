@@ -329,12 +329,17 @@ fn windowed(
         .collect()
 }
 
+/// The low word of a packed factor's bits without its three offsets.
+const OFFSETS_CLEARED: u32 = !((1 << (3 * prt_format::OFFSET_BITS)) - 1);
+
 /// The same asset with every factor's offset zeroed: each brick seen as its mean radiance.
 fn without_offsets(mut asset: Asset) -> Asset {
     match &mut asset.factors {
         Factors::F32(f) => f.iter_mut().for_each(|f| f.offset = [0.0; 3]),
         Factors::F16(f) => f.iter_mut().for_each(|f| f.offset = [0; 2]),
-        Factors::U8 { factors, .. } => factors.iter_mut().for_each(|f| f.bits[0] &= 0xff00_0000),
+        Factors::U8 { factors, .. } => factors
+            .iter_mut()
+            .for_each(|f| f.bits[0] &= OFFSETS_CLEARED),
     }
     asset
 }
@@ -344,11 +349,12 @@ fn without_offsets(mut asset: Asset) -> Asset {
 /// before building it (issue 32, item 1). Other precisions are left as they are.
 fn keep_l1(factors: &mut Factors) {
     if let Factors::U8 { factors, .. } = factors {
-        // Bits 0-23 offset, then 5 bits per SH term from bit 24 (`prt_format::FactorPacked`):
-        // keep terms 1..3, bits 24-38.
+        // The offsets, then the SH terms (`prt_format::FactorPacked`): keep terms 1..3, which
+        // end where term 4 starts.
+        let l1_end = prt_format::SH_AT[3] - 32;
         for f in factors.iter_mut() {
-            f.bits[0] &= 0xff00_0000;
-            f.bits[1] &= 0x0000_007f;
+            f.bits[0] &= OFFSETS_CLEARED;
+            f.bits[1] &= (1 << l1_end) - 1;
         }
     }
 }

@@ -33,9 +33,11 @@ enum Quality {
 
 #[derive(Clone, Copy, ValueEnum)]
 enum Precision {
+    /// 32-byte factors of halves.
     F16,
+    /// 56-byte factors of floats, and surfels of floats (80 bytes; 48 otherwise).
     F32,
-    /// 16-byte factors: 8-bit SH terms and offsets (half the size of f16).
+    /// 12-byte factors: 8-bit offsets, 5-bit SH terms (three eighths of f16).
     U8,
 }
 
@@ -117,7 +119,7 @@ pub struct BakeArgs {
     /// whose surfaces are sampled from the probe volume alone.
     #[arg(long)]
     no_surface_terms: bool,
-    /// Storage precision of factor transfers.
+    /// Storage precision of factor transfers (f32 also keeps surfels in f32).
     #[arg(long, value_enum, default_value = "u8")]
     precision: Precision,
     /// MiB of factor rows held in memory while probes are traced; past it the oldest wait

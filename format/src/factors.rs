@@ -82,9 +82,10 @@ impl FactorF16 {
 /// One factor of [`TransferPrecision::U8`] as the baker builds it, before the asset packs it
 /// into a [`FactorPacked`]: `brick_rays` = brick << 8 | rays (1..=255; the baker splits larger
 /// counts over several factors of the same brick); `packed` holds 12 bytes, low byte first:
-/// offset x, y, z as snorm8 (times the `offset_scale` of [`Factors::U8`]), then SH terms 1..8
-/// as 5-bit snorm values (-15..=15, times the term's `SH5_RANGE / 15` times the DC term
-/// `rays * 4pi/N * Y00`) in a byte each, then a zero (the baker's own use while it encodes).
+/// offset x, y, z in steps of [`OFFSET_BITS`] (times the `offset_scale` of [`Factors::U8`]),
+/// then SH terms 1..8 in steps of their [`SH_BITS`] (a step being the term's [`SH_RANGE`]
+/// times the DC term `rays * 4pi/N * Y00` over its levels), a signed byte each, then a zero
+/// (the baker's own use while it encodes).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable, Serialize, Deserialize)]
 #[repr(C)]
 pub struct FactorU8 {
@@ -116,13 +117,11 @@ impl FactorU8 {
     #[inline]
     pub fn transfer_with(rays: u32, sh: [f32; 8], dc_per_ray: f32) -> FactorU8 {
         let dc = rays as f32 * dc_per_ray;
-        // Terms 1..8 in bytes 3..10 of `packed`: snorm8 of a range 127/15 times wider is the
-        // term in fifteenths of its range, clamped below.
-        let unit: [f32; 8] = std::array::from_fn(|k| sh[k] / SH5_RANGE[k]);
-        let q = snorm8_div8(unit, dc * (127.0 / SH5_LEVELS)).map(|b| {
-            let level = SH5_LEVELS as i8;
-            u32::from((b as u8 as i8).clamp(-level, level) as u8)
-        });
+        // Terms 1..8 in bytes 3..10 of `packed`: snorm8 of the term over a range 127/L times
+        // wider is the term in steps of its range over L, clamped to its L levels below.
+        let unit: [f32; 8] = std::array::from_fn(|k| sh[k] * SH_UNIT[k]);
+        let q = snorm8_div8(unit, dc);
+        let q: [u32; 8] = std::array::from_fn(|k| clamp_levels(q[k], SH_BITS[k]));
         FactorU8 {
             brick_rays: rays,
             packed: [
@@ -138,7 +137,10 @@ impl FactorU8 {
     #[inline]
     pub fn place(self, brick: u32, offset: [f32; 3], offset_scale: f32) -> FactorU8 {
         let mut packed = self.packed;
-        let q = snorm8_div4([offset[0], offset[1], offset[2], 0.0], offset_scale);
+        let unit = 127.0 / levels(OFFSET_BITS);
+        let o = offset.map(|o| o / unit);
+        let q = snorm8_div4([o[0], o[1], o[2], 0.0], offset_scale);
+        let q = q.map(|b| clamp_levels(b, OFFSET_BITS));
         packed[0] |= q[0] | q[1] << 8 | q[2] << 16;
         FactorU8 {
             brick_rays: (brick << 8) | (self.brick_rays & 0xff),
@@ -158,20 +160,63 @@ pub fn u8_offset_scale(brick_size: f32) -> f32 {
 
 /// Largest |Y_k / Y_0| of each SH term k = 1..8 over the sphere (`crate::sh::basis`): the range
 /// of the packed terms relative to the DC term. Band 1: sqrt(3); the four off-axis terms of
-/// band 2: sqrt(15) / 2; `Y20`: sqrt(5). Each term in its own range: a shared range of
-/// sqrt(5) left Cornell's 8-bounce furnace 1.06% off (the bound is 1%).
-pub const SH5_RANGE: [f32; 8] = {
+/// band 2: sqrt(15) / 2; `Y20`: sqrt(5).
+pub const SH_RANGE: [f32; 8] = {
     use crate::sh::{Y00, Y1, Y20, Y22, Y2_OFF};
     let (l1, off, y20, y22) = (Y1 / Y00, 0.5 * Y2_OFF / Y00, 2.0 * Y20 / Y00, Y22 / Y00);
     [l1, l1, l1, off, off, y20, off, y22]
 };
-/// Steps of a packed SH term on each side of zero (5-bit snorm).
-pub const SH5_LEVELS: f32 = 15.0;
+
+/// Bits of each packed SH term k = 1..8: band 1, which weighs 2.7x band 2 in irradiance
+/// (`2pi/3` against `pi/4`), gets 7; band 2 gets 5. With 5 bits for every term (one range
+/// for all) Cornell's accuracy at 0.065 m fell from 2.25% to 2.82% and the closed box's
+/// 8-bounce furnace was 1.06% off (bound 1%).
+pub const SH_BITS: [u32; 8] = [7, 7, 7, 5, 5, 5, 5, 5];
+
+/// Bits of each offset axis of a packed factor (6: a 62nd of the brick).
+pub const OFFSET_BITS: u32 = 6;
+
+/// Where term k = 1..8 starts in [`FactorPacked::bits`], after the three offsets.
+pub const SH_AT: [u32; 8] = {
+    let mut at = [0; 8];
+    let mut p = 3 * OFFSET_BITS;
+    let mut k = 0;
+    while k < 8 {
+        at[k] = p;
+        p += SH_BITS[k];
+        k += 1;
+    }
+    assert!(p == 64, "the fields fill the 64 bits");
+    at
+};
+
+/// Steps on each side of zero of a signed field of `bits` bits.
+pub const fn levels(bits: u32) -> f32 {
+    ((1u32 << (bits - 1)) - 1) as f32
+}
+
+/// Per term, what multiplies it before the snorm8 quantiser (divided by the DC term) gives its
+/// steps: `L / (range * 127)`.
+const SH_UNIT: [f32; 8] = {
+    let mut u = [0.0; 8];
+    let mut k = 0;
+    while k < 8 {
+        u[k] = levels(SH_BITS[k]) / (SH_RANGE[k] * 127.0);
+        k += 1;
+    }
+    u
+};
+
+/// A snorm8 byte as a signed field of `bits` bits: clamped to its levels, as a byte.
+fn clamp_levels(byte: u32, bits: u32) -> u32 {
+    let level = levels(bits) as i8;
+    u32::from((byte as u8 as i8).clamp(-level, level) as u8)
+}
 
 /// One factor as a [`TransferPrecision::U8`] asset stores it, 12 bytes: `brick_rays` as in
-/// [`FactorU8`]; `bits` (a little-endian 64-bit word) holds the offset's three snorm8 bytes in
-/// bits 0..24 and SH term k = 1..8 as 5-bit two's complement at bit `24 + 5 (k - 1)`
-/// (`shaders/gather.wgsl` decodes the same).
+/// [`FactorU8`]; `bits` (a little-endian 64-bit word) holds the three offsets as signed
+/// [`OFFSET_BITS`]-bit fields from bit 0 and SH term k = 1..8 as a signed field of
+/// `SH_BITS[k - 1]` bits at `SH_AT[k - 1]` (`shaders/gather.wgsl` decodes the same).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable, Serialize, Deserialize)]
 #[repr(C)]
 pub struct FactorPacked {
@@ -184,9 +229,13 @@ impl FactorPacked {
     /// The packing of the baker's factor `f` (its last byte, the baker's own, is dropped).
     pub fn of(f: &FactorU8) -> FactorPacked {
         let byte = |i: usize| u64::from((f.packed[i / 4] >> (8 * (i % 4))) & 0xff);
-        let mut v = byte(0) | byte(1) << 8 | byte(2) << 16;
+        let field = |i: usize, bits: u32| byte(i) & ((1 << bits) - 1);
+        let mut v = 0u64;
+        for a in 0..3 {
+            v |= field(a, OFFSET_BITS) << (a as u32 * OFFSET_BITS);
+        }
         for k in 0..8 {
-            v |= (byte(3 + k) & 0x1f) << (24 + 5 * k);
+            v |= field(3 + k, SH_BITS[k]) << SH_AT[k];
         }
         FactorPacked {
             brick_rays: f.brick_rays,
@@ -194,26 +243,28 @@ impl FactorPacked {
         }
     }
 
-    /// SH term k = 1..8 in units of its range ([`SH5_RANGE`]) times the DC term, in [-1, 1].
-    pub fn term(&self, k: usize) -> f32 {
+    /// The signed field of `bits` bits at bit `at`.
+    fn field(&self, at: u32, bits: u32) -> f32 {
         let v = u64::from(self.bits[0]) | u64::from(self.bits[1]) << 32;
-        let q = ((v >> (24 + 5 * (k - 1))) & 0x1f) as i32;
-        ((q << 27) >> 27) as f32 / SH5_LEVELS
+        let q = ((v >> at) as u32 & ((1 << bits) - 1)) as i32;
+        ((q << (32 - bits)) >> (32 - bits)) as f32
+    }
+
+    /// SH term k = 1..8 in units of its range ([`SH_RANGE`]) times the DC term, in [-1, 1].
+    pub fn term(&self, k: usize) -> f32 {
+        self.field(SH_AT[k - 1], SH_BITS[k - 1]) / levels(SH_BITS[k - 1])
     }
 
     /// Offset axis `a` in units of the offset scale, in [-1, 1].
     pub fn offset_unit(&self, a: usize) -> f32 {
-        unsnorm8(self.bits[0] >> (8 * a))
+        self.field(a as u32 * OFFSET_BITS, OFFSET_BITS) / levels(OFFSET_BITS)
     }
 }
+
 /// Largest brick index of the 8-bit encoding (24 bits).
 pub const U8_MAX_BRICK: u32 = (1 << 24) - 1;
 /// Largest ray count of one 8-bit factor.
 pub const U8_MAX_RAYS: u32 = 255;
-
-fn unsnorm8(b: u32) -> f32 {
-    ((b & 0xff) as u8 as i8 as f32 / 127.0).max(-1.0)
-}
 
 /// A factor row as the baker produces it: brick, rays, transfer k = 1..9, offset.
 pub type FactorRow = (u32, u32, [f32; 8], [f32; 3]);
@@ -317,7 +368,7 @@ impl Factors {
             }
             Factors::U8 { factors, .. } => {
                 for k in 1..SH_COUNT {
-                    t[k] = factors[f].term(k) * SH5_RANGE[k - 1] * t[0];
+                    t[k] = factors[f].term(k) * SH_RANGE[k - 1] * t[0];
                 }
             }
         }
@@ -419,26 +470,27 @@ mod tests {
     use super::*;
 
     /// The factor's bytes as the loops before the quantiser took several terms at a time put
-    /// them: term k of the transfer in byte 3 + k (in fifteenths of the range), offset axis a
-    /// in byte a; the packing keeps each term and offset, and the decoded transfer is within
-    /// half a step of the exact one.
+    /// them: term k of the transfer in byte 3 + k (in steps of its range), offset axis a in
+    /// byte a; the packing keeps each field, and the decoded transfer and offset are within
+    /// half a step of the exact ones.
     #[test]
     fn transfer_and_offset_bytes_keep_their_places() {
-        let q = |v: f32| crate::snorm::snorm8_div4([v; 4], 1.0)[0];
-        let q5 = |v: f32| ((v.clamp(-1.0, 1.0) * 15.0).round() as i8 as u8) as u32;
-        let range = SH5_RANGE;
+        let q = |v: f32, bits: u32| {
+            let l = levels(bits);
+            ((v.clamp(-1.0, 1.0) * l).round() as i8 as u8) as u32
+        };
         for (rays, n) in [(1, 512), (37, 512), (255, 4096)] {
             let dc = rays as f32 * FactorU8::dc_per_ray(n);
             let sh = std::array::from_fn(|k| (k as f32 - 3.5) * 0.45 * dc);
             let mut packed = [0u32; 3];
             for k in 0..8 {
                 let b = 3 + k;
-                packed[b / 4] |= q5(sh[k] / range[k] / dc) << (8 * (b % 4));
+                packed[b / 4] |= q(sh[k] / SH_RANGE[k] / dc, SH_BITS[k]) << (8 * (b % 4));
             }
             let offset = [0.3, -0.7, 0.05];
             let scale = 0.8;
             for (a, &o) in offset.iter().enumerate() {
-                packed[0] |= q(o / scale) << (8 * a);
+                packed[0] |= q(o / scale, OFFSET_BITS) << (8 * a);
             }
             let got = FactorU8::transfer(rays, sh, n).place(99, offset, scale);
             assert_eq!(got.packed, packed, "{rays} rays of {n}");
@@ -449,26 +501,29 @@ mod tests {
             };
             let t = table.transfer(0, n);
             for k in 1..SH_COUNT {
-                let step = SH5_RANGE[k - 1] * dc / SH5_LEVELS;
+                let step = SH_RANGE[k - 1] * dc / levels(SH_BITS[k - 1]);
                 assert!(
                     (t[k] - sh[k - 1]).abs() <= 0.5 * step + 1e-6,
                     "term {k}: {t:?}"
                 );
             }
             for a in 0..3 {
-                assert!((table.offset(0)[a] - offset[a]).abs() <= 0.5 * scale / 127.0 + 1e-6);
+                let step = scale / levels(OFFSET_BITS);
+                assert!((table.offset(0)[a] - offset[a]).abs() <= 0.5 * step + 1e-6);
             }
             assert_eq!(table.brick_and_rays(0), (99, rays));
         }
-        // The extremes of every term survive the packing with their signs.
+        // The extremes of every field survive the packing with their signs.
         let mut f = FactorU8::default();
-        for (k, v) in [15u32, 0xf1, 1, 0xff, 0, 7, 0xf9, 15].iter().enumerate() {
-            let byte = 3 + k;
-            f.packed[byte / 4] |= v << (8 * (byte % 4));
+        let bytes = [31u32, 0xe1, 0, 63, 0xc1, 1, 15, 0xf1, 0, 7, 0xf9];
+        for (i, v) in bytes.iter().enumerate() {
+            f.packed[i / 4] |= v << (8 * (i % 4));
         }
         let p = FactorPacked::of(&f);
-        let terms: Vec<f32> = (1..9).map(|k| p.term(k) * 15.0).collect();
-        assert_eq!(terms, [15.0, -15.0, 1.0, -1.0, 0.0, 7.0, -7.0, 15.0]);
+        let offsets: Vec<f32> = (0..3).map(|a| p.offset_unit(a) * 31.0).collect();
+        assert_eq!(offsets, [31.0, -31.0, 0.0]);
+        let terms: Vec<f32> = (1..9).map(|k| p.term(k) * levels(SH_BITS[k - 1])).collect();
+        assert_eq!(terms, [63.0, -63.0, 1.0, 15.0, -15.0, 0.0, 7.0, -7.0]);
     }
 
     #[test]

@@ -370,13 +370,27 @@ pub fn wgsl_constants() -> Vec<(&'static str, String)> {
             format!("{}u", factor_format_code(TransferPrecision::U8)),
         ),
         (
-            "SH5_RANGE",
+            "SH_RANGE",
             format!(
                 "array<f32, 8>({})",
-                prt_format::SH5_RANGE.map(|r| format!("{r:?}")).join(", ")
+                prt_format::SH_RANGE.map(|r| format!("{r:?}")).join(", ")
             ),
         ),
-        ("SH5_LEVELS", format!("{:?}", prt_format::SH5_LEVELS)),
+        (
+            "SH_BITS",
+            format!(
+                "array<u32, 8>({})",
+                prt_format::SH_BITS.map(|b| format!("{b}u")).join(", ")
+            ),
+        ),
+        (
+            "SH_AT",
+            format!(
+                "array<u32, 8>({})",
+                prt_format::SH_AT.map(|b| format!("{b}u")).join(", ")
+            ),
+        ),
+        ("OFFSET_BITS", format!("{}u", prt_format::OFFSET_BITS)),
         ("SH_Y00", format!("{Y00:?}")),
         ("SH_Y1", format!("{Y1:?}")),
         ("SH_Y2_OFF", format!("{Y2_OFF:?}")),

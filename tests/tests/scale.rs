@@ -253,7 +253,9 @@ fn worst_of_mean(a: &[ShRgb], b: &[ShRgb]) -> f32 {
 /// centre, scaled to match) relight within 1e-3 of each probe's SH0 of their unscaled selves.
 ///
 /// Sponza is checked twice. Unmerged (`cell_size` 0), within 1e-3 of each probe's SH0 (measured
-/// 1.7e-5). Merged, within 1e-3 of the scene's mean SH0 (measured 8.0e-5 to 9.0e-4 since merged
+/// 1.7e-5). Merged, within 2e-3 of the scene's mean SH0 (measured 2.4e-4 to 1.6e-3 with the
+/// packed factors of format 9, whose 5- and 7-bit terms turn a row that differs a little into
+/// a whole step; 8.0e-5 to 9.0e-4 with 8-bit terms since merged
 /// surfels behind their surface are put back on it, `prt_bake::merge::snap`; 1.3e-4 to 4.4e-4
 /// before; that move compared with 1x instead of `snap::BEHIND` the distances to two surfaces a
 /// millimetre apart, which rounding then decided, 3.6e-3): a ray hit within rounding of a surfel
@@ -346,6 +348,11 @@ fn shared_scenes_relight_alike_at_every_scale() {
         } else {
             (per_probe, "of SH0")
         };
-        assert!(w <= 1e-3, "{scene} (merged {merge}) x{s}: {w} {what}");
+        let bound = if scene.starts_with("sponza") && merge {
+            2e-3
+        } else {
+            1e-3
+        };
+        assert!(w <= bound, "{scene} (merged {merge}) x{s}: {w} {what}");
     }
 }
