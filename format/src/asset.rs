@@ -169,10 +169,21 @@ pub struct BakeSettingsRecord {
     pub invalid_backface_fraction: f32,
     pub transfer_precision: TransferPrecision,
     /// How the surfels are stored ([`crate::surfel`]).
-    pub surfel_precision: crate::surfel::SurfelPrecision,
+    pub surfel_precision: SurfelPrecision,
     /// Hits farther than this many brick sizes from their probe went to coarse bricks
     /// ([`crate::coarse`]); 0: none did.
     pub far_ratio: f32,
+}
+
+/// How an asset stores its surfels (recorded in the header's bake settings; the encodings are
+/// `crate::surfel`'s).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum SurfelPrecision {
+    /// [`Surfel`] as it is: 80 bytes, every field f32.
+    F32,
+    /// `PackedSurfel`: 48 bytes.
+    #[default]
+    Packed,
 }
 
 /// Figures of the bake worth keeping with the asset.

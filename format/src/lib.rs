@@ -54,4 +54,4 @@ pub use io::{
 };
 pub use rig::{Light, LightKind, LightRig, Sky};
 pub use summary::Summary;
-pub use surfel::{PackedSurfel, SurfelPrecision};
+pub use surfel::PackedSurfel;

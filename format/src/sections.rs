@@ -14,12 +14,13 @@ use std::io::Write;
 use bytemuck::Pod;
 use serde::Serialize;
 
+use crate::asset::SurfelPrecision;
 use crate::asset::{Asset, Geometry, Header, Surfel};
 use crate::coarse::CoarseBricks;
 use crate::error::FormatError;
 use crate::factors::Factors;
 use crate::surface::SurfaceTerms;
-use crate::surfel::{PackedSurfel, SurfelPrecision};
+use crate::surfel::PackedSurfel;
 
 /// Bincode's variant indices of [`Factors`] (its declaration order).
 const F32: u32 = 0;

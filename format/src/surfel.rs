@@ -16,19 +16,9 @@
 use bytemuck::{Pod, Zeroable};
 use serde::{Deserialize, Serialize};
 
-use crate::asset::{Surfel, BRICK_BACKFACE};
+use crate::asset::{Surfel, SurfelPrecision, BRICK_BACKFACE};
 use crate::factors::{f16_to_f32, f32_to_f16};
 use crate::surface::{decode_normal, encode_normal};
-
-/// How an asset stores its surfels (recorded in the header's bake settings).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-pub enum SurfelPrecision {
-    /// [`Surfel`] as it is: 80 bytes, every field f32.
-    F32,
-    /// [`PackedSurfel`]: 48 bytes (module docs).
-    #[default]
-    Packed,
-}
 
 impl SurfelPrecision {
     /// Words (u32) per stored surfel, as `shaders/surfel.wgsl` reads them (`SURFEL_WORDS`).
