@@ -68,8 +68,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         var sum = vec3<f32>(0.0);
         var w = 0.0;
         for (var s = begin; s < begin + surface_groups[at + 1u]; s = s + 1u) {
-            sum = sum + surfel_at(s).weight * surfel_radiance_at(s);
-            w = w + surfel_at(s).weight;
+            let weight = surfel_at(s).weight;
+            sum = sum + weight * surfel_radiance_at(s);
+            w = w + weight;
         }
         group_radiance[g] = vec4<f32>(sum / w, 0.0);
     }

@@ -82,6 +82,10 @@ fn field_levels(w: u32) -> f32 {
 // This thread's share of the probe's SH: factors lid, lid + WORKGROUP, ... and sky rays likewise.
 fn accumulate(p: u32, lid: u32) -> array<vec3<f32>, 9> {
     var acc: array<vec3<f32>, 9>;
+    // The packed factors' fields (indexed at run time, so copied out of the constants once).
+    var range = SH_RANGE;
+    var bits = SH_BITS;
+    var at = SH_AT;
     let probe = probes[p];
     for (var f = probe.first_factor + lid; f < probe.first_factor + probe.factor_count; f = f + GATHER_WORKGROUP) {
         let base = (f - chunk.first_factor) * FACTOR_WORDS;
@@ -100,9 +104,6 @@ fn accumulate(p: u32, lid: u32) -> array<vec3<f32>, 9> {
                 packed_field(lo, hi, OFFSET_BITS, OFFSET_BITS),
                 packed_field(lo, hi, 2u * OFFSET_BITS, OFFSET_BITS),
             ) * ol;
-            var range = SH_RANGE;
-            var bits = SH_BITS;
-            var at = SH_AT;
             for (var k = 1u; k < 9u; k = k + 1u) {
                 let w = bits[k - 1u];
                 t[k] = packed_field(lo, hi, at[k - 1u], w) / field_levels(w) * range[k - 1u] * t[0];

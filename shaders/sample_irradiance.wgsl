@@ -334,15 +334,8 @@ fn prt_probe_ijk(index: u32) -> vec3<i32> {
     return vec3<i32>(vec3<u32>(index % c.x, (index / c.x) % c.y, index / (c.x * c.y)));
 }
 
-// prt_format::surface::decode_normal.
-fn prt_decode_normal(bits: u32) -> vec3<f32> {
-    let e = unpack2x16snorm(bits);
-    var v = vec3<f32>(e.x, e.y, 1.0 - abs(e.x) - abs(e.y));
-    let t = max(-v.z, 0.0);
-    v.x = v.x + select(t, -t, v.x >= 0.0);
-    v.y = v.y + select(t, -t, v.y >= 0.0);
-    return v / sqrt(v.x * v.x + v.y * v.y + v.z * v.z);
-}
+// prt_decode_normal (prt_format::surface::decode_normal) follows the snippet, from
+// oct_normal.wgsl, which the runtime's surfel stages share.
 
 // The SH9 basis of docs/conventions.md section 2 at unit n.
 fn prt_basis(n: vec3<f32>) -> array<f32, 9> {

@@ -2,7 +2,8 @@
 // The asset's surfels as stored (prt_format::surfel): SURFEL_WORDS words each in `surfels`,
 // the chunk's binding of the stage that includes this file. 20 words: `Surfel` as it is (f32
 // surfels). 12 words: position, brick (PACKED_BACKFACE in its top bit), gradient, octahedral
-// normal, then albedo, weight and emission as halves (PackedSurfel::surfel is the CPU twin).
+// normal (`prt_decode_normal`, oct_normal.wgsl), then albedo, weight and emission as halves
+// (PackedSurfel::surfel is the CPU twin).
 fn surfel_at(i: u32) -> Surfel {
     let b = i * SURFEL_WORDS;
     var s: Surfel;
@@ -21,7 +22,7 @@ fn surfel_at(i: u32) -> Surfel {
     s.brick = brick & ~PACKED_BACKFACE;
     s.flags = select(0u, BRICK_BACKFACE, (brick & PACKED_BACKFACE) != 0u);
     s.gradient = bitcast<vec3<f32>>(vec3<u32>(surfels[b + 4u], surfels[b + 5u], surfels[b + 6u]));
-    s.normal = surfel_normal(surfels[b + 7u]);
+    s.normal = prt_decode_normal(surfels[b + 7u]);
     let albedo_b_weight = unpack2x16float(surfels[b + 9u]);
     s.albedo = vec3<f32>(unpack2x16float(surfels[b + 8u]), albedo_b_weight.x);
     s.weight = albedo_b_weight.y;
@@ -29,13 +30,3 @@ fn surfel_at(i: u32) -> Surfel {
     return s;
 }
 
-// prt_format::surface::decode_normal (the engine snippet's prt_decode_normal, which not every
-// stage that reads surfels includes).
-fn surfel_normal(bits: u32) -> vec3<f32> {
-    let e = unpack2x16snorm(bits);
-    var v = vec3<f32>(e.x, e.y, 1.0 - abs(e.x) - abs(e.y));
-    let t = max(-v.z, 0.0);
-    v.x = v.x + select(t, -t, v.x >= 0.0);
-    v.y = v.y + select(t, -t, v.y >= 0.0);
-    return v / sqrt(v.x * v.x + v.y * v.y + v.z * v.z);
-}

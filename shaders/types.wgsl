@@ -162,7 +162,7 @@ struct Params {
     // Words of the light masks in use: ceil(max(previous, current light count) / 32), at most
     // MASK_STRIDE (the previous count clears removed lights' bits and counts old masks in full).
     light_words: u32,
-    // Metres per unit of 8-bit factor offsets (FACTOR_U8 only).
+    // Metres per unit of packed factor offsets (FACTOR_U8 only).
     offset_scale: f32,
     // 1 on the first update: every brick is relit (emissive bricks no light reaches too).
     all_bricks_dirty: u32,

@@ -97,7 +97,8 @@ pub struct BakeSettings {
     /// 4.0% / 4.9% at half); with the test's first version 0.2 cost a little (8.7%, 4.1%) and
     /// 0.3 much (worst level 11.9%, leaks 1.7%).
     pub prune_error: f32,
-    /// Storage precision of factor transfers.
+    /// Storage precision of factor transfers; f32 also keeps the surfels in f32 (packed
+    /// otherwise, `prt_format::surfel`).
     pub transfer_precision: TransferPrecision,
     /// Move probes that are inside geometry out of it (virtual offset, on by default): through
     /// the nearest back side their rays hit (a single-sided back face, or the inside of a

@@ -209,7 +209,7 @@ fn measure(
     if merged && precision == TransferPrecision::F16 {
         encodings.push(("sh9, flat brick", without_offsets(asset)));
     } else if merged && precision == TransferPrecision::U8 {
-        // What an 8-byte factor could hold (issue 32, item 1): brick and rays, three L1 bytes.
+        // What an 8-byte factor could hold (issue 32, item 1): brick and rays, three L1 terms.
         let mut l1 = asset;
         keep_l1(&mut l1.factors);
         encodings.push(("l1, flat brick", l1));

@@ -381,7 +381,7 @@ fn sample(
 }
 
 /// The asset's bytes an engine keeps at runtime: every array section of `prt_format::Summary`
-/// (the in-memory sizes `prt inspect` prints), since the GPU runtime uploads them all (probes,
+/// (the sizes `prt inspect` prints: packed surfels as stored), since the GPU runtime uploads them all (probes,
 /// sky mask and transfer, visibility maps and factors for the gather; bricks and surfels for
 /// the direct light; coarse bricks; BVH and triangles for its shadow rays; the surface
 /// lookup's terms). The file adds a header and a few bytes of lengths per section.

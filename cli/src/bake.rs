@@ -37,7 +37,8 @@ enum Precision {
     F16,
     /// 56-byte factors of floats, and surfels of floats (80 bytes; 48 otherwise).
     F32,
-    /// 12-byte factors: 8-bit offsets, 5-bit SH terms (three eighths of f16).
+    /// 12-byte factors: 6-bit offsets, 7-bit band-1 and 5-bit band-2 SH terms (three eighths
+    /// of f16).
     U8,
 }
 

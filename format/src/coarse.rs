@@ -2,7 +2,7 @@
 //!
 //! A probe's rays spread apart with distance: 512 rays are about 0.16 rad apart, so beyond a
 //! few brick sizes nearly every ray hits a brick of its own and the factor table holds a
-//! factor per ray (about 320 of them at 16 bytes on the default grid, 5 KB a probe). Rays
+//! factor per ray (about 320 of them at 16 bytes on the default grid, 5 KB a probe, in format 8). Rays
 //! that travel far are instead grouped by a brick of a coarser level: level `l` covers
 //! `2^l x 2^l x 2^l` bricks of one normal key (same dominant axis, same side), and a hit
 //! `d` from its probe goes to the level whose brick is at most `2/R` radians wide seen from
@@ -22,7 +22,7 @@
 //! with `W`, `mu`, `M` its own (`M^-1` stored as [`CoarseBrick::inverse`]). Both equal the fit
 //! over the union of the bricks' surfels, because `M_c G_c = b_c = sum_s w_s (p_s - mu_c) L_s`.
 //! The stored inverse is multiplied by `2^level` and the factors' offsets from a coarse
-//! brick's centroid are divided by it, so that 8-bit offsets keep the range of one brick.
+//! brick's centroid are divided by it, so that the packed offsets keep the range of one brick.
 //!
 //! Coarse bricks are numbered after the bricks: a factor whose brick index is
 //! `bricks.len() + i` reads coarse brick `i`. A coarse brick has at least two bricks, and none

@@ -16,11 +16,12 @@ pub enum TransferPrecision {
     F32,
     /// 8 + 3 IEEE halves per factor (32 bytes with brick index and ray count).
     F16,
-    /// 12 bytes per factor ([`FactorPacked`]): 24-bit brick index, 8-bit ray count, offset as
-    /// 8-bit snorm of the brick size, SH terms 1..8 as 5-bit snorm relative to the factor's DC
-    /// term: the default. Against the Cornell reference (0.1 m, 2048 rays, the default cells)
-    /// 2.15% mean irradiance error, against 1.89% with 8-bit terms (16 bytes, format 8) and
-    /// 1.91% in f32; issue 32 bounds a default at 3.81% (1.15x the exact 512-ray bake's).
+    /// 12 bytes per factor ([`FactorPacked`]): 24-bit brick index, 8-bit ray count, offsets as
+    /// 6-bit fields of the brick size, SH terms 1..3 as 7-bit and 4..8 as 5-bit fields
+    /// relative to the factor's DC term: the default. Against the Cornell reference (0.1 m,
+    /// 2048 rays, the default cells) 1.95% mean irradiance error, against 1.89% with 8-bit
+    /// terms (16 bytes, format 8) and 1.91% in f32; issue 32 bounds a default at 3.81% (1.15x
+    /// the exact 512-ray bake's).
     #[default]
     U8,
 }
@@ -149,7 +150,7 @@ impl FactorU8 {
     }
 }
 
-/// Metres per unit of the 8-bit offsets of factors of bricks `brick_size` metres wide.
+/// Metres per unit of the packed offsets of factors of bricks `brick_size` metres wide.
 pub fn u8_offset_scale(brick_size: f32) -> f32 {
     if brick_size > 0.0 {
         brick_size
@@ -292,11 +293,13 @@ pub fn split_row_for_u8(row: FactorRow) -> impl Iterator<Item = FactorRow> {
     })
 }
 
-fn pack2(a: f32, b: f32) -> u32 {
+/// Two halves in a word, `a` in the low half (WGSL `pack2x16float` order).
+pub(crate) fn pack2(a: f32, b: f32) -> u32 {
     u32::from(f32_to_f16(a)) | (u32::from(f32_to_f16(b)) << 16)
 }
 
-fn unpack2(w: u32) -> (f32, f32) {
+/// The two halves of a word, low half first.
+pub(crate) fn unpack2(w: u32) -> (f32, f32) {
     (f16_to_f32(w as u16), f16_to_f32((w >> 16) as u16))
 }
 
@@ -307,7 +310,7 @@ pub enum Factors {
     F16(Vec<FactorF16>),
     U8 {
         factors: Vec<FactorPacked>,
-        /// Metres of offset per unit of the snorm8 offset (the brick size).
+        /// Metres of offset per unit of the packed offset (the brick size).
         offset_scale: f32,
     },
 }
@@ -392,7 +395,7 @@ impl Factors {
     }
 
     /// Builds the table in the requested precision for a bake of `ray_count` rays.
-    /// `brick_size` (metres) scales 8-bit offsets; for `U8`, rows must have at most
+    /// `brick_size` (metres) scales packed offsets; for `U8`, rows must have at most
     /// [`U8_MAX_RAYS`] rays and bricks up to [`U8_MAX_BRICK`] (see [`split_row_for_u8`]).
     pub fn build(
         rows: &[FactorRow],

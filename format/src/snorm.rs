@@ -1,4 +1,4 @@
-//! The snorm8 quantiser of the 8-bit factors ([`crate::FactorU8`]): a value clamped to
+//! The snorm8 quantiser behind the packed factors' fields ([`crate::FactorU8`]): a value clamped to
 //! [-1, 1], times 127, rounded half away from zero, as a byte (NaN to 0).
 //!
 //! The baker quantises the eight SH terms of every factor row it makes (5.1 M rows at Sponza's

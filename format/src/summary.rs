@@ -56,7 +56,8 @@ pub struct Summary {
     pub grid: Grid,
 }
 
-/// In-memory bytes of each array section (the file adds a few bytes of lengths per section).
+/// Bytes of each array section as stored (in memory but for surfels, which are stored packed
+/// unless in f32; the file adds a few bytes of lengths per section).
 #[derive(Clone, Debug, Serialize)]
 pub struct SectionBytes {
     pub probes: u64,

@@ -17,7 +17,7 @@ use bytemuck::{Pod, Zeroable};
 use serde::{Deserialize, Serialize};
 
 use crate::asset::{Surfel, SurfelPrecision, BRICK_BACKFACE};
-use crate::factors::{f16_to_f32, f32_to_f16};
+use crate::factors::{f16_to_f32, f32_to_f16, pack2, unpack2};
 use crate::surface::{decode_normal, encode_normal};
 
 impl SurfelPrecision {
@@ -75,14 +75,6 @@ pub struct PackedSurfel {
 }
 const _: () = assert!(std::mem::size_of::<PackedSurfel>() == 48);
 
-fn pack2(a: f32, b: f32) -> u32 {
-    u32::from(f32_to_f16(a)) | u32::from(f32_to_f16(b)) << 16
-}
-
-fn unpack2(w: u32) -> [f32; 2] {
-    [f16_to_f32(w as u16), f16_to_f32((w >> 16) as u16)]
-}
-
 /// A half's value of `v`: the weight the baker gives a surfel, and what the packing keeps of it.
 pub fn half_weight(v: f32) -> f32 {
     f16_to_f32(f32_to_f16(saturate(v)))
@@ -127,10 +119,10 @@ impl PackedSurfel {
 
     /// The surfel these bytes hold, as `shaders/surfel.wgsl` decodes it.
     pub fn surfel(&self) -> Surfel {
-        let [ar, ag] = unpack2(self.albedo_rg);
-        let [ab, weight] = unpack2(self.albedo_b_weight);
-        let [er, eg] = unpack2(self.emission_rg);
-        let [eb, _] = unpack2(self.emission_b);
+        let (ar, ag) = unpack2(self.albedo_rg);
+        let (ab, weight) = unpack2(self.albedo_b_weight);
+        let (er, eg) = unpack2(self.emission_rg);
+        let (eb, _) = unpack2(self.emission_b);
         Surfel {
             position: self.position,
             brick: self.brick & !PACKED_BACKFACE,

@@ -369,33 +369,38 @@ pub fn wgsl_constants() -> Vec<(&'static str, String)> {
             "FACTOR_U8",
             format!("{}u", factor_format_code(TransferPrecision::U8)),
         ),
-        (
-            "SH_RANGE",
-            format!(
-                "array<f32, 8>({})",
-                prt_format::SH_RANGE.map(|r| format!("{r:?}")).join(", ")
-            ),
-        ),
-        (
-            "SH_BITS",
-            format!(
-                "array<u32, 8>({})",
-                prt_format::SH_BITS.map(|b| format!("{b}u")).join(", ")
-            ),
-        ),
-        (
-            "SH_AT",
-            format!(
-                "array<u32, 8>({})",
-                prt_format::SH_AT.map(|b| format!("{b}u")).join(", ")
-            ),
-        ),
-        ("OFFSET_BITS", format!("{}u", prt_format::OFFSET_BITS)),
         ("SH_Y00", format!("{Y00:?}")),
         ("SH_Y1", format!("{Y1:?}")),
         ("SH_Y2_OFF", format!("{Y2_OFF:?}")),
         ("SH_Y20", format!("{Y20:?}")),
         ("SH_Y22", format!("{Y22:?}")),
+    ]
+    .into_iter()
+    .chain(packed_factor_constants())
+    .collect()
+}
+
+/// The fields of a packed factor (`prt_format::FactorPacked`) as `shaders/gather.wgsl`
+/// decodes them: each SH term's range, bits and first bit, and the offsets' bits.
+fn packed_factor_constants() -> [(&'static str, String); 4] {
+    let array = |ty: &str, v: Vec<String>| format!("array<{ty}, {}>({})", v.len(), v.join(", "));
+    [
+        (
+            "SH_RANGE",
+            array(
+                "f32",
+                prt_format::SH_RANGE.map(|r| format!("{r:?}")).to_vec(),
+            ),
+        ),
+        (
+            "SH_BITS",
+            array("u32", prt_format::SH_BITS.map(|b| format!("{b}u")).to_vec()),
+        ),
+        (
+            "SH_AT",
+            array("u32", prt_format::SH_AT.map(|b| format!("{b}u")).to_vec()),
+        ),
+        ("OFFSET_BITS", format!("{}u", prt_format::OFFSET_BITS)),
     ]
 }
 

@@ -138,10 +138,10 @@ fn relit_sh_far_from_the_origin() {
         spacing: Some(0.25),
         bounds: Some([-0.6 + t, 0.4, -0.6 + t, 0.6 + t, 1.6, 0.6 + t]),
         virtual_offset,
-        // Every probe kept: the bakes differ by up to 2.6% of SH0 at 10 km, which flips the
+        // Every probe kept: the bakes differ by up to 4.3% of SH0 at 10 km, which flips the
         // refine stage's decisions for probes within that of its threshold (12% at 10 km).
         prune_error: 0.0,
-        // Half-float transfers: the default's 5-bit terms turn the bakes' small differences
+        // Half-float transfers: the default's 7- and 5-bit terms turn the bakes' small differences
         // into whole steps (7.2% of SH0 at 10 km against 4.3% with halves), which measures the
         // quantiser, not the coordinates (the accuracy tests measure it).
         transfer_precision: prt_format::TransferPrecision::F16,

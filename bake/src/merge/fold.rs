@@ -466,7 +466,7 @@ impl Cluster {
         self.emission += Vec3::from(h.emission);
     }
 
-    /// The merged surfel: means of its hits, weight their count (rounded to a half), back face as its brick (a
+    /// The merged surfel: means of its hits, weight their count (a half's value), back face as its brick (a
     /// brick's hits all have the same flags). An unmerged hit keeps its unit normal bit for bit
     /// (renormalising could move the last bit).
     fn surfel(&self, renormalise: bool, backface: bool) -> Surfel {

@@ -58,7 +58,7 @@ fn encode_u8(rows: &[RowU8], out: &mut [FactorPacked], at: Placement, offset_sca
     // By brick; a split row's parts full ones first, as they were split: the key is the final
     // brick above the rays' complement. The rows are sorted as integers, key above row index
     // (distinct, so any sort gives one order), then placed in that order: cheaper than sorting
-    // the 16-byte factors by their key. A brick has several factors when a row was split, and
+    // the factors by their key. A brick has several factors when a row was split, and
     // with coarse bricks also when a near row and a far row, or far rows of two levels, end on
     // the same brick or coarse brick (a coarse cell of one brick is that brick); equal keys then
     // keep the rows' order.

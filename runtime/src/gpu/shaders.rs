@@ -5,7 +5,7 @@
 //! (its entry in the stage table of `stages.rs`). The sources are the `prt-shaders` crate's
 //! (`shaders/` at the top of the repository).
 
-use prt_shaders::{LIGHT_SAMPLE, SAMPLE_IRRADIANCE, SHADOW_RAYS, TYPES};
+use prt_shaders::{LIGHT_SAMPLE, OCT_NORMAL, SAMPLE_IRRADIANCE, SHADOW_RAYS, TYPES};
 
 use crate::contract;
 
@@ -86,6 +86,7 @@ pub fn sample_irradiance_snippet(group: u32) -> String {
         s.push_str(&format!("const {name} = {v};\n"));
     }
     s.push_str(SAMPLE_IRRADIANCE);
+    s.push_str(OCT_NORMAL);
     s.replace("PRT_GROUP", &group.to_string())
 }
 

@@ -6,8 +6,8 @@
 
 use prt_shaders::{
     BOUNCE_SURFELS, BRICK_RADIANCE, COARSE_RADIANCE, CULL_LIGHTS, FILL, GATHER, GATHER_SUBGROUP,
-    GATHER_TREE, LIGHT_SAMPLE, MARK_PROBES, NEAR_RADIANCE, RELIGHT_SURFELS, SHADOW_RAYS,
-    STORE_PROBE, SURFEL, TYPES,
+    GATHER_TREE, LIGHT_SAMPLE, MARK_PROBES, NEAR_RADIANCE, OCT_NORMAL, RELIGHT_SURFELS,
+    SHADOW_RAYS, STORE_PROBE, SURFEL, TYPES,
 };
 
 use super::bindings::{bind_groups, declared_bindings, Set};
@@ -97,6 +97,7 @@ pub(super) const STAGES: [Stage; 9] = [
         wgsl: &[
             Part::File(LIGHT_SAMPLE),
             Part::File(SHADOW_RAYS),
+            Part::File(OCT_NORMAL),
             Part::File(SURFEL),
             Part::File(RELIGHT_SURFELS),
         ],
@@ -119,7 +120,11 @@ pub(super) const STAGES: [Stage; 9] = [
     // 4. Per dirty brick: mean and gradient of its radiance, direct plus bounce.
     Stage {
         label: "prt brick_radiance",
-        wgsl: &[Part::File(SURFEL), Part::File(BRICK_RADIANCE)],
+        wgsl: &[
+            Part::File(OCT_NORMAL),
+            Part::File(SURFEL),
+            Part::File(BRICK_RADIANCE),
+        ],
         dispatch: Dispatch::ChunkBricks,
         runs: |plan| plan.relight() || plan.bounce || plan.fixed_restart,
         bounces_only: false,
