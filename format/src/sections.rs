@@ -145,8 +145,7 @@ fn packed_surfels<W: Write>(out: &mut W, surfels: &[Surfel]) -> Result<(), Encod
     out.write_all(&(surfels.len() as u64).to_le_bytes())
         .map_err(EncodeTo::Io)?;
     for piece in surfels.chunks(1 << 14) {
-        let packed = PackedSurfel::pack_all(piece);
-        out.write_all(bytemuck::cast_slice(&packed))
+        out.write_all(&SurfelPrecision::Packed.stored(piece))
             .map_err(EncodeTo::Io)?;
     }
     Ok(())
@@ -425,7 +424,10 @@ mod tests {
             packed.surfels = surfels;
             let mut ours = Vec::new();
             assert!(write_payload(&packed, &mut ours).is_ok());
-            assert_eq!(ours.len(), sizes(&packed) + 48 * packed.surfels.len());
+            assert_eq!(
+                ours.len(),
+                sizes(&packed) + size_of::<PackedSurfel>() * packed.surfels.len()
+            );
             assert_eq!(payload_size(&packed).unwrap(), ours.len());
             let back = read(&ours).unwrap();
             assert_eq!(back.surfels[0].weight, 3.0);

@@ -94,8 +94,7 @@ impl Summary {
             coarse: bytes(&asset.coarse.bricks)
                 + bytes(&asset.coarse.children)
                 + bytes(&asset.coarse.moments),
-            surfels: (asset.surfels.len() * 4 * asset.header.settings.surfel_precision.words())
-                as u64,
+            surfels: (asset.surfels.len() * asset.header.settings.surfel_precision.bytes()) as u64,
             bvh_nodes: bytes(&asset.geometry.nodes),
             triangles: bytes(&asset.geometry.triangles),
             surface: surface_bytes(&asset.surface),

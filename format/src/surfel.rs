@@ -16,17 +16,33 @@
 use bytemuck::{Pod, Zeroable};
 use serde::{Deserialize, Serialize};
 
+use std::borrow::Cow;
+
 use crate::asset::{Surfel, SurfelPrecision, BRICK_BACKFACE};
-use crate::factors::{f16_to_f32, f32_to_f16, pack2, unpack2};
+use crate::factors::{f16_to_f32, f32_to_f16, pack2, unpack2, TransferPrecision};
 use crate::surface::{decode_normal, encode_normal};
 
 impl SurfelPrecision {
+    /// The surfels a bake of factor transfers in `transfer` stores: f32 with f32 transfers (the
+    /// exact preset, `--precision f32`), packed otherwise.
+    pub fn for_transfer(transfer: TransferPrecision) -> SurfelPrecision {
+        match transfer {
+            TransferPrecision::F32 => SurfelPrecision::F32,
+            TransferPrecision::F16 | TransferPrecision::U8 => SurfelPrecision::Packed,
+        }
+    }
+
+    /// Bytes per stored surfel.
+    pub fn bytes(self) -> usize {
+        match self {
+            SurfelPrecision::F32 => std::mem::size_of::<Surfel>(),
+            SurfelPrecision::Packed => std::mem::size_of::<PackedSurfel>(),
+        }
+    }
+
     /// Words (u32) per stored surfel, as `shaders/surfel.wgsl` reads them (`SURFEL_WORDS`).
     pub fn words(self) -> usize {
-        match self {
-            SurfelPrecision::F32 => std::mem::size_of::<Surfel>() / 4,
-            SurfelPrecision::Packed => std::mem::size_of::<PackedSurfel>() / 4,
-        }
+        self.bytes() / 4
     }
 
     /// `s` as this precision keeps it: what the asset reads back and the GPU decodes.
@@ -37,12 +53,17 @@ impl SurfelPrecision {
         }
     }
 
-    /// The stored words of `surfels`, for the file and the GPU.
-    pub fn encode(self, surfels: &[Surfel]) -> Vec<u32> {
+    /// The stored bytes of `surfels`, for the file and the GPU: f32 surfels as they are,
+    /// packed ones in one allocation.
+    pub fn stored(self, surfels: &[Surfel]) -> Cow<'_, [u8]> {
         match self {
-            SurfelPrecision::F32 => bytemuck::cast_slice(surfels).to_vec(),
+            SurfelPrecision::F32 => Cow::Borrowed(bytemuck::cast_slice(surfels)),
             SurfelPrecision::Packed => {
-                bytemuck::cast_slice(&PackedSurfel::pack_all(surfels)).to_vec()
+                let mut out = Vec::with_capacity(surfels.len() * self.bytes());
+                for s in surfels {
+                    out.extend_from_slice(bytemuck::bytes_of(&PackedSurfel::of(s)));
+                }
+                Cow::Owned(out)
             }
         }
     }
@@ -99,7 +120,7 @@ impl PackedSurfel {
     /// The packing of `s` (finite albedo, emission and weight beyond the half range are stored
     /// as its largest value; the brick index below 2^31, as validation requires).
     pub fn of(s: &Surfel) -> PackedSurfel {
-        let e = s.emission.map(saturate);
+        let (a, e) = (s.albedo.map(saturate), s.emission.map(saturate));
         let backface = if s.flags & BRICK_BACKFACE != 0 {
             PACKED_BACKFACE
         } else {
@@ -110,8 +131,8 @@ impl PackedSurfel {
             brick: (s.brick & !PACKED_BACKFACE) | backface,
             gradient: s.gradient,
             normal: encode_normal(s.normal),
-            albedo_rg: pack2(saturate(s.albedo[0]), saturate(s.albedo[1])),
-            albedo_b_weight: pack2(saturate(s.albedo[2]), saturate(s.weight)),
+            albedo_rg: pack2(a[0], a[1]),
+            albedo_b_weight: pack2(a[2], saturate(s.weight)),
             emission_rg: pack2(e[0], e[1]),
             emission_b: pack2(e[2], 0.0),
         }
@@ -177,10 +198,12 @@ mod tests {
         assert_eq!(SurfelPrecision::Packed.quantize(&q), q);
         assert_eq!(SurfelPrecision::F32.quantize(&s), s);
         assert_eq!(half_weight(4097.0), 4096.0);
-        let words = SurfelPrecision::Packed.encode(&[s, q]);
-        assert_eq!(words.len(), 2 * SurfelPrecision::Packed.words());
-        assert_eq!(words[..12], words[12..]);
-        assert_eq!(SurfelPrecision::F32.encode(&[s]).len(), 20);
+        let both = [s, q];
+        let bytes = SurfelPrecision::Packed.stored(&both);
+        assert_eq!(bytes.len(), 2 * SurfelPrecision::Packed.bytes());
+        assert_eq!(bytes[..48], bytes[48..]);
+        assert_eq!(SurfelPrecision::F32.stored(&[s]).len(), 80);
+        assert_eq!(SurfelPrecision::Packed.words(), 12);
     }
 
     /// Quantising is idempotent over normals in every octant, so a baked asset (quantised once)

@@ -521,7 +521,7 @@ fn chunked_surfels_match_the_unsplit_result() {
     let asset = bake(&fixture("cornell/cornell.gltf"), &BakeSettings::default());
     let lighting = load_rig(&fixture("cornell/rig_spot_range.json")).unwrap();
     // As uploaded: packed surfels.
-    let bytes = asset.surfels.len() * 4 * asset.header.settings.surfel_precision.words();
+    let bytes = asset.surfels.len() * asset.header.settings.surfel_precision.bytes();
     assert!(
         bytes > 16 * 256 * 1024,
         "the asset needs many chunks ({bytes} bytes)"

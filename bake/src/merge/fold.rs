@@ -466,9 +466,9 @@ impl Cluster {
         self.emission += Vec3::from(h.emission);
     }
 
-    /// The merged surfel: means of its hits, weight their count (a half's value), back face as its brick (a
-    /// brick's hits all have the same flags). An unmerged hit keeps its unit normal bit for bit
-    /// (renormalising could move the last bit).
+    /// The merged surfel: means of its hits, weight their count (a half's value), back face
+    /// as its brick (a brick's hits all have the same flags). An unmerged hit keeps its unit
+    /// normal bit for bit (renormalising could move the last bit).
     fn surfel(&self, renormalise: bool, backface: bool) -> Surfel {
         let n = if renormalise {
             self.normal.normalize_or(self.normal.signum())

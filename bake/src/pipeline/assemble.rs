@@ -5,8 +5,8 @@ use std::path::Path;
 
 use glam::Vec3;
 use prt_format::{
-    BakeSettingsRecord, BakeStats, Header, Probe, SurfelPrecision, TransferPrecision, NO_SLOT,
-    PROBE_DILATED, PROBE_OFFSET, PROBE_VALID,
+    BakeSettingsRecord, BakeStats, Header, Probe, SurfelPrecision, NO_SLOT, PROBE_DILATED,
+    PROBE_OFFSET, PROBE_VALID,
 };
 use prt_scene::Scene;
 
@@ -113,21 +113,12 @@ fn settings_record(settings: &BakeSettings, spacing: f32, cell_size: f32) -> Bak
         double_sided_override: settings.double_sided,
         invalid_backface_fraction: settings.invalid_backface_fraction,
         transfer_precision: settings.transfer_precision,
-        surfel_precision: surfel_precision(settings),
+        surfel_precision: SurfelPrecision::for_transfer(settings.transfer_precision),
         far_ratio: if cell_size > 0.0 {
             settings.far_ratio
         } else {
             0.0
         },
-    }
-}
-
-/// How the asset stores its surfels: in f32 with f32 transfers (the exact preset,
-/// `--precision f32`), packed otherwise (`prt_format::surfel`).
-pub(super) fn surfel_precision(settings: &BakeSettings) -> SurfelPrecision {
-    match settings.transfer_precision {
-        TransferPrecision::F32 => SurfelPrecision::F32,
-        TransferPrecision::F16 | TransferPrecision::U8 => SurfelPrecision::Packed,
     }
 }
 

@@ -165,12 +165,7 @@ pub(crate) mod tests {
                 for subgroups in [false, true] {
                     out.push(ShaderConfig {
                         factors,
-                        // f32 surfels with f32 transfers, as the bake stores them.
-                        surfels: if factors == prt_format::TransferPrecision::F32 {
-                            prt_format::SurfelPrecision::F32
-                        } else {
-                            prt_format::SurfelPrecision::Packed
-                        },
+                        surfels: prt_format::SurfelPrecision::for_transfer(factors),
                         volume_format,
                         subgroups,
                         mask_stride: 32,

@@ -62,13 +62,11 @@ pub(super) fn surfel_buffers(
             Ok([
                 alloc.storage(
                     "prt surfels",
-                    bytemuck::cast_slice(
-                        &asset
-                            .header
-                            .settings
-                            .surfel_precision
-                            .encode(&asset.surfels[range]),
-                    ),
+                    &asset
+                        .header
+                        .settings
+                        .surfel_precision
+                        .stored(&asset.surfels[range]),
                     none,
                 )?,
                 alloc.zeroed("prt surfel radiance", 16 * n, none)?,
@@ -154,7 +152,7 @@ pub fn surfel_chunks(asset: &Asset, limit: u64) -> Result<Vec<SurfelChunk>, GpuE
             .bricks
             .iter()
             .map(|b| (b.first_surfel, b.surfel_count)),
-        4 * asset.header.settings.surfel_precision.words() as u64,
+        asset.header.settings.surfel_precision.bytes() as u64,
         limit,
         "one brick's surfels",
     )?;
