@@ -72,7 +72,7 @@ struct PrtSample {
 @group(PRT_GROUP) @binding(7) var prt_sampler: sampler;
 @group(PRT_GROUP) @binding(8) var<uniform> prt_volume: PrtVolumeInfo;
 // Per placed probe, PRT_DEPTH_WORDS words: per texel, mean and standard deviation of hit distances in
-// spacings, one byte each, two texels per word (prt_format::depth).
+// spacings, four bits each, four texels per word (prt_format::depth).
 @group(PRT_GROUP) @binding(9) var<storage, read> prt_depth_moments: array<u32>;
 // Per grid point, where its probe's rays started (xyz; the grid position unless it was moved off
 // a surface or out of geometry: depth-moment distances are measured from there) as the bits of
@@ -154,12 +154,14 @@ fn prt_depth_weight(slot: u32, probe: vec3<f32>, surface: vec3<f32>, x: vec3<f32
         return w;
     }
     let texel = prt_depth_texel(dir);
-    let bytes = unpack4x8unorm(prt_depth_moments[slot * PRT_DEPTH_WORDS + texel / 2u]);
-    let pair = select(bytes.xy, bytes.zw, (texel & 1u) == 1u);
-    let mean = pair.x * PRT_MAX_DEPTH;
-    let deviation = pair.y * PRT_MAX_DEVIATION;
+    // Four texels a word, a byte each: mean in the low four bits, deviation in the high four,
+    // on a square-root scale (prt_format::depth::moments).
+    let byte = (prt_depth_moments[slot * PRT_DEPTH_WORDS + texel / 4u] >> (8u * (texel & 3u))) & 0xffu;
+    let s = vec2<f32>(f32(byte & 15u), f32(byte >> 4u)) / 15.0;
+    let mean = s.x * s.x * PRT_MAX_DEPTH;
+    let deviation = s.y * s.y * PRT_MAX_DEVIATION;
     // A saturated mean (sky, or hits beyond PRT_MAX_DEPTH) bounds nothing.
-    if dist > mean && pair.x < 1.0 {
+    if dist > mean && (byte & 15u) < 15u {
         let variance = max(deviation * deviation, PRT_MIN_VARIANCE);
         let d = dist - mean;
         let chebyshev = variance / (variance + d * d);

@@ -8,7 +8,7 @@
 //! computed once per bake ([`DepthFilter`]); a probe then costs a few multiply-adds per texel.
 
 use glam::Vec3;
-use prt_format::depth::{quantise, texel_direction, MAX_DEPTH};
+use prt_format::depth::{pack_texels, quantise, texel_direction, MAX_DEPTH};
 use prt_format::{DEPTH_TEXELS, DEPTH_WORDS};
 
 use crate::trace::ProbeRays;
@@ -129,7 +129,7 @@ impl DepthFilter {
                 *d = ((h.position - origin).length() / spacing).min(MAX_DEPTH);
             }
         }
-        let mut texels = [[0u8; 2]; DEPTH_TEXELS];
+        let mut texels = [0u8; DEPTH_TEXELS];
         let step = GROUP * self.feeds;
         for (g, out) in texels.chunks_mut(GROUP).enumerate() {
             let (rays, weights) = (
@@ -158,10 +158,7 @@ impl DepthFilter {
                 };
             }
         }
-        std::array::from_fn(|w| {
-            let (a, b) = (texels[2 * w], texels[2 * w + 1]);
-            u32::from_le_bytes([a[0], a[1], b[0], b[1]])
-        })
+        std::array::from_fn(|w| pack_texels(std::array::from_fn(|i| texels[4 * w + i])))
     }
 }
 

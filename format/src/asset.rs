@@ -233,10 +233,11 @@ pub const FILL_HIDDEN_SHIFT: u32 = 16;
 pub const FILL_HIDDEN_MASK: u32 = 0xff;
 /// Side of the octahedral visibility map.
 pub const DEPTH_MAP_SIDE: u32 = 16;
-/// Texels of a visibility map (two bytes each: mean and standard deviation of distance).
+/// Texels of a visibility map (a byte each: mean and standard deviation of distance, four bits
+/// each; `crate::depth::quantise`).
 pub const DEPTH_TEXELS: usize = (DEPTH_MAP_SIDE * DEPTH_MAP_SIDE) as usize;
-/// Words of visibility data per probe (two texels per word): 512 bytes.
-pub const DEPTH_WORDS: usize = DEPTH_TEXELS / 2;
+/// Words of visibility data per probe (four texels per word): 256 bytes.
+pub const DEPTH_WORDS: usize = DEPTH_TEXELS / 4;
 
 /// [`Probe::slot`] of a grid point the bake placed no probe at.
 pub const NO_SLOT: u32 = u32::MAX;

@@ -1,16 +1,25 @@
 //! Probe visibility data: per probe, an octahedral map ([`DEPTH_MAP_SIDE`]² texels; Cigolle et
 //! al., "A Survey of Efficient Representations for Independent Unit Vectors", JCGT 2014) of the
 //! mean and standard deviation of the distance to the first hit of its rays, in probe spacings
-//! (so the data does not depend on the scene's scale), one byte each: 512 bytes per probe.
+//! (so the data does not depend on the scene's scale), four bits each: 256 bytes per probe.
 //! Sampling tests whether a shaded point is visible from a probe with Chebyshev's inequality on
 //! these moments, as DDGI does (Majercik et al., "Dynamic Diffuse Global Illumination with
 //! Ray-Traced Irradiance Fields", JCGT 2019). Every function here has a WGSL twin in
 //! `shaders/sample_irradiance.wgsl`.
 //!
-//! Why 16x16 bytes rather than DDGI's 16x16 half pairs or 8x8 halves: a texel must be narrow,
+//! Why 16x16 texels rather than DDGI's 16x16 half pairs or 8x8 halves: a texel must be narrow,
 //! because the distance to a nearby wall changes fast with the angle (at 8x8, 25-degree texels
 //! averaged grazing rays that travel far along the wall into the mean, and light leaked through
-//! it); byte precision (1/64 spacing for the mean) is far finer than the test needs.
+//! it: measured again in format 9, the depth-moment lookup's worst tuning level went from 19.2%
+//! to 44.9%, `docs/results/packing.md`).
+//!
+//! Why four bits a moment, on a square-root scale (format 10; a byte each before): steps are
+//! fine where the test decides (a 56th of a spacing next to the probe, the first three under a
+//! fifth of a spacing) and coarse far away. On the level family's tuning seeds the
+//! depth-moment lookup measured as it did with bytes (median level 9.1% both, worst 19.3%
+//! against 19.2%); four linear bits measured worse (worst 20.2%, leaks 5.7% against 5.0%).
+//! Since the surface terms, the runtime's default lookup reads the moments only where a point
+//! has no surfel (`docs/results/packing.md`).
 
 use crate::asset::DEPTH_MAP_SIDE;
 
@@ -75,26 +84,33 @@ pub fn texel_direction(t: usize) -> [f32; 3] {
     oct_decode([c(t % side), c(t / side)])
 }
 
-/// A texel's two bytes: mean and standard deviation, quantised to [0, MAX_DEPTH] and
-/// [0, MAX_DEVIATION].
-pub fn quantise(mean: f32, deviation: f32) -> [u8; 2] {
-    let q = |v: f32, max: f32| (v / max * 255.0).round().clamp(0.0, 255.0) as u8;
-    [q(mean, MAX_DEPTH), q(deviation, MAX_DEVIATION)]
+/// Levels of a moment's four bits.
+const LEVELS: f32 = 15.0;
+
+/// A texel's byte: the mean in the low four bits, the standard deviation in the high four,
+/// each `round(15 sqrt(v / max))` of its range [0, MAX_DEPTH] or [0, MAX_DEVIATION].
+pub fn quantise(mean: f32, deviation: f32) -> u8 {
+    let q = |v: f32, max: f32| ((v / max).clamp(0.0, 1.0).sqrt() * LEVELS).round() as u8;
+    q(mean, MAX_DEPTH) | q(deviation, MAX_DEVIATION) << 4
+}
+
+/// A moment of four bits `q` in a range `max`: `max (q / 15)^2`.
+fn level(q: u32, max: f32) -> f32 {
+    let s = q as f32 / LEVELS;
+    s * s * max
 }
 
 /// Mean and standard deviation of texel `t` of a probe's map (`words` = its [`crate::DEPTH_WORDS`]
-/// words); the WGSL twin reads them with `unpack4x8unorm`.
+/// words, four texels a word, the first in the low byte); the WGSL twin
+/// (`shaders/sample_irradiance.wgsl`, `prt_depth_weight`) decodes the same.
 pub fn moments(words: &[u32], t: usize) -> (f32, f32) {
-    let b = words[t / 2].to_le_bytes();
-    let (m, d) = if t.is_multiple_of(2) {
-        (b[0], b[1])
-    } else {
-        (b[2], b[3])
-    };
-    (
-        f32::from(m) / 255.0 * MAX_DEPTH,
-        f32::from(d) / 255.0 * MAX_DEVIATION,
-    )
+    let b = words[t / 4] >> (8 * (t % 4)) & 0xff;
+    (level(b & 0xf, MAX_DEPTH), level(b >> 4, MAX_DEVIATION))
+}
+
+/// The four texel bytes of a word, the first in the low byte.
+pub fn pack_texels(bytes: [u8; 4]) -> u32 {
+    u32::from_le_bytes(bytes)
 }
 
 #[cfg(test)]
@@ -122,13 +138,29 @@ mod tests {
         }
     }
 
+    /// A moment comes back within half a step of its square-root scale, exact at zero and at
+    /// the top (a saturated mean must read as `MAX_DEPTH` exactly: it means "no bound"); out of
+    /// range values clamp; each texel of a word is read from its own byte.
     #[test]
     fn moments_round_trip_within_a_quantisation_step() {
-        let a = quantise(1.25, 0.3);
-        let b = quantise(9.0, -1.0);
-        let word = u32::from_le_bytes([a[0], a[1], b[0], b[1]]);
-        let (m, d) = moments(&[word], 0);
-        assert!((m - 1.25).abs() <= MAX_DEPTH / 510.0 && (d - 0.3).abs() <= MAX_DEVIATION / 510.0);
+        let half_step = |v: f32, back: f32, max: f32| {
+            ((back / max).sqrt() - (v / max).sqrt()).abs() <= 0.5 / LEVELS + 1e-6
+        };
+        for (mean, deviation) in [
+            (0.0, 0.0),
+            (0.05, 0.01),
+            (0.3, 0.1),
+            (1.25, 0.3),
+            (3.9, 1.9),
+        ] {
+            let word = pack_texels([0, 0, quantise(mean, deviation), 0]);
+            let (m, d) = moments(&[word], 2);
+            assert!(half_step(mean, m, MAX_DEPTH), "{mean} -> {m}");
+            assert!(half_step(deviation, d, MAX_DEVIATION), "{deviation} -> {d}");
+        }
+        let word = pack_texels([quantise(0.0, 0.0), quantise(9.0, -1.0), 0, 0xff]);
+        assert_eq!(moments(&[word], 0), (0.0, 0.0));
         assert_eq!(moments(&[word], 1), (MAX_DEPTH, 0.0));
+        assert_eq!(moments(&[word], 3), (MAX_DEPTH, MAX_DEVIATION));
     }
 }

@@ -43,7 +43,7 @@ fn trilinear() -> LookupSettings {
 }
 
 /// Every lookup `--lookup` knows, by name, in table order.
-const LOOKUPS: [Variant; 7] = [
+const LOOKUPS: [Variant; 8] = [
     // Hardware trilinear over the probes' validity only: what depth moments are measured against.
     ("trilinear", || (trilinear(), Kind::Runtime)),
     // The probe volume with depth moments (DDGI's Chebyshev test), normal bias 0.2 spacings:
@@ -52,6 +52,17 @@ const LOOKUPS: [Variant; 7] = [
     // The runtime's: the bake's surface terms (prt_format::surface: which probes the point's
     // surfel sees, its near field) where the point has a surfel, `moments` elsewhere.
     ("default", || (LookupSettings::default(), Kind::Runtime)),
+    // The same with plain trilinear weights where the point has no surfel: what the depth
+    // moments add once surface terms decide the probes at surfaces (docs/results/packing.md).
+    ("terms_trilinear", || {
+        (
+            LookupSettings {
+                depth_moments: false,
+                ..LookupSettings::default()
+            },
+            Kind::Runtime,
+        )
+    }),
     // Rays through the asset's BVH from the point: exact probe visibility and a dark near field.
     ("rays", || (trilinear(), Kind::Rays(RaySettings::default()))),
     // The same, with near-field hits bringing their surface's relit radiance (reach 1 spacing).
@@ -84,9 +95,14 @@ impl Lookup {
         match self.kind {
             Kind::Runtime if s.surface_terms => format!(
                 "{}: the bake's surface terms where the point has a surfel (which probes it \
-                 sees, its near field; prt_runtime::surface), depth moments elsewhere, normal \
-                 bias {bias} spacings",
-                self.name
+                 sees, its near field; prt_runtime::surface), {} elsewhere, normal bias {bias} \
+                 spacings",
+                self.name,
+                if s.depth_moments {
+                    "depth moments"
+                } else {
+                    "trilinear over probe validity"
+                }
             ),
             Kind::Runtime if s.depth_moments => format!(
                 "{}: depth moments (Chebyshev) and facing weights, normal bias {bias} spacings",
@@ -274,7 +290,7 @@ mod tests {
             .unwrap();
         assert!(
             err.to_string()
-                .contains("known: trilinear, moments, default, rays, rays_light, surfels, path"),
+                .contains("known: trilinear, moments, default, terms_trilinear, rays, rays_light, surfels, path"),
             "{err}"
         );
     }
