@@ -155,13 +155,15 @@ fn prt_depth_weight(slot: u32, probe: vec3<f32>, surface: vec3<f32>, x: vec3<f32
     }
     let texel = prt_depth_texel(dir);
     // Four texels a word, a byte each: mean in the low four bits, deviation in the high four,
-    // on a square-root scale (prt_format::depth::moments).
-    let byte = (prt_depth_moments[slot * PRT_DEPTH_WORDS + texel / 4u] >> (8u * (texel & 3u))) & 0xffu;
-    let s = vec2<f32>(f32(byte & 15u), f32(byte >> 4u)) / 15.0;
-    let mean = s.x * s.x * PRT_MAX_DEPTH;
-    let deviation = s.y * s.y * PRT_MAX_DEVIATION;
-    // A saturated mean (sky, or hits beyond PRT_MAX_DEPTH) bounds nothing.
-    if dist > mean && (byte & 15u) < 15u {
+    // each q^2 times its step (prt_format::depth::moments).
+    let word = prt_depth_moments[slot * PRT_DEPTH_WORDS + texel / 4u];
+    let byte = (word >> (8u * (texel & 3u))) & 0xffu;
+    let q = vec2<u32>(byte & 15u, byte >> 4u);
+    let mean = f32(q.x * q.x) * PRT_DEPTH_MEAN_STEP;
+    let deviation = f32(q.y * q.y) * PRT_DEPTH_DEVIATION_STEP;
+    // A saturated mean (the top value: sky, or hits farther than about 3.7 spacings) bounds
+    // nothing.
+    if dist > mean && q.x < PRT_DEPTH_TOP {
         let variance = max(deviation * deviation, PRT_MIN_VARIANCE);
         let d = dist - mean;
         let chebyshev = variance / (variance + d * d);

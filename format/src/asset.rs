@@ -24,7 +24,7 @@ pub struct Asset {
     pub sky_transfer: Vec<[f32; SH_COUNT]>,
     /// Per placed probe, [`DEPTH_WORDS`] words: the probe's visibility as an octahedral map
     /// ([`crate::depth`]) of the mean and standard deviation of its rays' hit distances in probe
-    /// spacings, one byte each, two texels per word. Sampling weights each probe by whether the
+    /// spacings, four bits each, four texels per word. Sampling weights each probe by whether the
     /// shaded point is visible from it (Chebyshev test, Majercik et al. 2019).
     pub probe_depth: Vec<u32>,
     /// Per-probe factor tables, concatenated; `Probe::first_factor..+factor_count` is a probe's.

@@ -13,13 +13,16 @@
 //! it: measured again in format 9, the depth-moment lookup's worst tuning level went from 19.2%
 //! to 44.9%, `docs/results/packing.md`).
 //!
-//! Why four bits a moment, on a square-root scale (format 10; a byte each before): steps are
-//! fine where the test decides (a 56th of a spacing next to the probe, the first three under a
-//! fifth of a spacing) and coarse far away. On the level family's tuning seeds the
-//! depth-moment lookup measured as it did with bytes (median level 9.1% both, worst 19.3%
-//! against 19.2%); four linear bits measured worse (worst 20.2%, leaks 5.7% against 5.0%).
-//! Since the surface terms, the runtime's default lookup reads the moments only where a point
-//! has no surfel (`docs/results/packing.md`).
+//! Why four bits a moment, on a square-root scale (format 10; a byte each before): the levels
+//! `4 (q / 15)^2` spacings (0, 0.018, 0.071, 0.16, 0.28, ...) are dense next to the probe,
+//! where a wall close by must stop light, and 0.2-0.37 spacings apart between 1 and 2
+//! spacings, where the shaded points of its cells lie (bytes had steps of a 64th). On the
+//! level family's tuning seeds the depth-moment lookup measured as it did with bytes (median
+//! level 9.1% both, worst 19.3% against 19.2%); on the held-out seeds its worst level went from
+//! 19.8% to 20.3% (cave_15, 25 leaking points against 22). Four linear bits measured worse on
+//! the tuning seeds (worst 20.2%, leaks 5.7% against 5.0%). Since the surface terms, the
+//! runtime's default lookup reads the moments only where a point has no surfel
+//! (`docs/results/packing.md`).
 
 use crate::asset::DEPTH_MAP_SIDE;
 
@@ -84,20 +87,33 @@ pub fn texel_direction(t: usize) -> [f32; 3] {
     oct_decode([c(t % side), c(t / side)])
 }
 
-/// Levels of a moment's four bits.
-const LEVELS: f32 = 15.0;
+/// The top value of a moment's four bits: a mean there is saturated (sky, or hits farther than
+/// about 3.7 spacings) and bounds nothing.
+pub const TOP: u32 = 15;
+
+/// What one unit of `q^2` is worth, `q` a moment's four bits: the mean `q^2 * MEAN_STEP`, the
+/// deviation `q^2 * DEVIATION_STEP` (`max / 225`). The WGSL twin multiplies by the same f32
+/// values (injected by `prt_runtime::contract`), so both decode every byte to the same bits.
+pub const MEAN_STEP: f32 = MAX_DEPTH / (TOP * TOP) as f32;
+/// See [`MEAN_STEP`].
+pub const DEVIATION_STEP: f32 = MAX_DEVIATION / (TOP * TOP) as f32;
 
 /// A texel's byte: the mean in the low four bits, the standard deviation in the high four,
 /// each `round(15 sqrt(v / max))` of its range [0, MAX_DEPTH] or [0, MAX_DEVIATION].
 pub fn quantise(mean: f32, deviation: f32) -> u8 {
-    let q = |v: f32, max: f32| ((v / max).clamp(0.0, 1.0).sqrt() * LEVELS).round() as u8;
+    let top = TOP as f32;
+    let q = |v: f32, max: f32| ((v / max).clamp(0.0, 1.0).sqrt() * top).round() as u8;
     q(mean, MAX_DEPTH) | q(deviation, MAX_DEVIATION) << 4
 }
 
-/// A moment of four bits `q` in a range `max`: `max (q / 15)^2`.
-fn level(q: u32, max: f32) -> f32 {
-    let s = q as f32 / LEVELS;
-    s * s * max
+/// A moment of four bits `q` whose unit is `step` ([`MEAN_STEP`], [`DEVIATION_STEP`]); the
+/// top value reads as `max` exactly, which callers test for a saturated mean.
+fn level(q: u32, step: f32, max: f32) -> f32 {
+    if q == TOP {
+        max
+    } else {
+        (q * q) as f32 * step
+    }
 }
 
 /// Mean and standard deviation of texel `t` of a probe's map (`words` = its [`crate::DEPTH_WORDS`]
@@ -105,7 +121,10 @@ fn level(q: u32, max: f32) -> f32 {
 /// (`shaders/sample_irradiance.wgsl`, `prt_depth_weight`) decodes the same.
 pub fn moments(words: &[u32], t: usize) -> (f32, f32) {
     let b = words[t / 4] >> (8 * (t % 4)) & 0xff;
-    (level(b & 0xf, MAX_DEPTH), level(b >> 4, MAX_DEVIATION))
+    (
+        level(b & 0xf, MEAN_STEP, MAX_DEPTH),
+        level(b >> 4, DEVIATION_STEP, MAX_DEVIATION),
+    )
 }
 
 /// The four texel bytes of a word, the first in the low byte.
@@ -144,7 +163,7 @@ mod tests {
     #[test]
     fn moments_round_trip_within_a_quantisation_step() {
         let half_step = |v: f32, back: f32, max: f32| {
-            ((back / max).sqrt() - (v / max).sqrt()).abs() <= 0.5 / LEVELS + 1e-6
+            ((back / max).sqrt() - (v / max).sqrt()).abs() <= 0.5 / TOP as f32 + 1e-6
         };
         for (mean, deviation) in [
             (0.0, 0.0),

@@ -10,7 +10,7 @@
 //! This module imports no other module of the crate.
 
 use bytemuck::{Pod, Zeroable};
-use prt_format::depth::{MAX_DEPTH, MAX_DEVIATION};
+use prt_format::depth::{DEVIATION_STEP, MEAN_STEP, TOP};
 use prt_format::surface::{BLOCKED_WEIGHT, NO_SURFEL, SLOT_AXIS_SHIFT, TERMS_TRACED};
 use prt_format::{
     LightKind, TransferPrecision, BRICK_BACKFACE, DEPTH_MAP_SIDE, DEPTH_WORDS, PROBE_VALID,
@@ -469,8 +469,9 @@ pub fn snippet_constants() -> Vec<(&'static str, String)> {
         ("PRT_MIN_DISTANCE", format!("{MIN_DISTANCE:e}")),
         ("PRT_DEPTH_SIDE", format!("{DEPTH_MAP_SIDE}u")),
         ("PRT_DEPTH_WORDS", format!("{DEPTH_WORDS}u")),
-        ("PRT_MAX_DEPTH", format!("{MAX_DEPTH:?}")),
-        ("PRT_MAX_DEVIATION", format!("{MAX_DEVIATION:?}")),
+        ("PRT_DEPTH_TOP", format!("{TOP}u")),
+        ("PRT_DEPTH_MEAN_STEP", format!("{MEAN_STEP:?}")),
+        ("PRT_DEPTH_DEVIATION_STEP", format!("{DEVIATION_STEP:?}")),
         ("PRT_FLAG_DEPTH_MOMENTS", format!("{VOLUME_DEPTH_MOMENTS}u")),
         ("PRT_FLAG_SURFACE", format!("{VOLUME_SURFACE}u")),
         ("PRT_NONE", format!("{}u", u32::MAX)),

@@ -172,8 +172,9 @@ impl<'a> VolumeSampler<'a> {
         let words = &self.depth_moments[slot * DEPTH_WORDS..(slot + 1) * DEPTH_WORDS];
         let (mean, deviation) =
             prt_format::depth::moments(words, prt_format::depth::texel_of(dir.to_array()));
-        // A saturated mean (sky, or hits beyond MAX_DEPTH) bounds nothing: points beyond it,
-        // outside the grid, stay visible.
+        // A saturated mean (`prt_format::depth::TOP`, read as MAX_DEPTH: sky, or hits farther
+        // than about 3.7 spacings) bounds nothing: points beyond it, outside the grid, stay
+        // visible.
         if dist > mean && mean < MAX_DEPTH {
             let variance = (deviation * deviation).max(MIN_VARIANCE);
             let d = dist - mean;
