@@ -8,6 +8,10 @@
 // of the probe at once (store_probe.wgsl, which holds the volume's layout and bindings).
 // Invalid probes are never gathered: their texels stay zero, validity included. Dilated probes
 // (inside geometry, carrying a neighbour's table) are gathered like valid ones.
+// Packed (u8) tables stride over 8-byte slots (prt_format::FactorSlot): a lobe factor is one,
+// decoded about the direction from the probe's ray origin to its mean hit point
+// (prt_format::lobe); a full factor is a head and a continuation, which a thread that lands on
+// it skips (its ray count is zero).
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> probes: array<Probe>;
@@ -24,6 +28,9 @@
 // The probes the gather visits, in grid order: the valid ones (a grid point without data, or an
 // invalid probe, is never gathered, so a window of the round robin spends no work on them).
 @group(0) @binding(11) var<storage, read> gather_list: array<u32>;
+// Per brick, then per coarse brick: the centroid (xyz) its factors' offsets are measured from,
+// and their multiplier (w, 2^level) (prt_format::Asset::factor_frame).
+@group(0) @binding(12) var<storage, read> factor_frames: array<vec4<f32>>;
 
 var<workgroup> go: u32;
 
@@ -60,8 +67,8 @@ fn factor_radiance(brick: u32, offset: vec3<f32>) -> vec3<f32> {
     return max(mean + g, vec3<f32>(0.0));
 }
 
-// The signed field of `w` bits at bit `p` of a packed factor's 64 bits (lo, hi), as a float
-// (FactorPacked::field).
+// The signed field of `w` bits at bit `p` of a packed slot's 64 bits (lo, hi), as a float
+// (prt_format::FactorSlot).
 fn packed_field(lo: u32, hi: u32, p: u32, w: u32) -> f32 {
     var b: u32;
     if p >= 32u {
@@ -79,13 +86,29 @@ fn field_levels(w: u32) -> f32 {
     return f32((1u << (w - 1u)) - 1u);
 }
 
+// Terms 1..8 of the lobe of length `r` and band-2 scale `a2` about `toward` times the DC
+// term `t0`, and `t0` (prt_format::lobe::lobe_terms): band 1 `R Y_1(d) / Y_00`, band 2
+// `A_2 Y_2(d) / Y_00`.
+fn lobe_transfer(t0: f32, r: f32, a2: f32, toward: vec3<f32>) -> array<f32, 9> {
+    var t: array<f32, 9>;
+    t[0] = t0;
+    let len_sq = dot(toward, toward);
+    if len_sq > 0.0 {
+        let y = sh_basis(toward * (1.0 / sqrt(len_sq)));
+        for (var k = 1u; k < 9u; k = k + 1u) {
+            t[k] = y[k] / SH_Y00 * select(a2, r, k < 4u) * t0;
+        }
+    }
+    return t;
+}
+
 // This thread's share of the probe's SH: factors lid, lid + WORKGROUP, ... and sky rays likewise.
 fn accumulate(p: u32, lid: u32) -> array<vec3<f32>, 9> {
     var acc: array<vec3<f32>, 9>;
     // The packed factors' fields (indexed at run time, so copied out of the constants once).
     var range = SH_RANGE;
     var bits = SH_BITS;
-    var at = SH_AT;
+    var at = TERMS_AT;
     let probe = probes[p];
     for (var f = probe.first_factor + lid; f < probe.first_factor + probe.factor_count; f = f + GATHER_WORKGROUP) {
         let base = (f - chunk.first_factor) * FACTOR_WORDS;
@@ -93,20 +116,35 @@ fn accumulate(p: u32, lid: u32) -> array<vec3<f32>, 9> {
         var brick = factors[base];
         var offset: vec3<f32>;
         if FACTOR_FORMAT == FACTOR_U8 {
-            // prt_format::FactorPacked: three offsets, then SH terms 1..8, as signed fields.
+            // prt_format::FactorSlot: a head (offsets, R, SLOT_FULL, A_2) or a continuation.
+            let rays = brick & 0xffu;
+            if rays == 0u {
+                continue;
+            }
             brick = brick >> 8u;
-            t[0] = f32(factors[base] & 0xffu) * params.ray_weight * SH_Y00;
-            let lo = factors[base + 1u];
-            let hi = factors[base + 2u];
+            let t0 = f32(rays) * params.ray_weight * SH_Y00;
+            let head = factors[base + 1u];
             let ol = params.offset_scale / field_levels(OFFSET_BITS);
             offset = vec3<f32>(
-                packed_field(lo, hi, 0u, OFFSET_BITS),
-                packed_field(lo, hi, OFFSET_BITS, OFFSET_BITS),
-                packed_field(lo, hi, 2u * OFFSET_BITS, OFFSET_BITS),
+                packed_field(head, 0u, 0u, OFFSET_BITS),
+                packed_field(head, 0u, OFFSET_BITS, OFFSET_BITS),
+                packed_field(head, 0u, 2u * OFFSET_BITS, OFFSET_BITS),
             ) * ol;
-            for (var k = 1u; k < 9u; k = k + 1u) {
-                let w = bits[k - 1u];
-                t[k] = packed_field(lo, hi, at[k - 1u], w) / field_levels(w) * range[k - 1u] * t[0];
+            if (head & SLOT_FULL) != 0u {
+                // The eight terms, in the continuation slot that follows.
+                let lo = factors[base + FACTOR_WORDS];
+                let hi = factors[base + FACTOR_WORDS + 1u];
+                t[0] = t0;
+                for (var k = 1u; k < 9u; k = k + 1u) {
+                    let w = bits[k - 1u];
+                    t[k] = packed_field(lo, hi, at[k - 1u], w) / field_levels(w) * range[k - 1u] * t0;
+                }
+            } else {
+                let frame = factor_frames[brick];
+                let toward = frame.xyz + offset * frame.w - probe.position;
+                let r = f32((head >> R_AT) & R_TOP) / f32(R_TOP);
+                let a2 = f32((head >> A2_AT) & A2_TOP) / f32(A2_TOP);
+                t = lobe_transfer(t0, r, a2, toward);
             }
         } else if FACTOR_FORMAT == FACTOR_F16 {
             t[0] = f32(factors[base + 1u]) * params.ray_weight * SH_Y00;

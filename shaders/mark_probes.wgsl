@@ -24,6 +24,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     var dirty = params.all_probes_dirty != 0u;
     for (var f = probe.first_factor; f < probe.first_factor + probe.factor_count && !dirty; f = f + 1u) {
         let word = factors[(f - chunk.first_factor) * FACTOR_WORDS];
+        // A packed table's continuation slot (no rays) names no brick (prt_format::FactorSlot).
+        if FACTOR_FORMAT == FACTOR_U8 && (word & 0xffu) == 0u {
+            continue;
+        }
         dirty = brick_dirty[select(word, word >> 8u, FACTOR_FORMAT == FACTOR_U8)] != 0u;
     }
     if dirty {

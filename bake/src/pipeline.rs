@@ -88,13 +88,14 @@ pub(crate) fn bake_in_pool(
         coarse,
         factors,
     } = bricks;
+    let probe_positions: Vec<Vec3> = positions.iter().map(|&(p, _)| p).collect();
     let carried = encode::Carried {
         from: &from,
         lens: &lens,
+        origins: &probe_positions,
     };
     lap(&mut report, "bricks", Some("surface"));
 
-    let probe_positions: Vec<Vec3> = positions.iter().map(|&(p, _)| p).collect();
     let probes = (&grid, &probe_positions[..]);
     let geometry = (&built.bvh, &loaded.scene.triangles[..]);
     let cells = settings.surface_terms.then_some(cell_size);

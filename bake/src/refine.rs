@@ -209,9 +209,9 @@ fn point_response(asset: &Asset, q: usize, light: Vec3) -> [f32; NORMALS.len()] 
     let mut sh = [0.0f32; SH_COUNT];
     let first = probe.first_factor as usize;
     for f in first..first + probe.factor_count as usize {
-        let d_sq = hit_point(asset, f).distance_squared(light);
+        let d_sq = Vec3::from(asset.factor_point(f)).distance_squared(light);
         let radiance = (spacing_sq / d_sq.max(spacing_sq)).min(1.0);
-        let t = asset.factors.transfer(f, asset.header.ray_count);
+        let t = asset.factor_transfer(probe, f);
         for (s, t) in sh.iter_mut().zip(&t) {
             *s += radiance * t;
         }
@@ -250,11 +250,10 @@ fn respond(asset: &Asset, p: usize) -> Response {
     let probe = &asset.probes[p];
     let grid = &asset.header.grid;
     let mut sh = [[0.0f32; SH_COUNT]; FIELDS];
-    let factors = &asset.factors;
     let first = probe.first_factor as usize;
     for f in first..first + probe.factor_count as usize {
-        let at = hit_point(asset, f);
-        let t = factors.transfer(f, asset.header.ray_count);
+        let at = Vec3::from(asset.factor_point(f));
+        let t = asset.factor_transfer(probe, f);
         for (k, sh) in sh.iter_mut().enumerate() {
             if field(k, at, grid) {
                 for (s, t) in sh.iter_mut().zip(&t) {
@@ -281,22 +280,6 @@ fn field(k: usize, at: Vec3, grid: &prt_format::Grid) -> bool {
     let period = PERIODS[k / DIRECTIONS.len()] * grid.spacing;
     let d = Vec3::from(DIRECTIONS[k % DIRECTIONS.len()]);
     (d.dot(at - Vec3::from(grid.origin)) / period).rem_euclid(1.0) < 0.5
-}
-
-/// Where factor `f`'s rays hit: its brick's (or coarse brick's) centroid plus its offset.
-fn hit_point(asset: &Asset, f: usize) -> Vec3 {
-    let (brick, _) = asset.factors.brick_and_rays(f);
-    let offset = Vec3::from(asset.factors.offset(f));
-    // Validated: the index names a brick or, past them, a coarse brick, whose offsets are
-    // stored divided by its 2^level (`prt_format::coarse`).
-    let b = brick as usize;
-    match asset.bricks.get(b) {
-        Some(brick) => Vec3::from(brick.centroid) + offset,
-        None => {
-            let c = &asset.coarse.bricks[b - asset.bricks.len()];
-            Vec3::from(c.centroid) + offset * (1u32 << c.level) as f32
-        }
-    }
 }
 
 /// Rewrites `asset` without the data of the probes marked in `drop`, which become filled from

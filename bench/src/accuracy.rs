@@ -208,11 +208,6 @@ fn measure(
     let merged = settings.cell_size != Some(0.0);
     if merged && precision == TransferPrecision::F16 {
         encodings.push(("sh9, flat brick", without_offsets(asset)));
-    } else if merged && precision == TransferPrecision::U8 {
-        // What an 8-byte factor could hold (issue 32, item 1): brick and rays, three L1 terms.
-        let mut l1 = asset;
-        keep_l1(&mut l1.factors);
-        encodings.push(("l1, flat brick", l1));
     }
     let mut rows = Vec::new();
     for (encoding, asset) in encodings {
@@ -236,7 +231,7 @@ fn measure(
             probes: asset.probes.len(),
             bytes_per_probe: summary.bytes_per_probe,
             transport_per_probe: summary.transport_bytes_per_probe,
-            factors_per_probe: asset.factors.len() as f64 / asset.probes.len() as f64,
+            factors_per_probe: summary.factor_count as f64 / asset.probes.len() as f64,
             error: compare(&ours, reference, 1e-3),
             deringed: compare(&windowed(&ours), reference, 1e-3),
         });
@@ -329,34 +324,15 @@ fn windowed(
         .collect()
 }
 
-/// The low word of a packed factor's bits without its three offsets.
-const OFFSETS_CLEARED: u32 = !((1 << (3 * prt_format::OFFSET_BITS)) - 1);
-
-/// The same asset with every factor's offset zeroed: each brick seen as its mean radiance.
+/// The same f32 or f16 asset with every factor's offset zeroed: each brick seen as its mean
+/// radiance (a u8 table is left as it is: its lobe factors' directions need their offsets).
 fn without_offsets(mut asset: Asset) -> Asset {
     match &mut asset.factors {
         Factors::F32(f) => f.iter_mut().for_each(|f| f.offset = [0.0; 3]),
         Factors::F16(f) => f.iter_mut().for_each(|f| f.offset = [0; 2]),
-        Factors::U8 { factors, .. } => factors
-            .iter_mut()
-            .for_each(|f| f.bits[0] &= OFFSETS_CLEARED),
+        Factors::U8 { .. } => {}
     }
     asset
-}
-
-/// Zeroes every u8 factor's offset and L2 transfer (SH terms 4..8), keeping what an 8-byte
-/// factor (24-bit brick, 8-bit rays, three L1 terms) would hold, to measure what it costs
-/// before building it (issue 32, item 1). Other precisions are left as they are.
-fn keep_l1(factors: &mut Factors) {
-    if let Factors::U8 { factors, .. } = factors {
-        // The offsets, then the SH terms (`prt_format::FactorPacked`): keep terms 1..3, which
-        // end where term 4 starts.
-        let l1_end = prt_format::SH_AT[3] - 32;
-        for f in factors.iter_mut() {
-            f.bits[0] &= OFFSETS_CLEARED;
-            f.bits[1] &= (1 << l1_end) - 1;
-        }
-    }
 }
 
 #[cfg(test)]
@@ -433,28 +409,5 @@ mod tests {
             e.contains("d.md line 4: column 'rays' is '5l2', not a ray count"),
             "{e}"
         );
-    }
-
-    /// `keep_l1` keeps a u8 factor's rays and L1 terms exactly and zeroes its offset and L2.
-    #[test]
-    fn keep_l1_keeps_rays_and_l1_only() {
-        let sh = [0.3, -0.2, 0.1, 0.25, -0.15, 0.05, 0.2, -0.1];
-        let f = prt_format::FactorPacked::of(&prt_format::FactorU8::transfer(40, sh, 2048).place(
-            7,
-            [0.3, -0.2, 0.1],
-            1.0,
-        ));
-        let mut factors = Factors::U8 {
-            factors: vec![f],
-            offset_scale: 1.0,
-        };
-        let before = factors.transfer(0, 2048);
-        keep_l1(&mut factors);
-        let after = factors.transfer(0, 2048);
-        assert_eq!(after[..4], before[..4], "rays (k = 0) and L1 kept");
-        assert!(before[4..].iter().any(|&t| t != 0.0));
-        assert!(after[4..].iter().all(|&t| t == 0.0), "{after:?}");
-        assert_eq!(factors.offset(0), [0.0; 3]);
-        assert_eq!(factors.brick_and_rays(0), (7, 40));
     }
 }

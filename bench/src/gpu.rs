@@ -228,7 +228,8 @@ impl Setup<'_> {
         };
         Ok(Row {
             probes,
-            factors_per_probe: asset.factors.len() as f64 / probes as f64,
+            factors_per_probe: prt_format::Summary::of(&asset, 0).factor_count as f64
+                / probes as f64,
             full,
             gather,
             idle,

@@ -37,8 +37,9 @@ enum Precision {
     F16,
     /// 56-byte factors of floats, and surfels of floats (80 bytes; 48 otherwise).
     F32,
-    /// 12-byte factors: 6-bit offsets, 7-bit band-1 and 5-bit band-2 SH terms (three eighths
-    /// of f16).
+    /// Factors of 8 bytes where a lobe toward the mean hit point fits their SH terms (`R` and
+    /// the band-2 scale stored; most factors), 16 with 7-bit band-1 and 5-bit band-2 terms
+    /// elsewhere; 6-bit offsets.
     U8,
 }
 

@@ -46,6 +46,42 @@ pub struct Asset {
 }
 
 impl Asset {
+    /// Where factor `f`'s rays hit on average: its brick's (or, past the bricks, coarse
+    /// brick's) centroid plus its offset, stored divided by the coarse brick's `2^level`
+    /// (`crate::coarse`). Validated assets only: `f` and its brick index in range.
+    pub fn factor_point(&self, f: usize) -> [f32; 3] {
+        let (brick, _) = self.factors.brick_and_rays(f);
+        let [centroid_x, centroid_y, centroid_z, scale] = self.factor_frame(brick as usize);
+        let offset = self.factors.offset(f);
+        let centroid = [centroid_x, centroid_y, centroid_z];
+        std::array::from_fn(|a| centroid[a] + offset[a] * scale)
+    }
+
+    /// The centroid and the offset multiplier (`2^level`, 1 for a brick) of brick or coarse
+    /// brick `b`: what a factor's mean hit point is measured from ([`Asset::factor_point`]).
+    pub fn factor_frame(&self, b: usize) -> [f32; 4] {
+        match self.bricks.get(b) {
+            Some(brick) => {
+                let [x, y, z] = brick.centroid;
+                [x, y, z, 1.0]
+            }
+            None => {
+                let c = &self.coarse.bricks[b - self.bricks.len()];
+                let [x, y, z] = c.centroid;
+                [x, y, z, (1u32 << c.level) as f32]
+            }
+        }
+    }
+
+    /// Factor `f`'s SH9 transfer as the table of `probe` holds it: a lobe factor
+    /// (`crate::lobe`) decoded about the direction from the probe's ray origin to the factor's
+    /// mean hit point.
+    pub fn factor_transfer(&self, probe: &Probe, f: usize) -> [f32; SH_COUNT] {
+        let point = self.factor_point(f);
+        let toward = std::array::from_fn(|a| point[a] - probe.position[a]);
+        self.factors.transfer(f, self.header.ray_count, toward)
+    }
+
     /// The visibility map ([`DEPTH_WORDS`] words) of probe `p`, found by its slot; `None` for a
     /// probe without data or out of range.
     pub fn visibility_map(&self, p: usize) -> Option<&[u32]> {

@@ -6,6 +6,7 @@
 use bytemuck::{Pod, Zeroable};
 use serde::{Deserialize, Serialize};
 
+use crate::lobe::{a2_level, lobe_terms, r_level};
 use crate::sh::SH_COUNT;
 use crate::snorm::{snorm8_div4, snorm8_div8};
 
@@ -16,12 +17,13 @@ pub enum TransferPrecision {
     F32,
     /// 8 + 3 IEEE halves per factor (32 bytes with brick index and ray count).
     F16,
-    /// 12 bytes per factor ([`FactorPacked`]): 24-bit brick index, 8-bit ray count, offsets as
-    /// 6-bit fields of the brick size, SH terms 1..3 as 7-bit and 4..8 as 5-bit fields
-    /// relative to the factor's DC term: the default. Against the Cornell reference (0.1 m,
-    /// 2048 rays, the default cells) 1.95% mean irradiance error, against 1.89% with 8-bit
-    /// terms (16 bytes, format 8) and 1.91% in f32; issue 32 bounds a default at 3.81% (1.15x
-    /// the exact 512-ray bake's).
+    /// 8-byte slots ([`FactorSlot`]): 24-bit brick index, 8-bit ray count, offsets as 6-bit
+    /// fields of the brick size, and either the 6-bit `R` of a lobe about the direction to
+    /// the factor's mean hit point ([`crate::lobe`]; one slot, nearly every factor) or, in a
+    /// second slot, SH terms 1..3 as 7-bit and 4..8 as 5-bit fields relative to the factor's
+    /// DC term: the default. Issue 32 bounds a default's error against the Cornell reference
+    /// (0.1 m, 2048 rays) at 3.81% (1.15x the exact 512-ray bake's); see
+    /// docs/results/packing.md for each encoding's.
     #[default]
     U8,
 }
@@ -81,7 +83,7 @@ impl FactorF16 {
 }
 
 /// One factor of [`TransferPrecision::U8`] as the baker builds it, before the asset packs it
-/// into a [`FactorPacked`]: `brick_rays` = brick << 8 | rays (1..=255; the baker splits larger
+/// into one or two [`FactorSlot`]s: `brick_rays` = brick << 8 | rays (1..=255; the baker splits larger
 /// counts over several factors of the same brick); `packed` holds 12 bytes, low byte first:
 /// offset x, y, z in steps of [`OFFSET_BITS`] (times the `offset_scale` of [`Factors::U8`]),
 /// then SH terms 1..8 in steps of their [`SH_BITS`] (a step being the term's [`SH_RANGE`]
@@ -133,6 +135,18 @@ impl FactorU8 {
         }
     }
 
+    /// The rays' mean direction times the length of their mean vector (`R d`), from the
+    /// quantised band-1 terms (`Y_1 = Y1 * (y, z, x)`, so each term over the DC term is
+    /// `sqrt(3) R d` along its axis).
+    pub fn mean_vector(&self) -> [f32; 3] {
+        let term = |k: usize| {
+            let i = 3 + k;
+            let byte = (self.packed[i / 4] >> (8 * (i % 4))) as u8 as i8;
+            f32::from(byte) / levels(SH_BITS[k]) * SH_RANGE[k] / 3f32.sqrt()
+        };
+        [term(2), term(0), term(1)]
+    }
+
     /// This transfer from brick `brick` (at most [`U8_MAX_BRICK`]) whose rays' mean hit point
     /// is `offset` from its centroid (metres; `offset_scale` as in [`Factors::U8`]).
     #[inline]
@@ -177,8 +191,9 @@ pub const SH_BITS: [u32; 8] = [7, 7, 7, 5, 5, 5, 5, 5];
 /// Bits of each offset axis of a packed factor (6: a 62nd of the brick).
 pub const OFFSET_BITS: u32 = 6;
 
-/// Where term k = 1..8 starts in [`FactorPacked::bits`], after the three offsets.
-pub const SH_AT: [u32; 8] = {
+/// Where term k = 1..8 starts in the 64 bits of a [`FactorU8`]'s offsets and terms, after
+/// the three offsets (`packed_bits`).
+const SH_AT: [u32; 8] = {
     let mut at = [0; 8];
     let mut p = 3 * OFFSET_BITS;
     let mut k = 0;
@@ -214,51 +229,149 @@ fn clamp_levels(byte: u32, bits: u32) -> u32 {
     u32::from((byte as u8 as i8).clamp(-level, level) as u8)
 }
 
-/// One factor as a [`TransferPrecision::U8`] asset stores it, 12 bytes: `brick_rays` as in
-/// [`FactorU8`]; `bits` (a little-endian 64-bit word) holds the three offsets as signed
-/// [`OFFSET_BITS`]-bit fields from bit 0 and SH term k = 1..8 as a signed field of
-/// `SH_BITS[k - 1]` bits at `SH_AT[k - 1]` (`shaders/gather.wgsl` decodes the same).
+/// The three offsets (from bit 0) and eight terms (at [`SH_AT`]) of the baker's factor `f` as
+/// signed fields of one 64-bit word (its last byte, the baker's own, is dropped).
+fn packed_bits(f: &FactorU8) -> u64 {
+    let byte = |i: usize| u64::from((f.packed[i / 4] >> (8 * (i % 4))) & 0xff);
+    let field = |i: usize, bits: u32| byte(i) & ((1 << bits) - 1);
+    let mut v = 0u64;
+    for a in 0..3 {
+        v |= field(a, OFFSET_BITS) << (a as u32 * OFFSET_BITS);
+    }
+    for k in 0..8 {
+        v |= field(3 + k, SH_BITS[k]) << SH_AT[k];
+    }
+    v
+}
+
+/// The signed field of `bits` bits at bit `at` of `v`, as a float.
+fn signed_field(v: u64, at: u32, bits: u32) -> f32 {
+    let q = ((v >> at) as u32 & ((1 << bits) - 1)) as i32;
+    ((q << (32 - bits)) >> (32 - bits)) as f32
+}
+
+/// Where a head's `R` code starts in [`FactorSlot::bits`], after the three offsets.
+pub const R_AT: u32 = 3 * OFFSET_BITS;
+/// Bit of a head's [`FactorSlot::bits`] set when its terms follow in a continuation slot.
+pub const SLOT_FULL: u32 = 1 << (R_AT + crate::lobe::R_BITS);
+
+/// Where a lobe head's band-2 scale code starts in [`FactorSlot::bits`], after [`SLOT_FULL`]
+/// (it fills the word).
+pub const A2_AT: u32 = R_AT + crate::lobe::R_BITS + 1;
+const _: () = assert!(A2_AT + crate::lobe::A2_BITS == 32);
+
+/// Where term k = 1..8 starts in a continuation's 64 bits (`brick_rays | bits << 32`), after
+/// its ray count of zero.
+pub const TERMS_AT: [u32; 8] = {
+    let mut at = [0; 8];
+    let mut k = 0;
+    while k < 8 {
+        at[k] = SH_AT[k] - 3 * OFFSET_BITS + 8;
+        k += 1;
+    }
+    assert!(at[7] + SH_BITS[7] <= 64, "the terms fit the continuation");
+    at
+};
+
+/// The frame a factor's lobe is decoded in: its brick's (or coarse brick's) centroid, the
+/// metres per unit of its packed offset, and the ray origin of the probe whose table holds it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LobeFrame {
+    pub centroid: [f32; 3],
+    pub offset_metres: f32,
+    pub origin: [f32; 3],
+}
+
+/// One slot of a [`TransferPrecision::U8`] table, 8 bytes. A factor takes one slot, a lobe
+/// factor ([`crate::lobe`]), or two, a head with [`SLOT_FULL`] set and a continuation slot
+/// that holds its eight terms. `shaders/gather.wgsl` decodes the same.
+///
+/// - A head: `brick_rays` = brick << 8 | rays (1..=255, as [`FactorU8`]); `bits` holds the
+///   three offsets as signed [`OFFSET_BITS`]-bit fields from bit 0 (times the `offset_scale`
+///   of [`Factors::U8`]), then the lobe's `R` code ([`crate::lobe::R_BITS`] bits at
+///   [`R_AT`]; zero in a full head), then [`SLOT_FULL`]; the bits above are zero.
+/// - A continuation: a ray count of zero (its low byte), so that a reader striding over slots
+///   skips it, and SH term k = 1..8 as a signed field of `SH_BITS[k - 1]` bits at
+///   `TERMS_AT[k - 1]` of the 64-bit word `brick_rays | bits << 32`, in steps of the term's
+///   [`SH_RANGE`] times the DC term over its levels.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable, Serialize, Deserialize)]
 #[repr(C)]
-pub struct FactorPacked {
+pub struct FactorSlot {
     pub brick_rays: u32,
-    pub bits: [u32; 2],
+    pub bits: u32,
 }
-const _: () = assert!(std::mem::size_of::<FactorPacked>() == 12);
+const _: () = assert!(std::mem::size_of::<FactorSlot>() == 8);
 
-impl FactorPacked {
-    /// The packing of the baker's factor `f` (its last byte, the baker's own, is dropped).
-    pub fn of(f: &FactorU8) -> FactorPacked {
-        let byte = |i: usize| u64::from((f.packed[i / 4] >> (8 * (i % 4))) & 0xff);
-        let field = |i: usize, bits: u32| byte(i) & ((1 << bits) - 1);
-        let mut v = 0u64;
-        for a in 0..3 {
-            v |= field(a, OFFSET_BITS) << (a as u32 * OFFSET_BITS);
-        }
-        for k in 0..8 {
-            v |= field(3 + k, SH_BITS[k]) << SH_AT[k];
-        }
-        FactorPacked {
+impl FactorSlot {
+    /// The slots of the baker's factor `f`: one lobe slot where `frame` is given and the lobe
+    /// about the direction from its origin to the factor's mean hit point (as decoded) fits
+    /// the factor's terms ([`crate::lobe::fit`]), else a full head and its continuation.
+    pub fn pack(f: &FactorU8, frame: Option<LobeFrame>) -> (FactorSlot, Option<FactorSlot>) {
+        let v = packed_bits(f);
+        let offsets = (v & ((1 << R_AT) - 1)) as u32;
+        let head = |bits| FactorSlot {
             brick_rays: f.brick_rays,
-            bits: [v as u32, (v >> 32) as u32],
+            bits,
+        };
+        let lobe = frame.and_then(|fr| {
+            let unit = |a: u32| signed_field(v, a * OFFSET_BITS, OFFSET_BITS) / levels(OFFSET_BITS);
+            let toward: [f32; 3] = std::array::from_fn(|a| {
+                fr.centroid[a] + unit(a as u32) * fr.offset_metres - fr.origin[a]
+            });
+            let terms: [f32; 8] = std::array::from_fn(|k| {
+                signed_field(v, SH_AT[k], SH_BITS[k]) / levels(SH_BITS[k]) * SH_RANGE[k]
+            });
+            crate::lobe::fit(&terms, toward)
+        });
+        match lobe {
+            Some((q, q2)) => (head(offsets | q << R_AT | q2 << A2_AT), None),
+            None => {
+                let c = (v >> R_AT) << 8;
+                let rest = FactorSlot {
+                    brick_rays: c as u32,
+                    bits: (c >> 32) as u32,
+                };
+                (head(offsets | SLOT_FULL), Some(rest))
+            }
         }
     }
 
-    /// The signed field of `bits` bits at bit `at`.
-    fn field(&self, at: u32, bits: u32) -> f32 {
-        let v = u64::from(self.bits[0]) | u64::from(self.bits[1]) << 32;
-        let q = ((v >> at) as u32 & ((1 << bits) - 1)) as i32;
-        ((q << (32 - bits)) >> (32 - bits)) as f32
+    /// Rays of a head; 0 for a continuation.
+    pub fn rays(&self) -> u32 {
+        self.brick_rays & 0xff
     }
 
-    /// SH term k = 1..8 in units of its range ([`SH_RANGE`]) times the DC term, in [-1, 1].
+    /// Brick of a head.
+    pub fn brick(&self) -> u32 {
+        self.brick_rays >> 8
+    }
+
+    /// A head whose terms follow in a continuation.
+    pub fn is_full(&self) -> bool {
+        self.rays() != 0 && self.bits & SLOT_FULL != 0
+    }
+
+    /// A lobe head's `R` code.
+    pub fn r_code(&self) -> u32 {
+        self.bits >> R_AT & crate::lobe::R_TOP
+    }
+
+    /// A lobe head's band-2 scale code.
+    pub fn a2_code(&self) -> u32 {
+        self.bits >> A2_AT & crate::lobe::A2_TOP
+    }
+
+    /// A continuation's SH term k = 1..8 in units of its range ([`SH_RANGE`]) times the DC
+    /// term, in [-1, 1].
     pub fn term(&self, k: usize) -> f32 {
-        self.field(SH_AT[k - 1], SH_BITS[k - 1]) / levels(SH_BITS[k - 1])
+        let v = u64::from(self.brick_rays) | u64::from(self.bits) << 32;
+        signed_field(v, TERMS_AT[k - 1], SH_BITS[k - 1]) / levels(SH_BITS[k - 1])
     }
 
-    /// Offset axis `a` in units of the offset scale, in [-1, 1].
+    /// A head's offset axis `a` in units of the offset scale, in [-1, 1].
     pub fn offset_unit(&self, a: usize) -> f32 {
-        self.field(a as u32 * OFFSET_BITS, OFFSET_BITS) / levels(OFFSET_BITS)
+        let v = u64::from(self.bits);
+        signed_field(v, a as u32 * OFFSET_BITS, OFFSET_BITS) / levels(OFFSET_BITS)
     }
 }
 
@@ -309,7 +422,8 @@ pub enum Factors {
     F32(Vec<FactorF32>),
     F16(Vec<FactorF16>),
     U8 {
-        factors: Vec<FactorPacked>,
+        /// Slots ([`FactorSlot`]): a probe's `first_factor..+factor_count` counts slots.
+        factors: Vec<FactorSlot>,
         /// Metres of offset per unit of the packed offset (the brick size).
         offset_scale: f32,
     },
@@ -345,20 +459,25 @@ impl Factors {
         }
     }
 
-    /// Brick index and ray count of factor `f`.
+    /// Brick index and ray count of factor `f`; a continuation slot of a u8 table
+    /// ([`FactorSlot`]) has no rays and names its head's brick.
     #[inline]
     pub fn brick_and_rays(&self, f: usize) -> (u32, u32) {
         match self {
             Factors::F32(t) => (t[f].brick, t[f].rays),
             Factors::F16(t) => (t[f].brick, t[f].rays),
-            Factors::U8 { factors, .. } => {
-                (factors[f].brick_rays >> 8, factors[f].brick_rays & 0xff)
-            }
+            Factors::U8 { factors, .. } => match factors[f].rays() {
+                0 => (f.checked_sub(1).map_or(0, |h| factors[h].brick()), 0),
+                rays => (factors[f].brick(), rays),
+            },
         }
     }
 
-    /// Full SH9 transfer of factor `f` for a bake of `ray_count` rays.
-    pub fn transfer(&self, f: usize, ray_count: u32) -> [f32; SH_COUNT] {
+    /// Full SH9 transfer of factor `f` for a bake of `ray_count` rays. A lobe factor
+    /// ([`crate::lobe`]) is decoded about `toward`, the direction from the ray origin of the
+    /// probe whose table holds it to its mean hit point (`Asset::factor_transfer` finds it);
+    /// the other factors ignore it. A continuation slot's transfer is zero.
+    pub fn transfer(&self, f: usize, ray_count: u32, toward: [f32; 3]) -> [f32; SH_COUNT] {
         let (_, rays) = self.brick_and_rays(f);
         let mut t = [0.0; SH_COUNT];
         t[0] = rays as f32 * crate::directions::direction_weight(ray_count) * crate::sh::Y00;
@@ -369,9 +488,22 @@ impl Factors {
                     (t[1 + 2 * w], t[2 + 2 * w]) = unpack2(word);
                 }
             }
+            Factors::U8 { factors, .. } if factors[f].is_full() => {
+                // A head at the end of the table (refused by validation) reads no terms.
+                if let Some(rest) = factors.get(f + 1) {
+                    for k in 1..SH_COUNT {
+                        t[k] = rest.term(k) * SH_RANGE[k - 1] * t[0];
+                    }
+                }
+            }
             Factors::U8 { factors, .. } => {
+                let lobe = lobe_terms(
+                    r_level(factors[f].r_code()),
+                    a2_level(factors[f].a2_code()),
+                    toward,
+                );
                 for k in 1..SH_COUNT {
-                    t[k] = factors[f].term(k) * SH_RANGE[k - 1] * t[0];
+                    t[k] = lobe[k - 1] * t[0];
                 }
             }
         }
@@ -390,13 +522,17 @@ impl Factors {
             Factors::U8 {
                 factors,
                 offset_scale,
-            } => std::array::from_fn(|a| factors[f].offset_unit(a) * offset_scale),
+            } => match factors[f].rays() {
+                0 => [0.0; 3],
+                _ => std::array::from_fn(|a| factors[f].offset_unit(a) * offset_scale),
+            },
         }
     }
 
     /// Builds the table in the requested precision for a bake of `ray_count` rays.
     /// `brick_size` (metres) scales packed offsets; for `U8`, rows must have at most
-    /// [`U8_MAX_RAYS`] rays and bricks up to [`U8_MAX_BRICK`] (see [`split_row_for_u8`]).
+    /// [`U8_MAX_RAYS`] rays and bricks up to [`U8_MAX_BRICK`] (see [`split_row_for_u8`]),
+    /// and every factor is full (two slots: without the probes' origins, no lobes).
     pub fn build(
         rows: &[FactorRow],
         precision: TransferPrecision,
@@ -408,12 +544,11 @@ impl Factors {
                 let offset_scale = u8_offset_scale(brick_size);
                 let factors = rows
                     .iter()
-                    .map(|&(brick, rays, sh, offset)| {
-                        FactorPacked::of(&FactorU8::transfer(rays, sh, ray_count).place(
-                            brick,
-                            offset,
-                            offset_scale,
-                        ))
+                    .flat_map(|&(brick, rays, sh, offset)| {
+                        let f = FactorU8::transfer(rays, sh, ray_count);
+                        let (head, rest) =
+                            FactorSlot::pack(&f.place(brick, offset, offset_scale), None);
+                        std::iter::once(head).chain(rest)
                     })
                     .collect();
                 Factors::U8 {
@@ -447,12 +582,12 @@ impl Factors {
         }
     }
 
-    /// Bytes one factor takes.
+    /// Bytes one factor (of u8 tables, one slot) takes.
     pub fn bytes_per_factor(&self) -> usize {
         match self {
             Factors::F32(_) => std::mem::size_of::<FactorF32>(),
             Factors::F16(_) => std::mem::size_of::<FactorF16>(),
-            Factors::U8 { .. } => std::mem::size_of::<FactorPacked>(),
+            Factors::U8 { .. } => std::mem::size_of::<FactorSlot>(),
         }
     }
 }
@@ -498,11 +633,14 @@ mod tests {
             let got = FactorU8::transfer(rays, sh, n).place(99, offset, scale);
             assert_eq!(got.packed, packed, "{rays} rays of {n}");
             assert_eq!(got.brick_rays, 99 << 8 | rays);
+            let (head, rest) = FactorSlot::pack(&got, None);
             let table = Factors::U8 {
-                factors: vec![FactorPacked::of(&got)],
+                factors: vec![head, rest.expect("full without a frame")],
                 offset_scale: scale,
             };
-            let t = table.transfer(0, n);
+            let t = table.transfer(0, n, [0.0; 3]);
+            assert_eq!(table.transfer(1, n, [0.0; 3]), [0.0; SH_COUNT]);
+            assert_eq!(table.brick_and_rays(1), (99, 0));
             for k in 1..SH_COUNT {
                 let step = SH_RANGE[k - 1] * dc / levels(SH_BITS[k - 1]);
                 assert!(
@@ -522,11 +660,62 @@ mod tests {
         for (i, v) in bytes.iter().enumerate() {
             f.packed[i / 4] |= v << (8 * (i % 4));
         }
-        let p = FactorPacked::of(&f);
-        let offsets: Vec<f32> = (0..3).map(|a| p.offset_unit(a) * 31.0).collect();
+        f.brick_rays = 7 << 8 | 3;
+        let (head, rest) = FactorSlot::pack(&f, None);
+        let rest = rest.expect("full");
+        assert!(head.is_full() && !rest.is_full());
+        assert_eq!((head.rays(), rest.rays()), (3, 0));
+        assert_eq!(head.bits >> A2_AT, 0);
+        let offsets: Vec<f32> = (0..3).map(|a| head.offset_unit(a) * 31.0).collect();
         assert_eq!(offsets, [31.0, -31.0, 0.0]);
-        let terms: Vec<f32> = (1..9).map(|k| p.term(k) * levels(SH_BITS[k - 1])).collect();
+        let terms: Vec<f32> = (1..9)
+            .map(|k| rest.term(k) * levels(SH_BITS[k - 1]))
+            .collect();
         assert_eq!(terms, [63.0, -63.0, 1.0, 15.0, -15.0, 0.0, 7.0, -7.0]);
+    }
+
+    /// A factor whose rays are a narrow bundle toward its mean hit point is one slot, whose
+    /// transfer decoded about that direction is within the fit's tolerance of its terms; about
+    /// no frame, or with terms no lobe about that direction has, it is two.
+    #[test]
+    fn a_bundle_toward_its_hit_point_is_one_slot() {
+        let (n, rays) = (512, 20);
+        let dc = rays as f32 * FactorU8::dc_per_ray(n);
+        let d = [0.48f32, 0.6, 0.64];
+        let y = crate::sh::basis(d);
+        // A bundle of R = 0.9 about d, band 2 that of a uniform cone of that R (R (2R - 1)).
+        let (r, a2) = (0.9, 0.72);
+        let sh: [f32; 8] =
+            std::array::from_fn(|k| dc * y[k + 1] / crate::sh::Y00 * if k < 3 { r } else { a2 });
+        let scale = 0.5;
+        let f = FactorU8::transfer(rays, sh, n).place(5, [0.1, 0.0, -0.1], scale);
+        // The brick's centroid 3 m from the origin along d, minus the offset.
+        let frame = LobeFrame {
+            centroid: [3.0 * d[0] - 0.1, 3.0 * d[1], 3.0 * d[2] + 0.1],
+            offset_metres: scale,
+            origin: [0.0; 3],
+        };
+        let (head, rest) = FactorSlot::pack(&f, Some(frame));
+        assert_eq!(rest, None);
+        assert!(!head.is_full());
+        let table = Factors::U8 {
+            factors: vec![head],
+            offset_scale: scale,
+        };
+        let toward = [3.0 * d[0], 3.0 * d[1], 3.0 * d[2]];
+        let t = table.transfer(0, n, toward);
+        // Within the fit's tolerance of the quantised terms, which are within half a step.
+        for k in 1..SH_COUNT {
+            let tolerance = match k {
+                1..=3 => crate::lobe::BAND1_TOLERANCE,
+                _ => crate::lobe::BAND2_TOLERANCE,
+            } + 0.5 / levels(SH_BITS[k - 1]);
+            assert!((t[k] - sh[k - 1]).abs() <= tolerance * SH_RANGE[k - 1] * dc);
+        }
+        // Band 2 of the opposite sign: no lobe has it.
+        let odd: [f32; 8] = std::array::from_fn(|k| if k < 3 { sh[k] } else { -sh[k] });
+        let g = FactorU8::transfer(rays, odd, n).place(5, [0.1, 0.0, -0.1], scale);
+        assert!(FactorSlot::pack(&g, Some(frame)).1.is_some());
     }
 
     #[test]

@@ -18,7 +18,8 @@
 //!
 //! which is exactly the Monte Carlo projection of docs/conventions.md section 2 when every ray hit its
 //! own brick (merging off), and an approximation that shares relighting work between probes
-//! otherwise. Factors are stored in f32, f16 or (default) packed fields of 5-7 bits ([`TransferPrecision`]).
+//! otherwise. Factors are stored in f32, f16 or (default) 8-byte slots: most as a lobe toward
+//! their mean hit point ([`lobe`]), the others with packed terms of 5-7 bits ([`TransferPrecision`]).
 //!
 //! ## File layout ([`io`])
 //! `magic (8) | format_version u32 | payload length u64 | payload (bincode 2) | xxh3-64 checksum`.
@@ -35,6 +36,7 @@ pub mod directions;
 pub mod error;
 pub mod factors;
 pub mod io;
+pub mod lobe;
 pub mod rig;
 mod sections;
 pub mod sh;

@@ -376,9 +376,9 @@ mod tests {
             brick: 77,
             ..FactorF16::default()
         };
-        let u8 = FactorPacked {
+        let u8 = FactorSlot {
             brick_rays: 0xdead_beef,
-            bits: [1, 2],
+            bits: 1,
         };
         vec![
             sample(Factors::F32(vec![f32, f32])),

@@ -42,7 +42,10 @@ pub struct Summary {
     pub brick_count: usize,
     /// Coarse bricks over the bricks, for far hits (`crate::coarse`).
     pub coarse_brick_count: usize,
+    /// Factors (a u8 table's lobe factors take one 8-byte slot, the others two).
     pub factor_count: usize,
+    /// Of those, lobe factors (`crate::lobe`; 0 but in u8 tables).
+    pub lobe_factor_count: usize,
     pub factors_per_probe: f64,
     pub transfer_precision: TransferPrecision,
     pub triangle_count: usize,
@@ -106,6 +109,16 @@ impl Summary {
                 b as f64 / probes as f64
             }
         };
+        let (factor_count, lobe_factor_count) = match &asset.factors {
+            crate::Factors::U8 { factors, .. } => (
+                factors.iter().filter(|f| f.rays() != 0).count(),
+                factors
+                    .iter()
+                    .filter(|f| f.rays() != 0 && !f.is_full())
+                    .count(),
+            ),
+            other => (other.len(), 0),
+        };
         let s = &section_bytes;
         let (traced, blind) = asset.surface.traced_and_blind();
         let probes_in_gaps = (0..asset.probes.len())
@@ -137,8 +150,9 @@ impl Summary {
             surfels_seeing_no_probe: blind,
             brick_count: asset.bricks.len(),
             coarse_brick_count: asset.coarse.bricks.len(),
-            factor_count: asset.factors.len(),
-            factors_per_probe: per_probe(asset.factors.len() as u64),
+            factor_count,
+            lobe_factor_count,
+            factors_per_probe: per_probe(factor_count as u64),
             transfer_precision: asset.factors.precision(),
             triangle_count: asset.geometry.triangles.len(),
             light_count: asset.lights.len(),
@@ -232,8 +246,18 @@ impl std::fmt::Display for Summary {
         )?;
         writeln!(
             f,
-            "factors          {} ({:.1} per probe, {:?} transfer)",
-            self.factor_count, self.factors_per_probe, self.transfer_precision
+            "factors          {} ({:.1} per probe, {:?} transfer{})",
+            self.factor_count,
+            self.factors_per_probe,
+            self.transfer_precision,
+            match self.transfer_precision {
+                TransferPrecision::U8 => format!(
+                    ": {} lobes of one 8-byte slot, {} of two",
+                    self.lobe_factor_count,
+                    self.factor_count - self.lobe_factor_count
+                ),
+                _ => String::new(),
+            }
         )?;
         writeln!(
             f,

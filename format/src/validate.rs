@@ -310,8 +310,15 @@ fn factor_table(asset: &Asset) -> Result<(), FormatError> {
     // infinity or a NaN. Decoding every u8 factor to check it took 0.1 s of a 5-million-factor
     // bake's serial assembly.
     let may_be_infinite = !matches!(factors, Factors::U8 { .. });
+    if let Factors::U8 { factors: slots, .. } = factors {
+        slot_pairs(asset, slots)?;
+    }
     for f in 0..factors.len() {
         let (b, rays) = factors.brick_and_rays(f);
+        if rays == 0 && matches!(factors, Factors::U8 { .. }) {
+            // A continuation, paired with its head by `slot_pairs`.
+            continue;
+        }
         if b as usize >= bricks {
             return Err(FormatError::invalid(
                 "factors",
@@ -327,8 +334,65 @@ fn factor_table(asset: &Asset) -> Result<(), FormatError> {
             ));
         }
         if may_be_infinite {
-            finite("factors", f, "transfer", &factors.transfer(f, h.ray_count))?;
+            finite(
+                "factors",
+                f,
+                "transfer",
+                &factors.transfer(f, h.ray_count, [0.0; 3]),
+            )?;
             finite("factors", f, "offset", &factors.offset(f))?;
+        }
+    }
+    Ok(())
+}
+
+/// The slots of a u8 table ([`crate::FactorSlot`]): every full head followed by a continuation
+/// of its probe's table and every continuation after a full head, and no bits set beyond the
+/// fields (a lobe head's fill its word).
+fn slot_pairs(asset: &Asset, slots: &[crate::FactorSlot]) -> Result<(), FormatError> {
+    let bad = |f: usize, what: String| Err(FormatError::invalid("factors", f, what));
+    for (f, s) in slots.iter().enumerate() {
+        let follows_full = f.checked_sub(1).is_some_and(|h| slots[h].is_full());
+        if s.rays() == 0 {
+            if !follows_full {
+                return bad(
+                    f,
+                    format!("continuation slot {:#x} without a full head", s.bits),
+                );
+            }
+            let v = u64::from(s.brick_rays) | u64::from(s.bits) << 32;
+            if v >> (crate::TERMS_AT[7] + crate::SH_BITS[7]) != 0 {
+                return bad(
+                    f,
+                    format!("continuation slot {v:#x}: bits beyond the terms"),
+                );
+            }
+        } else {
+            // A lobe head's fields fill its bits; a full head has no lobe codes.
+            if s.is_full() && s.bits & !(crate::SLOT_FULL | ((1 << crate::R_AT) - 1)) != 0 {
+                return bad(f, format!("full factor with lobe bits {:#x}", s.bits));
+            }
+            if s.is_full() && slots.get(f + 1).is_none_or(|c| c.rays() != 0) {
+                return bad(f, "full factor without its continuation slot".to_string());
+            }
+        }
+    }
+    // Pairs inside one probe's table: none starts with a continuation or ends with a head.
+    for (p, probe) in asset.probes.iter().enumerate() {
+        let (first, count) = (probe.first_factor as usize, probe.factor_count as usize);
+        if count == 0 {
+            continue;
+        }
+        let last = &slots[first + count - 1];
+        if slots[first].rays() == 0 || last.is_full() {
+            return Err(FormatError::invalid(
+                "probes",
+                p,
+                format!(
+                    "factor table {first}..{} splits a full factor's slots",
+                    first + count
+                ),
+            ));
         }
     }
     Ok(())

@@ -380,9 +380,10 @@ pub fn wgsl_constants() -> Vec<(&'static str, String)> {
     .collect()
 }
 
-/// The fields of a packed factor (`prt_format::FactorPacked`) as `shaders/gather.wgsl`
-/// decodes them: each SH term's range, bits and first bit, and the offsets' bits.
-fn packed_factor_constants() -> [(&'static str, String); 4] {
+/// The fields of a packed factor slot (`prt_format::FactorSlot`) as `shaders/gather.wgsl`
+/// decodes them: each SH term's range, bits and first bit in a continuation, the offsets'
+/// bits, where a lobe's `R` and `A_2` sit and their top codes, and the full head's bit.
+fn packed_factor_constants() -> [(&'static str, String); 9] {
     let array = |ty: &str, v: Vec<String>| format!("array<{ty}, {}>({})", v.len(), v.join(", "));
     [
         (
@@ -397,10 +398,18 @@ fn packed_factor_constants() -> [(&'static str, String); 4] {
             array("u32", prt_format::SH_BITS.map(|b| format!("{b}u")).to_vec()),
         ),
         (
-            "SH_AT",
-            array("u32", prt_format::SH_AT.map(|b| format!("{b}u")).to_vec()),
+            "TERMS_AT",
+            array(
+                "u32",
+                prt_format::TERMS_AT.map(|b| format!("{b}u")).to_vec(),
+            ),
         ),
         ("OFFSET_BITS", format!("{}u", prt_format::OFFSET_BITS)),
+        ("R_AT", format!("{}u", prt_format::R_AT)),
+        ("R_TOP", format!("{}u", prt_format::lobe::R_TOP)),
+        ("SLOT_FULL", format!("{}u", prt_format::SLOT_FULL)),
+        ("A2_AT", format!("{}u", prt_format::A2_AT)),
+        ("A2_TOP", format!("{}u", prt_format::lobe::A2_TOP)),
     ]
 }
 
@@ -409,7 +418,7 @@ pub fn factor_words(precision: TransferPrecision) -> u32 {
     let bytes = match precision {
         TransferPrecision::F32 => std::mem::size_of::<prt_format::FactorF32>(),
         TransferPrecision::F16 => std::mem::size_of::<prt_format::FactorF16>(),
-        TransferPrecision::U8 => std::mem::size_of::<prt_format::FactorPacked>(),
+        TransferPrecision::U8 => std::mem::size_of::<prt_format::FactorSlot>(),
     };
     (bytes / 4) as u32
 }

@@ -323,7 +323,6 @@ impl<'a> CpuRelighter<'a> {
         sky: &[ShRgb],
     ) -> (Vec<ShRgb>, RelightStats) {
         let asset = self.asset;
-        let n = asset.header.ray_count;
         let mut sh: Vec<ShRgb> = asset
             .probes
             .par_iter()
@@ -336,8 +335,12 @@ impl<'a> CpuRelighter<'a> {
                 // drift itself over 100,000 factors (`tests/tests/sums.rs`).
                 let mut acc = sky[p].map(|c| c.map(f64::from));
                 for f in probe.first_factor..probe.first_factor + probe.factor_count {
-                    let (brick, _) = asset.factors.brick_and_rays(f as usize);
-                    let t = asset.factors.transfer(f as usize, n);
+                    let (brick, rays) = asset.factors.brick_and_rays(f as usize);
+                    if rays == 0 {
+                        // A continuation slot (`prt_format::FactorSlot`): its head read it.
+                        continue;
+                    }
+                    let t = asset.factor_transfer(probe, f as usize);
                     let l = brick_radiance[brick as usize].at(asset.factors.offset(f as usize));
                     for k in 0..SH_COUNT {
                         for c in 0..3 {

@@ -102,7 +102,7 @@ fn transfer_sum(asset: &Asset, p: usize) -> [f64; 9] {
     let probe = &asset.probes[p];
     let mut sum = [0.0f64; 9];
     for f in probe.first_factor as usize..(probe.first_factor + probe.factor_count) as usize {
-        let t = asset.factors.transfer(f, asset.header.ray_count);
+        let t = asset.factor_transfer(probe, f);
         for k in 0..9 {
             sum[k] += f64::from(t[k]);
         }
@@ -355,8 +355,10 @@ fn merging_keeps_per_probe_totals() {
         .filter(|p| p.is_valid())
         .map(|p| u64::from(unmerged.header.ray_count - p.sky_rays))
         .sum();
-    assert_eq!(unmerged.factors.len() as u64, gathered_hits);
-    let (fu, fm) = (unmerged.factors.len(), merged.factors.len());
+    // Factors, not slots (a u8 factor takes one or two).
+    let factors = |a: &Asset| prt_format::Summary::of(a, 0).factor_count;
+    assert_eq!(factors(&unmerged) as u64, gathered_hits);
+    let (fu, fm) = (factors(&unmerged), factors(&merged));
     assert!(
         fm * 3 < fu,
         "merged bake has {fm} factors, unmerged {fu}: expected far fewer"

@@ -372,6 +372,84 @@ fn assert_count(what: &str, section: &str, damage: impl FnOnce(&mut Asset)) {
     }
 }
 
+/// A u8 table's slots pair up (`prt_format::FactorSlot`): a continuation without its full
+/// head, a full head without its continuation, and a probe table that splits a pair are
+/// refused, naming the section.
+#[test]
+fn u8_slot_pairs_are_checked() {
+    let asset = small_asset(TransferPrecision::U8);
+    let Factors::U8 { factors: slots, .. } = &asset.factors else {
+        panic!("a u8 bake has a u8 table")
+    };
+    let lobes = slots
+        .iter()
+        .filter(|s| s.rays() != 0 && !s.is_full())
+        .count();
+    let full = slots.iter().filter(|s| s.is_full()).count();
+    assert!(
+        lobes > 0 && full > 0,
+        "{lobes} lobes and {full} full factors"
+    );
+    let damaged = |damage: &dyn Fn(&mut Asset)| {
+        let mut a = asset.clone();
+        damage(&mut a);
+        decode(&encode(&a).expect("encode damaged asset"))
+    };
+    let invalid = |what: &str, section: &str, r: Result<Asset, FormatError>| match r {
+        Err(FormatError::Invalid { section: s, .. }) if s == section => {}
+        other => panic!("{what}: expected Invalid in {section}, got {other:?}"),
+    };
+    // A full head made a lobe: its continuation has no head.
+    let head = slots.iter().position(|s| s.is_full()).unwrap();
+    invalid(
+        "continuation without its head",
+        "factors",
+        damaged(&|a| u8_slots(a)[head].bits &= !prt_format::SLOT_FULL),
+    );
+    // A lobe head followed by another head, marked full.
+    let lobe = (0..slots.len() - 1)
+        .find(|&f| slots[f].rays() != 0 && !slots[f].is_full() && slots[f + 1].rays() != 0)
+        .unwrap();
+    invalid(
+        "full head without its continuation",
+        "factors",
+        damaged(&|a| {
+            let s = &mut u8_slots(a)[lobe];
+            s.bits = (s.bits & ((1 << prt_format::R_AT) - 1)) | prt_format::SLOT_FULL;
+        }),
+    );
+    // A probe whose table ends with a continuation gives it to the next probe with a table.
+    let ends = |p: &prt_format::Probe| (p.first_factor + p.factor_count) as usize;
+    let split = (0..asset.probes.len()).find(|&p| {
+        let probe = &asset.probes[p];
+        probe.factor_count > 2 && slots[ends(probe) - 1].rays() == 0
+    });
+    if let Some(p) = split {
+        invalid(
+            "a table that splits a full factor",
+            "probes",
+            damaged(&|a| {
+                a.probes[p].factor_count -= 1;
+                for q in a.probes.iter_mut().skip(p + 1) {
+                    q.first_factor -= 1;
+                    if q.factor_count > 0 {
+                        q.factor_count += 1;
+                        break;
+                    }
+                }
+            }),
+        );
+    }
+}
+
+/// The slots of a u8 table.
+fn u8_slots(a: &mut Asset) -> &mut Vec<prt_format::FactorSlot> {
+    match &mut a.factors {
+        Factors::U8 { factors, .. } => factors,
+        _ => panic!("not a u8 table"),
+    }
+}
+
 /// Sets the brick index of factor `f` in either precision.
 fn set_factor_brick(factors: &mut Factors, f: usize, brick: u32) {
     match factors {

@@ -18,8 +18,8 @@ pub(super) struct Bricks {
     pub(super) positions: Vec<(Vec3, bool)>,
     /// Per grid point, what its rays saw ([`trace::ProbeRays::not_placed`] where not traced).
     pub(super) rays: Vec<trace::ProbeRays>,
-    /// Per grid point, whose factor table it carries, and how many factors that is
-    /// ([`carried_layout`]).
+    /// Per grid point, whose factor table it carries ([`carried_layout`]), and how many
+    /// factors (u8 slots) that is once encoded.
     pub(super) from: Vec<Option<usize>>,
     pub(super) lens: Vec<usize>,
     /// The visibility maps of the probes with data, in slot order.
@@ -61,11 +61,13 @@ pub(super) fn bricks_stage(
         cell_size,
         double_sided: settings.double_sided,
     };
+    let origins: Vec<Vec3> = positions.iter().map(|&(origin, _)| origin).collect();
     let carried = encode::Carried {
         from: &from,
         lens: &lens,
+        origins: &origins,
     };
-    let (bricked, coarse, factors) = bricks_and_tables(
+    let (bricked, coarse, (factors, lens)) = bricks_and_tables(
         (folder, tables),
         carried,
         settings,
@@ -84,17 +86,20 @@ pub(super) fn bricks_stage(
     })
 }
 
+/// The encoded factor table and each probe's factor count (u8 slots).
+type Tables = (Factors, Vec<usize>);
+
 /// The bricks stage: numbers the bricks and finishes their surfels (those behind their
 /// surface put back on it, [`snap`]), then encodes the factor tables the probes carry into the
-/// asset's table ([`encode::encode_tables`]), freeing the rows as it goes; fails when u8
-/// factors cannot address the bricks.
+/// asset's table ([`encode::encode_tables`]), freeing the rows as it goes, with each probe's
+/// factor count; fails when u8 factors cannot address the bricks or their slots pass 2^32.
 fn bricks_and_tables(
     (folder, tables): (fold::BrickFolder, factors::Rows),
     carried: encode::Carried,
     settings: &BakeSettings,
     (cell_size, far_levels): (f32, &[u8]),
     surfaces: &snap::Surfaces,
-) -> Result<(fold::Bricked, CoarseBricks, Factors), BakeError> {
+) -> Result<(fold::Bricked, CoarseBricks, Tables), BakeError> {
     let (bricked, remap) = folder.finish_placed(&|s, cell| surfaces.place(s, cell));
     let mut used = vec![0u8; bricked.bricks.len()];
     for (&b, &l) in remap.iter().zip(far_levels) {
@@ -116,8 +121,16 @@ fn bricks_and_tables(
     }
     let encoding = (settings.transfer_precision, 4.0 * cell_size);
     let numbering = (&remap[..], &bricked.bricks[..], &placement);
-    let factors = encode::encode_tables(tables, carried, numbering, encoding)?;
-    Ok((bricked, coarse, factors))
+    let (factors, lens) = encode::encode_tables(tables, carried, numbering, encoding)?;
+    if factors.len() > u32::MAX as usize {
+        return Err(BakeError::Setting {
+            name: "spacing",
+            value: format!("{} factor slots", factors.len()),
+            reason:
+                "more than 2^32 factor slots (a factor takes one or two): use fewer probes or rays",
+        });
+    }
+    Ok((bricked, coarse, (factors, lens)))
 }
 
 /// Per probe, whether it is valid (placed and not inside geometry, [`valid`]); warns when most

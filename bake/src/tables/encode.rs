@@ -6,7 +6,7 @@
 use bytemuck::Pod;
 use glam::Vec3;
 use prt_format::{
-    u8_offset_scale, Brick, FactorF16, FactorF32, FactorPacked, FactorRow, Factors,
+    u8_offset_scale, Brick, FactorF16, FactorF32, FactorRow, FactorSlot, Factors, LobeFrame,
     TransferPrecision, U8_MAX_BRICK, U8_MAX_RAYS,
 };
 use rayon::prelude::*;
@@ -48,9 +48,17 @@ impl Placement<'_> {
     }
 }
 
-/// u8 rows encoded into `out` (one factor each): bricks renumbered, offsets from the bricks'
-/// centroids, sorted by brick (a split row's parts in order).
-fn encode_u8(rows: &[RowU8], out: &mut [FactorPacked], at: Placement, offset_scale: f32) {
+/// u8 rows encoded and appended to `out`: bricks renumbered, offsets from the bricks'
+/// centroids, sorted by brick (a split row's parts in order). Each is one lobe slot where the
+/// lobe about the direction from `origin` (the probe's ray origin) to its mean hit point fits
+/// its terms, else a full head and its continuation (`prt_format::FactorSlot`); without an
+/// origin (a dilation source, whose table probes elsewhere carry) all are full.
+fn encode_u8(
+    rows: &[RowU8],
+    out: &mut Vec<FactorSlot>,
+    (at, offset_scale, project): (Placement, f32, bool),
+    origin: Option<Vec3>,
+) {
     debug_assert!(
         at.placed.len() <= U8_MAX_BRICK as usize + 1,
         "every provisional brick fits the row's brick field"
@@ -78,33 +86,75 @@ fn encode_u8(rows: &[RowU8], out: &mut [FactorPacked], at: Placement, offset_sca
         })
         .collect();
     order.sort_unstable();
-    for (f, &o) in out.iter_mut().zip(&order) {
+    for &o in &order {
         let i = o as u32 as usize;
         let (r, (b, centroid, scale)) = (&rows[i], located[i]);
-        let offset = (Vec3::from(r.mean) - centroid) / scale;
-        *f = FactorPacked::of(&r.factor().place(b, offset.to_array(), offset_scale));
+        let mean = Vec3::from(r.mean);
+        let frame = |o: Vec3| LobeFrame {
+            centroid: centroid.to_array(),
+            offset_metres: offset_scale * scale,
+            origin: o.to_array(),
+        };
+        let lobe = origin.and_then(|o| {
+            lobe_head((r, mean), frame(o), project, |point| {
+                let offset = (point - centroid) / scale;
+                r.factor().place(b, offset.to_array(), offset_scale)
+            })
+        });
+        if let Some(head) = lobe {
+            out.push(head);
+            continue;
+        }
+        let offset = (mean - centroid) / scale;
+        let f = r.factor().place(b, offset.to_array(), offset_scale);
+        let (head, rest) = FactorSlot::pack(&f, None);
+        out.push(head);
+        out.extend(rest);
     }
 }
 
+/// Row `r`'s lobe slot, if a lobe fits: its direction is decoded toward its stored point
+/// (`place` puts the factor there), which is the mean hit point `mean` if the lobe toward it
+/// fits, else, if `project`, the point of the rays' mean direction nearest it
+/// (`prt_format::lobe`). An unmerged bake does not project: each of its factors is one hit,
+/// already in its ray's direction, and its offsets are in metres, not in brick sizes.
+fn lobe_head(
+    (r, mean): (&RowU8, Vec3),
+    frame: LobeFrame,
+    project: bool,
+    place: impl Fn(Vec3) -> prt_format::FactorU8,
+) -> Option<FactorSlot> {
+    let origin = Vec3::from(frame.origin);
+    let d = Vec3::from(r.factor().mean_vector()).normalize_or_zero();
+    let along = d.dot(mean - origin);
+    let projected = (along > 0.0 && project).then_some(origin + d * along);
+    std::iter::once(mean).chain(projected).find_map(|point| {
+        match FactorSlot::pack(&place(point), Some(frame)) {
+            (head, None) => Some(head),
+            _ => None,
+        }
+    })
+}
+
 /// How the asset's factor table is laid out: per probe, whose table it carries (its own, a
-/// dilation source's, or none), and how many factors that is.
+/// dilation source's, or none), how many factors (rows) that is, and where its rays started.
 #[derive(Clone, Copy)]
 pub struct Carried<'a> {
     pub from: &'a [Option<usize>],
     pub lens: &'a [usize],
+    pub origins: &'a [Vec3],
 }
 
-/// The asset's factor table, every carried table put in its place in probe order: tables in
-/// parallel, each encoded straight into its place,
-/// a dilated probe's copied from its source's, an invalid probe's rows dropped unencoded (a
-/// table per probe, joined, would copy every factor once more). Fails when rows in the
-/// temporary file cannot be read back ([`RowStore`]).
+/// The asset's factor table, every carried table put in its place in probe order, and each
+/// probe's length in factors (in slots for u8 tables, whose factors take one or two): tables
+/// in parallel, a dilated probe's copied from its source's, an invalid probe's rows dropped
+/// unencoded. Fails when rows in the temporary file cannot be read back ([`RowStore`]).
 pub fn encode_tables(
     rows: Rows,
     carried: Carried,
     (remap, bricks, coarse): (&[u32], &[Brick], &CoarsePlacement),
     (precision, brick_size): (TransferPrecision, f32),
-) -> Result<Factors, BakeError> {
+) -> Result<(Factors, Vec<usize>), BakeError> {
     let placed: Vec<Placed> = remap
         .par_iter()
         .map(|&b| (b, Vec3::from(bricks[b as usize].centroid)))
@@ -113,29 +163,91 @@ pub fn encode_tables(
         placed: &placed,
         coarse,
     };
+    let lens = || carried.lens.to_vec();
     Ok(match (precision, rows) {
         (TransferPrecision::U8, Rows::U8(rows)) => {
             let offset_scale = u8_offset_scale(brick_size);
-            let factors = place_tables(rows, carried, |rows, out| {
-                encode_u8(rows, out, placed, offset_scale)
+            let (factors, lens) = place_slots(rows, carried, |rows, out, origin| {
+                encode_u8(rows, out, (placed, offset_scale, brick_size > 0.0), origin)
             })?;
-            Factors::U8 {
+            let factors = Factors::U8 {
                 factors,
                 offset_scale,
-            }
+            };
+            (factors, lens)
         }
         (TransferPrecision::F16, Rows::Sums(rows)) => {
-            Factors::F16(place_tables(rows, carried, |rows, out| {
+            let table = place_tables(rows, carried, |rows, out| {
                 encode_sums(rows, out, placed, FactorF16::of)
-            })?)
+            })?;
+            (Factors::F16(table), lens())
         }
         (TransferPrecision::F32, Rows::Sums(rows)) => {
-            Factors::F32(place_tables(rows, carried, |rows, out| {
+            let table = place_tables(rows, carried, |rows, out| {
                 encode_sums(rows, out, placed, FactorF32::of)
-            })?)
+            })?;
+            (Factors::F32(table), lens())
         }
         _ => unreachable!("u8 rows are kept as u8, f16 and f32 rows as sums"),
     })
+}
+
+/// [`encode_tables`] for u8 slots, whose count per table is known once encoded: chunk by
+/// chunk, its probes encoded in parallel (`encode` appends a probe's slots, given its ray
+/// origin unless it is a dilation source), then appended in probe order and the chunk freed
+/// ([`RowStore::drain`]). A dilation source's factors are all full, so that the probes that
+/// carry its table decode it wherever they are (two slots a row); their places are filled
+/// with its table at the end. Returns the table and each probe's slot count.
+fn place_slots(
+    rows: RowStore<RowU8>,
+    carried: Carried,
+    encode: impl Fn(&[RowU8], &mut Vec<FactorSlot>, Option<Vec3>) + Sync,
+) -> Result<(Vec<FactorSlot>, Vec<usize>), BakeError> {
+    let n = carried.from.len();
+    debug_assert_eq!(rows.probe_count(), n, "a row entry per probe");
+    let mut source = vec![false; n];
+    for (p, from) in carried.from.iter().enumerate() {
+        if let Some(q) = from.filter(|&q| q != p) {
+            source[q] = true;
+        }
+    }
+    let rows_in_all: usize = carried.lens.iter().sum();
+    let mut out: Vec<FactorSlot> = Vec::with_capacity(rows_in_all + rows_in_all / 64);
+    let (mut starts, mut lens) = (vec![0; n], vec![0; n]);
+    rows.drain(|first, runs, chunk| {
+        let tables: Vec<Vec<FactorSlot>> = (runs.par_iter().enumerate())
+            .map(|(i, &(start, len))| {
+                let p = first + i;
+                let mut table = Vec::new();
+                if carried.from[p] == Some(p) {
+                    table.reserve(len + len / 16);
+                    let origin = (!source[p]).then(|| carried.origins[p]);
+                    encode(&chunk[start..start + len], &mut table, origin);
+                }
+                table
+            })
+            .collect();
+        for (i, table) in tables.into_iter().enumerate() {
+            let p = first + i;
+            starts[p] = out.len();
+            lens[p] = match carried.from[p] {
+                Some(q) if q == p => table.len(),
+                Some(q) => 2 * carried.lens[q],
+                None => 0,
+            };
+            match table.is_empty() {
+                true => out.resize(out.len() + lens[p], FactorSlot::default()),
+                false => out.extend_from_slice(&table),
+            }
+        }
+    })?;
+    for (p, from) in carried.from.iter().enumerate() {
+        if let Some(q) = from.filter(|&q| q != p) {
+            debug_assert_eq!(lens[q], lens[p], "a dilation source's factors are all full");
+            out.copy_within(starts[q]..starts[q] + lens[q], starts[p]);
+        }
+    }
+    Ok((out, lens))
 }
 
 /// [`encode_tables`] for one factor type: `encode` fills a probe's place from its rows. Chunk
@@ -293,17 +405,24 @@ mod tests {
             let carried = Carried {
                 from: &[Some(0)],
                 lens: &[rows.len(0)],
+                origins: &[far.origin],
             };
             let numbering = (&remap[..], &bricks[..], &placement);
-            let factors = encode_tables(rows, carried, numbering, (precision, 1.0)).unwrap();
-            assert_eq!(factors.len(), 3, "{precision:?}");
-            let (b, rays) = factors.brick_and_rays(2);
+            let (factors, lens) =
+                encode_tables(rows, carried, numbering, (precision, 1.0)).unwrap();
+            // Three factors (u8: the transfers point up, the hits lie along x: no lobe fits,
+            // two slots each).
+            let heads: Vec<usize> = (0..factors.len())
+                .filter(|&f| factors.brick_and_rays(f).1 > 0)
+                .collect();
+            assert_eq!((heads.len(), lens[0]), (3, factors.len()), "{precision:?}");
+            let (b, rays) = factors.brick_and_rays(heads[2]);
             assert_eq!(
                 (b, rays),
                 (4, 2),
                 "{precision:?}: the coarse brick, after the 4"
             );
-            let offset = factors.offset(2);
+            let offset = factors.offset(heads[2]);
             let want = (11.0 - centroid) / 2.0;
             assert!((offset[0] - want).abs() < 1e-2, "{precision:?}: {offset:?}");
             assert_eq!(factors.brick_and_rays(0), (0, 1));
@@ -350,7 +469,12 @@ mod tests {
             let spilled = rows.spilled_bytes() > 0;
             assert_eq!(spilled, budget < 10_000 && sizes.iter().sum::<usize>() > 0);
             let lens: Vec<usize> = from.iter().map(|f| f.map_or(0, |q| rows.len(q))).collect();
-            let carried = Carried { from, lens: &lens };
+            let origins = vec![Vec3::new(0.3, 2.0, 0.1); from.len()];
+            let carried = Carried {
+                from,
+                lens: &lens,
+                origins: &origins,
+            };
             let numbering = (&remap[..], &bricks[..], &no_coarse());
             encode_tables(rows, carried, numbering, (precision, 0.5)).unwrap()
         };
@@ -364,25 +488,33 @@ mod tests {
         let sizes = [0, 0, 3, 17, 90, 0, 5, 40, 2];
         for precision in [TransferPrecision::U8, TransferPrecision::F16] {
             let mut alone = Vec::new();
-            for q in from.iter().flatten() {
+            let mut alone_lens = vec![0; sizes.len()];
+            for (p, q) in from.iter().enumerate() {
+                let Some(q) = *q else { continue };
                 let mut one = vec![0; sizes.len()];
-                one[*q] = sizes[*q];
+                one[q] = sizes[q];
+                // Probe 3 is probe 6's source: its table alone, as a source, is all full.
                 let mut only = vec![None; sizes.len()];
-                only[*q] = Some(*q);
-                alone.extend(bytes(&encode(
-                    &one,
-                    &only,
-                    (1 << 26, usize::MAX),
-                    precision,
-                )));
+                only[q] = Some(q);
+                if q == 3 {
+                    only[6] = Some(3);
+                }
+                let (table, lens) = encode(&one, &only, (1 << 26, usize::MAX), precision);
+                alone.extend(bytes(&table.select(std::slice::from_ref(&(0..lens[q])))));
+                alone_lens[p] = lens[q];
             }
             for (chunk, budget) in [(1, 0), (1000, 1000), (1000, usize::MAX), (1 << 26, 1 << 26)] {
-                let table = encode(&sizes, &from, (chunk, budget), precision);
+                let (table, lens) = encode(&sizes, &from, (chunk, budget), precision);
                 assert!(!table.is_empty());
                 let what = format!("{precision:?}, chunks of {chunk} bytes, budget {budget}");
                 assert_eq!(bytes(&table), alone, "{what}");
+                assert_eq!(lens, alone_lens, "{what}");
             }
-            let none = encode(&[0; 9], &from, (1000, 1000), precision);
+            if precision == TransferPrecision::U8 {
+                // The source's factors take two slots each.
+                assert_eq!(alone_lens[3], 2 * 17);
+            }
+            let (none, _) = encode(&[0; 9], &from, (1000, 1000), precision);
             assert!(none.is_empty());
         }
     }
@@ -423,14 +555,22 @@ mod tests {
         let early = ProbeRows::of(rows, TransferPrecision::U8, n);
         let mut rows = Rows::new(TransferPrecision::U8, usize::MAX);
         rows.push(&early).unwrap();
+        // A dilation source: all full, as `Factors::build` makes them.
         let carried = Carried {
-            from: &[Some(0)],
-            lens: &[rows.len(0)],
+            from: &[Some(0), Some(0)],
+            lens: &[rows.len(0), 0],
+            origins: &[Vec3::ZERO; 2],
         };
+        rows.push(&ProbeRows::of(Vec::new(), TransferPrecision::U8, n))
+            .unwrap();
         let settings = (TransferPrecision::U8, size);
         let numbering = (&remap[..], &bricks[..], &coarse);
-        let early = encode_tables(rows, carried, numbering, settings).unwrap();
-        assert_eq!(early.len(), 7, "600 and 256 rays split in three and two");
-        assert_eq!(early, late);
+        let (early, lens) = encode_tables(rows, carried, numbering, settings).unwrap();
+        assert_eq!(
+            lens,
+            [14, 14],
+            "600 and 256 rays split in three and two, two slots each"
+        );
+        assert_eq!(early.select(std::slice::from_ref(&(0..14))), late);
     }
 }

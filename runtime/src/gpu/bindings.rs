@@ -73,6 +73,9 @@ pub(super) enum Binding {
     CoarseBricks,
     CoarseChildren,
     BrickMoments,
+    /// Per brick and coarse brick, what its factors' offsets are measured from
+    /// (`factor_frames`).
+    FactorFrames,
 }
 
 impl Binding {
@@ -128,6 +131,7 @@ impl Binding {
             "coarse_bricks" => Binding::CoarseBricks,
             "coarse_children" => Binding::CoarseChildren,
             "brick_moments" => Binding::BrickMoments,
+            "factor_frames" => Binding::FactorFrames,
             _ => return None,
         })
     }
@@ -185,6 +189,7 @@ impl Binding {
             Binding::CoarseBricks => b(&r.asset.coarse_bricks),
             Binding::CoarseChildren => b(&r.asset.coarse_children),
             Binding::BrickMoments => b(&r.asset.brick_moments),
+            Binding::FactorFrames => b(&r.asset.factor_frames),
         }
     }
 

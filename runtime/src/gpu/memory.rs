@@ -64,6 +64,7 @@ impl Resources {
             one("coarse_bricks", &a.coarse_bricks),
             one("coarse_children", &a.coarse_children),
             one("brick_moments", &a.brick_moments),
+            one("factor_frames", &a.factor_frames),
             all("factors (all chunks)", &mut self.chunk_factors.iter()),
             all("factor chunk uniforms", &mut self.chunk_uniforms.iter()),
             all(

@@ -84,6 +84,10 @@ pub struct AssetBuffers {
     pub coarse_bricks: wgpu::Buffer,
     pub coarse_children: wgpu::Buffer,
     pub brick_moments: wgpu::Buffer,
+    /// Per brick, then per coarse brick, the centroid its factors' offsets are measured from
+    /// and their multiplier (`prt_format::Asset::factor_frame`): where the gather decodes a
+    /// lobe factor's direction (at least one entry, so that the buffer binds).
+    pub factor_frames: wgpu::Buffer,
 }
 
 /// What the stages write and read back between updates, and the per-update uploads.
@@ -230,8 +234,22 @@ impl AssetBuffers {
                 "prt brick moments",
                 bytemuck::cast_slice(&asset.coarse.moments),
             )?,
+            factor_frames: upload(
+                "prt factor frames",
+                bytemuck::cast_slice(&factor_frames(asset)),
+            )?,
         })
     }
+}
+
+/// [`AssetBuffers::factor_frames`]: one per brick and coarse brick, at least one.
+fn factor_frames(asset: &Asset) -> Vec<[f32; 4]> {
+    let bricks = asset.bricks.len() + asset.coarse.bricks.len();
+    let mut frames: Vec<[f32; 4]> = (0..bricks).map(|b| asset.factor_frame(b)).collect();
+    if frames.is_empty() {
+        frames.push([0.0; 4]);
+    }
+    frames
 }
 
 /// The indices of `asset`'s probes that `keep`, in grid order, and how many: at least one word
