@@ -9,7 +9,7 @@
 // Invalid probes are never gathered: their texels stay zero, validity included. Dilated probes
 // (inside geometry, carrying a neighbour's table) are gathered like valid ones.
 // Packed (u8) tables stride over 8-byte slots (prt_format::FactorSlot): a lobe factor is one,
-// decoded about the direction from the probe's ray origin to its mean hit point
+// decoded about the direction from the probe's ray origin to its stored point
 // (prt_format::lobe); a full factor is a head and a continuation, which a thread that lands on
 // it skips (its ray count is zero).
 
@@ -93,13 +93,44 @@ fn lobe_transfer(t0: f32, r: f32, a2: f32, toward: vec3<f32>) -> array<f32, 9> {
     var t: array<f32, 9>;
     t[0] = t0;
     let len_sq = dot(toward, toward);
-    if len_sq > 0.0 {
+    // Zero or past the f32 range: no direction (prt_format::lobe::lobe_terms).
+    if len_sq > 0.0 && len_sq <= 3.4e38 {
         let y = sh_basis(toward * (1.0 / sqrt(len_sq)));
         for (var k = 1u; k < 9u; k = k + 1u) {
             t[k] = y[k] / SH_Y00 * select(a2, r, k < 4u) * t0;
         }
     }
     return t;
+}
+
+// An f16 or f32 factor's transfer and offset (its brick is its first word).
+struct FloatFactor {
+    t: array<f32, 9>,
+    offset: vec3<f32>,
+}
+
+// The f16 or f32 factor at word `base` (prt_format::FactorF16, FactorF32).
+fn float_factor(base: u32) -> FloatFactor {
+    var g: FloatFactor;
+    g.t[0] = f32(factors[base + 1u]) * params.ray_weight * SH_Y00;
+    if FACTOR_FORMAT == FACTOR_F16 {
+        for (var w = 0u; w < 4u; w = w + 1u) {
+            let h = unpack2x16float(factors[base + 2u + w]);
+            g.t[1u + 2u * w] = h.x;
+            g.t[2u + 2u * w] = h.y;
+        }
+        g.offset = vec3<f32>(unpack2x16float(factors[base + 6u]), unpack2x16float(factors[base + 7u]).x);
+    } else {
+        for (var k = 1u; k < 9u; k = k + 1u) {
+            g.t[k] = bitcast<f32>(factors[base + 1u + k]);
+        }
+        g.offset = vec3<f32>(
+            bitcast<f32>(factors[base + 10u]),
+            bitcast<f32>(factors[base + 11u]),
+            bitcast<f32>(factors[base + 12u]),
+        );
+    }
+    return g;
 }
 
 // This thread's share of the probe's SH: factors lid, lid + WORKGROUP, ... and sky rays likewise.
@@ -146,24 +177,10 @@ fn accumulate(p: u32, lid: u32) -> array<vec3<f32>, 9> {
                 let a2 = f32((head >> A2_AT) & A2_TOP) / f32(A2_TOP);
                 t = lobe_transfer(t0, r, a2, toward);
             }
-        } else if FACTOR_FORMAT == FACTOR_F16 {
-            t[0] = f32(factors[base + 1u]) * params.ray_weight * SH_Y00;
-            for (var w = 0u; w < 4u; w = w + 1u) {
-                let h = unpack2x16float(factors[base + 2u + w]);
-                t[1u + 2u * w] = h.x;
-                t[2u + 2u * w] = h.y;
-            }
-            offset = vec3<f32>(unpack2x16float(factors[base + 6u]), unpack2x16float(factors[base + 7u]).x);
         } else {
-            t[0] = f32(factors[base + 1u]) * params.ray_weight * SH_Y00;
-            for (var k = 1u; k < 9u; k = k + 1u) {
-                t[k] = bitcast<f32>(factors[base + 1u + k]);
-            }
-            offset = vec3<f32>(
-                bitcast<f32>(factors[base + 10u]),
-                bitcast<f32>(factors[base + 11u]),
-                bitcast<f32>(factors[base + 12u]),
-            );
+            let g = float_factor(base);
+            t = g.t;
+            offset = g.offset;
         }
         let l = factor_radiance(brick, offset);
         for (var k = 0u; k < 9u; k = k + 1u) {

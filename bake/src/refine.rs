@@ -209,6 +209,9 @@ fn point_response(asset: &Asset, q: usize, light: Vec3) -> [f32; NORMALS.len()] 
     let mut sh = [0.0f32; SH_COUNT];
     let first = probe.first_factor as usize;
     for f in first..first + probe.factor_count as usize {
+        if asset.factors.brick_and_rays(f).1 == 0 {
+            continue; // a continuation slot (`prt_format::FactorSlot`)
+        }
         let d_sq = Vec3::from(asset.factor_point(f)).distance_squared(light);
         let radiance = (spacing_sq / d_sq.max(spacing_sq)).min(1.0);
         let t = asset.factor_transfer(probe, f);
@@ -252,6 +255,9 @@ fn respond(asset: &Asset, p: usize) -> Response {
     let mut sh = [[0.0f32; SH_COUNT]; FIELDS];
     let first = probe.first_factor as usize;
     for f in first..first + probe.factor_count as usize {
+        if asset.factors.brick_and_rays(f).1 == 0 {
+            continue; // a continuation slot (`prt_format::FactorSlot`)
+        }
         let at = Vec3::from(asset.factor_point(f));
         let t = asset.factor_transfer(probe, f);
         for (k, sh) in sh.iter_mut().enumerate() {

@@ -46,9 +46,11 @@ pub struct Asset {
 }
 
 impl Asset {
-    /// Where factor `f`'s rays hit on average: its brick's (or, past the bricks, coarse
-    /// brick's) centroid plus its offset, stored divided by the coarse brick's `2^level`
-    /// (`crate::coarse`). Validated assets only: `f` and its brick index in range.
+    /// Factor `f`'s stored point: its brick's (or, past the bricks, coarse brick's) centroid
+    /// plus its offset, stored divided by the coarse brick's `2^level` (`crate::coarse`). That
+    /// is the rays' mean hit point, or for a lobe factor a point beside it on their mean
+    /// direction (`crate::lobe`); a continuation slot's is its head brick's centroid.
+    /// Validated assets only: `f` and its brick index in range.
     pub fn factor_point(&self, f: usize) -> [f32; 3] {
         let (brick, _) = self.factors.brick_and_rays(f);
         let [centroid_x, centroid_y, centroid_z, scale] = self.factor_frame(brick as usize);
@@ -75,7 +77,7 @@ impl Asset {
 
     /// Factor `f`'s SH9 transfer as the table of `probe` holds it: a lobe factor
     /// (`crate::lobe`) decoded about the direction from the probe's ray origin to the factor's
-    /// mean hit point.
+    /// stored point ([`Asset::factor_point`]).
     pub fn factor_transfer(&self, probe: &Probe, f: usize) -> [f32; SH_COUNT] {
         let point = self.factor_point(f);
         let toward = std::array::from_fn(|a| point[a] - probe.position[a]);
@@ -293,6 +295,8 @@ pub struct Probe {
     pub position: [f32; 3],
     /// [`PROBE_VALID`], [`PROBE_OFFSET`], [`PROBE_DILATED`], [`PROBE_FILLED`].
     pub flags: u32,
+    /// Its factor table in [`Asset::factors`] (in slots for u8 tables: a factor takes one or
+    /// two, [`crate::FactorSlot`]).
     pub first_factor: u32,
     pub factor_count: u32,
     /// Rays that escaped to the sky (their solid angle is `4pi * sky_rays / N`).

@@ -18,8 +18,9 @@ pub enum TransferPrecision {
     /// 8 + 3 IEEE halves per factor (32 bytes with brick index and ray count).
     F16,
     /// 8-byte slots ([`FactorSlot`]): 24-bit brick index, 8-bit ray count, offsets as 6-bit
-    /// fields of the brick size, and either the 6-bit `R` of a lobe about the direction to
-    /// the factor's mean hit point ([`crate::lobe`]; one slot, nearly every factor) or, in a
+    /// fields of the brick size, and either the 9-bit `R` and 4-bit band-2 scale of a lobe
+    /// about the direction to the factor's stored point ([`crate::lobe`]; one slot, nearly
+    /// every factor) or, in a
     /// second slot, SH terms 1..3 as 7-bit and 4..8 as 5-bit fields relative to the factor's
     /// DC term: the default. Issue 32 bounds a default's error against the Cornell reference
     /// (0.1 m, 2048 rays) at 3.81% (1.15x the exact 512-ray bake's); see
@@ -289,7 +290,8 @@ pub struct LobeFrame {
 /// - A head: `brick_rays` = brick << 8 | rays (1..=255, as [`FactorU8`]); `bits` holds the
 ///   three offsets as signed [`OFFSET_BITS`]-bit fields from bit 0 (times the `offset_scale`
 ///   of [`Factors::U8`]), then the lobe's `R` code ([`crate::lobe::R_BITS`] bits at
-///   [`R_AT`]; zero in a full head), then [`SLOT_FULL`]; the bits above are zero.
+///   [`R_AT`]), then [`SLOT_FULL`], then the lobe's band-2 scale code
+///   ([`crate::lobe::A2_BITS`] bits at [`A2_AT`]); a full head's lobe codes are zero.
 /// - A continuation: a ray count of zero (its low byte), so that a reader striding over slots
 ///   skips it, and SH term k = 1..8 as a signed field of `SH_BITS[k - 1]` bits at
 ///   `TERMS_AT[k - 1]` of the 64-bit word `brick_rays | bits << 32`, in steps of the term's
@@ -439,6 +441,7 @@ impl Default for Factors {
 }
 
 impl Factors {
+    /// Factors, or for u8 tables slots (a factor takes one or two).
     pub fn len(&self) -> usize {
         match self {
             Factors::F32(f) => f.len(),
@@ -475,7 +478,7 @@ impl Factors {
 
     /// Full SH9 transfer of factor `f` for a bake of `ray_count` rays. A lobe factor
     /// ([`crate::lobe`]) is decoded about `toward`, the direction from the ray origin of the
-    /// probe whose table holds it to its mean hit point (`Asset::factor_transfer` finds it);
+    /// probe whose table holds it to its stored point (`Asset::factor_transfer` finds it);
     /// the other factors ignore it. A continuation slot's transfer is zero.
     pub fn transfer(&self, f: usize, ray_count: u32, toward: [f32; 3]) -> [f32; SH_COUNT] {
         let (_, rays) = self.brick_and_rays(f);

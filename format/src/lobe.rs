@@ -13,11 +13,12 @@
 //!   a patch are closer to a uniform cone, so the bake fits `A_2` by itself ([`fit`]), which
 //!   measured better on the two-room fixture (5.02% -> 4.92% at 6-bit `R`).
 //!
-//! The direction is not stored: it is the direction from the probe's ray origin to the point
-//! the factor's offset names (`crate::Asset::factor_point`). For a lobe factor the bake
-//! stores the point of the rays' mean direction nearest their mean hit point, so that the
-//! direction is the rays' own up to the offset's 6-bit steps (the radiance is evaluated
-//! there, beside the mean hit point). A lobe factor thus stores `R` in [`R_BITS`] bits
+//! The direction is not stored: it is the direction from the probe's ray origin to the
+//! factor's *stored point*, the one its offset names (`crate::Asset::factor_point`). That is
+//! the rays' mean hit point where the lobe toward it fits; elsewhere, in merged bakes, the bake
+//! tries the point of the rays' mean direction nearest the mean hit point, whose direction is
+//! the rays' own up to the offset's 6-bit steps (the radiance is then evaluated there, beside
+//! the mean hit point). A lobe factor thus stores `R` in [`R_BITS`] bits
 //! ([`r_level`]) and `A_2` in [`A2_BITS`]: 8 bytes, where a factor with its eight terms
 //! takes 16 (two slots, `crate::FactorSlot`).
 //!
@@ -67,8 +68,9 @@ pub fn a2_level(q: u32) -> f32 {
 /// is uniform).
 pub fn lobe_terms(r: f32, a2: f32, toward: [f32; 3]) -> [f32; 8] {
     let len_sq = toward[0] * toward[0] + toward[1] * toward[1] + toward[2] * toward[2];
-    // Zero, or NaN from a point no validated asset holds: no direction.
-    if len_sq.is_nan() || len_sq <= 0.0 {
+    // Zero, or not finite (a point past the f32 range, from extreme coordinates or offset
+    // scales): no direction.
+    if !len_sq.is_finite() || len_sq <= 0.0 {
         return [0.0; 8];
     }
     let inv = 1.0 / len_sq.sqrt();

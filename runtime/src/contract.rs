@@ -413,7 +413,7 @@ fn packed_factor_constants() -> [(&'static str, String); 9] {
     ]
 }
 
-/// Size in u32 words of one factor of each precision.
+/// Size in u32 words of one factor of each precision (of u8 tables, one slot).
 pub fn factor_words(precision: TransferPrecision) -> u32 {
     let bytes = match precision {
         TransferPrecision::F32 => std::mem::size_of::<prt_format::FactorF32>(),

@@ -420,26 +420,27 @@ fn u8_slot_pairs_are_checked() {
     );
     // A probe whose table ends with a continuation gives it to the next probe with a table.
     let ends = |p: &prt_format::Probe| (p.first_factor + p.factor_count) as usize;
-    let split = (0..asset.probes.len()).find(|&p| {
-        let probe = &asset.probes[p];
-        probe.factor_count > 2 && slots[ends(probe) - 1].rays() == 0
-    });
-    if let Some(p) = split {
-        invalid(
-            "a table that splits a full factor",
-            "probes",
-            damaged(&|a| {
-                a.probes[p].factor_count -= 1;
-                for q in a.probes.iter_mut().skip(p + 1) {
-                    q.first_factor -= 1;
-                    if q.factor_count > 0 {
-                        q.factor_count += 1;
-                        break;
-                    }
+    let p = (0..asset.probes.len())
+        .find(|&p| {
+            let probe = &asset.probes[p];
+            let later = asset.probes[p + 1..].iter().any(|q| q.factor_count > 0);
+            probe.factor_count > 2 && slots[ends(probe) - 1].rays() == 0 && later
+        })
+        .expect("a probe whose table ends with a full factor, and a table after it");
+    invalid(
+        "a table that splits a full factor",
+        "probes",
+        damaged(&|a| {
+            a.probes[p].factor_count -= 1;
+            for q in a.probes.iter_mut().skip(p + 1) {
+                q.first_factor -= 1;
+                if q.factor_count > 0 {
+                    q.factor_count += 1;
+                    break;
                 }
-            }),
-        );
-    }
+            }
+        }),
+    );
 }
 
 /// The slots of a u8 table.

@@ -348,7 +348,7 @@ fn hostile_values_stay_finite() {
         .unwrap_or(0);
     assert!(
         most > prt_runtime::contract::GATHER_WORKGROUP,
-        "a probe has more factors ({most}) than gather threads"
+        "a probe has more factor slots ({most}) than gather threads"
     );
     let no_lights = Lighting {
         rig: LightRig::default(),

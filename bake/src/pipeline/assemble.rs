@@ -60,7 +60,7 @@ pub(super) fn assemble_probes(
             sky_rays: traced[from].sky_rays,
             slot,
         });
-        // At most 2^32 - 1 factors in all (checked before the tables were encoded), and as
+        // At most 2^32 - 1 factor slots in all (checked once the tables were encoded), and as
         // many placed probes as grid points.
         first_factor += len;
         slot += 1;

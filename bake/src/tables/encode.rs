@@ -243,7 +243,12 @@ fn place_slots(
     })?;
     for (p, from) in carried.from.iter().enumerate() {
         if let Some(q) = from.filter(|&q| q != p) {
-            debug_assert_eq!(lens[q], lens[p], "a dilation source's factors are all full");
+            assert_eq!(
+                carried.from[q],
+                Some(q),
+                "a dilation source carries its own table"
+            );
+            assert_eq!(lens[q], lens[p], "a dilation source's factors are all full");
             out.copy_within(starts[q]..starts[q] + lens[q], starts[p]);
         }
     }
