@@ -228,8 +228,7 @@ impl Setup<'_> {
         };
         Ok(Row {
             probes,
-            factors_per_probe: prt_format::Summary::of(&asset, 0).factor_count as f64
-                / probes as f64,
+            factors_per_probe: asset.factors.factor_counts().0 as f64 / probes as f64,
             full,
             gather,
             idle,

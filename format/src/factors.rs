@@ -454,6 +454,21 @@ impl Factors {
         self.len() == 0
     }
 
+    /// Factors (not slots: a u8 factor takes one or two), and of them lobe factors
+    /// ([`crate::lobe`]; none but in u8 tables), in one pass.
+    pub fn factor_counts(&self) -> (usize, usize) {
+        match self {
+            Factors::U8 { factors, .. } => factors.iter().fold((0, 0), |(all, lobes), f| {
+                let head = f.rays() != 0;
+                (
+                    all + usize::from(head),
+                    lobes + usize::from(head && !f.is_full()),
+                )
+            }),
+            other => (other.len(), 0),
+        }
+    }
+
     pub fn precision(&self) -> TransferPrecision {
         match self {
             Factors::F32(_) => TransferPrecision::F32,

@@ -109,16 +109,7 @@ impl Summary {
                 b as f64 / probes as f64
             }
         };
-        let (factor_count, lobe_factor_count) = match &asset.factors {
-            crate::Factors::U8 { factors, .. } => (
-                factors.iter().filter(|f| f.rays() != 0).count(),
-                factors
-                    .iter()
-                    .filter(|f| f.rays() != 0 && !f.is_full())
-                    .count(),
-            ),
-            other => (other.len(), 0),
-        };
+        let (factor_count, lobe_factor_count) = asset.factors.factor_counts();
         let s = &section_bytes;
         let (traced, blind) = asset.surface.traced_and_blind();
         let probes_in_gaps = (0..asset.probes.len())

@@ -356,7 +356,7 @@ fn merging_keeps_per_probe_totals() {
         .map(|p| u64::from(unmerged.header.ray_count - p.sky_rays))
         .sum();
     // Factors, not slots (a u8 factor takes one or two).
-    let factors = |a: &Asset| prt_format::Summary::of(a, 0).factor_count;
+    let factors = |a: &Asset| a.factors.factor_counts().0;
     assert_eq!(factors(&unmerged) as u64, gathered_hits);
     let (fu, fm) = (factors(&unmerged), factors(&merged));
     assert!(

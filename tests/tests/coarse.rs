@@ -113,7 +113,7 @@ fn coarse_bricks_follow_light_changes_on_the_gpu() {
     let asset = bake(&scene, &settings);
     assert_eq!(asset.header.settings.far_ratio, 2.0);
     // Factors, not slots (a u8 factor takes one or two).
-    let factors = |a: &prt_format::Asset| prt_format::Summary::of(a, 0).factor_count;
+    let factors = |a: &prt_format::Asset| a.factors.factor_counts().0;
     assert!(
         factors(&asset) * 3 < factors(&off),
         "{} factors against {}",

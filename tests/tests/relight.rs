@@ -317,5 +317,5 @@ fn rig_lights_accept_gltf_fields_and_warn_about_others() {
 
 /// Factors, not slots (a u8 factor takes one or two).
 fn factor_count(a: &prt_format::Asset) -> usize {
-    prt_format::Summary::of(a, 0).factor_count
+    a.factors.factor_counts().0
 }

@@ -23,7 +23,7 @@ fn gpu_gather_sums_match_the_f64_reference_up_to_100k_factors() {
             },
         );
         // Factors, not slots (a u8 factor takes one or two).
-        let factors = prt_format::Summary::of(&asset, 0).factor_count as u32;
+        let factors = asset.factors.factor_counts().0 as u32;
         assert!(factors >= rays * 9 / 10, "{factors} factors of {rays} rays");
         let cpu = CpuRelighter::new(&asset)
             .unwrap()

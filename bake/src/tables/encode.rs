@@ -241,17 +241,7 @@ fn place_slots(
             }
         }
     })?;
-    for (p, from) in carried.from.iter().enumerate() {
-        if let Some(q) = from.filter(|&q| q != p) {
-            assert_eq!(
-                carried.from[q],
-                Some(q),
-                "a dilation source carries its own table"
-            );
-            assert_eq!(lens[q], lens[p], "a dilation source's factors are all full");
-            out.copy_within(starts[q]..starts[q] + lens[q], starts[p]);
-        }
-    }
+    copy_dilated(&mut out, carried.from, &starts, &lens);
     Ok((out, lens))
 }
 
@@ -285,17 +275,25 @@ fn place_tables<R: Pod + Sync + Send, T: bytemuck::Zeroable + Copy + Send + Sync
             });
     })?;
     drop(places);
-    for (p, from) in carried.from.iter().enumerate() {
-        if let Some(q) = from.filter(|&q| q != p) {
-            debug_assert_eq!(
-                carried.from[q],
-                Some(q),
-                "a dilation source carries its own table"
+    copy_dilated(&mut out, carried.from, &starts, carried.lens);
+    Ok(out)
+}
+
+/// Fills each dilated probe's place (`starts`, `lens` per probe) in `out` with its source's
+/// table (`from`), once every source's own table is in place. A source carries its own
+/// table, and a dilated probe's place is its source's length (u8 sources' factors are all
+/// full, `place_slots`).
+fn copy_dilated<T: Copy>(out: &mut [T], from: &[Option<usize>], starts: &[usize], lens: &[usize]) {
+    for (p, from_p) in from.iter().enumerate() {
+        if let Some(q) = from_p.filter(|&q| q != p) {
+            assert_eq!(from[q], Some(q), "a dilation source carries its own table");
+            assert_eq!(
+                lens[q], lens[p],
+                "a dilated probe's place holds its source's table"
             );
-            out.copy_within(starts[q]..starts[q] + carried.lens[q], starts[p]);
+            out.copy_within(starts[q]..starts[q] + lens[q], starts[p]);
         }
     }
-    Ok(out)
 }
 
 /// Asks for the [`Placed`] entries of the provisional bricks `bricks` (one probe's rows) before
