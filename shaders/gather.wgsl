@@ -7,7 +7,8 @@
 // of its chunk. Thread 0 then writes the probe's SH to `probe_sh` and all seven volume texels
 // of the probe at once (store_probe.wgsl, which holds the volume's layout and bindings).
 // Invalid probes are never gathered: their texels stay zero, validity included. Dilated probes
-// (inside geometry, carrying a neighbour's table) are gathered like valid ones.
+// (inside geometry, reading a neighbour's table: their run is the neighbour's) are gathered like
+// valid ones.
 // Packed (u8) tables stride over 8-byte slots (prt_format::FactorSlot): a lobe factor is one,
 // decoded about the direction from the probe's ray origin to its stored point
 // (prt_format::lobe); a full factor is a head and a continuation, which a thread that lands on

@@ -28,7 +28,8 @@
 //! [`crate::BakeSettings::prune_error`]; a filled point has no visibility map for the lookups
 //! without surface terms), then, in order of error, more until a budget of probes with data
 //! holds ([`crate::BakeSettings::probe_budget`]). It keeps every probe that was moved off a
-//! surface or out of a wall. The dropped ones are flagged filled from level 1
+//! surface or out of a wall, and every dilation source (dilated probes read its table,
+//! [`prt_format::PROBE_DILATED`]). The dropped ones are flagged filled from level 1
 //! ([`prt_format::PROBE_FILLED`]): the runtime fills them
 //! after every gather, so the lookup reads the coarse interpolation there, continuous where kept
 //! and dropped probes meet (the argument of `prt_format::tier`). Only probes off level 1 are
@@ -40,6 +41,7 @@
 //! the error grows quickly (with the test's first version, Sponza at 1.2 m cut to 3,400
 //! probes: 23.7%, against 21.1% for a 2.4 m grid).
 
+use std::collections::{HashMap, HashSet};
 use std::f32::consts::PI;
 use std::ops::Range;
 
@@ -74,8 +76,8 @@ pub struct Refined {
     /// Probes with data before and after.
     pub before: usize,
     pub after: usize,
-    /// Probes off level 1 that could be dropped (valid, not dilated, their level-1 corners
-    /// with data), and how many were.
+    /// Probes off level 1 that could be dropped (valid, not dilated, no dilation source, their
+    /// level-1 corners with data), and how many were.
     pub candidates: usize,
     pub dropped: usize,
     /// The largest prediction error among the dropped probes ([module docs](self)), 0 if none.
@@ -101,8 +103,17 @@ pub fn prune(
         .into_par_iter()
         .map(|p| asset.probes[p].is_valid().then(|| respond(asset, p)))
         .collect();
+    // A dilation source keeps its table: dilated probes read it (format 12).
+    let sources: HashSet<(u32, u32)> = (asset.probes.iter())
+        .filter(|p| p.is_dilated() && p.factor_count > 0)
+        .map(|p| (p.first_factor, p.factor_count))
+        .collect();
     let mut scored: Vec<(f32, usize, u32)> = (0..asset.probes.len())
         .into_par_iter()
+        .filter(|&p| {
+            let probe = &asset.probes[p];
+            !sources.contains(&(probe.first_factor, probe.factor_count))
+        })
         .filter_map(|p| prediction_error(asset, &response, bvh, p).map(|(e, h)| (e, p, h)))
         .collect();
     let candidates = scored.len();
@@ -136,8 +147,8 @@ pub fn budget_warning(r: &Refined) -> Option<String> {
     let budget = r.budget.filter(|&b| r.after > b)?;
     Some(format!(
         "probe budget {budget} not met: {} probes with data remain, of which only the {} \
-         between every other grid point could be dropped (and were); a larger --spacing \
-         places fewer",
+         between every other grid point (and read by no dilated probe) could be dropped (and \
+         were); a larger --spacing places fewer",
         r.after, r.candidates
     ))
 }
@@ -296,6 +307,8 @@ fn rewrite(asset: &mut Asset, drop: &[Option<u32>]) {
     let mut ranges: Vec<Range<usize>> = Vec::new();
     let (mut sky_mask, mut sky_transfer, mut depth) = (Vec::new(), Vec::new(), Vec::new());
     let (mut first_factor, mut slot) = (0u32, 0u32);
+    // Where each kept table of a probe that is not dilated starts, by where it started.
+    let mut moved_to: HashMap<u32, u32> = HashMap::new();
     for (p, probe) in asset.probes.iter_mut().enumerate() {
         if let Some(hidden) = drop[p] {
             let [i, j, k] = grid.ijk(p);
@@ -308,10 +321,13 @@ fn rewrite(asset: &mut Asset, drop: &[Option<u32>]) {
             };
             continue;
         }
-        let start = probe.first_factor as usize;
-        ranges.push(start..start + probe.factor_count as usize);
-        probe.first_factor = first_factor;
-        first_factor += probe.factor_count;
+        if !probe.is_dilated() {
+            let start = probe.first_factor as usize;
+            ranges.push(start..start + probe.factor_count as usize);
+            moved_to.insert(probe.first_factor, first_factor);
+            probe.first_factor = first_factor;
+            first_factor += probe.factor_count;
+        }
         if probe.has_data() {
             let s = probe.slot as usize;
             sky_mask.extend_from_slice(&asset.sky_mask[s * mask_words..(s + 1) * mask_words]);
@@ -320,6 +336,13 @@ fn rewrite(asset: &mut Asset, drop: &[Option<u32>]) {
             probe.slot = slot;
             slot += 1;
         }
+    }
+    // A dilated probe reads its source's table where it now is (sources are never dropped).
+    for probe in asset.probes.iter_mut().filter(|p| p.is_dilated()) {
+        probe.first_factor = match probe.factor_count {
+            0 => first_factor,
+            _ => *(moved_to.get(&probe.first_factor)).expect("a dilation source is kept"),
+        };
     }
     asset.factors = asset.factors.select(&ranges);
     (asset.sky_mask, asset.sky_transfer, asset.probe_depth) = (sky_mask, sky_transfer, depth);

@@ -74,7 +74,7 @@ pub struct Keep<'a> {
     /// ([`crate::tables::row_store`]).
     pub row_memory: usize,
     /// Whether a probe's factor rows are kept: an invalid probe's table is never encoded (a
-    /// dilated probe carries its valid source's), so its rows are not even made.
+    /// dilated probe reads its valid source's), so its rows are not even made.
     pub rows_of: &'a (dyn Fn(&ProbeRays) -> bool + Sync),
     /// Where far hits go ([`crate::merge::coarse`]), but for its origin: each probe's own.
     pub far: FarField,

@@ -7,6 +7,7 @@
 mod accuracy;
 mod bake;
 mod fuzz;
+mod gather_lookup;
 mod gpu;
 mod lights;
 mod path_lookup;

@@ -147,26 +147,44 @@ impl NearLight {
         }
     }
 
-    /// Radiance leaving `p` on a surface whose normal (facing the ray) has dominant axis `axis`:
-    /// the nearest brick's (see [`Self::find`]), or black.
-    fn radiance_at(&self, p: Vec3, axis: u32) -> [f32; 3] {
-        match self.find(p, axis) {
-            Some(b) => self.radiance[b as usize].at((p - self.centroids[b as usize]).to_array()),
-            None => [0.0; 3],
-        }
-    }
-
     /// What a ray from `o` along unit `d` brings from within `reach` through `geo`: the
     /// radiance where it first hits ([`Self::hit_radiance`]), or `None` when it escapes.
     pub fn trace(&self, geo: &Geometry, o: Vec3, d: Vec3, reach: f32) -> Option<[f32; 3]> {
         closest_hit(geo, o, d, reach).map(|(t, tri)| self.hit_radiance(geo, o, d, t, tri))
     }
 
+    /// [`Self::trace`] with the brick that lit the hit (`None` where none was found: black).
+    pub fn trace_brick(
+        &self,
+        geo: &Geometry,
+        o: Vec3,
+        d: Vec3,
+        reach: f32,
+    ) -> Option<([f32; 3], Option<u32>)> {
+        closest_hit(geo, o, d, reach).map(|(t, tri)| self.hit_brick(geo, o, d, t, tri))
+    }
+
     /// What a ray from `o` along `d` sees where it hits triangle `tri` of `geo` at distance
     /// `t`: the radiance of the nearest brick of the triangle's side that faces the ray.
     fn hit_radiance(&self, geo: &Geometry, o: Vec3, d: Vec3, t: f32, tri: usize) -> [f32; 3] {
-        let facing = facing_normal(geo, tri, d);
-        self.radiance_at(o + d * t, dominant_axis(facing))
+        self.hit_brick(geo, o, d, t, tri).0
+    }
+
+    /// [`Self::hit_radiance`] and the brick it came from.
+    fn hit_brick(
+        &self,
+        geo: &Geometry,
+        o: Vec3,
+        d: Vec3,
+        t: f32,
+        tri: usize,
+    ) -> ([f32; 3], Option<u32>) {
+        let p = o + d * t;
+        let brick = self.find(p, dominant_axis(facing_normal(geo, tri, d)));
+        let l = brick.map_or([0.0; 3], |b| {
+            self.radiance[b as usize].at((p - self.centroids[b as usize]).to_array())
+        });
+        (l, brick)
     }
 
     /// The front-face brick of dominant axis `axis` whose centroid is nearest `p`, among those

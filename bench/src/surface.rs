@@ -48,6 +48,7 @@ use prt_format::{Asset, Summary};
 use prt_runtime::{Lighting, Sample};
 use rayon::prelude::*;
 
+use crate::gather_lookup::GatherLookup;
 use crate::path_lookup::PathLookup;
 use crate::ray_lookup::{NearLight, RayLookup};
 use crate::results::Out;
@@ -85,7 +86,8 @@ pub struct SurfaceArgs {
     #[arg(long)]
     reach: Option<f32>,
     /// Rays per point of the path lookup (`--lookup path`) [default: 256; its figures against
-    /// the probes' in docs/results/surface_candidates.md took 4096].
+    /// the probes' in docs/results/surface_candidates.md took 4096], and per gather of
+    /// `gather` and `surfel_gather` [default: 512].
     #[arg(long)]
     path_rays: Option<u32>,
     /// Bake at this spacing in metres instead of the default, and at half of it [default: the
@@ -282,6 +284,7 @@ enum Sampler<'a> {
     Rays(RayLookup<'a>),
     Surfels(SurfelLookup<'a>),
     Path(PathLookup<'a>),
+    Gather(GatherLookup<'a>),
 }
 
 impl<'a> Sampler<'a> {
@@ -309,6 +312,11 @@ impl<'a> Sampler<'a> {
                 let light = (&baked.lighting.rig, &baked.lighting.sky);
                 Sampler::Path(PathLookup::new(asset, near()?, light, rays))
             }
+            Kind::Gather { rays, per_surfel } => {
+                let surface = SurfaceSampler::new(asset, sh, &baked.irradiance, settings);
+                let with = (near()?, &baked.lighting.sky);
+                Sampler::Gather(GatherLookup::new(asset, surface, with, rays, per_surfel))
+            }
         })
     }
 
@@ -318,6 +326,7 @@ impl<'a> Sampler<'a> {
             Sampler::Rays(s) => s.sample(p, n),
             Sampler::Surfels(s) => s.sample(p, n),
             Sampler::Path(s) => s.sample(p, n),
+            Sampler::Gather(s) => s.sample(p, n),
         }
     }
 }
@@ -358,6 +367,9 @@ fn sample(
         None => None,
     };
     let image_s = t.elapsed().as_secs_f64();
+    if let Sampler::Gather(g) = &sampler {
+        eprintln!("  {} {}: {}", case.name, lookup.name, g.note());
+    }
     let summary = Summary::of(&baked.asset, 0);
     Ok(Row {
         case: case.name.clone(),

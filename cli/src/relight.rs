@@ -89,7 +89,8 @@ pub fn run(args: RelightArgs) -> Result<()> {
                     counters.probes_clamped
                 );
             }
-            (sh, prt_runtime::output::gpu_stats(&counters), "gpu")
+            let stats = prt_runtime::output::gpu_stats(&counters, &allocations, total);
+            (sh, stats, "gpu")
         }
     };
     let seconds = start.elapsed().as_secs_f64();

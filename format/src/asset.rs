@@ -27,7 +27,8 @@ pub struct Asset {
     /// spacings, four bits each, four texels per word. Sampling weights each probe by whether the
     /// shaded point is visible from it (Chebyshev test, Majercik et al. 2019).
     pub probe_depth: Vec<u32>,
-    /// Per-probe factor tables, concatenated; `Probe::first_factor..+factor_count` is a probe's.
+    /// The factor tables of the probes that are not dilated, concatenated in probe order;
+    /// `Probe::first_factor..+factor_count` is a probe's (a dilated probe's is its source's).
     pub factors: Factors,
     /// Normal-keyed bricks of surfels; a brick's radiance is the weighted mean of its surfels'.
     pub bricks: Vec<Brick>,
@@ -243,11 +244,13 @@ pub const PROBE_VALID: u32 = 1;
 /// rays start (and where visibility-aware sampling measures distances from), its texel stays at
 /// the grid position.
 pub const PROBE_OFFSET: u32 = 2;
-/// Probe flag (with [`PROBE_VALID`]): the probe is inside geometry and was *dilated*: its factor
-/// table, sky mask and sky transfer are copies of its nearest valid neighbour's, so a surface
-/// whose eight surrounding probes are all inside geometry still gets light. It keeps its own
-/// visibility map, which sees the geometry around it at short range: visibility-aware sampling
-/// therefore weights it down wherever a real probe sees the point.
+/// Probe flag (with [`PROBE_VALID`]): the probe is inside geometry and was *dilated*: it reads
+/// the factor table of its nearest valid neighbour (its `first_factor..+factor_count` are the
+/// neighbour's, whose u8 factors are all full so that they decode the same from here; since
+/// format 12, no copy), and its sky mask and sky transfer are copies of the neighbour's, so a
+/// surface whose eight surrounding probes are all inside geometry still gets light. It keeps
+/// its own visibility map, which sees the geometry around it at short range: visibility-aware
+/// sampling therefore weights it down wherever a real probe sees the point.
 pub const PROBE_DILATED: u32 = 4;
 /// Probe flag (without [`PROBE_VALID`], on a grid point without data): a sparse bake did not
 /// trace this point, and the runtime *fills* it after every gather with the trilinear
@@ -296,7 +299,7 @@ pub struct Probe {
     /// [`PROBE_VALID`], [`PROBE_OFFSET`], [`PROBE_DILATED`], [`PROBE_FILLED`].
     pub flags: u32,
     /// Its factor table in [`Asset::factors`] (in slots for u8 tables: a factor takes one or
-    /// two, [`crate::FactorSlot`]).
+    /// two, [`crate::FactorSlot`]); a dilated probe's is its source's ([`PROBE_DILATED`]).
     pub first_factor: u32,
     pub factor_count: u32,
     /// Rays that escaped to the sky (their solid angle is `4pi * sky_rays / N`).
@@ -318,7 +321,7 @@ impl Probe {
         self.slot != NO_SLOT
     }
 
-    /// Inside geometry, its table copied from a neighbour ([`PROBE_DILATED`]).
+    /// Inside geometry, reading a neighbour's table ([`PROBE_DILATED`]).
     pub fn is_dilated(&self) -> bool {
         self.flags & PROBE_DILATED != 0
     }

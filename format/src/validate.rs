@@ -152,8 +152,9 @@ fn probe_sections(asset: &Asset) -> Result<(), FormatError> {
 /// Each probe's record: a finite position, a sky ray count within the header's `ray_count`,
 /// dilated only if valid, slots numbering the probes with data in grid order (a probe with
 /// data is not filled; a probe without has no flags but `PROBE_OFFSET` and `PROBE_FILLED`
-/// with its level, no factors and no sky rays), and factor runs that follow one another and
-/// add up to the factor table's length.
+/// with its level, no factors and no sky rays), the factor runs of the probes that are not
+/// dilated following one another and adding up to the factor table's length, and each dilated
+/// probe's run one of theirs ([`dilated_tables`]).
 fn probe_records(asset: &Asset) -> Result<(), FormatError> {
     let h = &asset.header;
     let factors = &asset.factors;
@@ -214,6 +215,9 @@ fn probe_records(asset: &Asset) -> Result<(), FormatError> {
                 format!("flags {:#x}: dilated but not valid", p.flags),
             ));
         }
+        if p.is_dilated() {
+            continue;
+        }
         if u64::from(p.first_factor) != next_factor {
             return Err(FormatError::invalid(
                 "probes",
@@ -229,6 +233,61 @@ fn probe_records(asset: &Asset) -> Result<(), FormatError> {
             found: factors.len(),
             expected: next_factor as usize,
         });
+    }
+    dilated_tables(asset)
+}
+
+/// A dilated probe carries no table of its own (format 12): its run is its source's, the
+/// run of a probe with data that is not dilated (or empty), and in u8 tables holds no lobe
+/// factor, since a lobe is decoded from the position of the probe that reads it and a
+/// dilated probe reads its source's from elsewhere (`prt_format::FactorSlot`).
+fn dilated_tables(asset: &Asset) -> Result<(), FormatError> {
+    let own: std::collections::HashSet<(u32, u32)> = (asset.probes.iter())
+        .filter(|p| p.has_data() && !p.is_dilated() && p.factor_count > 0)
+        .map(|p| (p.first_factor, p.factor_count))
+        .collect();
+    for (i, p) in asset.probes.iter().enumerate() {
+        if !p.is_dilated() {
+            continue;
+        }
+        if p.factor_count == 0 {
+            // An empty run (a source that saw only sky) starts anywhere in the table.
+            if p.first_factor as usize > asset.factors.len() {
+                return Err(FormatError::invalid(
+                    "probes",
+                    i,
+                    format!(
+                        "dilated, with first_factor {} past the table",
+                        p.first_factor
+                    ),
+                ));
+            }
+            continue;
+        }
+        if !own.contains(&(p.first_factor, p.factor_count)) {
+            return Err(FormatError::invalid(
+                "probes",
+                i,
+                format!(
+                    "dilated, with factors {}..{} that are no other probe's table",
+                    p.first_factor,
+                    u64::from(p.first_factor) + u64::from(p.factor_count)
+                ),
+            ));
+        }
+        if let Factors::U8 { factors, .. } = &asset.factors {
+            let run = p.first_factor as usize..p.first_factor as usize + p.factor_count as usize;
+            if let Some(f) = run
+                .clone()
+                .find(|&f| factors[f].rays() != 0 && !factors[f].is_full())
+            {
+                return Err(FormatError::invalid(
+                    "probes",
+                    i,
+                    format!("dilated, with a lobe factor (slot {f}) in its source's table"),
+                ));
+            }
+        }
     }
     Ok(())
 }

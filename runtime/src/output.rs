@@ -1,14 +1,16 @@
 //! The relight JSON of docs/conventions.md section 6: `{"probes": [{"index": i, "position":
 //! [x,y,z], "valid": true, "dilated": false, "sh": [[r,g,b] x 9]}, ...]}`. `valid` is what the
 //! runtime gathers (it also samples the grid points sparse placement filled, which are not
-//! valid, with the SH of the coarse level they are filled from); `dilated` marks the valid probes that carry a copy of their
-//! nearest measured neighbour's data, so that a tool can tell them from measured ones.
+//! valid, with the SH of the coarse level they are filled from); `dilated` marks the valid
+//! probes that read their nearest measured neighbour's data, so that a tool can tell them from
+//! measured ones.
 
 use prt_format::sh::ShRgb;
 use prt_format::Asset;
 use serde_json::{json, Value};
 
 use crate::contract::Counters;
+use crate::gpu::Allocation;
 use crate::relight::RelightStats;
 
 /// The JSON document for `sh` relit from `asset` by `backend`, with that backend's work counts
@@ -52,14 +54,22 @@ pub fn cpu_stats(stats: &RelightStats) -> Value {
     })
 }
 
-/// What the GPU update did (its work counters).
-pub fn gpu_stats(counters: &Counters) -> Value {
+/// What the GPU update did (its work counters) and what the runtime allocated for it
+/// ([`crate::gpu::PrtRuntime::gpu_memory`]: every buffer and texture group in bytes, largest
+/// first, and the total), so that an engine can budget a level from one relight.
+pub fn gpu_stats(counters: &Counters, allocations: &[Allocation], total: u64) -> Value {
+    let memory: Vec<Value> = allocations
+        .iter()
+        .map(|a| json!({ "name": a.name, "bytes": a.bytes }))
+        .collect();
     json!({
         "bricks_relit": counters.bricks_relit,
         "surfels_relit": counters.surfels_relit,
         "shadow_rays": counters.shadow_rays,
         "probes_gathered": counters.probes_gathered,
         "probes_clamped": counters.probes_clamped,
+        "gpu_memory_bytes": total,
+        "gpu_memory": memory,
     })
 }
 
@@ -87,4 +97,29 @@ pub fn read_probe_sh(doc: &Value) -> Option<Vec<([f32; 3], ShRgb)>> {
             Some((position, c))
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The GPU stats list every allocation with its bytes, in the order given, and their total.
+    #[test]
+    fn gpu_stats_list_the_memory() {
+        let allocations = [
+            Allocation {
+                name: "factors (all chunks)",
+                bytes: 300,
+            },
+            Allocation {
+                name: "probes",
+                bytes: 20,
+            },
+        ];
+        let doc = gpu_stats(&Counters::default(), &allocations, 320);
+        assert_eq!(doc["gpu_memory_bytes"], 320);
+        assert_eq!(doc["gpu_memory"][0]["name"], "factors (all chunks)");
+        assert_eq!(doc["gpu_memory"][1]["bytes"], 20);
+        assert_eq!(doc["gpu_memory"].as_array().map(Vec::len), Some(2));
+    }
 }

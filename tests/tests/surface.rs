@@ -129,6 +129,19 @@ fn holes_are_filled_by_dilation() {
     }
     let dilated = bake_ok(&scene, &base);
     assert_eq!(dilated.probes.iter().filter(|p| p.is_dilated()).count(), 64);
+    dilated_probes_read_their_sources_tables(&dilated);
+    // Refine under a budget keeps every source and points the dilated probes at its new run.
+    let with_data = |a: &Asset| a.probes.iter().filter(|p| p.has_data()).count();
+    let budget = BakeSettings {
+        probe_budget: Some(100),
+        ..base.clone()
+    };
+    let refined = bake_ok(&scene, &budget);
+    assert!(
+        with_data(&refined) < with_data(&dilated),
+        "refine dropped nothing"
+    );
+    dilated_probes_read_their_sources_tables(&refined);
     let sh = relit(&dilated, "rigs/sky_only.json");
     let s = VolumeSampler::for_asset(&dilated, &sh, &settings);
     for (p, n) in inside {
@@ -138,6 +151,53 @@ fn holes_are_filled_by_dilation() {
             "{p:?}: {got:?}"
         );
     }
+}
+
+/// Format 12: a dilated probe has no table of its own. Its run is that of a probe with data that
+/// is not dilated (its source), the factors are the sources' tables and nothing more, and the
+/// sources' u8 factors are all full (a lobe decodes from the reading probe's position). A
+/// dilated probe's run that is no source's, or a lobe in a source's table, is refused.
+fn dilated_probes_read_their_sources_tables(asset: &Asset) {
+    let own = |p: &&prt_format::Probe| p.has_data() && !p.is_dilated();
+    let tables: std::collections::HashSet<(u32, u32)> = (asset.probes.iter().filter(own))
+        .map(|p| (p.first_factor, p.factor_count))
+        .collect();
+    let own_slots: u32 = asset
+        .probes
+        .iter()
+        .filter(own)
+        .map(|p| p.factor_count)
+        .sum();
+    assert_eq!(own_slots as usize, asset.factors.len(), "no copies");
+    let dilated: Vec<usize> = (0..asset.probes.len())
+        .filter(|&p| asset.probes[p].is_dilated() && asset.probes[p].factor_count > 0)
+        .collect();
+    assert!(!dilated.is_empty());
+    let prt_format::Factors::U8 { factors, .. } = &asset.factors else {
+        panic!("u8 factors by default");
+    };
+    for &p in &dilated {
+        let probe = &asset.probes[p];
+        assert!(tables.contains(&(probe.first_factor, probe.factor_count)));
+        let run = probe.first_factor as usize..(probe.first_factor + probe.factor_count) as usize;
+        assert!(factors[run].iter().all(|s| s.rays() == 0 || s.is_full()));
+    }
+    let mut moved = asset.clone();
+    moved.probes[dilated[0]].first_factor += 2;
+    let err = prt_format::validate::validate(&moved)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("no other probe's table"), "{err}");
+    let mut lobe = asset.clone();
+    let probe = lobe.probes[dilated[0]];
+    if let prt_format::Factors::U8 { factors, .. } = &mut lobe.factors {
+        let head = &mut factors[probe.first_factor as usize];
+        head.bits &= !prt_format::SLOT_FULL;
+    }
+    let err = prt_format::validate::validate(&lobe)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("lobe factor"), "{err}");
 }
 
 /// A probe inside a closed solid with double-sided materials sees only the inside of its faces

@@ -15,10 +15,11 @@ use crate::tables::encode;
 use crate::{trace, BakeSettings};
 
 /// Per probe, in probe order: its record, and the sky mask and sky transfer it carries with
-/// its factor table (`carried`). A dilated probe carries its source's table, sky and ray counts
-/// (the record describes the data it carries); only its position is its own. An invalid probe
-/// that is not dilated, like a grid point the placement left out, carries nothing: no table,
-/// flags or slot in the sky and visibility sections ([`prt_format::Probe::slot`]).
+/// its factor table (`carried`). A dilated probe reads its source's table (its run is the
+/// source's, format 12) and carries copies of its sky and ray counts (the record describes the
+/// data it reads); only its position is its own. An invalid probe that is not dilated, like a
+/// grid point the placement left out, carries nothing: no table, flags or slot in the sky and
+/// visibility sections ([`prt_format::Probe::slot`]).
 pub(super) fn assemble_probes(
     traced: &[trace::ProbeRays],
     positions: &[(Vec3, bool)],
@@ -51,6 +52,8 @@ pub(super) fn assemble_probes(
                 continue;
             }
         };
+        // A dilated probe has no table of its own (`carried.lens` 0): its run is set to its
+        // source's below, once every source has its place.
         let len = carried.lens[p] as u32;
         probes.push(Probe {
             position: pos.to_array(),
@@ -66,6 +69,12 @@ pub(super) fn assemble_probes(
         slot += 1;
         sky_mask.extend_from_slice(&traced[from].sky_mask);
         sky_transfer.push(traced[from].sky_transfer);
+    }
+    for (p, from) in carried.from.iter().enumerate() {
+        if let Some(q) = from.filter(|&q| q != p) {
+            (probes[p].first_factor, probes[p].factor_count) =
+                (probes[q].first_factor, probes[q].factor_count);
+        }
     }
     Assembled {
         probes,

@@ -160,7 +160,7 @@ fn validity(
     valid
 }
 
-/// Per probe of `grid`: whose factor table it carries (its own when valid, else, placed, its
+/// Per probe of `grid`: whose factor table it reads (its own when valid, else, placed, its
 /// dilation source's when the settings dilate, into holes of `cells` if given, else none) and
 /// how many factors that is; fails when they pass 2^32 in all.
 fn carried_layout(
@@ -187,12 +187,13 @@ fn carried_layout(
         .iter()
         .map(|f| f.map_or(0, |q| tables.len(q)))
         .collect();
-    let factor_count: u64 = lens.iter().map(|&len| len as u64).sum();
+    // Dilated probes read their sources' tables: only the probes' own count.
+    let factor_count: u64 = encode::own(&from, &lens).map(|len| len as u64).sum();
     if factor_count > u64::from(u32::MAX) {
         return Err(BakeError::Setting {
             name: "spacing",
             value: format!("{factor_count} factors"),
-            reason: "more than 2^32 factors (dilation copies tables into probes inside geometry): use fewer probes or rays, or --no-dilation",
+            reason: "more than 2^32 factors: use fewer probes or rays",
         });
     }
     Ok((from, lens))

@@ -136,8 +136,9 @@ fn lobe_head(
     })
 }
 
-/// How the asset's factor table is laid out: per probe, whose table it carries (its own, a
-/// dilation source's, or none), how many factors (rows) that is, and where its rays started.
+/// How the asset's factor table is laid out: per probe, whose table it reads (its own, a
+/// dilation source's, or none), how many factors (rows) that is (a dilated probe's its
+/// source's count, or 0 once encoded: [`own_lens`]), and where its rays started.
 #[derive(Clone, Copy)]
 pub struct Carried<'a> {
     pub from: &'a [Option<usize>],
@@ -145,10 +146,11 @@ pub struct Carried<'a> {
     pub origins: &'a [Vec3],
 }
 
-/// The asset's factor table, every carried table put in its place in probe order, and each
+/// The asset's factor table, every probe's own table put in its place in probe order, and each
 /// probe's length in factors (in slots for u8 tables, whose factors take one or two): tables
-/// in parallel, a dilated probe's copied from its source's, an invalid probe's rows dropped
-/// unencoded. Fails when rows in the temporary file cannot be read back ([`RowStore`]).
+/// in parallel, none for a dilated probe (it reads its source's,
+/// [`prt_format::PROBE_DILATED`]), an invalid probe's rows dropped unencoded. Fails when rows
+/// in the temporary file cannot be read back ([`RowStore`]).
 pub fn encode_tables(
     rows: Rows,
     carried: Carried,
@@ -163,7 +165,7 @@ pub fn encode_tables(
         placed: &placed,
         coarse,
     };
-    let lens = || carried.lens.to_vec();
+    let lens = || own_lens(carried);
     Ok(match (precision, rows) {
         (TransferPrecision::U8, Rows::U8(rows)) => {
             let offset_scale = u8_offset_scale(brick_size);
@@ -195,9 +197,9 @@ pub fn encode_tables(
 /// [`encode_tables`] for u8 slots, whose count per table is known once encoded: chunk by
 /// chunk, its probes encoded in parallel (`encode` appends a probe's slots, given its ray
 /// origin unless it is a dilation source), then appended in probe order and the chunk freed
-/// ([`RowStore::drain`]). A dilation source's factors are all full, so that the probes that
-/// carry its table decode it wherever they are (two slots a row); their places are filled
-/// with its table at the end. Returns the table and each probe's slot count.
+/// ([`RowStore::drain`]). A dilation source's factors are all full, so that the dilated probes
+/// that read its table decode it where they are (two slots a row); they have none of their
+/// own. Returns the table and each probe's slot count (a dilated probe's 0).
 fn place_slots(
     rows: RowStore<RowU8>,
     carried: Carried,
@@ -211,9 +213,9 @@ fn place_slots(
             source[q] = true;
         }
     }
-    let rows_in_all: usize = carried.lens.iter().sum();
+    let rows_in_all: usize = own_lens(carried).iter().sum();
     let mut out: Vec<FactorSlot> = Vec::with_capacity(rows_in_all + rows_in_all / 64);
-    let (mut starts, mut lens) = (vec![0; n], vec![0; n]);
+    let mut lens = vec![0; n];
     rows.drain(|first, runs, chunk| {
         let tables: Vec<Vec<FactorSlot>> = (runs.par_iter().enumerate())
             .map(|(i, &(start, len))| {
@@ -228,25 +230,30 @@ fn place_slots(
             })
             .collect();
         for (i, table) in tables.into_iter().enumerate() {
-            let p = first + i;
-            starts[p] = out.len();
-            lens[p] = match carried.from[p] {
-                Some(q) if q == p => table.len(),
-                Some(q) => 2 * carried.lens[q],
-                None => 0,
-            };
-            match table.is_empty() {
-                true => out.resize(out.len() + lens[p], FactorSlot::default()),
-                false => out.extend_from_slice(&table),
-            }
+            lens[first + i] = table.len();
+            out.extend_from_slice(&table);
         }
     })?;
-    copy_dilated(&mut out, carried.from, &starts, &lens);
     Ok((out, lens))
 }
 
-/// [`encode_tables`] for one factor type: `encode` fills a probe's place from its rows. Chunk
-/// by chunk, its probes in parallel, then the chunk freed ([`RowStore::drain`]).
+/// Each probe's rows in the asset's table: its own, none for a dilated probe (it reads its
+/// source's) or a probe without data.
+pub fn own_lens(carried: Carried) -> Vec<usize> {
+    own(carried.from, carried.lens).collect()
+}
+
+/// Each probe's own count of `lens` (`from`: whose table it reads): 0 for a dilated probe.
+pub fn own<'a>(from: &'a [Option<usize>], lens: &'a [usize]) -> impl Iterator<Item = usize> + 'a {
+    (from.iter().zip(lens).enumerate()).map(|(p, (&from, &len))| match from == Some(p) {
+        true => len,
+        false => 0,
+    })
+}
+
+/// [`encode_tables`] for one factor type: `encode` fills a probe's place from its rows (a
+/// dilated probe has none: it reads its source's). Chunk by chunk, its probes in parallel,
+/// then the chunk freed ([`RowStore::drain`]).
 fn place_tables<R: Pod + Sync + Send, T: bytemuck::Zeroable + Copy + Send + Sync>(
     rows: RowStore<R>,
     carried: Carried,
@@ -257,10 +264,9 @@ fn place_tables<R: Pod + Sync + Send, T: bytemuck::Zeroable + Copy + Send + Sync
         carried.from.len(),
         "a row entry per probe"
     );
-    let mut out: Vec<T> = bytemuck::zeroed_vec(carried.lens.iter().sum());
-    let places = crate::memory::split_runs(&mut out, carried.lens);
-    let starts: Vec<usize> = places.iter().map(|&(start, _)| start).collect();
-    let mut places = places.into_iter();
+    let lens = own_lens(carried);
+    let mut out: Vec<T> = bytemuck::zeroed_vec(lens.iter().sum());
+    let mut places = crate::memory::split_runs(&mut out, &lens).into_iter();
     rows.drain(|first, runs, chunk| {
         let these: Vec<_> = places.by_ref().take(runs.len()).collect();
         these
@@ -274,26 +280,7 @@ fn place_tables<R: Pod + Sync + Send, T: bytemuck::Zeroable + Copy + Send + Sync
                 }
             });
     })?;
-    drop(places);
-    copy_dilated(&mut out, carried.from, &starts, carried.lens);
     Ok(out)
-}
-
-/// Fills each dilated probe's place (`starts`, `lens` per probe) in `out` with its source's
-/// table (`from`), once every source's own table is in place. A source carries its own
-/// table, and a dilated probe's place is its source's length (u8 sources' factors are all
-/// full, `place_slots`).
-fn copy_dilated<T: Copy>(out: &mut [T], from: &[Option<usize>], starts: &[usize], lens: &[usize]) {
-    for (p, from_p) in from.iter().enumerate() {
-        if let Some(q) = from_p.filter(|&q| q != p) {
-            assert_eq!(from[q], Some(q), "a dilation source carries its own table");
-            assert_eq!(
-                lens[q], lens[p],
-                "a dilated probe's place holds its source's table"
-            );
-            out.copy_within(starts[q]..starts[q] + lens[q], starts[p]);
-        }
-    }
 }
 
 /// Asks for the [`Placed`] entries of the provisional bricks `bricks` (one probe's rows) before
@@ -433,9 +420,9 @@ mod tests {
         }
     }
 
-    /// The table is each carried probe's own table, encoded alone, in probe order, whatever
-    /// the chunks and whether they went through the temporary file: probes of no rows before
-    /// any chunk, a probe larger than a chunk, a dilated probe and an invalid one, in chunks
+    /// The table is each probe's own table, encoded alone, in probe order, whatever the chunks
+    /// and whether they went through the temporary file: probes of no rows before any chunk, a
+    /// probe larger than a chunk, a dilated probe (no table) and an invalid one, in chunks
     /// of one row with no budget (a chunk per probe, every one through the file), of 1,000
     /// bytes with a budget of one chunk (through the file) and of all of them (held), and in
     /// chunks of 64 MiB; and no rows at all.
@@ -493,7 +480,10 @@ mod tests {
             let mut alone = Vec::new();
             let mut alone_lens = vec![0; sizes.len()];
             for (p, q) in from.iter().enumerate() {
-                let Some(q) = *q else { continue };
+                // A dilated probe (6) has no table of its own: it reads its source's.
+                let Some(q) = q.filter(|&q| q == p) else {
+                    continue;
+                };
                 let mut one = vec![0; sizes.len()];
                 one[q] = sizes[q];
                 // Probe 3 is probe 6's source: its table alone, as a source, is all full.
@@ -571,8 +561,8 @@ mod tests {
         let (early, lens) = encode_tables(rows, carried, numbering, settings).unwrap();
         assert_eq!(
             lens,
-            [14, 14],
-            "600 and 256 rays split in three and two, two slots each"
+            [14, 0],
+            "600 and 256 rays split in three and two, two slots each; none for the dilated probe"
         );
         assert_eq!(early.select(std::slice::from_ref(&(0..14))), late);
     }

@@ -23,6 +23,9 @@ pub enum Kind {
     /// `crate::path_lookup::PathLookup`: one-bounce path tracing at the point with this many
     /// rays, no probes.
     Path(u32),
+    /// `crate::gather_lookup::GatherLookup`: a gather of this many rays from the point's near
+    /// group, or with `per_surfel` from its surfel, hits lit by their relit bricks.
+    Gather { rays: u32, per_surfel: bool },
 }
 
 /// A lookup's name and how to make it.
@@ -43,7 +46,7 @@ fn trilinear() -> LookupSettings {
 }
 
 /// Every lookup `--lookup` knows, by name, in table order.
-const LOOKUPS: [Variant; 8] = [
+const LOOKUPS: [Variant; 10] = [
     // Hardware trilinear over the probes' validity only: what depth moments are measured against.
     ("trilinear", || (trilinear(), Kind::Runtime)),
     // The probe volume with depth moments (DDGI's Chebyshev test), normal bias 0.2 spacings:
@@ -76,6 +79,29 @@ const LOOKUPS: [Variant; 8] = [
     // the benchmark itself and the probes' radiance cost (settings unused).
     ("path", || {
         (trilinear(), Kind::Path(crate::path_lookup::PATH_RAYS))
+    }),
+    // What a baked table per near group of the bricks its rays hit would give: no probes where
+    // the point has a surfel (one gather per group, shared by its points).
+    ("gather", || {
+        let rays = crate::gather_lookup::GATHER_RAYS;
+        (
+            LookupSettings::default(),
+            Kind::Gather {
+                rays,
+                per_surfel: false,
+            },
+        )
+    }),
+    // The same per surfel: the bound of a table that fine.
+    ("surfel_gather", || {
+        let rays = crate::gather_lookup::GATHER_RAYS;
+        (
+            LookupSettings::default(),
+            Kind::Gather {
+                rays,
+                per_surfel: true,
+            },
+        )
     }),
 ];
 
@@ -126,6 +152,17 @@ impl Lookup {
                     "are dark"
                 }
             ),
+            Kind::Gather { rays, per_surfel } => format!(
+                "{}: {rays} cosine rays from the point's {} through the asset's BVH, hits lit \
+                 by the relit brick they hit (its linear model), escapes by the sky; the \
+                 runtime's lookup where the point has no surfel (bench/src/gather_lookup.rs)",
+                self.name,
+                if per_surfel {
+                    "surfel"
+                } else {
+                    "surfel's near group (its centroid and mean normal)"
+                }
+            ),
             Kind::Path(rays) => format!(
                 "{}: one-bounce path tracing at the point, no probes: {rays} cosine rays \
                  through the asset's BVH, hits lit by the rig behind shadow rays, escapes the \
@@ -146,7 +183,7 @@ impl Lookup {
         match self.kind {
             Kind::Runtime => false,
             Kind::Rays(r) => r.near_light,
-            Kind::Surfels | Kind::Path(_) => true,
+            Kind::Surfels | Kind::Path(_) | Kind::Gather { .. } => true,
         }
     }
 }
@@ -159,7 +196,7 @@ pub struct Overrides {
     /// The near-field reach of the ray lookups that have one (`rays`, `rays_light`; probe
     /// spacings).
     pub reach: Option<f32>,
-    /// The path lookup's rays per point.
+    /// The path lookup's rays per point, and the gather lookups' rays per gather.
     pub path_rays: Option<u32>,
 }
 
@@ -213,7 +250,9 @@ impl Lookups {
                     Kind::Rays(r) if r.near_field.is_some() => {
                         r.near_field = o.reach.or(r.near_field);
                     }
-                    Kind::Path(rays) => *rays = o.path_rays.unwrap_or(*rays),
+                    Kind::Path(rays) | Kind::Gather { rays, .. } => {
+                        *rays = o.path_rays.unwrap_or(*rays)
+                    }
                     _ => {}
                 }
                 l
@@ -290,7 +329,7 @@ mod tests {
             .unwrap();
         assert!(
             err.to_string()
-                .contains("known: trilinear, moments, default, terms_trilinear, rays, rays_light, surfels, path"),
+                .contains("known: trilinear, moments, default, terms_trilinear, rays, rays_light, surfels, path, gather, surfel_gather"),
             "{err}"
         );
     }
