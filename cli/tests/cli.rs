@@ -206,7 +206,7 @@ fn bake_resolves_external_buffers_from_another_directory() {
 
 /// `prt relight --backend gpu` writes the same JSON as `--backend cpu` (docs/conventions.md section
 /// 6): same probes, positions and validity, SH within 1e-4 of each probe's SH0 (plus 1e-7 of the
-/// brightest probe's, for near-black probes).
+/// brightest probe's, for near-black probes); and its stats list the GPU allocations.
 #[test]
 fn relight_json_is_the_same_on_cpu_and_gpu() {
     let dir = Scratch::new("relight_json");
@@ -233,6 +233,11 @@ fn relight_json_is_the_same_on_cpu_and_gpu() {
             serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
         docs.push(doc);
     }
+    // The GPU run lists what it allocated, every buffer once, adding up to its total.
+    let memory = docs[1]["stats"]["gpu_memory"].as_array().unwrap();
+    let sum: u64 = memory.iter().map(|a| a["bytes"].as_u64().unwrap()).sum();
+    assert_eq!(Some(sum), docs[1]["stats"]["gpu_memory_bytes"].as_u64());
+    assert!(memory.iter().any(|a| a["name"] == "factors (all chunks)"));
     let probes = |d: &serde_json::Value| d["probes"].as_array().unwrap().clone();
     let (cpu, gpu) = (probes(&docs[0]), probes(&docs[1]));
     assert_eq!(cpu.len(), gpu.len());
