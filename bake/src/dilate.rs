@@ -2,8 +2,8 @@
 //! source's, no copy) and gets copies of the sky mask and sky transfer of its nearest valid
 //! probe within [`RINGS`] grid steps, so that its SH equals that probe's at runtime (Unity's
 //! adaptive probe volumes dilate the same way, by copying neighbours' data into invalid
-//! probes). A dilated probe keeps its own visibility map, which sees the geometry
-//! around it at short range, so visibility-aware sampling lets it fill holes (a surface whose
+//! probes). A dilated probe keeps its own visibility map, which sees the geometry around it at
+//! short range, so visibility-aware sampling lets it fill holes (a surface whose
 //! eight probes are all inside geometry) without competing with probes that see the point.
 //!
 //! Only a probe that fills a hole is dilated: one corner of a cell none of whose eight
@@ -22,9 +22,9 @@ pub const RINGS: i64 = 2;
 /// For each probe, the valid probe whose data it reads (`None` for valid probes, for invalid
 /// ones that fill no hole, and for those with no valid probe within reach). With `cells` (per
 /// cell, indexed by its lowest corner: whether a surface needs it,
-/// `crate::placement::surface_cells`) only holes in those cells count: a sparse bake fills no hole inside a solid block. Nearest
-/// by grid distance, ties to the lowest index: deterministic, and sources are only originally
-/// valid probes (no chains).
+/// `crate::placement::surface_cells`) only holes in those cells count: a sparse bake fills no
+/// hole inside a solid block. Nearest by grid distance, ties to the lowest index:
+/// deterministic, and sources are only originally valid probes (no chains).
 pub fn sources(grid: &Grid, valid: &[bool], cells: Option<&[bool]>) -> Vec<Option<usize>> {
     let n = grid.counts.map(i64::from);
     let mut out = vec![None; valid.len()];

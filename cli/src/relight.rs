@@ -89,7 +89,7 @@ pub fn run(args: RelightArgs) -> Result<()> {
                     counters.probes_clamped
                 );
             }
-            let stats = prt_runtime::output::gpu_stats(&counters, &allocations, total);
+            let stats = prt_runtime::output::gpu_stats(&counters, &allocations);
             (sh, stats, "gpu")
         }
     };

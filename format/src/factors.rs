@@ -20,9 +20,8 @@ pub enum TransferPrecision {
     /// 8-byte slots ([`FactorSlot`]): 24-bit brick index, 8-bit ray count, offsets as 6-bit
     /// fields of the brick size, and either the 9-bit `R` and 4-bit band-2 scale of a lobe
     /// about the direction to the factor's stored point ([`crate::lobe`]; one slot, nearly
-    /// every factor) or, in a
-    /// second slot, SH terms 1..3 as 7-bit and 4..8 as 5-bit fields relative to the factor's
-    /// DC term: the default. Issue 32 bounds a default's error against the Cornell reference
+    /// every factor) or, in a second slot, SH terms 1..3 as 7-bit and 4..8 as 5-bit fields
+    /// relative to the factor's DC term: the default. Issue 32 bounds a default's error against the Cornell reference
     /// (0.1 m, 2048 rays) at 3.81% (1.15x the exact 512-ray bake's); see
     /// docs/results/packing.md for each encoding's.
     #[default]
@@ -84,10 +83,10 @@ impl FactorF16 {
 }
 
 /// One factor of [`TransferPrecision::U8`] as the baker builds it, before the asset packs it
-/// into one or two [`FactorSlot`]s: `brick_rays` = brick << 8 | rays (1..=255; the baker splits larger
-/// counts over several factors of the same brick); `packed` holds 12 bytes, low byte first:
-/// offset x, y, z in steps of [`OFFSET_BITS`] (times the `offset_scale` of [`Factors::U8`]),
-/// then SH terms 1..8 in steps of their [`SH_BITS`] (a step being the term's [`SH_RANGE`]
+/// into one or two [`FactorSlot`]s: `brick_rays` = brick << 8 | rays (1..=255; the baker
+/// splits larger counts over several factors of the same brick); `packed` holds 12 bytes, low
+/// byte first: offset x, y, z in steps of [`OFFSET_BITS`] (times the `offset_scale` of
+/// [`Factors::U8`]), then SH terms 1..8 in steps of their [`SH_BITS`] (a step being the term's [`SH_RANGE`]
 /// times the DC term `rays * 4pi/N * Y00` over its levels), a signed byte each, then a zero
 /// (the baker's own use while it encodes).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable, Serialize, Deserialize)]

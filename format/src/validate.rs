@@ -366,8 +366,8 @@ fn factor_table(asset: &Asset) -> Result<(), FormatError> {
     let bricks = asset.bricks.len() + asset.coarse.bricks.len();
     // Packed factors decode to finite values whatever their bits (signed fields times a finite
     // scale, checked above, a DC term of at most 255 rays, and lobes about a direction that is
-    // zero when it is not finite): only f32 and f16 can hold an infinity or a NaN. Decoding every u8 factor to check it took 0.1 s of a 5-million-factor
-    // bake's serial assembly.
+    // zero when it is not finite): only f32 and f16 can hold an infinity or a NaN. Decoding
+    // every u8 factor to check it took 0.1 s of a 5-million-factor bake's serial assembly.
     let may_be_infinite = !matches!(factors, Factors::U8 { .. });
     if let Factors::U8 { factors: slots, .. } = factors {
         slot_pairs(asset, slots)?;

@@ -56,8 +56,9 @@ pub fn cpu_stats(stats: &RelightStats) -> Value {
 
 /// What the GPU update did (its work counters) and what the runtime allocated for it
 /// ([`crate::gpu::PrtRuntime::gpu_memory`]: every buffer and texture group in bytes, largest
-/// first, and the total), so that an engine can budget a level from one relight.
-pub fn gpu_stats(counters: &Counters, allocations: &[Allocation], total: u64) -> Value {
+/// first, and their sum), so that an engine can budget a level from one relight.
+pub fn gpu_stats(counters: &Counters, allocations: &[Allocation]) -> Value {
+    let total: u64 = allocations.iter().map(|a| a.bytes).sum();
     let memory: Vec<Value> = allocations
         .iter()
         .map(|a| json!({ "name": a.name, "bytes": a.bytes }))
@@ -103,7 +104,7 @@ pub fn read_probe_sh(doc: &Value) -> Option<Vec<([f32; 3], ShRgb)>> {
 mod tests {
     use super::*;
 
-    /// The GPU stats list every allocation with its bytes, in the order given, and their total.
+    /// The GPU stats list every allocation with its bytes, in the order given, and their sum.
     #[test]
     fn gpu_stats_list_the_memory() {
         let allocations = [
@@ -116,7 +117,7 @@ mod tests {
                 bytes: 20,
             },
         ];
-        let doc = gpu_stats(&Counters::default(), &allocations, 320);
+        let doc = gpu_stats(&Counters::default(), &allocations);
         assert_eq!(doc["gpu_memory_bytes"], 320);
         assert_eq!(doc["gpu_memory"][0]["name"], "factors (all chunks)");
         assert_eq!(doc["gpu_memory"][1]["bytes"], 20);

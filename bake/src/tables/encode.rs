@@ -52,7 +52,7 @@ impl Placement<'_> {
 /// centroids, sorted by brick (a split row's parts in order). Each is one lobe slot where the
 /// lobe about the direction from `origin` (the probe's ray origin) to its mean hit point fits
 /// its terms, else a full head and its continuation (`prt_format::FactorSlot`); without an
-/// origin (a dilation source, whose table probes elsewhere carry) all are full.
+/// origin (a dilation source, whose table dilated probes elsewhere read) all are full.
 fn encode_u8(
     rows: &[RowU8],
     out: &mut Vec<FactorSlot>,
