@@ -57,14 +57,15 @@ use cases::Case;
 use image::View;
 use lookups::{Kind, Lookup, Lookups, Overrides};
 use prt_runtime::surface::SurfaceSampler;
-use refs::Reference;
+use refs::{RefPoint, Reference};
 use report::{Row, Setting};
 
 #[derive(clap::Args)]
 pub struct SurfaceArgs {
     /// Cases to run (comma-separated): case names (cornell, two_rooms, thick_walls, sponza,
     /// sponza_sun_2, and each level of fixtures/levels/levels.json) and groups: bundled,
-    /// tuning, held-out, family (tuning + held-out), all [default: bundled,family;
+    /// tuning, held-out, family (tuning + held-out), unseen (seeds 24-31), fresh (seeds
+    /// 32-39), all [default: bundled,family,unseen,fresh;
     /// street_20_L120 runs only when named or with all].
     #[arg(long = "case", value_delimiter = ',')]
     cases: Vec<String>,
@@ -108,6 +109,10 @@ pub struct SurfaceArgs {
     /// lookup, over-lit (red) and under-lit (blue) pixels (`surface/pictures.rs`).
     #[arg(long, value_name = "DIR")]
     pictures: Option<PathBuf>,
+    /// Write each sampling's per-point scores to DIR/CASE_SPACING_LOOKUP.csv (position,
+    /// normal, pocket, truth, estimate, relative error, over-lit).
+    #[arg(long, value_name = "DIR")]
+    points_out: Option<PathBuf>,
     #[command(flatten)]
     out: Out,
 }
@@ -119,6 +124,8 @@ struct Refs {
     image: Option<View>,
     /// Where the camera view's pictures go (`--pictures`).
     pictures: Option<PathBuf>,
+    /// Where the per-point scores go (`--points-out`).
+    points_out: Option<PathBuf>,
 }
 
 /// One bake of a case, relit with `lighting`.
@@ -166,6 +173,7 @@ pub fn run(args: SurfaceArgs) -> Result<()> {
             points: refs::read_reference(&case.points)?,
             image: case.image.as_deref().map(image::read_image).transpose()?,
             pictures: args.pictures.clone(),
+            points_out: args.points_out.clone(),
         };
         eprintln!(
             "{} ({}): {} reference points ({} pockets), {} image pixels",
@@ -349,6 +357,17 @@ fn sample(
         .map(|p| at(p.position, p.normal))
         .collect();
     let points_s = t.elapsed().as_secs_f64();
+    if let Some(dir) = &refs.points_out {
+        let path = dir.join(format!(
+            "{}_{}_{}.csv",
+            case.name,
+            setting.label(),
+            lookup.name
+        ));
+        std::fs::create_dir_all(dir)
+            .and_then(|()| std::fs::write(&path, score::points_csv(&refs.points.points, &samples)))
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
     let t = Instant::now();
     let image = match &refs.image {
         Some(view) => {
@@ -358,6 +377,26 @@ fn sample(
                 .map(|p| at(p.position, p.normal))
                 .collect();
             let e = score::irradiance(&samples);
+            if let Some(dir) = &refs.points_out {
+                let as_points: Vec<RefPoint> = (view.pixels.iter())
+                    .map(|p| RefPoint {
+                        position: p.position,
+                        normal: p.normal,
+                        e_sh: p.e_sh,
+                        e_hemi: p.e_hemi,
+                        pocket: false,
+                    })
+                    .collect();
+                let name = format!(
+                    "{}_{}_{}_image.csv",
+                    case.name,
+                    setting.label(),
+                    lookup.name
+                );
+                let path = dir.join(name);
+                std::fs::write(&path, score::points_csv(&as_points, &samples))
+                    .with_context(|| format!("writing {}", path.display()))?;
+            }
             if let Some(dir) = &refs.pictures {
                 let name = format!("{}_{}_{}", case.name, setting.label(), lookup.name);
                 pictures::write(dir, &name, view, &e)?;

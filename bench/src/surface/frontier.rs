@@ -176,6 +176,7 @@ pub fn run(args: FrontierArgs) -> Result<()> {
             points: refs::read_reference(&case.points)?,
             image: case.image.as_deref().map(image::read_image).transpose()?,
             pictures: None,
+            points_out: None,
         };
         let lighting = prt_runtime::load_rig(&case.rig)
             .with_context(|| format!("{}: loading the rig {}", case.name, case.rig.display()))?;
@@ -361,10 +362,12 @@ fn markdown(rows: &[Row], args: &FrontierArgs) -> String {
     let mut md = String::from(
         "Bake seconds and runtime bytes against surface error (`prt-bench frontier`, issue 32 item 3): each case baked at spacings relative to its default (x1) and at several ray counts, on the uniform grid or, labelled sparse, at the grid points surfaces need and coarse levels around them (the bake's default; uniform is `prt bake --uniform`), relit on the CPU (one bounce) and sampled with the runtime's lookup (`default`, the surface terms) at the oracle's surface points and camera pixels. Scores as in [surface.md](surface.md): open mean is the mean relative error at points that are not pockets, leaks the open points lit over 1.5x their truth, over-lit the camera view's pixels lit over 1.5x. Runtime MB: every array an engine uploads (probes, sky, visibility, factors, bricks, surfels, BVH, triangles, surface terms). Bake seconds on all of this machine's cores (2 here). A setting is on a front when no other setting is as small on that axis and better on the median level's error.\n\n## Summary\n",
     );
-    let sets: [(&str, Keep); 5] = [
+    let sets: [(&str, Keep); 7] = [
         ("The level family (seeds 0-15)", in_family),
         ("Tuning seeds 0-7", |r| r.set == Set::Tuning),
         ("Held-out seeds 8-15", |r| r.set == Set::HeldOut),
+        ("Unseen seeds 24-31", |r| r.set == Set::Unseen),
+        ("Fresh seeds 32-39", |r| r.set == Set::Fresh),
         (
             "Sponza (double-sided, fixtures/rigs/sponza_sun_31.json)",
             |r| r.case == "sponza",

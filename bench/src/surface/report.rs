@@ -53,7 +53,7 @@ pub struct Row {
     pub image_s: f64,
 }
 
-/// Issue 31's targets, for the held-out set at the default spacing.
+/// Issue 31's targets, for the held-out, unseen and fresh sets at the default spacing.
 const TARGET_MEDIAN: f64 = 8.0;
 const TARGET_WORST: f64 = 15.0;
 const TARGET_LEAKS: f64 = 1.0;
@@ -97,7 +97,7 @@ pub fn markdown(rows: &[Row], oracle: &[(String, Option<f64>)]) -> Result<String
         md,
         "Surface irradiance against the oracle's references: the bundled scenes \
          (`fixtures/surface/`) and the level family of issue 31 (`fixtures/levels/`, tuning set \
-         seeds 0-7, held-out set seeds 8-15). Each case baked as a new user would (whole scene, \
+         seeds 0-7, held-out set seeds 8-15, unseen set seeds 24-31, fresh set seeds 32-39). Each case baked as a new user would (whole scene, \
          default spacing) and at half that spacing, relit on the CPU (one bounce) and sampled \
          with each lookup: `trilinear` and `default` are the CPU twin of `sample_irradiance`, \
          which is what `prt render` shows; `rays`, `rays_light` and `surfels` are references \
@@ -183,8 +183,9 @@ fn summary(md: &mut String, rows: &[Row]) -> Result<()> {
     writeln!(
         md,
         "\n## Summary\n\nPer set, spacing and lookup, over its levels. Issue 31's targets hold \
-         for the held-out set at the default spacing (met or missed is said there only). The \
-         median of an even number of levels is the mean of the two middle ones.\n\n\
+         for the held-out, unseen and fresh sets at the default spacing (met or missed is said \
+         there only). The median of an even number of levels is the mean of the two middle \
+         ones.\n\n\
          | set | spacing | lookup | levels | open mean, median level (target <= {TARGET_MEDIAN}%) \
          | open mean, worst level (<= {TARGET_WORST}%) | open leaks, worst level (<= \
          {TARGET_LEAKS}% of open points) | over-lit pixels, worst level (<= {TARGET_OVER_LIT}%) \
@@ -196,7 +197,7 @@ fn summary(md: &mut String, rows: &[Row]) -> Result<()> {
             lookups.push(r.lookup.name);
         }
     }
-    for set in [Set::Tuning, Set::HeldOut] {
+    for set in [Set::Tuning, Set::HeldOut, Set::Unseen, Set::Fresh] {
         for setting in [Setting::Default, Setting::Half] {
             for &lookup in &lookups {
                 let group: Vec<&Row> = rows
@@ -204,7 +205,8 @@ fn summary(md: &mut String, rows: &[Row]) -> Result<()> {
                     .filter(|r| r.set == set && r.setting == setting && r.lookup.name == lookup)
                     .collect();
                 if !group.is_empty() {
-                    let targets = set == Set::HeldOut && setting == Setting::Default;
+                    let targets = matches!(set, Set::HeldOut | Set::Unseen | Set::Fresh)
+                        && setting == Setting::Default;
                     summary_row(md, &group, targets)?;
                 }
             }

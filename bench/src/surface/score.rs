@@ -97,6 +97,34 @@ pub fn score_points(points: &[RefPoint], samples: &[Sample]) -> PointScore {
     }
 }
 
+/// One CSV line per point (header first): position, normal, pocket flag, the reference's SH
+/// and hemispherical irradiance, the lookup's, the relative error and whether it is over-lit,
+/// all as [`score_points`] computes them, so that a row of the report can be taken apart.
+pub fn points_csv(points: &[RefPoint], samples: &[Sample]) -> String {
+    use std::fmt::Write;
+    let e = irradiance(samples);
+    let hemi: Vec<f64> = points.iter().map(|p| mean_rgb(&p.e_hemi)).collect();
+    let median = percentile(&hemi, 0.5);
+    let floor = 1e-3 * median;
+    let mut csv = String::from("i,x,y,z,nx,ny,nz,pocket,e_sh,e_hemi,e,rel_err,over_lit\n");
+    for (i, (p, e)) in points.iter().zip(&e).enumerate() {
+        let diff = (0..3).map(|c| (e[c] - p.e_sh[c]).abs()).sum::<f64>() / 3.0;
+        let err = diff / mean_rgb(&p.e_sh).max(floor);
+        let [x, y, z] = p.position;
+        let [nx, ny, nz] = p.normal;
+        let _ = writeln!(
+            csv,
+            "{i},{x},{y},{z},{nx},{ny},{nz},{},{:.6e},{:.6e},{:.6e},{err:.5},{}",
+            u8::from(p.pocket),
+            mean_rgb(&p.e_sh),
+            hemi[i],
+            mean_rgb(e),
+            u8::from(is_over_lit(mean_rgb(e), hemi[i], median))
+        );
+    }
+    csv
+}
+
 fn mean(values: &[f64]) -> f64 {
     values.iter().sum::<f64>() / values.len().max(1) as f64
 }
