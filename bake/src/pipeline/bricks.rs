@@ -8,7 +8,8 @@ use prt_format::{Factors, TransferPrecision, DEPTH_WORDS, U8_MAX_BRICK};
 use prt_scene::Scene;
 
 use super::{valid, Built, Loaded};
-use crate::merge::{coarse, fold, snap};
+use crate::accel::bvh::SceneBvh;
+use crate::merge::{coarse, fold, links, snap};
 use crate::tables::{encode, factors};
 use crate::{diagnostics, dilate, placement, stream, trace, BakeError, BakeReport, BakeSettings};
 
@@ -72,7 +73,7 @@ pub(super) fn bricks_stage(
         carried,
         settings,
         (cell_size, &far_levels),
-        &surfaces,
+        (&surfaces, &built.bvh),
     )?;
     Ok(Bricks {
         positions,
@@ -98,14 +99,26 @@ fn bricks_and_tables(
     carried: encode::Carried,
     settings: &BakeSettings,
     (cell_size, far_levels): (f32, &[u8]),
-    surfaces: &snap::Surfaces,
+    (surfaces, bvh): (&snap::Surfaces, &SceneBvh),
 ) -> Result<(fold::Bricked, CoarseBricks, Tables), BakeError> {
     let (bricked, remap) = folder.finish_placed(&|s, cell| surfaces.place(s, cell));
     let mut used = vec![0u8; bricked.bricks.len()];
     for (&b, &l) in remap.iter().zip(far_levels) {
         used[b as usize] |= l;
     }
-    let (coarse, placement) = coarse::build(&bricked.keys, &bricked.fits, &used);
+    // Links only where a coarse brick will be made (some row is far), lifted a brick size off
+    // the surface (a quarter cell split the cells of Sponza's columns and arches needlessly).
+    let linked = match used.iter().any(|&bits| bits > 1) {
+        true => links::Links {
+            pairs: links::links(&bricked.keys, &bricked.fits, 4.0 * cell_size, bvh),
+            bounds: (bricked.bricks.iter())
+                .map(|b| [Vec3::from(b.min), Vec3::from(b.max)])
+                .collect(),
+            margin: cell_size,
+        },
+        false => links::Links::default(),
+    };
+    let (coarse, placement) = coarse::build(&bricked.keys, &bricked.fits, &used, &linked);
     let u8_rows = settings.transfer_precision == TransferPrecision::U8;
     let all = bricked.bricks.len() + coarse.bricks.len();
     if u8_rows && all > U8_MAX_BRICK as usize + 1 {

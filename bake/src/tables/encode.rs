@@ -29,12 +29,14 @@ struct Placement<'a> {
 }
 
 impl Placement<'_> {
-    /// The final brick or coarse brick of a row of provisional brick `brick` at `level`, the
-    /// point its offset is measured from and what it is divided by.
+    /// The final brick or coarse brick of a row of provisional brick `brick` at `level` whose
+    /// hits' mean is `mean`, the point its offset is measured from and what it is divided by.
     #[inline]
-    fn locate(&self, brick: usize, level: u32) -> (u32, Vec3, f32) {
+    fn locate(&self, brick: usize, level: u32, mean: Vec3) -> (u32, Vec3, f32) {
         let (b, centroid) = self.placed[brick];
-        self.coarse.place(b, level).unwrap_or((b, centroid, 1.0))
+        self.coarse
+            .place(b, level, mean)
+            .unwrap_or((b, centroid, 1.0))
     }
 
     /// A row of sums' provisional brick and level: the word as it is unless rows carry
@@ -74,7 +76,7 @@ fn encode_u8(
     prefetch_placed(rows.iter().map(RowU8::brick), at.placed);
     let located: Vec<(u32, Vec3, f32)> = rows
         .iter()
-        .map(|r| at.locate(r.brick(), r.level()))
+        .map(|r| at.locate(r.brick(), r.level(), Vec3::from(r.mean)))
         .collect();
     let mut order: Vec<u64> = rows
         .iter()
@@ -311,9 +313,10 @@ fn encode_sums<T>(rows: &[RowSums], out: &mut [T], at: Placement, of: fn(&Factor
 fn finish(rows: &mut [FactorRow], at: Placement) {
     for row in rows.iter_mut() {
         let (brick, level) = at.sums_brick(row.0);
-        let (b, centroid, scale) = at.locate(brick, level);
+        let mean = Vec3::from(row.3) / row.1 as f32;
+        let (b, centroid, scale) = at.locate(brick, level, mean);
         row.0 = b;
-        row.3 = ((Vec3::from(row.3) / row.1 as f32 - centroid) / scale).to_array();
+        row.3 = ((mean - centroid) / scale).to_array();
     }
     rows.sort_unstable_by_key(|r| r.0);
 }
@@ -330,7 +333,7 @@ mod tests {
 
     /// A placement without coarse bricks.
     fn no_coarse() -> CoarsePlacement {
-        crate::merge::coarse::build(&[], &[], &[]).1
+        crate::merge::coarse::build(&[], &[], &[], &Default::default()).1
     }
 
     /// Far hits of one coarse cell make one row, which reads the coarse brick over their bricks
@@ -377,7 +380,9 @@ mod tests {
             })
             .collect();
         let remap = [0u32, 1, 2, 3];
-        let (coarse, placement) = crate::merge::coarse::build(&keys, &fits, &[0, 0, 1 << 1, 0]);
+        let used = [0, 0, 1 << 1, 0];
+        let links = Default::default();
+        let (coarse, placement) = crate::merge::coarse::build(&keys, &fits, &used, &links);
         assert_eq!(coarse.children, [2, 3]);
         let centroid = (10.5 + 3.0 * 11.5) / 4.0;
         for precision in [TransferPrecision::F32, TransferPrecision::U8] {
