@@ -110,7 +110,8 @@ pub struct SurfaceArgs {
     #[arg(long, value_name = "DIR")]
     pictures: Option<PathBuf>,
     /// Write each sampling's per-point scores to DIR/CASE_SPACING_LOOKUP.csv (position,
-    /// normal, pocket, truth, estimate, relative error, over-lit).
+    /// normal, pocket, truth, estimate, relative error, over-lit), and with a camera view its
+    /// hit pixels' to DIR/CASE_SPACING_LOOKUP_image.csv (in view order; the error per pixel).
     #[arg(long, value_name = "DIR")]
     points_out: Option<PathBuf>,
     #[command(flatten)]

@@ -122,12 +122,12 @@ impl FarField {
 /// split ([`crate::merge::links`]); and where each coarse brick's offsets are measured from.
 pub struct CoarsePlacement {
     targets: Vec<Vec<u32>>,
-    /// Empty where no cell is split.
+    /// Empty when the bake computed no links (no far rows).
     parts: Vec<Vec<u32>>,
     /// Per coarse brick: its centroid and `2^level`, the divisor of its factors' offsets.
     frames: Vec<(Vec3, f32)>,
     /// Per brick and coarse brick, the box a row's mean hit point must lie in to read it as a
-    /// part ([`Links::bounds`] grown by [`Links::margin`]); empty where no cell is split.
+    /// part ([`Links::bounds`] grown by [`Links::margin`]); empty when there are no links.
     boxes: Vec<[Vec3; 2]>,
     bricks: u32,
 }
@@ -142,9 +142,11 @@ impl CoarsePlacement {
     /// What a level-`level` row of (final) brick `brick` whose hits' mean is `mean` reads, and
     /// the centroid and scale of its offsets, or `None` for the brick itself (level 0, or a
     /// level that has no coarse brick over it of more than itself). Where the cell is split,
-    /// the row reads its brick's part when its mean lies in the part's box: its hits are then
-    /// that part's (a probe on one side of a wall), else they span parts (a probe that sees
-    /// round a column whose bricks no link joins) and it reads the whole cell, as before parts.
+    /// the row reads its brick's part when its mean lies in the part's box, as it does when
+    /// its hits are all that part's (a probe on one side of a wall; a box is a heuristic: an
+    /// L-shaped part's box can hold the mean of a row that spans parts), else it reads the
+    /// whole cell, as before parts (a probe that sees round a column whose bricks no link
+    /// joins).
     #[inline]
     pub fn place(&self, brick: u32, level: u32, mean: Vec3) -> Option<(u32, Vec3, f32)> {
         let l = level.checked_sub(1)? as usize;
@@ -187,12 +189,17 @@ pub fn build(
         bricks: n,
     };
     let whole = Groups::of(keys, levels, None);
-    let targets = made.number(&whole, used, fits, None);
+    let (targets, numbers) = made.number(&whole, used, fits, None);
     let split = !links.bounds.is_empty() && levels > 0;
+    debug_assert!(
+        !split || links.bounds.len() == keys.len(),
+        "a box per brick"
+    );
     let parts = match split {
         true => {
             let parts = Groups::of(keys, levels, Some(&links.pairs));
-            made.number(&parts, used, fits, Some((&whole, &targets)))
+            made.number(&parts, used, fits, Some((&whole, &targets, &numbers)))
+                .0
         }
         false => Vec::new(),
     };
@@ -200,8 +207,9 @@ pub fn build(
         true => made.boxes(links),
         false => Vec::new(),
     };
-    let Made { coarse, frames, .. } = made;
-    let mut coarse = coarse;
+    let Made {
+        mut coarse, frames, ..
+    } = made;
     if !coarse.bricks.is_empty() {
         coarse.moments = fits.iter().map(moments).collect();
     }
@@ -215,6 +223,10 @@ pub fn build(
     (coarse, placement)
 }
 
+/// The whole cells' grouping, and per level what each brick's rows read and each group's
+/// number ([`Made::number`]).
+type Whole<'a> = (&'a Groups, &'a [Vec<u32>], &'a [Vec<u32>]);
+
 /// The coarse bricks made so far.
 struct Made {
     coarse: CoarseBricks,
@@ -224,24 +236,26 @@ struct Made {
 
 impl Made {
     /// Makes a coarse brick per group of `groups` a row wants (in order of level and group)
-    /// and returns, per level and brick, what its rows read. With `whole` (`groups` being the
-    /// parts of its cells, and what the whole cells' rows read), a part that is its whole cell
-    /// reads what the whole cell does, and no brick is made for it.
+    /// and returns, per level and brick, what its rows read, and per level and group its
+    /// number ([`NONE`]: not made). With `whole` (`groups` being the parts of its cells, then
+    /// the whole cells' grouping, targets and numbers), a part that is its whole cell reads
+    /// what the whole cell does, and a part that equals a whole cell the first pass made (at
+    /// the lower level it resolves to) is that brick: no brick is made twice.
     fn number(
         &mut self,
         groups: &Groups,
         used: &[u8],
         fits: &[BrickFit],
-        whole: Option<(&Groups, &[Vec<u32>])>,
-    ) -> Vec<Vec<u32>> {
+        whole: Option<Whole>,
+    ) -> (Vec<Vec<u32>>, Vec<Vec<u32>>) {
         let n = self.bricks;
-        let members = |g: &Groups, at: Option<(u32, u32)>| {
-            at.map(|(l, i)| g.levels[l as usize - 1].members(i).to_vec())
+        // A brick's part lies in its cell, so it is the whole cell when it is as large (`None`:
+        // the brick alone); sizes, not members, so that the test is O(1) on any level.
+        let size = |g: &Groups, at: Option<(u32, u32)>| {
+            at.map_or(1, |(l, i)| g.levels[l as usize - 1].members(i).len())
         };
         let is_whole = |level: u32, b: u32| match whole {
-            Some((w, _)) => {
-                members(w, w.resolve(level, b)) == members(groups, groups.resolve(level, b))
-            }
+            Some((w, ..)) => size(w, w.resolve(level, b)) == size(groups, groups.resolve(level, b)),
             None => false,
         };
         // Per level and group, its number once used (a group the same as below is never
@@ -263,18 +277,29 @@ impl Made {
         wanted.dedup();
         for (level, g) in wanted {
             let members = groups.levels[level as usize - 1].members(g);
-            let first_child = self.coarse.children.len();
-            let (brick, frame) = coarse_brick(members, fits, level, first_child);
-            self.coarse.children.extend_from_slice(members);
-            self.coarse.bricks.push(brick);
-            self.frames.push(frame);
-            numbers[level as usize - 1][g as usize] = n + self.coarse.bricks.len() as u32 - 1;
+            let made_whole = whole.and_then(|(w, _, made)| {
+                let (wl, wg) = w.resolve(level, members[0])?;
+                let same = w.levels[wl as usize - 1].members(wg).len() == members.len();
+                let number = made[wl as usize - 1][wg as usize];
+                (same && number != NONE).then_some(number)
+            });
+            numbers[level as usize - 1][g as usize] = match made_whole {
+                Some(number) => number,
+                None => {
+                    let first_child = self.coarse.children.len();
+                    let (brick, frame) = coarse_brick(members, fits, level, first_child);
+                    self.coarse.children.extend_from_slice(members);
+                    self.coarse.bricks.push(brick);
+                    self.frames.push(frame);
+                    n + self.coarse.bricks.len() as u32 - 1
+                }
+            };
         }
-        (1..=groups.depth())
+        let targets = (1..=groups.depth())
             .map(|level| {
                 (0..n)
                     .map(|b| match (whole, groups.resolve(level, b)) {
-                        (Some((_, targets)), _) if is_whole(level, b) => {
+                        (Some((_, targets, _)), _) if is_whole(level, b) => {
                             targets[level as usize - 1][b as usize]
                         }
                         (_, Some((l, g))) if numbers[l as usize - 1][g as usize] != NONE => {
@@ -284,7 +309,8 @@ impl Made {
                     })
                     .collect()
             })
-            .collect()
+            .collect();
+        (targets, numbers)
     }
 
     /// Per brick and coarse brick, its bounds grown by the margin.
@@ -610,5 +636,22 @@ mod tests {
         let (coarse, placement) = build(&keys, &fits, &used, &all);
         assert_eq!(coarse.children, [0, 1, 2, 3]);
         assert_eq!(placement.place(0, 2, Vec3::ZERO).map(|p| p.0), Some(4));
+
+        // A part that equals a whole cell of the level below (0-1 | 2-3 at level 2 is 0-1,
+        // the level-1 cell) is that cell's brick, not a second one.
+        let halves = Links {
+            pairs: vec![(0, 1), (2, 3)],
+            ..all
+        };
+        let (coarse, placement) = build(&keys, &fits, &[(1 << 1) | (1 << 2), 0, 0, 0], &halves);
+        assert_eq!(coarse.children, [0, 1, 0, 1, 2, 3]);
+        let at = |level: u32, x: f32| {
+            let place = placement.place(0, level, Vec3::new(x, 0.0, 0.0));
+            place.map(|p| p.0)
+        };
+        assert_eq!(
+            (at(1, 0.5), at(2, 0.5), at(2, 1.5)),
+            (Some(4), Some(4), Some(5))
+        );
     }
 }

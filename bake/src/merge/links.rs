@@ -1,7 +1,8 @@
 //! Which neighbouring bricks of one normal key see each other: where a zero-thickness wall
 //! stands between two bricks of the floor, ceiling or wall that runs on under it, the segment
 //! between them is blocked. [`crate::merge::coarse`] makes a coarse brick per connected part of
-//! a coarse cell, so that no coarse brick fits one room's light together with the next room's.
+//! a coarse cell, which the far rows of a probe on one side read instead of the whole cell's
+//! fit over both rooms.
 
 use glam::Vec3;
 use rayon::prelude::*;
@@ -14,6 +15,7 @@ use crate::merge::key::Key;
 /// [`crate::merge::coarse::build`] splits coarse cells into parts. Empty: no cell is split.
 #[derive(Clone, Debug, Default)]
 pub struct Links {
+    /// Linked bricks, `(a, b)` with `a < b`, sorted ([`links`]).
     pub pairs: Vec<(u32, u32)>,
     /// Per brick, the bounds of its surfels.
     pub bounds: Vec<[Vec3; 2]>,
@@ -32,9 +34,9 @@ fn forward_neighbours() -> impl Iterator<Item = [i32; 3]> {
 /// Pairs `(a, b)`, `a < b`, of bricks of one normal key in neighbouring cells (at most one
 /// apart on every axis) that see each other: the segment between their centroids, each moved
 /// `lift` off its surface along its key's axis, hits no triangle. Sorted, so the same at any
-/// thread count. `lift` is a share of the brick lattice (the bake passes one brick size: a
-/// quarter of a cell split the cells of Sponza's columns, whose centroids lie inside them),
-/// so the test is the same at every scene scale.
+/// thread count. `lift` is a share of the brick lattice (the bake passes one brick size, four
+/// cells: a lift of a quarter of a cell split the cells of Sponza's columns, whose centroids
+/// lie inside them), so the test is the same at every scene scale.
 pub fn links(keys: &[Key], fits: &[BrickFit], lift: f32, bvh: &SceneBvh) -> Vec<(u32, u32)> {
     use std::collections::HashMap;
     let index: HashMap<Key, u32> = (keys.iter().enumerate())

@@ -106,8 +106,8 @@ fn bricks_and_tables(
     for (&b, &l) in remap.iter().zip(far_levels) {
         used[b as usize] |= l;
     }
-    // Links only where a coarse brick will be made (some row is far), lifted a brick size off
-    // the surface (a quarter cell split the cells of Sponza's columns and arches needlessly).
+    // Links only where a coarse brick will be made (some row is far), lifted a brick size (four
+    // cells) off the surface: a quarter of a cell split Sponza's columns' cells needlessly.
     let linked = match used.iter().any(|&bits| bits > 1) {
         true => links::Links {
             pairs: links::links(&bricked.keys, &bricked.fits, 4.0 * cell_size, bvh),
