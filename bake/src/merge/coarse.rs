@@ -198,8 +198,7 @@ pub fn build(
     let parts = match split {
         true => {
             let parts = Groups::of(keys, levels, Some(&links.pairs));
-            made.number(&parts, used, fits, Some((&whole, &targets, &numbers)))
-                .0
+            made.number(&parts, used, fits, Some((&whole, &numbers))).0
         }
         false => Vec::new(),
     };
@@ -223,9 +222,8 @@ pub fn build(
     (coarse, placement)
 }
 
-/// The whole cells' grouping, and per level what each brick's rows read and each group's
-/// number ([`Made::number`]).
-type Whole<'a> = (&'a Groups, &'a [Vec<u32>], &'a [Vec<u32>]);
+/// The whole cells' grouping and, per level, each group's number ([`Made::number`]).
+type Whole<'a> = (&'a Groups, &'a [Vec<u32>]);
 
 /// The coarse bricks made so far.
 struct Made {
@@ -238,9 +236,10 @@ impl Made {
     /// Makes a coarse brick per group of `groups` a row wants (in order of level and group)
     /// and returns, per level and brick, what its rows read, and per level and group its
     /// number ([`NONE`]: not made). With `whole` (`groups` being the parts of its cells, then
-    /// the whole cells' grouping, targets and numbers), a part that is its whole cell reads
-    /// what the whole cell does, and a part that equals a whole cell the first pass made (at
-    /// the lower level it resolves to) is that brick: no brick is made twice.
+    /// the whole cells' grouping and numbers), a part that equals a whole cell the first pass
+    /// made is that brick: no brick is made twice. (A part lies in its cell, so it is the cell
+    /// when it is as large; equal sets resolve to the same level in both groupings, so a
+    /// part that is its whole cell reads what the whole cell does.)
     fn number(
         &mut self,
         groups: &Groups,
@@ -249,15 +248,6 @@ impl Made {
         whole: Option<Whole>,
     ) -> (Vec<Vec<u32>>, Vec<Vec<u32>>) {
         let n = self.bricks;
-        // A brick's part lies in its cell, so it is the whole cell when it is as large (`None`:
-        // the brick alone); sizes, not members, so that the test is O(1) on any level.
-        let size = |g: &Groups, at: Option<(u32, u32)>| {
-            at.map_or(1, |(l, i)| g.levels[l as usize - 1].members(i).len())
-        };
-        let is_whole = |level: u32, b: u32| match whole {
-            Some((w, ..)) => size(w, w.resolve(level, b)) == size(groups, groups.resolve(level, b)),
-            None => false,
-        };
         // Per level and group, its number once used (a group the same as below is never
         // used: its rows resolve to the group below).
         let mut numbers: Vec<Vec<u32>> = (groups.levels.iter())
@@ -266,7 +256,7 @@ impl Made {
         let mut wanted: Vec<(u32, u32)> = Vec::new();
         for (b, &bits) in used.iter().enumerate() {
             for level in 1..=groups.depth() {
-                if bits & (1 << level) != 0 && !is_whole(level, b as u32) {
+                if bits & (1 << level) != 0 {
                     if let Some(at) = groups.resolve(level, b as u32) {
                         wanted.push(at);
                     }
@@ -277,7 +267,7 @@ impl Made {
         wanted.dedup();
         for (level, g) in wanted {
             let members = groups.levels[level as usize - 1].members(g);
-            let made_whole = whole.and_then(|(w, _, made)| {
+            let made_whole = whole.and_then(|(w, made)| {
                 let (wl, wg) = w.resolve(level, members[0])?;
                 let same = w.levels[wl as usize - 1].members(wg).len() == members.len();
                 let number = made[wl as usize - 1][wg as usize];
@@ -298,11 +288,8 @@ impl Made {
         let targets = (1..=groups.depth())
             .map(|level| {
                 (0..n)
-                    .map(|b| match (whole, groups.resolve(level, b)) {
-                        (Some((_, targets, _)), _) if is_whole(level, b) => {
-                            targets[level as usize - 1][b as usize]
-                        }
-                        (_, Some((l, g))) if numbers[l as usize - 1][g as usize] != NONE => {
+                    .map(|b| match groups.resolve(level, b) {
+                        Some((l, g)) if numbers[l as usize - 1][g as usize] != NONE => {
                             numbers[l as usize - 1][g as usize]
                         }
                         _ => b,
