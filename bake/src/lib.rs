@@ -88,6 +88,8 @@ pub struct BakeReport {
     /// threshold, [`BakeSettings::prune_error`], and no budget exceeded,
     /// [`BakeSettings::probe_budget`]).
     pub refined: Option<refine::Refined>,
+    /// Bricks split where a wall stands on them ([`merge::split`]), and the parts they made.
+    pub split: (usize, usize),
 }
 
 /// What sparse placement ([`placement`]) placed, of a grid's points.

@@ -104,6 +104,13 @@ pub struct BakeSettings {
     /// the nearest back side their rays hit (a single-sided back face, or the inside of a
     /// closed solid), if it is within half a spacing and the probe is valid there.
     pub virtual_offset: bool,
+    /// Split a brick where a wall stands on it into a brick per side (`crate::merge::split`; on
+    /// by default, `prt bake --no-split-bricks`). On the level family it takes interior_32 (a
+    /// room lit only through a door) from 21.2% to 13.6% (22.9% to 9.8% at half the spacing)
+    /// and cave_31's over-lit pixels from 3.64% to 3.31%, and moves no other level by more than
+    /// 0.5 point; Sponza 10.34% -> 10.44%, 1.7% more runtime bytes (`prt-bench surface`,
+    /// docs/results/surface_candidates.md, stop 50).
+    pub split_bricks: bool,
     /// Worker threads; `None` uses all cores.
     pub threads: Option<usize>,
     /// Bytes of factor rows held in memory between the trace and the table encoding (whole
@@ -139,6 +146,7 @@ impl Default for BakeSettings {
             prune_error: 0.15,
             transfer_precision: TransferPrecision::U8,
             virtual_offset: true,
+            split_bricks: true,
             threads: None,
             row_memory: 256 << 20,
             allowed: prt_scene::Allowed::default(),

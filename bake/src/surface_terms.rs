@@ -92,14 +92,18 @@ pub fn surface_terms(input: &Inputs, surfels: &mut [Surfel]) -> SurfaceTerms {
         ..SurfaceTerms::default()
     };
     table(&mut terms, input.bricks);
-    let grouped = group_surfels(&mut terms, input, surfels);
+    let mut grouped = group_surfels(&mut terms, input, surfels);
     if terms.group_surfels.len() > MAX_GROUPS as usize {
         return SurfaceTerms::default();
     }
-    terms.cells = input
-        .bricks
-        .par_iter()
-        .flat_map_iter(|b| cells(&terms, b, surfels))
+    let runs = prt_format::surface_key_runs(&terms, input.bricks);
+    let nameable = from_first_parts(&terms, input.bricks, &runs, &mut grouped);
+    terms.cells = (input.bricks.par_iter().zip(&runs))
+        .flat_map_iter(|(b, &(_, end))| {
+            let last = &input.bricks[end as usize - 1];
+            let end = (last.first_surfel + last.surfel_count) as usize;
+            cells(&terms, b, &surfels[..end], &nameable)
+        })
         .collect();
     let surfels = &*surfels;
     let traced: Vec<(SurfelTerms, Vec<NearHit>)> = (0..surfels.len())
@@ -194,6 +198,32 @@ fn group_surfels(terms: &mut SurfaceTerms, input: &Inputs, surfels: &mut [Surfel
     out
 }
 
+/// Counts each surfel's group from the first brick under its key (`runs`,
+/// `prt_format::surface_key_runs`): the lookup finds the first part of a split brick in the
+/// table and reads its groups from there. Returns per surfel whether a cell of the first part
+/// may name it: not when its group lies more than 255 past the first part's.
+fn from_first_parts(
+    terms: &SurfaceTerms,
+    bricks: &[Brick],
+    runs: &[(u32, u32)],
+    grouped: &mut Grouped,
+) -> Vec<bool> {
+    let mut nameable = vec![true; grouped.group.len()];
+    for (b, (brick, &(first, _))) in bricks.iter().zip(runs).enumerate() {
+        if first as usize == b {
+            continue;
+        }
+        let base = terms.groups[first as usize];
+        let range = brick.first_surfel as usize..(brick.first_surfel + brick.surfel_count) as usize;
+        for i in range {
+            let relative = grouped.group[i].1 - base;
+            grouped.group[i].0 = relative.min(255) as u8;
+            nameable[i] = relative <= 255;
+        }
+    }
+    nameable
+}
+
 /// A group's near field from its surfels' near hits: per group hit, its share of all the
 /// hits (those that find no brick bring nothing) in 255ths, rounded so that the shares keep
 /// their sum (largest remainders); groups whose share rounds to nothing are left out.
@@ -276,16 +306,23 @@ fn table(terms: &mut SurfaceTerms, bricks: &[Brick]) {
     terms.header.max_probe = max_probe;
 }
 
-/// The [`CELL_WORDS`] words of brick `b`: per cell, its surfel nearest the cell's centre
-/// (among its first 255) within [`CELL_GAP`] cells of the cell, or [`NO_SURFEL`].
-fn cells(terms: &SurfaceTerms, b: &Brick, surfels: &[Surfel]) -> [u32; CELL_WORDS] {
+/// The [`CELL_WORDS`] words of brick `b`: per cell, the surfel nearest the cell's centre
+/// (among the first 255 from its first, its own and those of the parts after it under its key:
+/// `surfels` ends with the last of them) within [`CELL_GAP`] cells of the cell, or
+/// [`NO_SURFEL`]. A part's surfel whose group the first part cannot count to is not named.
+fn cells(
+    terms: &SurfaceTerms,
+    b: &Brick,
+    surfels: &[Surfel],
+    nameable: &[bool],
+) -> [u32; CELL_WORDS] {
     let mut words = [0u32; CELL_WORDS];
     let h = &terms.header;
     let key = terms.key_of(b.centroid);
     let origin = Vec3::from(h.anchor) + Vec3::from(key.map(|k| k as f32)) * h.brick_size;
     let cell = h.brick_size / 4.0;
     let first = b.first_surfel as usize;
-    let own = &surfels[first..first + (b.surfel_count as usize).min(255)];
+    let own = &surfels[first..surfels.len().min(first + 255)];
     for c in 0..64u32 {
         let centre =
             origin + (Vec3::new((c % 4) as f32, (c / 4 % 4) as f32, (c / 16) as f32) + 0.5) * cell;
@@ -294,6 +331,7 @@ fn cells(terms: &SurfaceTerms, b: &Brick, surfels: &[Surfel]) -> [u32; CELL_WORD
         let nearest = own
             .iter()
             .enumerate()
+            .filter(|&(i, _)| nameable[first + i])
             .filter(|(_, s)| {
                 let p = Vec3::from(s.position);
                 (p.clamp(lo, hi) - p).length() <= CELL_GAP * cell

@@ -105,6 +105,9 @@ pub struct SurfaceArgs {
     /// Drop probes whose prediction error is below this (`prt bake --prune-error`).
     #[arg(long)]
     prune_error: Option<f32>,
+    /// Keep bricks whole where a wall stands on them (`prt bake --no-split-bricks`).
+    #[arg(long)]
+    no_split_bricks: bool,
     /// Write each camera view (the levels') per spacing and lookup to DIR as a PNG: reference,
     /// lookup, over-lit (red) and under-lit (blue) pixels (`surface/pictures.rs`).
     #[arg(long, value_name = "DIR")]
@@ -195,6 +198,7 @@ pub fn run(args: SurfaceArgs) -> Result<()> {
                 args.probe_budget,
                 args.prune_error,
             ),
+            !args.no_split_bricks,
         )?);
     }
     args.out
@@ -208,6 +212,7 @@ fn measure(
     refs: &Refs,
     lookups: &[Lookup],
     (spacing, sparse, probe_budget, prune_error): (Option<f32>, bool, Option<usize>, Option<f32>),
+    split_bricks: bool,
 ) -> Result<Vec<Row>> {
     let lighting = prt_runtime::load_rig(&case.rig)
         .with_context(|| format!("{}: loading the rig {}", case.name, case.rig.display()))?;
@@ -217,6 +222,7 @@ fn measure(
         sparse,
         probe_budget,
         prune_error: prune_error.unwrap_or(BakeSettings::default().prune_error),
+        split_bricks,
         ..BakeSettings::default()
     };
     let bricks = lookups.iter().any(Lookup::needs_bricks);

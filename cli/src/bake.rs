@@ -102,6 +102,11 @@ pub struct BakeArgs {
     /// out through the nearest back side their rays hit, within half a spacing.
     #[arg(long)]
     no_virtual_offset: bool,
+    /// Keep a brick whole where a wall stands on it: by default it is split into a brick per
+    /// side, so that a dark room beside a lit one does not read the lit side's light through
+    /// the floor or wall that runs on under their shared wall (docs/surfaces.md).
+    #[arg(long)]
+    no_split_bricks: bool,
     /// Probes with more than this fraction of back-face hits are invalid.
     #[arg(long, default_value_t = 0.1)]
     invalid_backface_fraction: f32,
@@ -153,6 +158,7 @@ pub fn run(args: BakeArgs) -> Result<()> {
         far_ratio,
         double_sided,
         no_virtual_offset,
+        no_split_bricks,
         invalid_backface_fraction,
         inside_facing_away_fraction,
         no_dilation,
@@ -185,6 +191,7 @@ pub fn run(args: BakeArgs) -> Result<()> {
         far_ratio: far_ratio.unwrap_or(preset.far_ratio),
         double_sided,
         virtual_offset: !no_virtual_offset,
+        split_bricks: !no_split_bricks,
         invalid_backface_fraction,
         inside_facing_away_fraction,
         dilate: !no_dilation,
@@ -213,6 +220,12 @@ pub fn run(args: BakeArgs) -> Result<()> {
     }
     if let Some(r) = report.refined {
         println!("{}", refine_line(&r));
+    }
+    if report.split.0 > 0 {
+        println!(
+            "split            {} bricks where a wall stands on them, into {} parts",
+            report.split.0, report.split.1
+        );
     }
     let times: Vec<String> = report
         .timings

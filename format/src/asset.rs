@@ -462,3 +462,33 @@ pub struct Triangle {
     pub _pad2: u32,
 }
 const _: () = assert!(std::mem::size_of::<Triangle>() == 48);
+
+/// Per brick of `bricks`, the run of bricks it shares its key with: `(first, end)`, the
+/// consecutive front-face bricks whose centroids lie under one key with one normal axis.
+/// The bake splits a brick where a wall stands on it into parts that keep its key, one
+/// after another (format 13); the table names the first, whose cells name any part's
+/// surfels (counted from the first's first surfel) and whose near groups a surfel's
+/// [`crate::surface::SurfelTerms::group`] counts from.
+pub fn surface_key_runs(terms: &SurfaceTerms, bricks: &[Brick]) -> Vec<(u32, u32)> {
+    let key = |b: &Brick| {
+        (b.flags & BRICK_BACKFACE == 0)
+            .then(|| (terms.key_of(b.centroid), b.flags & BRICK_AXIS_MASK))
+    };
+    let keys: Vec<_> = bricks.iter().map(key).collect();
+    let mut runs = vec![(0u32, 0u32); bricks.len()];
+    let mut first = 0;
+    for b in 0..bricks.len() {
+        if b == 0 || keys[b].is_none() || keys[b] != keys[b - 1] {
+            first = b;
+        }
+        runs[b].0 = first as u32;
+    }
+    let mut end = bricks.len();
+    for b in (0..bricks.len()).rev() {
+        if b + 1 == bricks.len() || keys[b].is_none() || keys[b] != keys[b + 1] {
+            end = b + 1;
+        }
+        runs[b].1 = end as u32;
+    }
+    runs
+}

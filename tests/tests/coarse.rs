@@ -210,3 +210,76 @@ fn coarse_bricks_do_not_read_light_across_a_wall() {
         at(1.0)
     );
 }
+
+/// Fine bricks split where a wall stands on them (`prt_bake::merge::split`, format 13). In
+/// `fixtures/levels/interior_32` a room lit only through a door sits beside a lit one behind a
+/// zero-thickness wall, and the walls that run on under it put both rooms' surfels in one
+/// brick, a cell at the corner holding hits of both sides. The surfels of the dark room that
+/// no light reaches read from their brick's fit at most half the level's median surfel
+/// radiance (measured 0.23x: light through the door still grades some parts), where one fit
+/// over the brick's parts together (the brick before the split, fitted here) gives some of
+/// them over twice the median (measured 6.9x).
+#[test]
+fn bricks_split_at_a_wall_keep_the_dark_side_dark() {
+    let scene = fixture("levels/interior_32.gltf");
+    let lighting = load_rig(&fixture("levels/interior_32_rig.json")).expect("rig");
+    let asset = bake(&scene, &BakeSettings::default());
+    let relighter = CpuRelighter::new(&asset).expect("relighter");
+    let e = relighter
+        .relight(&lighting, 1)
+        .expect("relight")
+        .surfel_irradiance;
+    let models = relighter.brick_radiance(&e);
+    let runs = prt_format::surface_key_runs(&asset.surface, &asset.bricks);
+    let sum = |v: [f32; 3]| f64::from(v[0] + v[1] + v[2]);
+    let radiance = |s: usize| {
+        let a = asset.surfels[s].albedo;
+        sum(std::array::from_fn(|c| a[c] * e[s][c])) * std::f64::consts::FRAC_1_PI
+    };
+    let mut lit: Vec<f64> = (0..asset.surfels.len())
+        .map(radiance)
+        .filter(|&l| l > 0.0)
+        .collect();
+    lit.sort_by(f64::total_cmp);
+    let median = lit[lit.len() / 2];
+    let dark = |p: [f32; 3]| (23.3..27.2).contains(&p[0]) && (14.95..19.94).contains(&p[2]);
+    let (mut split, mut whole, mut unlit, mut parts) = (0.0f64, 0.0f64, 0, 0);
+    for (b, brick) in asset.bricks.iter().enumerate() {
+        if brick.flags & prt_format::BRICK_BACKFACE != 0 || runs[b].0 as usize != b {
+            continue;
+        }
+        parts += usize::from(runs[b].1 as usize > b + 1);
+        let run: Vec<usize> = (b..runs[b].1 as usize)
+            .flat_map(|p| {
+                let q = &asset.bricks[p];
+                q.first_surfel as usize..(q.first_surfel + q.surfel_count) as usize
+            })
+            .collect();
+        let (mean, gradient) = fit(&asset, &e, &run);
+        let w = |s: usize| f64::from(asset.surfels[s].weight);
+        let pos = |s: usize| DVec3::from(asset.surfels[s].position.map(f64::from));
+        let mu = run.iter().map(|&s| pos(s) * w(s)).sum::<DVec3>()
+            / run.iter().map(|&s| w(s)).sum::<f64>();
+        for &s in &run {
+            let surfel = &asset.surfels[s];
+            if !dark(surfel.position) || sum(e[s]) > 0.0 || sum(surfel.emission) > 0.0 {
+                continue;
+            }
+            unlit += 1;
+            let own = &asset.bricks[surfel.brick as usize];
+            let offset: [f32; 3] = std::array::from_fn(|a| surfel.position[a] - own.centroid[a]);
+            split = split.max(sum(models[surfel.brick as usize].at(offset)));
+            let d = pos(s) - mu;
+            let at = (0..3).map(|c| (mean[c] + DVec3::from(gradient[c]).dot(d)).max(0.0));
+            whole = whole.max(at.sum());
+        }
+    }
+    assert!(
+        unlit > 100 && parts > 0,
+        "{unlit} unlit surfels, {parts} split bricks"
+    );
+    assert!(
+        split <= 0.5 * median && whole >= 2.0 * median,
+        "unlit dark-room surfels read up to {split:e} (split), {whole:e} (one fit), median {median:e}"
+    );
+}

@@ -253,7 +253,10 @@ fn worst_of_mean(a: &[ShRgb], b: &[ShRgb]) -> f32 {
 /// centre, scaled to match) relight within 1e-3 of each probe's SH0 of their unscaled selves.
 ///
 /// Sponza is checked twice. Unmerged (`cell_size` 0), within 1e-3 of each probe's SH0 (measured
-/// 1.7e-5). Merged, within 2e-3 of the scene's mean SH0 (measured 2.4e-4 to 1.6e-3 with the
+/// 1.7e-5). Merged, within 3e-3 of the scene's mean SH0 (stop 50: 4.7e-4 to 2.1e-3 with bricks
+/// split at walls, `prt_bake::merge::split`, 2.5e-4 to 1.6e-3 without: a surfel that merges
+/// differently at another scale can also change which surfels a wall parts, while room.glb and
+/// sunshadowTest.glb stay within 5e-6 with the split; earlier, 2.4e-4 to 1.6e-3 with the
 /// packed factors of format 9, whose 5- and 7-bit terms turn a row that differs a little into
 /// a whole step; 8.0e-5 to 9.0e-4 with 8-bit terms since merged
 /// surfels behind their surface are put back on it, `prt_bake::merge::snap`; 1.3e-4 to 4.4e-4
@@ -349,7 +352,7 @@ fn shared_scenes_relight_alike_at_every_scale() {
             (per_probe, "of SH0")
         };
         let bound = if scene.starts_with("sponza") && merge {
-            2e-3
+            3e-3
         } else {
             1e-3
         };

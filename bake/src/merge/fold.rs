@@ -381,7 +381,7 @@ impl BrickFolder {
 /// surfel stores `g_s = w_s C^-1 (p_s - centroid)` and the runtime gets `G = sum_s g_s L_s`.
 /// `C` is regularised by a thousandth of its trace: flat bricks get no gradient along their
 /// normal, single-surfel bricks none at all.
-fn brick_of(surfels: &mut [Surfel], flags: u32, first_surfel: u32) -> (Brick, BrickFit) {
+pub(crate) fn brick_of(surfels: &mut [Surfel], flags: u32, first_surfel: u32) -> (Brick, BrickFit) {
     let mut min = Vec3::INFINITY;
     let mut max = Vec3::NEG_INFINITY;
     let mut sum = DVec3::ZERO;

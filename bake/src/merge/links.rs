@@ -8,6 +8,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use crate::accel::bvh::SceneBvh;
+use crate::accel::bvh8::PACKET;
 use crate::merge::fold::BrickFit;
 use crate::merge::key::Key;
 
@@ -39,9 +40,12 @@ fn forward_neighbours() -> impl Iterator<Item = [i32; 3]> {
 /// lie inside them), so the test is the same at every scene scale.
 pub fn links(keys: &[Key], fits: &[BrickFit], lift: f32, bvh: &SceneBvh) -> Vec<(u32, u32)> {
     use std::collections::HashMap;
-    let index: HashMap<Key, u32> = (keys.iter().enumerate())
-        .map(|(b, &k)| (k, b as u32))
-        .collect();
+    // The parts of a split fine brick share its key and are consecutive
+    // (`crate::merge::split`): a key names its first brick and how many there are.
+    let mut index: HashMap<Key, (u32, u32)> = HashMap::with_capacity(keys.len());
+    for (b, &k) in keys.iter().enumerate() {
+        index.entry(k).or_insert((b as u32, 0)).1 += 1;
+    }
     let lifted = |b: u32| {
         let axis = keys[b as usize].3 & prt_format::BRICK_AXIS_MASK;
         let mut up = Vec3::ZERO;
@@ -62,13 +66,18 @@ pub fn links(keys: &[Key], fits: &[BrickFit], lift: f32, bvh: &SceneBvh) -> Vec<
                     );
                     index.get(&at).copied()
                 })
+                .flat_map(|(first, n)| first..first + n)
                 .collect();
             let from = lifted(a);
             let dirs: Vec<Vec3> = others.iter().map(|&b| lifted(b) - from).collect();
-            let hits = bvh.closest_hits(from, &dirs, 1.0);
-            let seen: Vec<(u32, u32)> = (others.iter().zip(hits))
-                .filter(|(_, hit)| hit.is_none())
-                .map(|(&b, _)| (a.min(b), a.max(b)))
+            let seen: Vec<(u32, u32)> = (others.chunks(PACKET).zip(dirs.chunks(PACKET)))
+                .flat_map(|(others, dirs)| {
+                    let hits = bvh.closest_hits(from, dirs, 1.0);
+                    (others.iter().zip(hits))
+                        .filter(|(_, hit)| hit.is_none())
+                        .map(|(&b, _)| (a.min(b), a.max(b)))
+                        .collect::<Vec<_>>()
+                })
                 .collect();
             seen.into_iter()
         })

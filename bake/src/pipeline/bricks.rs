@@ -9,7 +9,7 @@ use prt_scene::Scene;
 
 use super::{valid, Built, Loaded};
 use crate::accel::bvh::SceneBvh;
-use crate::merge::{coarse, fold, links, snap};
+use crate::merge::{coarse, fold, links, snap, split};
 use crate::tables::{encode, factors};
 use crate::{diagnostics, dilate, placement, stream, trace, BakeError, BakeReport, BakeSettings};
 
@@ -68,13 +68,14 @@ pub(super) fn bricks_stage(
         lens: &lens,
         origins: &origins,
     };
-    let (bricked, coarse, (factors, lens)) = bricks_and_tables(
+    let (bricked, coarse, (factors, lens), split) = bricks_and_tables(
         (folder, tables),
         carried,
         settings,
         (cell_size, &far_levels),
         (&surfaces, &built.bvh),
     )?;
+    report.split = split;
     Ok(Bricks {
         positions,
         rays,
@@ -91,20 +92,28 @@ pub(super) fn bricks_stage(
 type Tables = (Factors, Vec<usize>);
 
 /// The bricks stage: numbers the bricks and finishes their surfels (those behind their
-/// surface put back on it, [`snap`]), then encodes the factor tables the probes carry into the
-/// asset's table ([`encode::encode_tables`]), freeing the rows as it goes, with each probe's
-/// factor count; fails when u8 factors cannot address the bricks or their slots pass 2^32.
+/// surface put back on it, [`snap`]; bricks split where a wall stands on them, [`split`]),
+/// then encodes the factor tables the probes carry into the asset's table
+/// ([`encode::encode_tables`]), freeing the rows as it goes, with each probe's factor count
+/// and how many bricks were split into how many parts; fails when u8 factors cannot address
+/// the bricks or their slots pass 2^32.
 fn bricks_and_tables(
     (folder, tables): (fold::BrickFolder, factors::Rows),
     carried: encode::Carried,
     settings: &BakeSettings,
     (cell_size, far_levels): (f32, &[u8]),
     (surfaces, bvh): (&snap::Surfaces, &SceneBvh),
-) -> Result<(fold::Bricked, CoarseBricks, Tables), BakeError> {
+) -> Result<(fold::Bricked, CoarseBricks, Tables, (usize, usize)), BakeError> {
     let (bricked, remap) = folder.finish_placed(&|s, cell| surfaces.place(s, cell));
+    let (bricked, parts) = match settings.split_bricks {
+        true => split::split(bricked, cell_size, bvh),
+        false => (bricked, split::FineParts::default()),
+    };
     let mut used = vec![0u8; bricked.bricks.len()];
     for (&b, &l) in remap.iter().zip(far_levels) {
-        used[b as usize] |= l;
+        for p in parts.parts(b) {
+            used[p as usize] |= l;
+        }
     }
     // Links only where a coarse brick will be made (some row is far), lifted a brick size (four
     // cells) off the surface: a quarter of a cell split Sponza's columns' cells needlessly.
@@ -133,7 +142,7 @@ fn bricks_and_tables(
         });
     }
     let encoding = (settings.transfer_precision, 4.0 * cell_size);
-    let numbering = (&remap[..], &bricked.bricks[..], &placement);
+    let numbering = (&remap[..], &bricked.bricks[..], (&placement, &parts));
     let (factors, lens) = encode::encode_tables(tables, carried, numbering, encoding)?;
     if factors.len() > u32::MAX as usize {
         return Err(BakeError::Setting {
@@ -143,7 +152,7 @@ fn bricks_and_tables(
                 "more than 2^32 factor slots (a factor takes one or two): use fewer probes or rays",
         });
     }
-    Ok((bricked, coarse, (factors, lens)))
+    Ok((bricked, coarse, (factors, lens), parts.split_count()))
 }
 
 /// Per probe, whether it is valid (placed and not inside geometry, [`valid`]); warns when most

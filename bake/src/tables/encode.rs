@@ -12,6 +12,7 @@ use prt_format::{
 use rayon::prelude::*;
 
 use crate::merge::coarse::CoarsePlacement;
+use crate::merge::split::FineParts;
 use crate::tables::factors::{brick_and_level, from_words, RowSums, RowU8, Rows};
 use crate::tables::row_store::RowStore;
 use crate::BakeError;
@@ -26,6 +27,10 @@ type Placed = (u32, Vec3);
 struct Placement<'a> {
     placed: &'a [Placed],
     coarse: &'a CoarsePlacement,
+    /// Where bricks were split ([`crate::merge::split`]): `placed` names a split brick's
+    /// first part.
+    parts: &'a FineParts,
+    bricks: &'a [Brick],
 }
 
 impl Placement<'_> {
@@ -34,6 +39,13 @@ impl Placement<'_> {
     #[inline]
     fn locate(&self, brick: usize, level: u32, mean: Vec3) -> (u32, Vec3, f32) {
         let (b, centroid) = self.placed[brick];
+        let (b, centroid) = match self.parts.is_split(b) {
+            true => {
+                let p = self.parts.part_after(b, mean);
+                (p, Vec3::from(self.bricks[p as usize].centroid))
+            }
+            false => (b, centroid),
+        };
         self.coarse
             .place(b, level, mean)
             .unwrap_or((b, centroid, 1.0))
@@ -156,16 +168,21 @@ pub struct Carried<'a> {
 pub fn encode_tables(
     rows: Rows,
     carried: Carried,
-    (remap, bricks, coarse): (&[u32], &[Brick], &CoarsePlacement),
+    (remap, bricks, (coarse, parts)): (&[u32], &[Brick], (&CoarsePlacement, &FineParts)),
     (precision, brick_size): (TransferPrecision, f32),
 ) -> Result<(Factors, Vec<usize>), BakeError> {
     let placed: Vec<Placed> = remap
         .par_iter()
-        .map(|&b| (b, Vec3::from(bricks[b as usize].centroid)))
+        .map(|&b| {
+            let first = parts.parts(b).start;
+            (first, Vec3::from(bricks[first as usize].centroid))
+        })
         .collect();
     let placed = Placement {
         placed: &placed,
         coarse,
+        parts,
+        bricks,
     };
     let lens = || own_lens(carried);
     Ok(match (precision, rows) {
@@ -402,7 +419,7 @@ mod tests {
                 lens: &[rows.len(0)],
                 origins: &[far.origin],
             };
-            let numbering = (&remap[..], &bricks[..], &placement);
+            let numbering = (&remap[..], &bricks[..], (&placement, &FineParts::default()));
             let (factors, lens) =
                 encode_tables(rows, carried, numbering, (precision, 1.0)).unwrap();
             // Three factors (u8: the transfers point up, the hits lie along x: no lobe fits,
@@ -470,7 +487,11 @@ mod tests {
                 lens: &lens,
                 origins: &origins,
             };
-            let numbering = (&remap[..], &bricks[..], &no_coarse());
+            let numbering = (
+                &remap[..],
+                &bricks[..],
+                (&no_coarse(), &FineParts::default()),
+            );
             encode_tables(rows, carried, numbering, (precision, 0.5)).unwrap()
         };
         let bytes = |f: &Factors| -> Vec<u8> {
@@ -546,6 +567,8 @@ mod tests {
         let at = Placement {
             placed: &placed,
             coarse: &coarse,
+            parts: &FineParts::default(),
+            bricks: &bricks,
         };
         finish(&mut late, at);
         let late: Vec<FactorRow> = late.into_iter().flat_map(split_row_for_u8).collect();
@@ -562,7 +585,7 @@ mod tests {
         rows.push(&ProbeRows::of(Vec::new(), TransferPrecision::U8, n))
             .unwrap();
         let settings = (TransferPrecision::U8, size);
-        let numbering = (&remap[..], &bricks[..], &coarse);
+        let numbering = (&remap[..], &bricks[..], (&coarse, &FineParts::default()));
         let (early, lens) = encode_tables(rows, carried, numbering, settings).unwrap();
         assert_eq!(
             lens,

@@ -28,9 +28,10 @@ fn count(found: usize, expected: usize) -> Result<(), FormatError> {
 
 /// None at all, or: a header of finite positive sizes; a power-of-two table naming bricks that
 /// exist, whose longest search is what its slots need; a cell table per brick naming its own
-/// surfels; per brick, near groups that tile its surfels in order; per surfel, terms whose mask,
-/// centre probe, hit count and group are in range and whose halves are finite; near fields in
-/// range naming groups that exist.
+/// surfels or those of the parts after it under its key (`surface_key_runs`, format 13);
+/// per brick, near groups that tile its surfels in order; per surfel, terms whose mask, centre
+/// probe, hit count and group (counted from its key's first brick) are in range and whose
+/// halves are finite; near fields in range naming groups that exist.
 pub(super) fn surface_terms(asset: &Asset) -> Result<(), FormatError> {
     let st = &asset.surface;
     let empty = st.slots.is_empty()
@@ -44,9 +45,10 @@ pub(super) fn surface_terms(asset: &Asset) -> Result<(), FormatError> {
         return Ok(());
     }
     header_and_table(st, asset.bricks.len())?;
-    cells(asset)?;
+    let runs = crate::asset::surface_key_runs(st, &asset.bricks);
+    cells(asset, &runs)?;
     groups(asset)?;
-    surfels(asset)?;
+    surfels(asset, &runs)?;
     near(st)
 }
 
@@ -88,18 +90,19 @@ fn header_and_table(st: &SurfaceTerms, bricks: usize) -> Result<(), FormatError>
     Ok(())
 }
 
-fn cells(asset: &Asset) -> Result<(), FormatError> {
+fn cells(asset: &Asset, runs: &[(u32, u32)]) -> Result<(), FormatError> {
     let st = &asset.surface;
     count(st.cells.len(), asset.bricks.len() * CELL_WORDS)?;
     for (b, brick) in asset.bricks.iter().enumerate() {
         let words = &st.cells[b * CELL_WORDS..(b + 1) * CELL_WORDS];
         let bytes = words.iter().flat_map(|w| w.to_le_bytes());
         let mut named = bytes.filter(|&s| s != NO_SURFEL);
-        if let Some(s) = named.find(|&s| u32::from(s) >= brick.surfel_count) {
-            return bad(
-                b,
-                format!("cell names surfel {s} of {}", brick.surfel_count),
-            );
+        // Its own surfels and those of the parts after it under its key.
+        let end = &asset.bricks[runs[b].1 as usize - 1];
+        let surfels = u64::from(end.first_surfel) + u64::from(end.surfel_count)
+            - u64::from(brick.first_surfel);
+        if let Some(s) = named.find(|&s| u64::from(s) >= surfels) {
+            return bad(b, format!("cell names surfel {s} of {surfels}"));
         }
     }
     Ok(())
@@ -135,16 +138,18 @@ fn groups(asset: &Asset) -> Result<(), FormatError> {
     Ok(())
 }
 
-fn surfels(asset: &Asset) -> Result<(), FormatError> {
+fn surfels(asset: &Asset, runs: &[(u32, u32)]) -> Result<(), FormatError> {
     let st = &asset.surface;
     let h = &st.header;
     let probes = asset.probes.len() as u64;
     count(st.surfels.len(), asset.surfels.len())?;
     for (b, brick) in asset.bricks.iter().enumerate() {
-        let first = st.groups[b] as usize;
+        // A surfel's group counts from the first brick under its key's.
+        let (run_first, run_end) = runs[b];
+        let first = st.groups[run_first as usize] as usize;
         let next = st
             .groups
-            .get(b + 1)
+            .get(run_end as usize)
             .map_or(st.group_surfels.len(), |&g| g as usize);
         let range = brick.first_surfel as usize..(brick.first_surfel + brick.surfel_count) as usize;
         for (i, t) in st.surfels[range.clone()].iter().enumerate() {
