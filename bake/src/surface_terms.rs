@@ -5,8 +5,9 @@
 //! stage traces it from every front-face surfel, after the bricks are final:
 //!
 //! 1. **The brick table**: each front-face brick under its key (lattice cell of its centroid,
-//!    dominant axis) in an open-addressed hash table, and per brick the nearest surfel of each
-//!    of its 4x4x4 cells.
+//!    dominant axis) in an open-addressed hash table (of a brick split at a wall, the first
+//!    part), and per brick the nearest surfel of each of its 4x4x4 cells, its own or a later
+//!    part's.
 //! 2. **Probe visibility**: a ray from the surfel to each of the 27 probes around its nearest
 //!    one (to where the probe's rays started), through the scene's BVH.
 //! 3. **Near field**: [`RAYS`] cosine-distributed rays (a Fibonacci spiral about the normal)
@@ -130,8 +131,8 @@ pub fn surface_terms(input: &Inputs, surfels: &mut [Surfel]) -> SurfaceTerms {
 /// A near hit: where, and the dominant axis of the side of the surface that faces the ray.
 type NearHit = (Vec3, u32);
 
-/// Per surfel (in their new order), its probe mask and its group: within its brick, and
-/// absolute.
+/// Per surfel (in their new order), its probe mask and its group: counted from its key's
+/// first brick's groups (within its brick until [`from_first_parts`]), and absolute.
 struct Grouped {
     masks: Vec<u32>,
     group: Vec<(u8, u32)>,
@@ -273,7 +274,8 @@ fn field<'a>(
 }
 
 /// Fills the hash table with the front-face bricks (a second brick under a key already
-/// taken, which float rounding of a centroid on a lattice plane could make, is left out).
+/// taken is left out: a later part of a brick split at a wall, or a brick whose centroid
+/// float rounding put on a lattice plane).
 fn table(terms: &mut SurfaceTerms, bricks: &[Brick]) {
     let front = bricks.iter().filter(|b| b.flags & BRICK_BACKFACE == 0);
     let len = (2 * front.count()).next_power_of_two().max(1);
@@ -346,7 +348,7 @@ fn cells(
     words
 }
 
-/// A surfel's terms (with `mask` and its `group` within its brick) and its near hits.
+/// A surfel's terms (with `mask` and its `group`, [`Grouped`]) and its near hits.
 fn near_field(
     input: &Inputs,
     s: &Surfel,

@@ -72,11 +72,10 @@ impl<'a> GatherLookup<'a> {
 
     /// The irradiance at `position` on a surface with unit normal `normal`.
     pub fn sample(&self, position: [f32; 3], normal: [f32; 3]) -> Sample {
-        let Some(surfel) = self.surface.surfel(position, normal) else {
+        let Some((brick, surfel)) = self.surface.surfel_of(position, normal) else {
             return self.surface.sample(position, normal);
         };
         let terms = &self.asset.surface;
-        let brick = self.asset.surfels[surfel].brick as usize;
         let group = (terms.groups[brick] + u32::from(terms.surfels[surfel].group)) as usize;
         let key = if self.per_surfel { surfel } else { group };
         if let Some(&(s, _)) = self.done.lock().expect("gather cache").get(&key) {

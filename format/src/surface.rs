@@ -53,7 +53,8 @@ pub const MAX_TABLE_BRICKS: u32 = (1 << SLOT_AXIS_SHIFT) - 2;
 /// Words of [`SurfaceTerms::cells`] per brick: 64 cells of one byte.
 pub const CELL_WORDS: usize = 16;
 
-/// [`SurfaceTerms::cells`] byte of a cell with no surfel to name (its brick has over 255).
+/// [`SurfaceTerms::cells`] byte of a cell with no surfel to name (none near enough among the
+/// first 255 it may name).
 pub const NO_SURFEL: u8 = 0xff;
 
 /// The bake's settings for the terms, and the brick lattice.
@@ -92,7 +93,9 @@ pub struct SurfelTerms {
     pub open: [u16; SH_COUNT],
     /// Near-field rays that hit a surface within reach (of [`SurfelTermsHeader::rays`]).
     pub hits: u8,
-    /// The surfel's near group within its brick ([`SurfaceTerms::groups`]).
+    /// The surfel's near group, counted from the first group of the first brick of its key's
+    /// run (its own brick unless the bake split it: format 13, `crate::surface_key_runs`;
+    /// [`SurfaceTerms::groups`]).
     pub group: u8,
     /// Grid index of the surfel's nearest probe, the centre of `mask` ([`centre_probe`]).
     pub centre: u32,
@@ -126,12 +129,14 @@ pub struct SurfaceTerms {
     pub header: SurfelTermsHeader,
     /// Open-addressed hash table of the front-face bricks, a power of two long.
     pub slots: Vec<SurfaceSlot>,
-    /// Per brick, [`CELL_WORDS`] words: byte `x + 4 (y + 4 z)` is the index (within the brick)
-    /// of the surfel nearest the centre of cell (x, y, z), or [`NO_SURFEL`].
+    /// Per brick, [`CELL_WORDS`] words: byte `x + 4 (y + 4 z)` is the index, counted from the
+    /// brick's first surfel, of the surfel nearest the centre of cell (x, y, z), its own or a
+    /// later part's of its key (format 13, `crate::surface_key_runs`), or [`NO_SURFEL`].
     pub cells: Vec<u32>,
     /// One per surfel.
     pub surfels: Vec<SurfelTerms>,
-    /// Per brick, its first near group; its surfels' `group` counts from there.
+    /// Per brick, its first near group; the `group` of its surfels and of its key's later
+    /// parts' counts from there.
     pub groups: Vec<u32>,
     /// Per near group, its surfels (`first, count`: consecutive, within one brick).
     pub group_surfels: Vec<[u32; 2]>,

@@ -165,8 +165,10 @@ impl<'a> SurfaceSampler<'a> {
         self.surfel_of(position, normal).map(|(_, s)| s)
     }
 
-    /// The brick and surfel (asset indices) whose terms stand for the point, if any.
-    fn surfel_of(&self, position: [f32; 3], normal: [f32; 3]) -> Option<(usize, usize)> {
+    /// The brick the table found (a split brick's first part) and the surfel (asset indices)
+    /// whose terms stand for the point, if any. The surfel's near group is the brick's
+    /// `groups` entry plus its `group` (format 13: counted from the first part's groups).
+    pub fn surfel_of(&self, position: [f32; 3], normal: [f32; 3]) -> Option<(usize, usize)> {
         let t = &self.asset.surface;
         if !self.enabled || t.is_empty() {
             return None;

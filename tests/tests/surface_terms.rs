@@ -197,6 +197,29 @@ fn damaged_terms_are_refused() {
     }
 }
 
+/// A slot naming a later part of a brick the bake split at a wall (format 13): the lookup would
+/// count the part's surfels' groups from the wrong brick, past the table's end on the last
+/// one. Refused, naming the surface section; the default bake of the two-room fixture splits
+/// bricks at its shared wall.
+#[test]
+fn a_slot_naming_a_later_part_is_refused() {
+    let mut asset = bake_ok(&fixture("two_rooms.gltf"), &BakeSettings::default());
+    let runs = prt_format::surface_key_runs(&asset.surface, &asset.bricks);
+    let later = (0..runs.len()).find(|&b| runs[b].0 as usize != b);
+    let b = later.expect("a brick split at a wall") as u32;
+    let slot = (asset.surface.slots.iter_mut())
+        .find(|s| {
+            s.value >> prt_format::surface::SLOT_AXIS_SHIFT
+                == asset.bricks[b as usize].flags & BRICK_AXIS_MASK
+        })
+        .unwrap();
+    slot.value = (slot.value & !0x1fff_ffff) | (b + 1);
+    match decode(&encode(&asset).unwrap()) {
+        Err(FormatError::Invalid { section, .. }) => assert_eq!(section, "surface"),
+        other => panic!("{other:?}"),
+    }
+}
+
 /// A sunlit atrium with two-storey galleries (`fixtures/levels/atrium_1`, a tuning level of
 /// the family: sun through the roof opening, hard shadow edges beside dark gallery ceilings
 /// and arcade soffits), default bake, against the oracle's 299 points: with the surface terms

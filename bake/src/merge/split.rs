@@ -25,6 +25,7 @@ use crate::accel::bvh::SceneBvh;
 use crate::accel::bvh8::PACKET;
 use crate::memory::split_runs;
 use crate::merge::fold::{brick_of, BrickFit, Bricked};
+use crate::merge::key::Key;
 
 /// How far off its surface a surfel's end of a link is lifted, in surfel cells: far enough
 /// that a link along a flat surface does not graze it, and that the small relief of a detailed
@@ -69,10 +70,9 @@ impl FineParts {
         self.span.get(first as usize).is_some_and(|&n| n > 1)
     }
 
-    /// Of the parts from `first` on (numbered after the split), the one whose bounds lie
-    /// nearest `mean` (a row of hits of one side lies in that side's part), and where `mean`
-    /// lies in several or as near to them, the one whose centroid is nearest
-    /// ([`part_distance`]).
+    /// Of the parts from `first` on (numbered after the split), the one nearest `mean` by
+    /// [`part_distance`]: mostly the one whose bounds hold it (a row of hits of one side lies
+    /// in that side's part), the centroids deciding among parts whose bounds hold it.
     #[inline]
     pub fn part_after(&self, first: u32, mean: Vec3) -> u32 {
         let n = self.span.get(first as usize).copied().unwrap_or(1).max(1);
@@ -153,38 +153,49 @@ pub fn split(bricked: Bricked, cell_size: f32, bvh: &SceneBvh) -> (Bricked, Fine
             },
         )
         .collect();
-    let mut new_bricks = Vec::with_capacity(first[bricks.len()] as usize);
-    let mut new_fits = Vec::with_capacity(new_bricks.capacity());
-    let mut new_keys = Vec::with_capacity(new_bricks.capacity());
+    assemble(made, keys, first, surfels)
+}
+
+/// The bricks `made` per brick before the split (with its key), in order, and where each
+/// brick went (`first`: where its parts start).
+fn assemble(
+    made: Vec<Vec<(Brick, BrickFit)>>,
+    keys: Vec<Key>,
+    first: Vec<u32>,
+    surfels: Vec<Surfel>,
+) -> (Bricked, FineParts) {
+    let count = first[first.len() - 1] as usize;
+    let (mut bricks, mut fits, mut new_keys) = (
+        Vec::with_capacity(count),
+        Vec::with_capacity(count),
+        Vec::with_capacity(count),
+    );
     for (made, key) in made.into_iter().zip(keys) {
         for (brick, fit) in made {
-            new_bricks.push(brick);
-            new_fits.push(fit);
+            bricks.push(brick);
+            fits.push(fit);
             new_keys.push(key);
         }
     }
-    let bounds = new_bricks
-        .iter()
+    let bounds = (bricks.iter())
         .map(|b| [b.min, b.max, b.centroid].map(Vec3::from))
         .collect();
-    let mut span = vec![0u32; new_bricks.len()];
+    let mut span = vec![0u32; count];
     for w in first.windows(2) {
         span[w[0] as usize] = w[1] - w[0];
     }
     let bricked = Bricked {
-        bricks: new_bricks,
+        bricks,
         surfels,
         keys: new_keys,
-        fits: new_fits,
+        fits,
     };
-    (
-        bricked,
-        FineParts {
-            first,
-            span,
-            bounds,
-        },
-    )
+    let parts = FineParts {
+        first,
+        span,
+        bounds,
+    };
+    (bricked, parts)
 }
 
 /// Per surfel of `run` (one brick's), its part: parts numbered largest weight first (ties
@@ -283,7 +294,7 @@ mod tests {
                     0.125 + 0.25 * (i / 4) as f32,
                 ],
                 normal: [0.0, 1.0, 0.0],
-                // The lit side's two columns weigh less: the dark side is the first part.
+                // The lit side's column weighs less: the dark side is the first part.
                 weight: if i % 4 >= 3 { 1.0 } else { 2.0 },
                 ..Surfel::default()
             })

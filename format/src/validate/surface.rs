@@ -46,6 +46,18 @@ pub(super) fn surface_terms(asset: &Asset) -> Result<(), FormatError> {
     }
     header_and_table(st, asset.bricks.len())?;
     let runs = crate::asset::surface_key_runs(st, &asset.bricks);
+    // The lookup counts a surfel's group from the brick the table names: the first of its
+    // key's run, as the cells and groups are checked below.
+    let named = st.slots.iter().enumerate().filter(|(_, s)| s.value != 0);
+    for (i, s) in named {
+        let brick = (s.value & ((1 << SLOT_AXIS_SHIFT) - 1)) as usize - 1;
+        if runs[brick].0 as usize != brick {
+            return bad(
+                i,
+                format!("slot names brick {brick}, not the first of its key's"),
+            );
+        }
+    }
     cells(asset, &runs)?;
     groups(asset)?;
     surfels(asset, &runs)?;
