@@ -81,6 +81,14 @@ pub struct SurfaceSlot {
 }
 const _: () = assert!(std::mem::size_of::<SurfaceSlot>() == 16);
 
+impl SurfaceSlot {
+    /// The brick the slot names, `None` for an empty slot.
+    #[inline]
+    pub fn brick(&self) -> Option<u32> {
+        (self.value & ((1 << SLOT_AXIS_SHIFT) - 1)).checked_sub(1)
+    }
+}
+
 /// A surfel's terms (module docs). 32 bytes; as eight words in WGSL: `mask`, `open` two halves
 /// a word, then the last half with `hits` and `group` above it, `centre`, `normal`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable, Serialize, Deserialize)]
@@ -184,7 +192,7 @@ impl SurfaceTerms {
                 return None;
             }
             if s.key == key && s.value >> SLOT_AXIS_SHIFT == axis {
-                return Some((s.value & ((1 << SLOT_AXIS_SHIFT) - 1)) - 1);
+                return s.brick();
             }
         }
         None

@@ -44,8 +44,6 @@ pub struct FineParts {
     /// Per brick after the split: how many parts start at it (1 for a brick not split, 0
     /// for a part after the first).
     span: Vec<u32>,
-    /// Per brick after the split, the bounds of its surfels and their centroid.
-    bounds: Vec<[Vec3; 3]>,
 }
 
 impl FineParts {
@@ -70,26 +68,27 @@ impl FineParts {
         self.span.get(first as usize).is_some_and(|&n| n > 1)
     }
 
-    /// Of the parts from `first` on (numbered after the split), the one nearest `mean` by
-    /// [`part_distance`]: mostly the one whose bounds hold it (a row of hits of one side lies
-    /// in that side's part), the centroids deciding among parts whose bounds hold it.
+    /// Of the parts from `first` on (numbered after the split; `bricks` after it), the one
+    /// nearest `mean` by [`part_distance`]: mostly the one whose bounds hold it (a row of hits
+    /// of one side lies in that side's part), the centroids deciding among parts whose bounds
+    /// hold it.
     #[inline]
-    pub fn part_after(&self, first: u32, mean: Vec3) -> u32 {
+    pub fn part_after(&self, first: u32, mean: Vec3, bricks: &[Brick]) -> u32 {
         let n = self.span.get(first as usize).copied().unwrap_or(1).max(1);
-        let d = |p: u32| part_distance(self.bounds[p as usize], mean);
+        let d = |p: u32| part_distance(&bricks[p as usize], mean);
         (first..first + n)
             .min_by(|&a, &b| d(a).total_cmp(&d(b)).then(a.cmp(&b)))
             .unwrap_or(first)
     }
 }
 
-/// How far `mean` lies from a part with bounds and centroid `[lo, hi, centroid]`: the squared
-/// distance to its bounds plus a hundredth of the squared distance to its centroid. Continuous
+/// How far `mean` lies from a part: the squared distance to its surfels' bounds plus a hundredth of the squared distance to its centroid. Continuous
 /// in `mean`, so that a row's part does not hang on a discrete tie: ranking by the bounds
 /// alone, then by the parts' order (their weights), made the surfels that merge differently at
 /// another scene scale move rows between parts (`tests/tests/scale.rs`: Sponza 7.4e-3 of the
 /// mean SH0 at x0.001, against at most 2e-3).
-fn part_distance([lo, hi, centroid]: [Vec3; 3], mean: Vec3) -> f32 {
+fn part_distance(part: &Brick, mean: Vec3) -> f32 {
+    let (lo, hi, centroid) = (part.min.into(), part.max.into(), Vec3::from(part.centroid));
     mean.clamp(lo, hi).distance_squared(mean) + 1e-2 * centroid.distance_squared(mean)
 }
 
@@ -177,9 +176,6 @@ fn assemble(
             new_keys.push(key);
         }
     }
-    let bounds = (bricks.iter())
-        .map(|b| [b.min, b.max, b.centroid].map(Vec3::from))
-        .collect();
     let mut span = vec![0u32; count];
     for w in first.windows(2) {
         span[w[0] as usize] = w[1] - w[0];
@@ -190,11 +186,7 @@ fn assemble(
         keys: new_keys,
         fits,
     };
-    let parts = FineParts {
-        first,
-        span,
-        bounds,
-    };
+    let parts = FineParts { first, span };
     (bricked, parts)
 }
 
@@ -358,8 +350,9 @@ mod tests {
         }
         // Rows read the part their hits lie in.
         assert!(parts.is_split(0));
-        assert_eq!(parts.part_after(0, Vec3::new(0.3, 0.0, 0.5)), 0);
-        assert_eq!(parts.part_after(0, Vec3::new(0.9, 0.0, 0.5)), 1);
+        let part = |x: f32| parts.part_after(0, Vec3::new(x, 0.0, 0.5), &split.bricks);
+        assert_eq!(part(0.3), 0);
+        assert_eq!(part(0.9), 1);
     }
 
     #[test]

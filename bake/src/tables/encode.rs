@@ -41,7 +41,7 @@ impl Placement<'_> {
         let (b, centroid) = self.placed[brick];
         let (b, centroid) = match self.parts.is_split(b) {
             true => {
-                let p = self.parts.part_after(b, mean);
+                let p = self.parts.part_after(b, mean, self.bricks);
                 (p, Vec3::from(self.bricks[p as usize].centroid))
             }
             false => (b, centroid),

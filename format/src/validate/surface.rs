@@ -48,9 +48,8 @@ pub(super) fn surface_terms(asset: &Asset) -> Result<(), FormatError> {
     let runs = crate::asset::surface_key_runs(st, &asset.bricks);
     // The lookup counts a surfel's group from the brick the table names: the first of its
     // key's run, as the cells and groups are checked below.
-    let named = st.slots.iter().enumerate().filter(|(_, s)| s.value != 0);
-    for (i, s) in named {
-        let brick = (s.value & ((1 << SLOT_AXIS_SHIFT) - 1)) as usize - 1;
+    let named = (st.slots.iter().enumerate()).filter_map(|(i, s)| Some((i, s.brick()? as usize)));
+    for (i, brick) in named {
         if runs[brick].0 as usize != brick {
             return bad(
                 i,
@@ -85,9 +84,8 @@ fn header_and_table(st: &SurfaceTerms, bricks: usize) -> Result<(), FormatError>
         if s.value == 0 {
             continue;
         }
-        let brick = (s.value & ((1 << SLOT_AXIS_SHIFT) - 1)) as usize;
         let axis = s.value >> SLOT_AXIS_SHIFT;
-        if brick == 0 || brick > bricks || axis >= 6 {
+        if s.brick().is_none_or(|b| b as usize >= bricks) || axis >= 6 {
             return bad(i, format!("slot value {:#x} (bricks: {bricks})", s.value));
         }
         let home = slot_hash(s.key, axis) as usize & (len - 1);
