@@ -8,7 +8,7 @@
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> bricks: array<Brick>;
 @group(0) @binding(2) var<storage, read> surfels: array<u32>;
-@group(0) @binding(3) var<storage, read_write> surfel_bounce: array<vec4<f32>>;
+@group(0) @binding(3) var<storage, read_write> surfel_bounce: array<f32>;
 @group(0) @binding(4) var<storage, read_write> brick_dirty: array<u32>;
 // surfels and surfel_bounce hold this chunk's surfels only (dispatched once per chunk).
 @group(0) @binding(5) var<uniform> chunk: SurfelChunk;
@@ -24,6 +24,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         return;
     }
     let e = sample_irradiance(surfel.position, surfel.normal);
-    surfel_bounce[c] = vec4<f32>(surfel.albedo * (params.bounce_damping / PI) * e, 0.0);
+    let l = surfel.albedo * (params.bounce_damping / PI) * e;
+    // Three floats a surfel, as relight_surfels.wgsl writes surfel_radiance.
+    surfel_bounce[3u * c] = l.x;
+    surfel_bounce[3u * c + 1u] = l.y;
+    surfel_bounce[3u * c + 2u] = l.z;
     brick_dirty[surfel.brick] = 1u;
 }

@@ -10,7 +10,7 @@
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> probes: array<Probe>;
-@group(0) @binding(2) var<storage, read_write> probe_sh: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read_write> probe_sh: array<f32>;
 // The filled grid points, in grid order.
 @group(0) @binding(3) var<storage, read> fill_list: array<u32>;
 // Per probe: 1 while it waits for a gather, else the serial of the update that last gathered it.
@@ -65,7 +65,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         }
         total = total + w;
         for (var k = 0u; k < 9u; k = k + 1u) {
-            c[k] = c[k] + w * probe_sh[9u * q + k].xyz;
+            let at = 27u * q + 3u * k;
+            c[k] = c[k] + w * vec3<f32>(probe_sh[at], probe_sh[at + 1u], probe_sh[at + 2u]);
         }
     }
     if total <= 0.0 {

@@ -23,7 +23,7 @@
 // Per lattice direction: the direction (xyz), then the sky radiance (xyz).
 @group(0) @binding(6) var<storage, read> sky_directions: array<vec4<f32>>;
 @group(0) @binding(7) var<storage, read_write> probe_dirty: array<u32>;
-@group(0) @binding(8) var<storage, read_write> probe_sh: array<vec4<f32>>;
+@group(0) @binding(8) var<storage, read_write> probe_sh: array<f32>;
 @group(0) @binding(9) var<storage, read_write> counters: Counters;
 @group(0) @binding(10) var<uniform> chunk: FactorChunk;
 // The probes the gather visits, in grid order: the valid ones (a grid point without data, or an

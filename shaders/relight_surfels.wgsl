@@ -15,7 +15,7 @@
 @group(0) @binding(6) var<storage, read> brick_cache: array<u32>;
 @group(0) @binding(7) var<storage, read_write> shadow_cache: array<u32>;
 @group(0) @binding(8) var<storage, read> light_changes: array<u32>;
-@group(0) @binding(9) var<storage, read_write> surfel_radiance: array<vec4<f32>>;
+@group(0) @binding(9) var<storage, read_write> surfel_radiance: array<f32>;
 @group(0) @binding(10) var<storage, read_write> counters: Counters;
 // surfels and surfel_radiance hold this chunk's surfels only (dispatched once per chunk).
 @group(0) @binding(11) var<uniform> chunk: SurfelChunk;
@@ -107,7 +107,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     if rank_new % 32u != 0u && new_at != NO_CACHE {
         shadow_cache[new_first + rank_new / 32u] = word;
     }
-    surfel_radiance[c] = vec4<f32>(surfel.emission + surfel.albedo * (1.0 / PI) * e, 0.0);
+    let l = surfel.emission + surfel.albedo * (1.0 / PI) * e;
+    // Three floats a surfel (a vec4 array spent a fourth on padding).
+    surfel_radiance[3u * c] = l.x;
+    surfel_radiance[3u * c + 1u] = l.y;
+    surfel_radiance[3u * c + 2u] = l.z;
     atomicAdd(&counters.surfels_relit, 1u);
     if rays > 0u {
         atomicAdd(&counters.shadow_rays, rays);

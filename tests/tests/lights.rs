@@ -69,6 +69,40 @@ fn pairs_of(cpu: &CpuRelighter, light: &Light) -> u64 {
         .shadow_rays
 }
 
+/// A runtime fitted to its rig (`RuntimeSettings::fitted_to`: light masks of one word, a
+/// shadow-ray cache of one word per surfel) relights bit for bit as one with room for 256
+/// lights, in less memory, and its cache never overflows.
+#[test]
+fn a_runtime_fitted_to_its_rig_relights_the_same_in_less_memory() {
+    let fitted = |n| RuntimeSettings::default().fitted_to(n).max_lights;
+    assert_eq!(
+        (
+            fitted(0),
+            fitted(20),
+            fitted(32),
+            fitted(33),
+            fitted(100_000)
+        ),
+        (32, 32, 32, 64, prt_runtime::contract::MAX_LIGHTS)
+    );
+    let (device, queue) = gpu_device();
+    let asset = bake(&fixture("cornell/cornell.gltf"), &BakeSettings::default());
+    let lighting = many_lights(20);
+    let run = |settings| {
+        let mut runtime = PrtRuntime::new(&device, &queue, &asset, settings).unwrap();
+        let (sh, counters) = update(&device, &queue, &mut runtime, &lighting);
+        (sh, counters, runtime.gpu_memory().1)
+    };
+    let (roomy, _, roomy_bytes) = run(RuntimeSettings::default().with_room_for(20));
+    let (sh, counters, bytes) = run(RuntimeSettings::default().fitted_to(20));
+    assert!(sh == roomy, "fitted and roomy runtimes differ");
+    assert_eq!(counters.bricks_uncached, 0, "the fitted cache overflowed");
+    assert!(
+        bytes < roomy_bytes,
+        "fitted {bytes} B, with room for 256 lights {roomy_bytes} B"
+    );
+}
+
 /// 1,024 point and spot lights relight on the GPU as on the CPU; moving one of them re-traces
 /// exactly that light's pairs and tests one light per brick; a pool too small for the cache
 /// leaves bricks uncached but the result unchanged.

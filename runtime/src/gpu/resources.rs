@@ -283,7 +283,7 @@ impl StateBuffers {
         let stride = u64::from(mask_stride);
         let cache_capacity = settings
             .shadow_cache_words
-            .unwrap_or(2 * asset.surfels.len() as u64)
+            .unwrap_or(stride.min(2) * asset.surfels.len() as u64)
             .clamp(1, (alloc.max_binding / 8).min(u64::from(u32::MAX / 2)));
         let max_lights = settings.max_lights as u64;
         let copy_src = wgpu::BufferUsages::COPY_SRC;
@@ -306,7 +306,7 @@ impl StateBuffers {
             group_radiance: alloc.zeroed("prt group radiance", 16 * n_groups, none)?,
             near_radiance: alloc.zeroed("prt near radiance", 16 * n_groups, none)?,
             probe_dirty: alloc.zeroed("prt probe dirty", 4 * n_probes, none)?,
-            probe_sh: alloc.zeroed("prt probe sh", 16 * 9 * n_probes, copy_src)?,
+            probe_sh: alloc.zeroed("prt probe sh", 4 * 27 * n_probes, copy_src)?,
             counters: alloc.zeroed("prt counters", size_of::<Counters>() as u64, copy_src)?,
             lights: alloc.zeroed("prt lights", 64 * max_lights, none)?,
             sky_directions: alloc.zeroed(

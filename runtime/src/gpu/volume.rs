@@ -83,11 +83,12 @@ impl PrtRuntime {
             &self.device,
             &self.queue,
             &self.res.state.probe_sh,
-            16 * 9 * u64::from(self.probe_count.max(1)),
+            4 * 27 * u64::from(self.probe_count.max(1)),
         )?;
-        let v: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
+        // 27 floats a probe, rgb by coefficient (`store_probe.wgsl`).
+        let v: &[[f32; 3]] = bytemuck::cast_slice(&bytes);
         Ok((0..self.probe_count as usize)
-            .map(|p| std::array::from_fn(|k| [v[9 * p + k][0], v[9 * p + k][1], v[9 * p + k][2]]))
+            .map(|p| std::array::from_fn(|k| v[9 * p + k]))
             .collect())
     }
 

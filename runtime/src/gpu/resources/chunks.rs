@@ -67,10 +67,10 @@ pub(super) fn surfel_buffers(
                         .stored(&asset.surfels[range]),
                     none,
                 )?,
-                alloc.zeroed("prt surfel radiance", 16 * n, none)?,
+                alloc.zeroed("prt surfel radiance", 12 * n, none)?,
                 alloc.zeroed(
                     "prt surfel bounce",
-                    if feeds_back { 16 * n } else { 0 },
+                    if feeds_back { 12 * n } else { 0 },
                     none,
                 )?,
                 alloc.uniform("prt surfel chunk", c),
