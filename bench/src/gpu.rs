@@ -149,7 +149,7 @@ pub fn gpu(
         rays,
         cell,
         far_ratio,
-        runtime: RuntimeSettings::default().fitted_to(a.rig.lights.len()),
+        runtime: RuntimeSettings::default().fitted_to(a),
         lit: a,
         moved,
         skies: [sky(0.3), sky(0.4)],

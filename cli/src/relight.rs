@@ -65,7 +65,7 @@ pub fn run(args: RelightArgs) -> Result<()> {
                     bounces: prt_runtime::gpu::Bounces::Fixed(bounces),
                     ..prt_runtime::gpu::RuntimeSettings::default()
                 }
-                .fitted_to(lighting.rig.lights.len()),
+                .fitted_to(&lighting),
             )?;
             eprintln!("adapter: {} ({:?})", info.name, info.backend);
             let largest: Vec<String> = (allocations.iter().take(4))

@@ -101,7 +101,7 @@ fn sample_gpu(
 ) -> Result<Vec<Sample>> {
     let (device, queue, info) = prt_runtime::gpu::headless_device()?;
     eprintln!("adapter: {} ({:?})", info.name, info.backend);
-    let settings = settings.fitted_to(lighting.rig.lights.len());
+    let settings = settings.fitted_to(lighting);
     let mut runtime = PrtRuntime::new(&device, &queue, asset, settings)?;
     runtime.settle(lighting)?;
     Ok(prt_runtime::gpu::sample_points(

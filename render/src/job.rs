@@ -153,7 +153,7 @@ fn relight(
     if !job.output.needs_gi() {
         return Ok(None);
     }
-    let settings = job.runtime.fitted_to(lighting.rig.lights.len());
+    let settings = job.runtime.fitted_to(lighting);
     let mut rt = PrtRuntime::new(device, queue, asset, settings)?;
     rt.settle(lighting)?;
     rt.wait()?;

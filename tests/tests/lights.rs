@@ -69,21 +69,19 @@ fn pairs_of(cpu: &CpuRelighter, light: &Light) -> u64 {
         .shadow_rays
 }
 
-/// A runtime fitted to its rig (`RuntimeSettings::fitted_to`: light masks of one word, a
-/// shadow-ray cache of one word per surfel) relights bit for bit as one with room for 256
-/// lights, in less memory, and its cache never overflows.
+/// A runtime fitted to its lighting (`RuntimeSettings::fitted_to`: light masks of one word, a
+/// shadow-ray cache of one word per surfel, no sky masks without an equirect sky) relights bit
+/// for bit as one with room for 256 lights and any sky, in less memory; its cache never
+/// overflows, and an equirect sky it was not fitted to is refused.
 #[test]
 fn a_runtime_fitted_to_its_rig_relights_the_same_in_less_memory() {
-    let fitted = |n| RuntimeSettings::default().fitted_to(n).max_lights;
+    let fitted = |n| {
+        let settings = RuntimeSettings::default().fitted_to(&many_lights(n));
+        (settings.max_lights, settings.equirect_sky)
+    };
     assert_eq!(
-        (
-            fitted(0),
-            fitted(20),
-            fitted(32),
-            fitted(33),
-            fitted(100_000)
-        ),
-        (32, 32, 32, 64, prt_runtime::contract::MAX_LIGHTS)
+        [fitted(0), fitted(20), fitted(32), fitted(33), fitted(5000)],
+        [32, 32, 32, 64, prt_runtime::contract::MAX_LIGHTS].map(|m| (m, false))
     );
     let (device, queue) = gpu_device();
     let asset = bake(&fixture("cornell/cornell.gltf"), &BakeSettings::default());
@@ -91,16 +89,29 @@ fn a_runtime_fitted_to_its_rig_relights_the_same_in_less_memory() {
     let run = |settings| {
         let mut runtime = PrtRuntime::new(&device, &queue, &asset, settings).unwrap();
         let (sh, counters) = update(&device, &queue, &mut runtime, &lighting);
-        (sh, counters, runtime.gpu_memory().1)
+        (sh, counters, runtime)
     };
-    let (roomy, _, roomy_bytes) = run(RuntimeSettings::default().with_room_for(20));
-    let (sh, counters, bytes) = run(RuntimeSettings::default().fitted_to(20));
+    let (roomy, _, roomy_runtime) = run(RuntimeSettings::default().with_room_for(20));
+    let (sh, counters, mut runtime) = run(RuntimeSettings::default().fitted_to(&lighting));
     assert!(sh == roomy, "fitted and roomy runtimes differ");
     assert_eq!(counters.bricks_uncached, 0, "the fitted cache overflowed");
+    let (bytes, roomy_bytes) = (runtime.gpu_memory().1, roomy_runtime.gpu_memory().1);
     assert!(
-        bytes < roomy_bytes,
-        "fitted {bytes} B, with room for 256 lights {roomy_bytes} B"
+        bytes + asset.sky_mask.len() as u64 * 4 <= roomy_bytes,
+        "fitted {bytes} B, with room for 256 lights and sky masks {roomy_bytes} B"
     );
+    let equirect = Lighting {
+        sky: prt_runtime::SkyModel::Equirect {
+            width: 2,
+            height: 1,
+            texels: vec![[1.0; 3]; 2],
+        },
+        ..lighting
+    };
+    let mut encoder = device.create_command_encoder(&Default::default());
+    let refused = runtime.update(&mut encoder, &equirect, None);
+    assert!(matches!(refused, Err(GpuError::NoSkyMask)), "{refused:?}");
+    assert!(RuntimeSettings::default().fitted_to(&equirect).equirect_sky);
 }
 
 /// 1,024 point and spot lights relight on the GPU as on the CPU; moving one of them re-traces

@@ -79,6 +79,9 @@ impl PrtRuntime {
         let (sky_mode, sky_color, sky_directions) = match &lighting.sky {
             SkyModel::Black => (SKY_BLACK, [0.0; 3], Vec::new()),
             SkyModel::Constant(c) => (SKY_CONSTANT, *c, Vec::new()),
+            SkyModel::Equirect { .. } if !self.settings.equirect_sky => {
+                return Err(GpuError::NoSkyMask)
+            }
             sky @ SkyModel::Equirect { .. } => {
                 let cached = self.sky_cache.as_ref().filter(|(s, _)| s == sky);
                 let directions = match cached {

@@ -95,6 +95,8 @@ pub enum GpuError {
     MaxLights(usize),
     #[error("the asset has no probes")]
     NoProbes,
+    #[error("an equirect sky reads the probes' sky masks, which this runtime was built without (RuntimeSettings::equirect_sky is false)")]
+    NoSkyMask,
     #[error("{what} needs the device feature {feature}, which this adapter lacks")]
     Feature {
         what: &'static str,
@@ -170,19 +172,33 @@ pub struct RuntimeSettings {
     /// need]. Bricks past it are left uncached (traced every time they are relit;
     /// `Counters::bricks_uncached`), never wrong.
     pub shadow_cache_words: Option<u64>,
+    /// Whether the runtime can relight with an equirect sky (`SkyModel::Equirect`), which
+    /// reads each probe's sky mask: a bit per ray, 256 bytes a probe at 2048 rays (7.7 MB on
+    /// `street_20_L120` at 1 m). Without it the mask is not uploaded and such a sky is refused
+    /// ([`GpuError::NoSkyMask`]); constant and black skies need none [default: true].
+    pub equirect_sky: bool,
 }
 
 impl RuntimeSettings {
-    /// These settings with `max_lights` set to `lights` rounded up to a whole light-mask word
-    /// (32; at most [`MAX_LIGHTS`]), for a runtime whose rig never grows (a command-line
-    /// relight, sample or render). The per-brick light masks and the shadow-ray cache then take
-    /// what the rig needs rather than what 256 lights would: on `street_20_L120` at 1 m (60k
-    /// bricks, 860k surfels, 8 lights) 3.9 MB of masks become 0.5 MB and the cache 13.8 MB
-    /// 6.9 MB, with the same relit result (`tests/tests/lights.rs`). An engine whose rig may grow keeps
+    /// These settings fitted to `lighting`, for a runtime whose lighting never changes kind
+    /// (a command-line relight, sample or render): `max_lights` its light count rounded up to
+    /// a whole light-mask word (32; at most [`MAX_LIGHTS`]), and the probes' sky masks only
+    /// for an equirect sky. The per-brick light masks and the shadow-ray cache then take what
+    /// the rig needs rather than what 256 lights would: on `street_20_L120` at 1 m (60k bricks,
+    /// 860k surfels, 8 lights, a constant sky) 3.9 MB of masks become 0.5 MB, the cache 13.8
+    /// MB 6.9 MB and the sky masks 7.7 MB nothing, with the same relit result
+    /// (`tests/tests/lights.rs`). An engine whose rig may grow keeps
     /// [`RuntimeSettings::with_room_for`].
-    pub fn fitted_to(self, lights: usize) -> RuntimeSettings {
+    pub fn fitted_to(self, lighting: &crate::Lighting) -> RuntimeSettings {
         RuntimeSettings {
-            max_lights: lights.max(1).next_multiple_of(32).min(MAX_LIGHTS),
+            max_lights: lighting
+                .rig
+                .lights
+                .len()
+                .max(1)
+                .next_multiple_of(32)
+                .min(MAX_LIGHTS),
+            equirect_sky: matches!(lighting.sky, crate::SkyModel::Equirect { .. }),
             ..self
         }
     }
@@ -203,6 +219,7 @@ impl Default for RuntimeSettings {
             bounces: Bounces::Fixed(1),
             max_lights: 256,
             shadow_cache_words: None,
+            equirect_sky: true,
             volume_format: VolumeFormat::default(),
             max_factor_chunk_bytes: None,
             max_surfel_chunk_bytes: None,

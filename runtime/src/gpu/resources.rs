@@ -133,7 +133,7 @@ impl Resources {
         };
         let (chunks, chunk_factors, chunk_uniforms) = factor_buffers(&alloc, asset, settings)?;
         let (surfel_chunks, chunk_surfels) = surfel_buffers(&alloc, asset, settings)?;
-        let asset_buffers = AssetBuffers::new(&alloc, asset)?;
+        let asset_buffers = AssetBuffers::new(&alloc, asset, settings)?;
         let state = StateBuffers::new(&alloc, asset, settings, mask_stride)?;
         let (textures, views, sampler) = volume(device, &g, settings);
         let info = volume_info(asset, settings);
@@ -159,7 +159,11 @@ impl Resources {
 impl AssetBuffers {
     /// Uploads the asset's arrays (a scene without triangles gets one leaf holding a degenerate
     /// triangle, which no ray hits).
-    fn new(alloc: &Alloc, asset: &Asset) -> Result<AssetBuffers, GpuError> {
+    fn new(
+        alloc: &Alloc,
+        asset: &Asset,
+        settings: &RuntimeSettings,
+    ) -> Result<AssetBuffers, GpuError> {
         let none = wgpu::BufferUsages::empty();
         let upload = |label, bytes: &[u8]| alloc.storage(label, bytes, none);
         let normal_bounds: Vec<GpuNormalBounds> = brick_normal_bounds(asset)
@@ -200,7 +204,14 @@ impl AssetBuffers {
                 "prt sky transfer",
                 bytemuck::cast_slice(&asset.sky_transfer),
             )?,
-            sky_mask: upload("prt sky mask", bytemuck::cast_slice(&asset.sky_mask))?,
+            // Read only under an equirect sky (gather.wgsl): without one, the smallest binding.
+            sky_mask: upload(
+                "prt sky mask",
+                bytemuck::cast_slice(match settings.equirect_sky {
+                    true => &asset.sky_mask[..],
+                    false => &[],
+                }),
+            )?,
             depth_moments: upload(
                 "prt probe depth moments",
                 bytemuck::cast_slice(&asset.probe_depth),
