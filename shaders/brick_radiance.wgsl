@@ -21,9 +21,10 @@
 
 fn surfel_radiance_at(s: u32) -> vec3<f32> {
     // Three floats a surfel (relight_surfels.wgsl, bounce_surfels.wgsl).
-    var l = vec3<f32>(surfel_radiance[3u * s], surfel_radiance[3u * s + 1u], surfel_radiance[3u * s + 2u]);
+    let at = 3u * s;
+    var l = vec3<f32>(surfel_radiance[at], surfel_radiance[at + 1u], surfel_radiance[at + 2u]);
     if BOUNCES {
-        l = l + vec3<f32>(surfel_bounce[3u * s], surfel_bounce[3u * s + 1u], surfel_bounce[3u * s + 2u]);
+        l = l + vec3<f32>(surfel_bounce[at], surfel_bounce[at + 1u], surfel_bounce[at + 2u]);
     }
     return l;
 }

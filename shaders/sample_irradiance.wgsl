@@ -264,9 +264,10 @@ fn prt_irradiance(c: array<vec3<f32>, 9>, n: vec3<f32>) -> vec3<f32> {
 // brick key (brick lattice cell, the normal's dominant axis) in the hash table, then by the
 // point's cell of that brick. Its terms say which of the 27 probes around it the surfel sees
 // (a probe it cannot see keeps PRT_BLOCKED_WEIGHT of its trilinear weight) and scale the
-// irradiance by (open . L + hits / rays * near) / (A(n_s) . L) per channel: open the mean SH
-// basis of its near-field rays that escape, near its near group's relit radiance per hit, A the
-// clamped-cosine transfer of the surfel's normal. A point without one gets prt_sample_sh.
+// irradiance by (clamp(open . L, 0, A(n_s) . L) + hits / rays * near) / (A(n_s) . L) per
+// channel: open the mean SH basis of its near-field rays that escape (held to what the whole
+// hemisphere brings: L2 ringing can exceed it), near its near group's relit radiance per hit, A
+// the clamped-cosine transfer of the surfel's normal (twin: prt_runtime::surface). A point without one gets prt_sample_sh.
 
 // What sample_irradiance computed: the SH it interpolated, its validity and the irradiance.
 struct PrtSurfaceSample {
@@ -398,7 +399,8 @@ fn prt_sample_surface(world_pos: vec3<f32>, normal: vec3<f32>) -> PrtSurfaceSamp
         lo = lo + s.sh[k] * open[k];
         all_l = all_l + s.sh[k] * (a * y[k]);
     }
-    let ratio = max((lo + share * near) / all_l, vec3<f32>(0.0));
+    let escaping = min(max(lo, vec3<f32>(0.0)), max(all_l, vec3<f32>(0.0)));
+    let ratio = max((escaping + share * near) / all_l, vec3<f32>(0.0));
     out.irradiance = select(out.irradiance, out.irradiance * ratio, all_l > vec3<f32>(0.0));
     return out;
 }

@@ -15,10 +15,15 @@
 //!    that sees none of them leaves the weights to the default lookup (its near field still
 //!    applies).
 //! 3. **Near field**: scale the irradiance, per colour channel, by
-//!    `(open . L + hits / rays * near_G) / (A(n) . L)`, `L` the interpolated radiance SH, `A`
-//!    the cosine transfer of the surfel's normal, `near_G` the mean radiance per near hit of
-//!    the surfel's near group (the surfels of its brick that see the same probes;
-//!    [`near_radiance`], one value per group per relight).
+//!    `(clamp(open . L, 0, A(n) . L) + hits / rays * near_G) / (A(n) . L)`, `L` the
+//!    interpolated radiance SH, `A` the cosine transfer of the surfel's normal, `near_G` the
+//!    mean radiance per near hit of the surfel's near group (the surfels of its brick that see
+//!    the same probes; [`near_radiance`], one value per group per relight). The clamp holds
+//!    the escaping rays to what every direction of the hemisphere brings: with radiance that
+//!    is nowhere negative they cannot bring more, but L2's ringing (a bright lobe the near
+//!    field blocks, a sunlit court behind a parapet, spreads a third of its peak to the
+//!    opposite side) can. It has no constant to tune; [`scale_by_near_field`] says what it
+//!    measured.
 //!
 //! The figures that chose it (the family's tuning seeds, and the held-out seeds it was then
 //! scored on) are in `docs/results/surface.md` (`prt-bench surface --lookup surface`).
@@ -76,10 +81,16 @@ pub fn group_radiance(asset: &Asset, irradiance: &[[f32; 3]]) -> Vec<[f32; 3]> {
 }
 
 /// Scales `sample`'s irradiance, per colour channel, by its near field
-/// `(open . L + near) / (all . L)`, `L` the sample's SH, `open` and `all` the SH transfer of
-/// the near-field rays that escape and of all of them, `near` the radiance the others bring
-/// (in the same normalisation), clamped at 0; a channel whose `all . L` is not positive stays
-/// as it is.
+/// `(clamp(open . L, 0, all . L) + near) / (all . L)`, `L` the sample's SH, `open` and `all`
+/// the SH transfer of the near-field rays that escape and of all of them, `near` the radiance
+/// the others bring (in the same normalisation), clamped at 0; a channel whose `all . L` is
+/// not positive stays as it is.
+///
+/// The clamp of `open . L` (issue 31, stop 52; `prt-bench surface --lookup default`) cut the
+/// levels' leaks where a sunlit court lay behind a parapet or a shell: unseen seeds 24-31,
+/// worst leaks 1.0% -> 0.3% and over-lit pixels 3.3% -> 2.6%; the fixtures' two rooms 4.74% ->
+/// 4.03% and thick walls 2.98% -> 2.74%; Sponza and Cornell unchanged
+/// (docs/results/surface_candidates.md, stop 52).
 pub fn scale_by_near_field(
     sample: &mut Sample,
     open: &[f32; SH_COUNT],
@@ -90,7 +101,8 @@ pub fn scale_by_near_field(
         let dot = |t: &[f32; SH_COUNT]| (0..SH_COUNT).map(|k| sample.sh[k][ch] * t[k]).sum::<f32>();
         let total = dot(all);
         if total > 0.0 {
-            *e *= ((dot(open) + near[ch]) / total).max(0.0);
+            let escaping = dot(open).max(0.0).min(total);
+            *e *= ((escaping + near[ch]) / total).max(0.0);
         }
     }
 }
@@ -178,5 +190,35 @@ impl<'a> SurfaceSampler<'a> {
         let within = t.surfel_in(brick, key, position)?;
         let surfel = (self.asset.bricks[brick as usize].first_surfel + within) as usize;
         (t.surfels[surfel].mask & TERMS_TRACED != 0).then_some((brick as usize, surfel))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Escaping rays bring at most what the whole hemisphere does and never less than nothing
+    /// (L2 ringing can put `open . L` outside both); a near field brighter than the probes'
+    /// light in its directions still brightens the point.
+    #[test]
+    fn escaping_light_is_held_to_the_hemisphere() {
+        let mut sh = [[0.0f32; 3]; SH_COUNT];
+        sh[0] = [1.0, 2.0, 4.0];
+        let scaled = |open_dc: f32, near: f32| {
+            let mut sample = Sample {
+                sh,
+                irradiance: [1.0; 3],
+                validity: 1.0,
+            };
+            let mut open = [0.0; SH_COUNT];
+            open[0] = open_dc;
+            let mut all = [0.0; SH_COUNT];
+            all[0] = 1.0;
+            scale_by_near_field(&mut sample, &open, &all, [near; 3]);
+            sample.irradiance
+        };
+        assert_eq!(scaled(1.5, 0.0), [1.0; 3], "more than the hemisphere");
+        assert_eq!(scaled(-0.5, 0.0), [0.0; 3], "less than nothing");
+        assert_eq!(scaled(0.5, 1.0), [1.5, 1.0, 0.75], "a bright near field");
     }
 }

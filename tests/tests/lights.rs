@@ -86,15 +86,29 @@ fn a_runtime_fitted_to_its_rig_relights_the_same_in_less_memory() {
     let (device, queue) = gpu_device();
     let asset = bake(&fixture("cornell/cornell.gltf"), &BakeSettings::default());
     let lighting = many_lights(20);
+    // A second update with one light moved: the cache's other half, and the bits copied
+    // across for bricks the move leaves alone.
+    let mut moved = many_lights(20);
+    moved.rig.lights[7].position[0] += 0.15;
     let run = |settings| {
         let mut runtime = PrtRuntime::new(&device, &queue, &asset, settings).unwrap();
-        let (sh, counters) = update(&device, &queue, &mut runtime, &lighting);
-        (sh, counters, runtime)
+        let first = update(&device, &queue, &mut runtime, &lighting);
+        let second = update(&device, &queue, &mut runtime, &moved);
+        (first, second, runtime)
     };
-    let (roomy, _, roomy_runtime) = run(RuntimeSettings::default().with_room_for(20));
-    let (sh, counters, mut runtime) = run(RuntimeSettings::default().fitted_to(&lighting));
-    assert!(sh == roomy, "fitted and roomy runtimes differ");
-    assert_eq!(counters.bricks_uncached, 0, "the fitted cache overflowed");
+    let (roomy, roomy_moved, roomy_runtime) = run(RuntimeSettings::default().with_room_for(20));
+    let (first, second, mut runtime) = run(RuntimeSettings::default().fitted_to(&lighting));
+    assert!(first.0 == roomy.0, "fitted and roomy runtimes differ");
+    assert!(second.0 == roomy_moved.0, "they differ after a light moved");
+    assert_eq!(
+        (first.1.bricks_uncached, second.1.bricks_uncached),
+        (0, 0),
+        "the fitted cache overflowed"
+    );
+    assert!(
+        second.1.shadow_rays < first.1.shadow_rays,
+        "the cache was not used"
+    );
     let (bytes, roomy_bytes) = (runtime.gpu_memory().1, roomy_runtime.gpu_memory().1);
     assert!(
         bytes + asset.sky_mask.len() as u64 * 4 <= roomy_bytes,

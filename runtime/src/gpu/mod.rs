@@ -180,13 +180,14 @@ pub struct RuntimeSettings {
 }
 
 impl RuntimeSettings {
-    /// These settings fitted to `lighting`, for a runtime whose lighting never changes kind
-    /// (a command-line relight, sample or render): `max_lights` its light count rounded up to
-    /// a whole light-mask word (32; at most [`MAX_LIGHTS`]), and the probes' sky masks only
-    /// for an equirect sky. The per-brick light masks and the shadow-ray cache then take what
-    /// the rig needs rather than what 256 lights would: on `street_20_L120` at 1 m (60k bricks,
-    /// 860k surfels, 8 lights, a constant sky) 3.9 MB of masks become 0.5 MB, the cache 13.8
-    /// MB 6.9 MB and the sky masks 7.7 MB nothing, with the same relit result
+    /// These settings fitted to `lighting`, for a runtime whose rig never grows and whose sky
+    /// never becomes an image (a command-line relight, sample or render, and the GPU bench):
+    /// `max_lights` its light count rounded up to a whole light-mask word (32; at most
+    /// [`MAX_LIGHTS`]) and `equirect_sky` only for an equirect sky, whatever these settings
+    /// had. The per-brick light masks and the shadow-ray cache then take what the rig needs
+    /// rather than what 256 lights would: on `street_20_L120` at 1 m (60k bricks, 860k
+    /// surfels, 8 lights, a constant sky) the masks go from 3.9 to 0.5 MB, the cache from 13.8
+    /// to 6.9 MB and the sky masks from 7.7 MB to none, with the same relit result
     /// (`tests/tests/lights.rs`). An engine whose rig may grow keeps
     /// [`RuntimeSettings::with_room_for`].
     pub fn fitted_to(self, lighting: &crate::Lighting) -> RuntimeSettings {

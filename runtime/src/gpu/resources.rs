@@ -133,7 +133,7 @@ impl Resources {
         };
         let (chunks, chunk_factors, chunk_uniforms) = factor_buffers(&alloc, asset, settings)?;
         let (surfel_chunks, chunk_surfels) = surfel_buffers(&alloc, asset, settings)?;
-        let asset_buffers = AssetBuffers::new(&alloc, asset, settings)?;
+        let asset_buffers = AssetBuffers::new(&alloc, asset, settings.equirect_sky)?;
         let state = StateBuffers::new(&alloc, asset, settings, mask_stride)?;
         let (textures, views, sampler) = volume(device, &g, settings);
         let info = volume_info(asset, settings);
@@ -159,11 +159,10 @@ impl Resources {
 impl AssetBuffers {
     /// Uploads the asset's arrays (a scene without triangles gets one leaf holding a degenerate
     /// triangle, which no ray hits).
-    fn new(
-        alloc: &Alloc,
-        asset: &Asset,
-        settings: &RuntimeSettings,
-    ) -> Result<AssetBuffers, GpuError> {
+    /// Without `equirect_sky` the probes' sky masks (read only under an equirect sky,
+    /// gather.wgsl) are not uploaded: the binding gets the smallest buffer.
+    fn new(alloc: &Alloc, asset: &Asset, equirect_sky: bool) -> Result<AssetBuffers, GpuError> {
+        let sky_mask: &[u32] = if equirect_sky { &asset.sky_mask } else { &[] };
         let none = wgpu::BufferUsages::empty();
         let upload = |label, bytes: &[u8]| alloc.storage(label, bytes, none);
         let normal_bounds: Vec<GpuNormalBounds> = brick_normal_bounds(asset)
@@ -204,14 +203,7 @@ impl AssetBuffers {
                 "prt sky transfer",
                 bytemuck::cast_slice(&asset.sky_transfer),
             )?,
-            // Read only under an equirect sky (gather.wgsl): without one, the smallest binding.
-            sky_mask: upload(
-                "prt sky mask",
-                bytemuck::cast_slice(match settings.equirect_sky {
-                    true => &asset.sky_mask[..],
-                    false => &[],
-                }),
-            )?,
+            sky_mask: upload("prt sky mask", bytemuck::cast_slice(sky_mask))?,
             depth_moments: upload(
                 "prt probe depth moments",
                 bytemuck::cast_slice(&asset.probe_depth),
