@@ -267,7 +267,7 @@ fn prt_irradiance(c: array<vec3<f32>, 9>, n: vec3<f32>) -> vec3<f32> {
 // irradiance by (clamp(open . L, 0, A(n_s) . L) + hits / rays * near) / (A(n_s) . L) per
 // channel: open the mean SH basis of its near-field rays that escape (held to what the whole
 // hemisphere brings: L2 ringing can exceed it), near its near group's relit radiance per hit, A
-// the clamped-cosine transfer of the surfel's normal (twin: prt_runtime::surface). A point without one gets prt_sample_sh.
+// the clamped-cosine transfer of the surfel's normal. A point without one gets prt_sample_sh.
 
 // What sample_irradiance computed: the SH it interpolated, its validity and the irradiance.
 struct PrtSurfaceSample {

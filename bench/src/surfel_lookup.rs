@@ -13,8 +13,10 @@
 //!   brick borders: the bound is for the stored values, not for that search;
 //! - a probe counts when a ray from the surfel reaches it ([`BLOCKED_WEIGHT`] otherwise); a
 //!   surfel that sees none of the point's probes leaves them to the default lookup;
-//! - the irradiance is scaled by `(T_open . L + near) / (T_all . L)` per channel: `T_open` and
-//!   `T_all` are the SH9 sums of the surfel's [`NEAR_FIELD_RAYS`] cosine rays that escape
+//! - the irradiance is scaled by `(clamp(T_open . L, 0, T_all . L) + near) / (T_all . L)` per
+//!   channel (the runtime's `scale_by_near_field`, whose clamp since stop 52 this reference
+//!   shares: its rows in docs/results/surface.md predate it): `T_open` and `T_all` are the SH9
+//!   sums of the surfel's [`NEAR_FIELD_RAYS`] cosine rays that escape
 //!   within the reach and of all of them, `L` the point's interpolated radiance SH, `near` the
 //!   summed relit radiance of the bricks the other rays hit. In a bake `T_open` and `T_all` are
 //!   18 numbers per surfel and `near` a gather over the bricks within reach.

@@ -23,9 +23,10 @@
 //!   bytes per brick giving each of its 4x4x4 cells its nearest surfel ([`SurfaceTerms::cells`]).
 //!
 //! The lookup then scales the interpolated irradiance by
-//! `(open . L + hits / rays * near) / (A(n) . L)` per colour channel, with `L` the interpolated
-//! radiance SH and `A(n)` the clamped-cosine transfer of the surfel's normal (what `open` is
-//! when every ray escapes). All of it is optional: an asset baked without merging, or a point
+//! `(clamp(open . L, 0, A(n) . L) + hits / rays * near) / (A(n) . L)` per colour channel, with
+//! `L` the interpolated radiance SH and `A(n)` the clamped-cosine transfer of the surfel's
+//! normal (what `open` is when every ray escapes; the clamp since stop 52,
+//! `prt_runtime::surface`). All of it is optional: an asset baked without merging, or a point
 //! whose brick has no entry, is sampled by the default lookup.
 
 use bytemuck::{Pod, Zeroable};
