@@ -25,9 +25,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     }
     let e = sample_irradiance(surfel.position, surfel.normal);
     let l = surfel.albedo * (params.bounce_damping / PI) * e;
-    // Three floats a surfel, as relight_surfels.wgsl writes surfel_radiance.
-    surfel_bounce[3u * c] = l.x;
-    surfel_bounce[3u * c + 1u] = l.y;
-    surfel_bounce[3u * c + 2u] = l.z;
+    // SURFEL_RADIANCE_FLOATS a surfel, as relight_surfels.wgsl writes surfel_radiance.
+    let at = SURFEL_RADIANCE_FLOATS * c;
+    surfel_bounce[at] = l.x;
+    surfel_bounce[at + 1u] = l.y;
+    surfel_bounce[at + 2u] = l.z;
     brick_dirty[surfel.brick] = 1u;
 }

@@ -20,8 +20,8 @@
 @group(0) @binding(9) var<storage, read_write> group_radiance: array<vec4<f32>>;
 
 fn surfel_radiance_at(s: u32) -> vec3<f32> {
-    // Three floats a surfel (relight_surfels.wgsl, bounce_surfels.wgsl).
-    let at = 3u * s;
+    // SURFEL_RADIANCE_FLOATS a surfel, rgb (relight_surfels.wgsl, bounce_surfels.wgsl).
+    let at = SURFEL_RADIANCE_FLOATS * s;
     var l = vec3<f32>(surfel_radiance[at], surfel_radiance[at + 1u], surfel_radiance[at + 2u]);
     if BOUNCES {
         l = l + vec3<f32>(surfel_bounce[at], surfel_bounce[at + 1u], surfel_bounce[at + 2u]);

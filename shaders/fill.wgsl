@@ -65,7 +65,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         }
         total = total + w;
         for (var k = 0u; k < 9u; k = k + 1u) {
-            let at = 27u * q + 3u * k;
+            let at = PROBE_SH_FLOATS * q + 3u * k;
             c[k] = c[k] + w * vec3<f32>(probe_sh[at], probe_sh[at + 1u], probe_sh[at + 2u]);
         }
     }

@@ -108,10 +108,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         shadow_cache[new_first + rank_new / 32u] = word;
     }
     let l = surfel.emission + surfel.albedo * (1.0 / PI) * e;
-    // Three floats a surfel (a vec4 array spent a fourth on padding).
-    surfel_radiance[3u * c] = l.x;
-    surfel_radiance[3u * c + 1u] = l.y;
-    surfel_radiance[3u * c + 2u] = l.z;
+    // SURFEL_RADIANCE_FLOATS a surfel, rgb.
+    let at = SURFEL_RADIANCE_FLOATS * c;
+    surfel_radiance[at] = l.x;
+    surfel_radiance[at + 1u] = l.y;
+    surfel_radiance[at + 2u] = l.z;
     atomicAdd(&counters.surfels_relit, 1u);
     if rays > 0u {
         atomicAdd(&counters.shadow_rays, rays);

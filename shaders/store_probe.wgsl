@@ -1,5 +1,5 @@
 // Writing one probe's SH, shared by the stages that produce it (gather.wgsl, fill.wgsl): its
-// nine coefficients to `probe_sh` (which the stage declares; 27 floats a probe, rgb by
+// nine coefficients to `probe_sh` (which the stage declares; PROBE_SH_FLOATS a probe, rgb by
 // coefficient, the layout `PrtRuntime::read_probe_sh` reads) and all seven volume texels at
 // once, so a texel never holds half of an update.
 //
@@ -23,7 +23,7 @@ fn texel(v: vec4<f32>) -> vec4<f32> {
 // Probe p's SH c, to probe_sh and its seven texels.
 fn store_probe(p: u32, c: array<vec3<f32>, 9>) {
     for (var k = 0u; k < 9u; k = k + 1u) {
-        let at = 27u * p + 3u * k;
+        let at = PROBE_SH_FLOATS * p + 3u * k;
         probe_sh[at] = c[k].x;
         probe_sh[at + 1u] = c[k].y;
         probe_sh[at + 2u] = c[k].z;

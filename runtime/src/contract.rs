@@ -27,6 +27,13 @@ pub const GATHER_WORKGROUP: u32 = 32;
 /// the last), 64 MiB for 64k bricks at this limit, and the CPU reference's own limit
 /// ([`crate::relight::MAX_CPU_LIGHTS`]), which every GPU result is checked against.
 pub const MAX_LIGHTS: usize = 4096;
+/// Floats per probe in the runtime's `probe_sh` buffer: the nine SH coefficients, rgb each,
+/// unpadded (`store_probe.wgsl` writes them, `fill.wgsl` and `PrtRuntime::read_probe_sh` read
+/// them; a vec4 per coefficient spent a quarter on padding).
+pub const PROBE_SH_FLOATS: u32 = 27;
+/// Floats per surfel in the runtime's direct and bounce radiance buffers: rgb, unpadded
+/// (`relight_surfels.wgsl`, `bounce_surfels.wgsl`, `brick_radiance.wgsl`).
+pub const SURFEL_RADIANCE_FLOATS: u32 = 3;
 /// A brick without room in the shadow-ray cache (its lights are traced whenever it is relit).
 pub const NO_CACHE: u32 = u32::MAX;
 /// Workgroups along x of every dispatch; more work continues along y.
@@ -309,6 +316,11 @@ pub fn wgsl_constants() -> Vec<(&'static str, String)> {
     vec![
         ("WORKGROUP", format!("{WORKGROUP}u")),
         ("NO_CACHE", format!("{NO_CACHE}u")),
+        ("PROBE_SH_FLOATS", format!("{PROBE_SH_FLOATS}u")),
+        (
+            "SURFEL_RADIANCE_FLOATS",
+            format!("{SURFEL_RADIANCE_FLOATS}u"),
+        ),
         ("GATHER_WORKGROUP", format!("{GATHER_WORKGROUP}u")),
         ("BVH_STACK", format!("{MAX_STACK}u")),
         (

@@ -309,7 +309,11 @@ impl StateBuffers {
             group_radiance: alloc.zeroed("prt group radiance", 16 * n_groups, none)?,
             near_radiance: alloc.zeroed("prt near radiance", 16 * n_groups, none)?,
             probe_dirty: alloc.zeroed("prt probe dirty", 4 * n_probes, none)?,
-            probe_sh: alloc.zeroed("prt probe sh", 4 * 27 * n_probes, copy_src)?,
+            probe_sh: alloc.zeroed(
+                "prt probe sh",
+                4 * u64::from(PROBE_SH_FLOATS) * n_probes,
+                copy_src,
+            )?,
             counters: alloc.zeroed("prt counters", size_of::<Counters>() as u64, copy_src)?,
             lights: alloc.zeroed("prt lights", 64 * max_lights, none)?,
             sky_directions: alloc.zeroed(

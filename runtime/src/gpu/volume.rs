@@ -83,9 +83,9 @@ impl PrtRuntime {
             &self.device,
             &self.queue,
             &self.res.state.probe_sh,
-            4 * 27 * u64::from(self.probe_count.max(1)),
+            4 * u64::from(crate::contract::PROBE_SH_FLOATS) * u64::from(self.probe_count.max(1)),
         )?;
-        // 27 floats a probe, rgb by coefficient (`store_probe.wgsl`).
+        // `PROBE_SH_FLOATS` a probe, rgb by coefficient (`store_probe.wgsl`).
         let v: &[[f32; 3]] = bytemuck::cast_slice(&bytes);
         Ok((0..self.probe_count as usize)
             .map(|p| std::array::from_fn(|k| v[9 * p + k]))

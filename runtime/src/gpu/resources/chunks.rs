@@ -51,6 +51,7 @@ pub(super) fn surfel_buffers(
     let none = wgpu::BufferUsages::empty();
     let surfel_chunks = surfel_chunks(asset, alloc.chunk_bytes(settings.max_surfel_chunk_bytes))?;
     let feeds_back = settings.bounces.feeds_back();
+    let radiance_bytes = 4 * u64::from(crate::contract::SURFEL_RADIANCE_FLOATS);
     // Per chunk: its surfels, their direct radiance and their bounce radiance.
     let chunk_surfels: Vec<[wgpu::Buffer; 4]> = surfel_chunks
         .iter()
@@ -67,10 +68,10 @@ pub(super) fn surfel_buffers(
                         .stored(&asset.surfels[range]),
                     none,
                 )?,
-                alloc.zeroed("prt surfel radiance", 12 * n, none)?,
+                alloc.zeroed("prt surfel radiance", radiance_bytes * n, none)?,
                 alloc.zeroed(
                     "prt surfel bounce",
-                    if feeds_back { 12 * n } else { 0 },
+                    if feeds_back { radiance_bytes * n } else { 0 },
                     none,
                 )?,
                 alloc.uniform("prt surfel chunk", c),
