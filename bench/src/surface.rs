@@ -108,6 +108,10 @@ pub struct SurfaceArgs {
     /// Keep bricks whole where a wall stands on them (`prt bake --no-split-bricks`).
     #[arg(long)]
     no_split_bricks: bool,
+    /// Send hits at least this many brick sizes away to coarse bricks (`prt bake --far-ratio`;
+    /// 0: none) [default: the bake's].
+    #[arg(long)]
+    far_ratio: Option<f32>,
     /// Write each camera view (the levels') per spacing and lookup to DIR as a PNG: reference,
     /// lookup, over-lit (red) and under-lit (blue) pixels (`surface/pictures.rs`).
     #[arg(long, value_name = "DIR")]
@@ -198,7 +202,7 @@ pub fn run(args: SurfaceArgs) -> Result<()> {
                 args.probe_budget,
                 args.prune_error,
             ),
-            !args.no_split_bricks,
+            (!args.no_split_bricks, args.far_ratio),
         )?);
     }
     args.out
@@ -212,7 +216,7 @@ fn measure(
     refs: &Refs,
     lookups: &[Lookup],
     (spacing, sparse, probe_budget, prune_error): (Option<f32>, bool, Option<usize>, Option<f32>),
-    split_bricks: bool,
+    (split_bricks, far_ratio): (bool, Option<f32>),
 ) -> Result<Vec<Row>> {
     let lighting = prt_runtime::load_rig(&case.rig)
         .with_context(|| format!("{}: loading the rig {}", case.name, case.rig.display()))?;
@@ -223,6 +227,7 @@ fn measure(
         probe_budget,
         prune_error: prune_error.unwrap_or(BakeSettings::default().prune_error),
         split_bricks,
+        far_ratio: far_ratio.unwrap_or(BakeSettings::default().far_ratio),
         ..BakeSettings::default()
     };
     let bricks = lookups.iter().any(Lookup::needs_bricks);

@@ -4,7 +4,8 @@
 //! level 0 (its own brick) within `far_ratio` brick sizes, then one level more each time the
 //! distance doubles, so that a level's brick is at most `2 / far_ratio` radians wide where it
 //! is used. A probe's hits of one level and one coarse cell (and one normal key) make one
-//! factor row. Once every brick is known, [`build`] makes the coarse bricks: per level, the
+//! factor row, which reads the lowest level whose cell holds all its hits
+//! (`tables::factors::probe_rows`). Once every brick is known, [`build`] makes the coarse bricks: per level, the
 //! bricks of each coarse cell, unless that is a single brick (the brick itself is used) or the
 //! same bricks as the level below (the finer coarse brick is used). [`CoarsePlacement`] then
 //! says which brick or coarse brick a row of a given level reads.
