@@ -6,9 +6,10 @@
 //! that travel far are instead grouped by a brick of a coarser level: level `l` covers
 //! `2^l x 2^l x 2^l` bricks of one normal key (same dominant axis, same side), and a hit
 //! `d` from its probe goes to the level whose brick is at most `2/R` radians wide seen from
-//! there (`R` the bake's `far_ratio`); the factor then reads the lowest level whose brick
-//! holds all its hits, which may be lower (rays that land in one corner of a cell: a floor
-//! seen through a door). That is what the prior art does for radiance caches
+//! there (`R` the bake's `far_ratio`), but no coarser than level 3, cells of 8 bricks
+//! (`prt_bake::merge::coarse::FAR_LEVELS`); the factor then reads the lowest level whose
+//! brick holds all its hits, which may be lower (rays that land in one corner of a cell: a
+//! floor seen through a door). That is what the prior art does for radiance caches
 //! (Unreal's volumetric lightmap bricks refined near geometry, clipmaps of DDGI-like caches),
 //! applied to the transfer: the factor's rays, SH transfer and mean hit point are kept as
 //! they are; only the radiance they multiply is the coarse brick's.

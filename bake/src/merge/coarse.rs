@@ -2,8 +2,8 @@
 //!
 //! While tracing, each hit is given a level by its distance from its probe ([`FarField`]):
 //! level 0 (its own brick) within `far_ratio` brick sizes, then one level more each time the
-//! distance doubles, so that a level's brick is at most `2 / far_ratio` radians wide where it
-//! is used. A probe's hits of one level and one coarse cell (and one normal key) make one
+//! distance doubles up to [`FAR_LEVELS`], so that a level's brick is at most `2 / far_ratio`
+//! radians wide where it is used. A probe's hits of one level and one coarse cell (and one normal key) make one
 //! factor row, which reads the lowest level whose cell holds all its hits
 //! (`tables::factors::probe_rows`). Once every brick is known, [`build`] makes the coarse bricks: per level, the
 //! bricks of each coarse cell, unless that is a single brick (the brick itself is used) or the
@@ -48,6 +48,22 @@ pub struct FarField {
 /// Levels are kept as bits 1..=7 of a byte per brick (`stream::Traced::far_levels`).
 const _: () = assert!(MAX_LEVEL <= 7);
 
+/// The coarsest level a far hit goes to: cells of at most 8 bricks a side (four probe
+/// spacings at the default cells of an eighth of the spacing). Past it, distance no longer
+/// coarsens the cells, so a probe's rays that travel more than 40 brick sizes (at the default
+/// ratio of 5) make more rows than the angular rule alone would.
+///
+/// Why a cap (stop 53): a level-5 cell of an interior is half a room's floor, and one linear
+/// fit over a light pool and the dark floor around it carried the pool's light into probes
+/// that saw only the dark part. On levels no one had tuned on (`prt-bench surface`), with
+/// levels up to [`MAX_LEVEL`] against up to 3: interior_52 23.3% -> 16.0% open mean (15.3%
+/// with no coarse bricks at all), interior_60 at half the spacing 7.9% -> 5.0%; on the tuning
+/// seeds, the bundled cases and Sponza the same figures and runtime bytes at the default
+/// spacing, and at half of it Cornell 2.26% -> 1.58% for 11% more bytes. A cap of 4 changed
+/// nothing; 2 cost 4-13% more bytes at the default spacing for about as much.
+pub const FAR_LEVELS: u32 = 3;
+const _: () = assert!(FAR_LEVELS <= MAX_LEVEL);
+
 impl FarField {
     /// Where a bake with `far_ratio` sends far hits over the fold's brick lattice
     /// ([`crate::merge::fold::BrickFolder::lattice`]; origin left for each probe): nowhere
@@ -81,7 +97,7 @@ impl FarField {
     }
 
     /// The level of a hit at `position`: 0 nearer than `near`, else `l` for distances in
-    /// `near * [2^(l-1), 2^l)`, at most [`MAX_LEVEL`]. By comparisons with exact powers of
+    /// `near * [2^(l-1), 2^l)`, at most [`FAR_LEVELS`]. By comparisons with exact powers of
     /// two of `near`, not a logarithm, so that the level is the same on every platform.
     #[inline]
     pub fn level(&self, position: Vec3) -> u32 {
@@ -101,7 +117,7 @@ impl FarField {
         }
         let mut level = 0;
         let mut bound = self.near;
-        while level < MAX_LEVEL && d >= bound {
+        while level < FAR_LEVELS && d >= bound {
             level += 1;
             bound *= 2.0;
         }
@@ -534,7 +550,7 @@ mod tests {
             assert_eq!(at(3.999), 1);
             assert_eq!(at(4.0), 2);
             assert_eq!(at(8.0), 3);
-            assert_eq!(at(1e9), MAX_LEVEL);
+            assert_eq!(at(1e9), FAR_LEVELS);
             assert_eq!(far.level(far.origin + Vec3::X * 8.5 * 0.5 * scale), 3);
         }
         assert_eq!(FarField::off().level_at(1e30), 0);
