@@ -97,10 +97,10 @@ fn fit(
     (mean, b.map(|bc| (inv * bc).to_array()))
 }
 
-/// Far rays share factors: with a far ratio of 2 the fast preset's Cornell bake keeps under a
-/// third of the factors, and after a light moves the GPU re-gathers every probe whose coarse
-/// bricks changed (a coarse brick is dirty when one of its bricks is): it equals the CPU
-/// relight.
+/// Far rays share factors: with a far ratio of 2 the fast preset's Cornell bake keeps under
+/// 40% of the factors (34.6% since stop 53's coarsest level of 3; under a third before), and
+/// after a light moves the GPU re-gathers every probe whose coarse bricks changed (a coarse
+/// brick is dirty when one of its bricks is): it equals the CPU relight.
 #[test]
 fn coarse_bricks_follow_light_changes_on_the_gpu() {
     use prt_runtime::gpu::{PrtRuntime, RuntimeSettings, VolumeFormat};
@@ -115,7 +115,7 @@ fn coarse_bricks_follow_light_changes_on_the_gpu() {
     // Factors, not slots (a u8 factor takes one or two).
     let factors = |a: &prt_format::Asset| a.factors.factor_counts().0;
     assert!(
-        factors(&asset) * 3 < factors(&off),
+        factors(&asset) * 5 < factors(&off) * 2,
         "{} factors against {}",
         factors(&asset),
         factors(&off)
