@@ -56,7 +56,8 @@ pub struct BakeSettings {
     /// 8 and 12.5% at 12; `prt-bench frontier --cells 6,8,12`).
     pub cells_per_spacing: f32,
     /// Hits at least this many brick sizes from their probe go to coarse bricks, one level
-    /// coarser each time the distance doubles ([`prt_format::coarse`]): a probe's far rays
+    /// coarser each time the distance doubles up to cells of 8 bricks
+    /// ([`crate::merge::coarse::FAR_LEVELS`], [`prt_format::coarse`]): a probe's far rays
     /// share factors instead of taking one each. 0 keeps every hit in its own brick's factor.
     /// 5 by default, with 2048 rays ([`BakeSettings::rays`] says why).
     pub far_ratio: f32,

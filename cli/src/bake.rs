@@ -91,7 +91,8 @@ pub struct BakeArgs {
     #[arg(long)]
     no_merge: bool,
     /// Hits at least this many brick sizes from their probe share factors of coarse bricks,
-    /// one level coarser each time the distance doubles; 0 gives every brick its own factor
+    /// one level coarser each time the distance doubles up to cells of 8 bricks; 0 gives every
+    /// brick its own factor
     /// [default: the --quality preset's: 5, fast and high 0].
     #[arg(long)]
     far_ratio: Option<f32>,

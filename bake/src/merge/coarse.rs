@@ -3,12 +3,12 @@
 //! While tracing, each hit is given a level by its distance from its probe ([`FarField`]):
 //! level 0 (its own brick) within `far_ratio` brick sizes, then one level more each time the
 //! distance doubles up to [`FAR_LEVELS`], so that a level's brick is at most `2 / far_ratio`
-//! radians wide where it is used. A probe's hits of one level and one coarse cell (and one normal key) make one
-//! factor row, which reads the lowest level whose cell holds all its hits
-//! (`tables::factors::probe_rows`). Once every brick is known, [`build`] makes the coarse bricks: per level, the
-//! bricks of each coarse cell, unless that is a single brick (the brick itself is used) or the
-//! same bricks as the level below (the finer coarse brick is used). [`CoarsePlacement`] then
-//! says which brick or coarse brick a row of a given level reads.
+//! radians wide where it is used. A probe's hits of one level and one coarse cell (and one
+//! normal key) make one factor row, which reads the lowest level whose cell holds all its
+//! hits (`tables::factors::probe_rows`). Once every brick is known, [`build`] makes the coarse
+//! bricks: per level, the bricks of each coarse cell, unless that is a single brick (the brick
+//! itself is used) or the same bricks as the level below (the finer coarse brick is used).
+//! [`CoarsePlacement`] then says which brick or coarse brick a row of a given level reads.
 //!
 //! **A coarse brick is not read across a wall.** A floor, ceiling or wall that runs on under a
 //! zero-thickness partition gives bricks of one normal key on both sides of it, and a coarse
@@ -55,12 +55,13 @@ const _: () = assert!(MAX_LEVEL <= 7);
 ///
 /// Why a cap (stop 53): a level-5 cell of an interior is half a room's floor, and one linear
 /// fit over a light pool and the dark floor around it carried the pool's light into probes
-/// that saw only the dark part. On levels no one had tuned on (`prt-bench surface`), with
-/// levels up to [`MAX_LEVEL`] against up to 3: interior_52 23.3% -> 16.0% open mean (15.3%
-/// with no coarse bricks at all), interior_60 at half the spacing 7.9% -> 5.0%; on the tuning
-/// seeds, the bundled cases and Sponza the same figures and runtime bytes at the default
-/// spacing, and at half of it Cornell 2.26% -> 1.58% for 11% more bytes. A cap of 4 changed
-/// nothing; 2 cost 4-13% more bytes at the default spacing for about as much.
+/// that saw only the dark part. On levels no one had tuned on (`prt-bench surface`), levels
+/// up to [`MAX_LEVEL`] against up to 3 (both with rows at their hits' smallest cell):
+/// interior_52 23.3% -> 16.0% open mean (15.3% with no coarse bricks at all), interior_60 at
+/// half the spacing 7.9% -> 5.0%; on the tuning seeds, the bundled scenes and Sponza the same
+/// figures and runtime bytes at the default spacing, and at half of it Cornell 2.26% -> 1.58%
+/// for 11% more bytes. A cap of 4 changed nothing; 2 cost 2-12% more bytes at the default
+/// spacing (`docs/results/coarse.md`).
 pub const FAR_LEVELS: u32 = 3;
 const _: () = assert!(FAR_LEVELS <= MAX_LEVEL);
 

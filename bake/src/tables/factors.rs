@@ -67,17 +67,16 @@ pub fn probe_rows(
             }
             entry.1
         } else {
-            let key = (far.key(&hits[i], level), level);
-            let at = *coarse.entry(key).or_insert_with(|| {
+            let fine = far.key(&hits[i], 0);
+            let at = *coarse.entry((cell(fine, level), level)).or_insert_with(|| {
                 rows.push((with_level(brick, level), 0, [0.0; SH_COUNT - 1], [0.0; 3]));
                 rows.len() as u32 - 1
             });
-            let fine = far.key(&hits[i], 0);
             if spread.len() <= at as usize {
                 spread.resize(at as usize + 1, None);
             }
-            let (first, level) = spread[at as usize].get_or_insert((fine, 1));
-            *level = (*level).max(common_level(*first, fine));
+            let (first, need) = spread[at as usize].get_or_insert((fine, 1));
+            *need = (*need).max(common_level(*first, fine));
             at
         };
         let row = &mut rows[at as usize];
@@ -91,16 +90,26 @@ pub fn probe_rows(
     // A far row reads the smallest coarse cell that holds all its hits, not its distance's:
     // rows are one per cell of the distance's level, but a row whose rays all land in a
     // corner of that cell (a floor seen through a door, the edge of a spotlight's pool) read
-    // a fit over the whole cell, lit parts and dark alike. Same rows, same bytes; on a level
-    // nobody had tuned on (`interior_52`, stop 53), 27.7% -> 23.3% open mean, and the dark
-    // room's probes nearer those of a bake without coarse bricks.
+    // a fit over the whole cell, lit parts and dark alike. The same rows (the bytes move only
+    // with the u8 slots' scales and the coarse bricks made: Cornell -0.1%); on a level nobody
+    // had tuned on (`interior_52`, stop 53), 27.7% -> 23.3% open mean, the dark room's probes
+    // nearer those of a bake without coarse bricks. At least level 1: a row whose hits share
+    // one brick key may span the parts of a brick split at a wall (`crate::merge::split`),
+    // which its first hit's brick alone would not stand for.
     for (at, spread) in spread.iter().enumerate() {
         if let Some((_, need)) = *spread {
             let (brick, level) = brick_and_level(rows[at].0);
-            rows[at].0 = with_level(brick as u32, need.min(level));
+            debug_assert!(need <= level, "the hits share their distance's cell");
+            rows[at].0 = with_level(brick as u32, need);
         }
     }
     ProbeRows::of(rows, precision, basis.len() as u32)
+}
+
+/// The cell of `level` that holds the brick of key `fine` ([`FarField::key`] without its
+/// division again).
+fn cell(fine: Key, level: u32) -> Key {
+    (fine.0 >> level, fine.1 >> level, fine.2 >> level, fine.3)
 }
 
 /// The lowest level (at least 1) whose coarse cell holds bricks `a` and `b` of one normal key:
