@@ -129,9 +129,16 @@ impl FarField {
     /// divided by `2^level`.
     #[inline]
     pub fn key(&self, hit: &Hit, level: u32) -> Key {
-        let (x, y, z, flags) = brick_key(hit, self.anchor, self.brick_size);
-        (x >> level, y >> level, z >> level, flags)
+        cell(brick_key(hit, self.anchor, self.brick_size), level)
     }
+}
+
+/// The level-`level` coarse cell that holds the brick of key `key`: its cell divided by
+/// `2^level` (an arithmetic shift, so that cells tile negative coordinates too), the same
+/// normal key.
+#[inline]
+pub fn cell(key: Key, level: u32) -> Key {
+    (key.0 >> level, key.1 >> level, key.2 >> level, key.3)
 }
 
 /// Which brick or coarse brick a factor row of each level reads, per brick: `targets[l - 1][b]`
@@ -404,10 +411,7 @@ impl Groups {
         let n = keys.len() as u32;
         let mut out = Groups { levels: Vec::new() };
         for level in 1..=levels {
-            let cell = |b: u32| {
-                let k = keys[b as usize];
-                (k.0 >> level, k.1 >> level, k.2 >> level, k.3)
-            };
+            let cell = |b: u32| cell(keys[b as usize], level);
             // Without links, one group per cell (the label 0 for every brick).
             let part = match links {
                 Some(links) => {

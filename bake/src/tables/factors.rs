@@ -15,7 +15,7 @@ use std::collections::HashMap;
 
 use foldhash::fast::FixedState;
 
-use crate::merge::coarse::FarField;
+use crate::merge::coarse::{cell, FarField};
 use crate::merge::key::Key;
 use crate::tables::row_store::RowStore;
 use crate::trace::Hit;
@@ -52,10 +52,9 @@ pub fn probe_rows(
     let mut rows: Vec<FactorRow> = Vec::with_capacity(hits.len().min(256));
     // Far hits' rows by coarse cell and level; the row names the first hit's brick, which
     // with the level finds the coarse brick once bricks are numbered (`CoarsePlacement`).
-    let mut coarse: HashMap<(Key, u32), u32, FixedState> = HashMap::default();
-    // Per far row (by row index): its first hit's brick key and the lowest level whose cell
-    // holds all its hits so far.
-    let mut spread: Vec<Option<(Key, u32)>> = Vec::new();
+    // Per row: its index, its first hit's brick key and the lowest level whose cell holds all
+    // its hits so far.
+    let mut coarse: HashMap<(Key, u32), (u32, Key, u32), FixedState> = HashMap::default();
     for (ray, &i) in by_ray.iter().enumerate().filter(|&(_, &i)| i != NO_HIT) {
         let (brick, i) = (hit_brick[i as usize], i as usize);
         let level = far.level(hits[i].position);
@@ -68,16 +67,12 @@ pub fn probe_rows(
             entry.1
         } else {
             let fine = far.key(&hits[i], 0);
-            let at = *coarse.entry((cell(fine, level), level)).or_insert_with(|| {
+            let (at, first, need) = coarse.entry((cell(fine, level), level)).or_insert_with(|| {
                 rows.push((with_level(brick, level), 0, [0.0; SH_COUNT - 1], [0.0; 3]));
-                rows.len() as u32 - 1
+                (rows.len() as u32 - 1, fine, 1)
             });
-            if spread.len() <= at as usize {
-                spread.resize(at as usize + 1, None);
-            }
-            let (first, need) = spread[at as usize].get_or_insert((fine, 1));
             *need = (*need).max(common_level(*first, fine));
-            at
+            *at
         };
         let row = &mut rows[at as usize];
         let y = &basis[ray];
@@ -96,25 +91,18 @@ pub fn probe_rows(
     // nearer those of a bake without coarse bricks. At least level 1: a row whose hits share
     // one brick key may span the parts of a brick split at a wall (`crate::merge::split`),
     // which its first hit's brick alone would not stand for.
-    for (at, spread) in spread.iter().enumerate() {
-        if let Some((_, need)) = *spread {
-            let (brick, level) = brick_and_level(rows[at].0);
-            debug_assert!(need <= level, "the hits share their distance's cell");
-            rows[at].0 = with_level(brick as u32, need);
-        }
+    // (Each entry rewrites its own row: the map's order does not matter.)
+    for &(at, _, need) in coarse.values() {
+        let (brick, level) = brick_and_level(rows[at as usize].0);
+        debug_assert!(need <= level, "the hits share their distance's cell");
+        rows[at as usize].0 = with_level(brick as u32, need);
     }
     ProbeRows::of(rows, precision, basis.len() as u32)
 }
 
-/// The cell of `level` that holds the brick of key `fine` ([`FarField::key`] without its
-/// division again).
-fn cell(fine: Key, level: u32) -> Key {
-    (fine.0 >> level, fine.1 >> level, fine.2 >> level, fine.3)
-}
-
 /// The lowest level (at least 1) whose coarse cell holds bricks `a` and `b` of one normal key:
-/// the cells of level `l` are the keys shifted right by `l` (arithmetic, as
-/// [`FarField::key`]), which agree exactly when the keys' bits from `l` up do.
+/// the cells of level `l` are the keys shifted right by `l` ([`cell`]), which agree exactly
+/// when the keys' bits from `l` up do.
 fn common_level(a: Key, b: Key) -> u32 {
     let differ = ((a.0 ^ b.0) | (a.1 ^ b.1) | (a.2 ^ b.2)) as u32;
     (u32::BITS - differ.leading_zeros()).max(1)
