@@ -98,6 +98,9 @@ pub struct SurfaceArgs {
     /// Bake on the uniform grid (`prt bake --uniform`) instead of the default sparse placement.
     #[arg(long)]
     uniform: bool,
+    /// Rays per probe (`prt bake --rays`) [default: the bake's].
+    #[arg(long)]
+    rays: Option<u32>,
     /// At most this many probes with data (`prt bake --probe-budget`), twice as many in the
     /// second bake, at half the spacing [default: no budget].
     #[arg(long)]
@@ -202,7 +205,7 @@ pub fn run(args: SurfaceArgs) -> Result<()> {
                 args.probe_budget,
                 args.prune_error,
             ),
-            (!args.no_split_bricks, args.far_ratio),
+            (!args.no_split_bricks, args.far_ratio, args.rays),
         )?);
     }
     args.out
@@ -216,7 +219,7 @@ fn measure(
     refs: &Refs,
     lookups: &[Lookup],
     (spacing, sparse, probe_budget, prune_error): (Option<f32>, bool, Option<usize>, Option<f32>),
-    (split_bricks, far_ratio): (bool, Option<f32>),
+    (split_bricks, far_ratio, rays): (bool, Option<f32>, Option<u32>),
 ) -> Result<Vec<Row>> {
     let lighting = prt_runtime::load_rig(&case.rig)
         .with_context(|| format!("{}: loading the rig {}", case.name, case.rig.display()))?;
@@ -228,6 +231,7 @@ fn measure(
         prune_error: prune_error.unwrap_or(BakeSettings::default().prune_error),
         split_bricks,
         far_ratio: far_ratio.unwrap_or(BakeSettings::default().far_ratio),
+        rays: rays.unwrap_or(BakeSettings::default().rays),
         ..BakeSettings::default()
     };
     let bricks = lookups.iter().any(Lookup::needs_bricks);
