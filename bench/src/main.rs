@@ -15,6 +15,7 @@ mod plot;
 mod ray_lookup;
 mod render;
 mod results;
+mod sky_point_lookup;
 mod surface;
 mod surfel_lookup;
 

@@ -71,8 +71,9 @@ pub struct SurfaceArgs {
     cases: Vec<String>,
     /// Lookups to sample with (comma-separated): default (the runtime's), trilinear, and the
     /// references of issue 31: rays, rays_light (per point, through the asset's BVH), surfels
-    /// (the same terms per surfel) [default: all but trilinear, which runs on the bundled
-    /// cases only].
+    /// (the same terms per surfel), path, gather, surfel_gather, sky_point (the point's own
+    /// sky instead of the probes') [default: trilinear, moments, default, rays, rays_light and
+    /// surfels, trilinear on the bundled cases only].
     #[arg(long = "lookup", value_delimiter = ',')]
     lookups: Vec<String>,
     /// Directory the cases' paths are relative to (the repository root).
@@ -87,8 +88,8 @@ pub struct SurfaceArgs {
     #[arg(long)]
     reach: Option<f32>,
     /// Rays per point of the path lookup (`--lookup path`) [default: 256; its figures against
-    /// the probes' in docs/results/surface_candidates.md took 4096], and per gather of
-    /// `gather` and `surfel_gather` [default: 512].
+    /// the probes' in docs/results/surface_candidates.md took 4096], per gather of `gather`
+    /// and `surfel_gather` [default: 512], and per point of `sky_point` [default: 4096].
     #[arg(long)]
     path_rays: Option<u32>,
     /// Bake at this spacing in metres instead of the default, and at half of it [default: the
@@ -141,6 +142,8 @@ struct Refs {
 
 /// One bake of a case, relit with `lighting`.
 struct Baked<'l> {
+    /// The probes' direct view of the sky ([`sky_view`]), for `sky_point`.
+    sky_sh: Option<Vec<ShRgb>>,
     asset: Asset,
     /// The relit bricks, for the near-field hits of the reference lookups that need them.
     near: Option<NearLight>,
@@ -234,8 +237,11 @@ fn measure(
         rays: rays.unwrap_or(BakeSettings::default().rays),
         ..BakeSettings::default()
     };
-    let bricks = lookups.iter().any(Lookup::needs_bricks);
-    let baked = bake(case, &base, &lighting, bricks)?;
+    let needs = (
+        lookups.iter().any(Lookup::needs_bricks),
+        lookups.iter().any(Lookup::needs_sky),
+    );
+    let baked = bake(case, &base, &lighting, needs)?;
     let mut rows = sample_all(case, &baked, Setting::Default, refs, lookups)?;
     let half = BakeSettings {
         spacing: Some(baked.asset.header.grid.spacing / 2.0),
@@ -243,7 +249,7 @@ fn measure(
         ..base
     };
     drop(baked);
-    let baked = bake(case, &half, &lighting, bricks)?;
+    let baked = bake(case, &half, &lighting, needs)?;
     rows.extend(sample_all(case, &baked, Setting::Half, refs, lookups)?);
     Ok(rows)
 }
@@ -270,7 +276,7 @@ fn bake<'l>(
     case: &Case,
     settings: &BakeSettings,
     lighting: &'l Lighting,
-    bricks: bool,
+    (bricks, sky): (bool, bool),
 ) -> Result<Baked<'l>> {
     let t = Instant::now();
     let (asset, report) = prt_bake::bake(&case.scene, settings, &NoProgress)
@@ -291,7 +297,9 @@ fn bake<'l>(
     let relight_s = t.elapsed().as_secs_f64();
     let near = bricks
         .then(|| NearLight::for_asset(&asset, relighter.brick_radiance(&relit.surfel_irradiance)));
+    let sky_sh = sky.then(|| sky_view(&asset, lighting)).transpose()?;
     Ok(Baked {
+        sky_sh,
         asset,
         lighting,
         sh: relit.sh,
@@ -302,6 +310,26 @@ fn bake<'l>(
     })
 }
 
+/// Per grid point, the SH of the sky the probes see directly: `asset` relit with `lighting`'s
+/// sky alone over black surfels (the fill and dilation as the runtime's).
+fn sky_view(asset: &Asset, lighting: &Lighting) -> Result<Vec<ShRgb>> {
+    let mut black = asset.clone();
+    for s in &mut black.surfels {
+        s.albedo = [0.0; 3];
+        s.emission = [0.0; 3];
+    }
+    let sky_only = Lighting {
+        rig: prt_format::LightRig {
+            lights: Vec::new(),
+            sky: lighting.rig.sky.clone(),
+        },
+        sky: lighting.sky.clone(),
+    };
+    Ok(prt_runtime::CpuRelighter::new(&black)?
+        .relight(&sky_only, 1)?
+        .sh)
+}
+
 /// The sampler of one lookup over one bake.
 enum Sampler<'a> {
     Runtime(SurfaceSampler<'a>),
@@ -309,6 +337,7 @@ enum Sampler<'a> {
     Surfels(SurfelLookup<'a>),
     Path(PathLookup<'a>),
     Gather(GatherLookup<'a>),
+    SkyPoint(Box<crate::sky_point_lookup::SkyPointLookup<'a>>),
 }
 
 impl<'a> Sampler<'a> {
@@ -336,6 +365,20 @@ impl<'a> Sampler<'a> {
                 let light = (&baked.lighting.rig, &baked.lighting.sky);
                 Sampler::Path(PathLookup::new(asset, near()?, light, rays))
             }
+            Kind::SkyPoint(rays) => {
+                let black = vec![[0.0f32; 3]; asset.surfels.len()];
+                let sky_sh = baked.sky_sh.as_ref().context("no sky SH")?;
+                let pair = (
+                    SurfaceSampler::new(asset, sh, &baked.irradiance, settings),
+                    SurfaceSampler::new(asset, sky_sh, &black, settings),
+                );
+                Sampler::SkyPoint(Box::new(crate::sky_point_lookup::SkyPointLookup::new(
+                    asset,
+                    pair,
+                    &baked.lighting.sky,
+                    rays,
+                )))
+            }
             Kind::Gather { rays, per_surfel } => {
                 let surface = SurfaceSampler::new(asset, sh, &baked.irradiance, settings);
                 let with = (near()?, &baked.lighting.sky);
@@ -351,6 +394,7 @@ impl<'a> Sampler<'a> {
             Sampler::Surfels(s) => s.sample(p, n),
             Sampler::Path(s) => s.sample(p, n),
             Sampler::Gather(s) => s.sample(p, n),
+            Sampler::SkyPoint(s) => s.sample(p, n),
         }
     }
 }

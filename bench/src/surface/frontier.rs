@@ -193,13 +193,18 @@ pub fn run(args: FrontierArgs) -> Result<()> {
                     ..BakeSettings::default()
                 };
                 let scaled = default_spacing.map(|s: f32| s * scale);
-                let mut baked = super::bake(case, &settings(scaled), &lighting, false)?;
+                let mut baked = super::bake(case, &settings(scaled), &lighting, (false, false))?;
                 if default_spacing.is_none() {
                     // The first bake learns the case's default spacing; rebake it scaled.
                     let s = baked.asset.header.grid.spacing;
                     default_spacing = Some(s);
                     if scale != 1.0 {
-                        baked = super::bake(case, &settings(Some(s * scale)), &lighting, false)?;
+                        baked = super::bake(
+                            case,
+                            &settings(Some(s * scale)),
+                            &lighting,
+                            (false, false),
+                        )?;
                     }
                 }
                 let sampled = super::sample(case, &baked, Setting::Default, &refs, &lookup)?;

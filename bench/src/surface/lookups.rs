@@ -26,6 +26,9 @@ pub enum Kind {
     /// `crate::gather_lookup::GatherLookup`: a gather of this many rays from the point's near
     /// group, or with `per_surfel` from its surfel, hits lit by their relit bricks.
     Gather { rays: u32, per_surfel: bool },
+    /// `crate::sky_point_lookup::SkyPointLookup`: the runtime's with the sky's direct share
+    /// traced at the point with this many rays instead of the probes'.
+    SkyPoint(u32),
 }
 
 /// A lookup's name and how to make it.
@@ -46,7 +49,7 @@ fn trilinear() -> LookupSettings {
 }
 
 /// Every lookup `--lookup` knows, by name, in table order.
-const LOOKUPS: [Variant; 10] = [
+const LOOKUPS: [Variant; 11] = [
     // Hardware trilinear over the probes' validity only: what depth moments are measured against.
     ("trilinear", || (trilinear(), Kind::Runtime)),
     // The probe volume with depth moments (DDGI's Chebyshev test), normal bias 0.2 spacings:
@@ -92,6 +95,12 @@ const LOOKUPS: [Variant; 10] = [
             },
         )
     }),
+    // The runtime's with the probes' direct view of the sky swapped for the point's own,
+    // traced with 4,096 rays: what a per-surfel sky term would bring (issue 31, stop 54).
+    ("sky_point", || {
+        let rays = crate::sky_point_lookup::SKY_RAYS;
+        (LookupSettings::default(), Kind::SkyPoint(rays))
+    }),
     // The same per surfel: the bound of a table that fine.
     ("surfel_gather", || {
         let rays = crate::gather_lookup::GATHER_RAYS;
@@ -119,6 +128,12 @@ impl Lookup {
         let s = &self.settings;
         let bias = s.normal_bias;
         match self.kind {
+            Kind::SkyPoint(rays) => format!(
+                "{}: the runtime's lookup with the probes' direct view of the sky replaced by \
+                 the point's own ({rays} cosine rays to the sky; constant skies; \
+                 bench/src/sky_point_lookup.rs)",
+                self.name
+            ),
             Kind::Runtime if s.surface_terms => format!(
                 "{}: the bake's surface terms where the point has a surfel (which probes it \
                  sees, its near field; prt_runtime::surface), {} elsewhere, normal bias {bias} \
@@ -178,10 +193,15 @@ impl Lookup {
         }
     }
 
+    /// Whether sampling needs the probes relit with the sky alone over black surfaces.
+    pub fn needs_sky(&self) -> bool {
+        matches!(self.kind, Kind::SkyPoint(_))
+    }
+
     /// Whether sampling needs the relit bricks (`crate::ray_lookup::NearLight`).
     pub fn needs_bricks(&self) -> bool {
         match self.kind {
-            Kind::Runtime => false,
+            Kind::Runtime | Kind::SkyPoint(_) => false,
             Kind::Rays(r) => r.near_light,
             Kind::Surfels | Kind::Path(_) | Kind::Gather { .. } => true,
         }
@@ -250,7 +270,7 @@ impl Lookups {
                     Kind::Rays(r) if r.near_field.is_some() => {
                         r.near_field = o.reach.or(r.near_field);
                     }
-                    Kind::Path(rays) | Kind::Gather { rays, .. } => {
+                    Kind::Path(rays) | Kind::Gather { rays, .. } | Kind::SkyPoint(rays) => {
                         *rays = o.path_rays.unwrap_or(*rays)
                     }
                     _ => {}

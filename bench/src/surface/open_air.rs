@@ -86,8 +86,8 @@ fn measure(case: &Case, spacing: Option<f32>) -> Result<Row> {
         sparse,
         ..BakeSettings::default()
     };
-    let uniform = super::bake(case, &settings(false), &lighting, false)?;
-    let sparse = super::bake(case, &settings(true), &lighting, false)?;
+    let uniform = super::bake(case, &settings(false), &lighting, (false, false))?;
+    let sparse = super::bake(case, &settings(true), &lighting, (false, false))?;
     let (u, s) = (&uniform.asset, &sparse.asset);
     let points: Vec<usize> = (0..s.probes.len())
         .filter(|&p| s.probes[p].is_filled())
