@@ -2,9 +2,11 @@
 //! with the sky's direct share replaced by the point's own (issue 31, stop 54; a reference,
 //! not in the runtime). The probes' direct view of the sky is sampled through the same lookup
 //! from SH relit with the sky alone over black surfels (`surface::sky_view`) and subtracted;
-//! the point's own sky light is added back: of `rays` cosine-distributed rays from the point,
-//! the share that leaves the scene, times pi times the sky's radiance (constant skies; another
-//! sky adds nothing back).
+//! the point's own sky light is added back: `rays` cosine-distributed rays from the point, pi /
+//! `rays` times the sky's radiance along those that leave the scene (any sky, as the `path`
+//! lookup reads it). The subtraction goes through the lookup's clamps (the near field's
+//! `clamp(open . L, 0, A(n) . L)`, irradiance at least 0), so it is exact only where they do
+//! not bind.
 //!
 //! What it is for: probes a spacing from a point see more or less of a bright sky than the
 //! point does (a wall under an overhang, a cave's skylight, a gallery's ceiling beside an open
@@ -24,28 +26,24 @@ use crate::ray_lookup::ray_start;
 /// noisy to compare (cave_31 5.9% -> 8.6% against 4.9% at 4,096).
 pub const SKY_RAYS: u32 = 4096;
 
-/// The lookup over one bake and one constant sky.
+/// The lookup over one bake and its rig's sky.
 pub struct SkyPointLookup<'a> {
     asset: &'a Asset,
     default: SurfaceSampler<'a>,
     sky_only: SurfaceSampler<'a>,
-    sky: [f32; 3],
+    sky: &'a SkyModel,
     rays: u32,
 }
 
 impl<'a> SkyPointLookup<'a> {
     /// `default` samples the relit probes, `sky_only` their direct view of the sky (the same
-    /// lookup settings), `sky` the rig's sky.
+    /// lookup settings, over black surfels), `sky` the rig's sky.
     pub fn new(
         asset: &'a Asset,
         (default, sky_only): (SurfaceSampler<'a>, SurfaceSampler<'a>),
-        sky: &SkyModel,
+        sky: &'a SkyModel,
         rays: u32,
     ) -> Self {
-        let sky = match sky {
-            SkyModel::Constant(c) => *c,
-            _ => [0.0; 3],
-        };
         SkyPointLookup {
             asset,
             default,
@@ -62,16 +60,16 @@ impl<'a> SkyPointLookup<'a> {
         let n = Vec3::from(normal).normalize_or_zero();
         let x = ray_start(Vec3::from(position), n, self.asset.header.grid.spacing);
         let (t, b) = n.any_orthonormal_pair();
-        let escaping = (0..self.rays)
-            .filter(|&k| {
-                let d = prt_bake::surface_terms::cosine_spiral(k, self.rays, t, b, n);
-                closest_hit(&self.asset.geometry, x, d, f32::INFINITY).is_none()
-            })
-            .count() as f32
-            / self.rays as f32;
+        let mut own = Vec3::ZERO;
+        for k in 0..self.rays {
+            let d = prt_bake::surface_terms::cosine_spiral(k, self.rays, t, b, n);
+            if closest_hit(&self.asset.geometry, x, d, f32::MAX).is_none() {
+                own += Vec3::from(self.sky.radiance(d.to_array()));
+            }
+        }
+        let own = own * std::f32::consts::PI / self.rays as f32;
         for ch in 0..3 {
-            let own = std::f32::consts::PI * self.sky[ch] * escaping;
-            out.irradiance[ch] = (out.irradiance[ch] - probes.irradiance[ch] + own).max(0.0);
+            out.irradiance[ch] = (out.irradiance[ch] - probes.irradiance[ch] + own[ch]).max(0.0);
         }
         out
     }

@@ -142,8 +142,9 @@ struct Refs {
 
 /// One bake of a case, relit with `lighting`.
 struct Baked<'l> {
-    /// The probes' direct view of the sky ([`sky_view`]), for `sky_point`.
-    sky_sh: Option<Vec<ShRgb>>,
+    /// The asset with black surfels and its probes' direct view of the sky ([`sky_view`]),
+    /// for `sky_point`.
+    sky: Option<(Asset, Vec<ShRgb>)>,
     asset: Asset,
     /// The relit bricks, for the near-field hits of the reference lookups that need them.
     near: Option<NearLight>,
@@ -270,8 +271,9 @@ fn sample_all(
     lookups.iter().map(row).collect()
 }
 
-/// Bakes `case` with `settings`, relights it with `lighting`, and with `bricks` keeps the relit
-/// bricks for the reference lookups' near field (outside the relight's time).
+/// Bakes `case` with `settings`, relights it with `lighting`, with `bricks` keeps the relit
+/// bricks for the reference lookups' near field (outside the relight's time), and with `sky`
+/// the probes' direct view of the sky ([`sky_view`], for `sky_point`).
 fn bake<'l>(
     case: &Case,
     settings: &BakeSettings,
@@ -297,9 +299,9 @@ fn bake<'l>(
     let relight_s = t.elapsed().as_secs_f64();
     let near = bricks
         .then(|| NearLight::for_asset(&asset, relighter.brick_radiance(&relit.surfel_irradiance)));
-    let sky_sh = sky.then(|| sky_view(&asset, lighting)).transpose()?;
+    let sky = sky.then(|| sky_view(&asset, lighting)).transpose()?;
     Ok(Baked {
-        sky_sh,
+        sky,
         asset,
         lighting,
         sh: relit.sh,
@@ -310,9 +312,10 @@ fn bake<'l>(
     })
 }
 
-/// Per grid point, the SH of the sky the probes see directly: `asset` relit with `lighting`'s
-/// sky alone over black surfels (the fill and dilation as the runtime's).
-fn sky_view(asset: &Asset, lighting: &Lighting) -> Result<Vec<ShRgb>> {
+/// `asset` with black surfels (no albedo, no emission) and, per grid point, the SH of the sky
+/// its probes see directly: that asset relit with `lighting`'s sky alone (the fill and
+/// dilation as the runtime's).
+fn sky_view(asset: &Asset, lighting: &Lighting) -> Result<(Asset, Vec<ShRgb>)> {
     let mut black = asset.clone();
     for s in &mut black.surfels {
         s.albedo = [0.0; 3];
@@ -325,9 +328,10 @@ fn sky_view(asset: &Asset, lighting: &Lighting) -> Result<Vec<ShRgb>> {
         },
         sky: lighting.sky.clone(),
     };
-    Ok(prt_runtime::CpuRelighter::new(&black)?
+    let sh = prt_runtime::CpuRelighter::new(&black)?
         .relight(&sky_only, 1)?
-        .sh)
+        .sh;
+    Ok((black, sh))
 }
 
 /// The sampler of one lookup over one bake.
@@ -366,11 +370,11 @@ impl<'a> Sampler<'a> {
                 Sampler::Path(PathLookup::new(asset, near()?, light, rays))
             }
             Kind::SkyPoint(rays) => {
-                let black = vec![[0.0f32; 3]; asset.surfels.len()];
-                let sky_sh = baked.sky_sh.as_ref().context("no sky SH")?;
+                let (black, sky_sh) = baked.sky.as_ref().context("the sky view was not kept")?;
+                let dark = vec![[0.0f32; 3]; black.surfels.len()];
                 let pair = (
                     SurfaceSampler::new(asset, sh, &baked.irradiance, settings),
-                    SurfaceSampler::new(asset, sky_sh, &black, settings),
+                    SurfaceSampler::new(black, sky_sh, &dark, settings),
                 );
                 Sampler::SkyPoint(Box::new(crate::sky_point_lookup::SkyPointLookup::new(
                     asset,

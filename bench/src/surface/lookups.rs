@@ -97,10 +97,6 @@ const LOOKUPS: [Variant; 11] = [
     }),
     // The runtime's with the probes' direct view of the sky swapped for the point's own,
     // traced with 4,096 rays: what a per-surfel sky term would bring (issue 31, stop 54).
-    ("sky_point", || {
-        let rays = crate::sky_point_lookup::SKY_RAYS;
-        (LookupSettings::default(), Kind::SkyPoint(rays))
-    }),
     // The same per surfel: the bound of a table that fine.
     ("surfel_gather", || {
         let rays = crate::gather_lookup::GATHER_RAYS;
@@ -111,6 +107,11 @@ const LOOKUPS: [Variant; 11] = [
                 per_surfel: true,
             },
         )
+    }), // The runtime's with the probes' direct view of the sky swapped for the point's own,
+    // traced with 4,096 rays: what a per-surfel sky term would bring (issue 31, stop 54).
+    ("sky_point", || {
+        let rays = crate::sky_point_lookup::SKY_RAYS;
+        (LookupSettings::default(), Kind::SkyPoint(rays))
     }),
 ];
 
@@ -130,7 +131,7 @@ impl Lookup {
         match self.kind {
             Kind::SkyPoint(rays) => format!(
                 "{}: the runtime's lookup with the probes' direct view of the sky replaced by \
-                 the point's own ({rays} cosine rays to the sky; constant skies; \
+                 the point's own ({rays} cosine rays to the sky; \
                  bench/src/sky_point_lookup.rs)",
                 self.name
             ),
@@ -216,7 +217,8 @@ pub struct Overrides {
     /// The near-field reach of the ray lookups that have one (`rays`, `rays_light`; probe
     /// spacings).
     pub reach: Option<f32>,
-    /// The path lookup's rays per point, and the gather lookups' rays per gather.
+    /// The path lookup's rays per point, the gather lookups' rays per gather, and
+    /// `sky_point`'s rays per point.
     pub path_rays: Option<u32>,
 }
 
@@ -349,7 +351,7 @@ mod tests {
             .unwrap();
         assert!(
             err.to_string()
-                .contains("known: trilinear, moments, default, terms_trilinear, rays, rays_light, surfels, path, gather, surfel_gather"),
+                .contains("known: trilinear, moments, default, terms_trilinear, rays, rays_light, surfels, path, gather, surfel_gather, sky_point"),
             "{err}"
         );
     }
