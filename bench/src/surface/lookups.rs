@@ -95,8 +95,6 @@ const LOOKUPS: [Variant; 11] = [
             },
         )
     }),
-    // The runtime's with the probes' direct view of the sky swapped for the point's own,
-    // traced with 4,096 rays: what a per-surfel sky term would bring (issue 31, stop 54).
     // The same per surfel: the bound of a table that fine.
     ("surfel_gather", || {
         let rays = crate::gather_lookup::GATHER_RAYS;
@@ -107,7 +105,8 @@ const LOOKUPS: [Variant; 11] = [
                 per_surfel: true,
             },
         )
-    }), // The runtime's with the probes' direct view of the sky swapped for the point's own,
+    }),
+    // The runtime's with the probes' direct view of the sky swapped for the point's own,
     // traced with 4,096 rays: what a per-surfel sky term would bring (issue 31, stop 54).
     ("sky_point", || {
         let rays = crate::sky_point_lookup::SKY_RAYS;
