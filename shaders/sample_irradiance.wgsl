@@ -51,8 +51,12 @@ struct PrtVolumeInfo {
     bricks_at: u32,
     // Near-field rays per surfel.
     near_rays: f32,
+    // Where in prt_surface the sky terms start (two halves a word, one per surfel).
+    sky_at: u32,
     _pad0: u32,
-    _pad1: u32,
+    // Pi times the sky's mean radiance: the irradiance a surfel's sky term of 1 adds.
+    sky_irradiance: vec3<f32>,
+    _pad1: f32,
 }
 
 // The interpolated probe SH at a point (validity-renormalised; zero where validity <= 1e-6) and
@@ -81,8 +85,8 @@ struct PrtSample {
 @group(PRT_GROUP) @binding(10) var<storage, read> prt_probe_positions: array<vec4<u32>>;
 // The surface lookup's tables, one array of words (prt_format::surface): the brick table (four
 // words a slot: key xyz, axis << 29 | brick + 1), then from the offsets in prt_volume the cells
-// (16 words a brick), the surfel terms (8 words a surfel) and per brick its first surfel and
-// first near group.
+// (16 words a brick), the surfel terms (8 words a surfel), per brick its first surfel and
+// first near group, and the sky terms (two halves a word, one per surfel).
 @group(PRT_GROUP) @binding(11) var<storage, read> prt_surface: array<u32>;
 // Per near group, the mean radiance its surfels' near-field hits bring (xyz), as the runtime
 // last relit it.
@@ -267,7 +271,9 @@ fn prt_irradiance(c: array<vec3<f32>, 9>, n: vec3<f32>) -> vec3<f32> {
 // irradiance by (clamp(open . L, 0, A(n_s) . L) + hits / rays * near) / (A(n_s) . L) per
 // channel: open the mean SH basis of its near-field rays that escape (held to what the whole
 // hemisphere brings: L2 ringing can exceed it), near its near group's relit radiance per hit, A
-// the clamped-cosine transfer of the surfel's normal. A point without one gets prt_sample_sh.
+// the clamped-cosine transfer of the surfel's normal; then add the surfel's sky term (the sky it
+// sees less the sky its probes bring it) times pi times the sky's mean radiance, clamped at 0.
+// A point without one gets prt_sample_sh.
 
 // What sample_irradiance computed: the SH it interpolated, its validity and the irradiance.
 struct PrtSurfaceSample {
@@ -402,6 +408,10 @@ fn prt_sample_surface(world_pos: vec3<f32>, normal: vec3<f32>) -> PrtSurfaceSamp
     let escaping = min(max(lo, vec3<f32>(0.0)), max(all_l, vec3<f32>(0.0)));
     let ratio = max((escaping + share * near) / all_l, vec3<f32>(0.0));
     out.irradiance = select(out.irradiance, out.irradiance * ratio, all_l > vec3<f32>(0.0));
+    if any(prt_volume.sky_irradiance != vec3<f32>(0.0)) {
+        let sky = unpack2x16float(prt_surface[prt_volume.sky_at + found.x / 2u])[found.x % 2u];
+        out.irradiance = max(out.irradiance + sky * prt_volume.sky_irradiance, vec3<f32>(0.0));
+    }
     return out;
 }
 

@@ -1,7 +1,7 @@
 //! The bake's stages in order, from the scene file to the validated asset: load, BVH,
 //! placement (sparse bakes), trace (merging as it goes, [`crate::stream`]), bricks (validity,
 //! dilation, numbering the bricks and encoding the factor tables, [`bricks`]), surface terms,
-//! assemble ([`assemble`]). [`crate::bake`] runs them in its thread pool, then [`validate`]s
+//! assemble ([`assemble`]), refine ([`crate::refine`]), sky terms ([`crate::sky_terms`]). [`crate::bake`] runs them in its thread pool, then [`validate`]s
 //! the asset; each stage's time goes into the report.
 
 use std::path::Path;
@@ -133,9 +133,11 @@ pub(crate) fn bake_in_pool(
     };
     lap(&mut report, "assemble", Some("refine"));
     refine_stage(&mut asset, settings, &built.bvh, &mut report);
+    lap(&mut report, "refine", Some("sky"));
+    asset.surface.sky = crate::sky_terms::sky_terms(&asset, &built.bvh);
     asset.geometry = built.bvh.geometry;
     report.warnings.extend(diagnostics::gap_warning(&asset));
-    lap(&mut report, "refine", None);
+    lap(&mut report, "sky", None);
     Ok((asset, report))
 }
 

@@ -69,7 +69,8 @@ pub struct SurfaceArgs {
     /// street_20_L120 runs only when named or with all].
     #[arg(long = "case", value_delimiter = ',')]
     cases: Vec<String>,
-    /// Lookups to sample with (comma-separated): default (the runtime's), trilinear, and the
+    /// Lookups to sample with (comma-separated): default (the runtime's), no_sky (the same
+    /// without the sky terms), trilinear, and the
     /// references of issue 31: rays, rays_light (per point, through the asset's BVH), surfels
     /// (the same terms per surfel), path, gather, surfel_gather, sky_point (the point's own
     /// sky instead of the probes') [default: trilinear, moments, default, rays, rays_light and
@@ -151,6 +152,8 @@ struct Baked<'l> {
     sh: Vec<ShRgb>,
     /// The relit surfels' irradiance (the surface lookup's near field).
     irradiance: Vec<[f32; 3]>,
+    /// The sky's mean radiance (the surface lookup's sky term).
+    sky_mean: [f32; 3],
     /// The rig it was relit with (the path lookup lights its hits with it).
     lighting: &'l Lighting,
     bake_s: f64,
@@ -306,6 +309,7 @@ fn bake<'l>(
         lighting,
         sh: relit.sh,
         irradiance: relit.surfel_irradiance,
+        sky_mean: relit.sky,
         near,
         bake_s,
         relight_s,
@@ -355,7 +359,14 @@ impl<'a> Sampler<'a> {
         };
         Ok(match lookup.kind {
             Kind::Runtime => {
-                Sampler::Runtime(SurfaceSampler::new(asset, sh, &baked.irradiance, settings))
+                let sky = baked.sky_mean;
+                Sampler::Runtime(SurfaceSampler::new(
+                    asset,
+                    sh,
+                    &baked.irradiance,
+                    sky,
+                    settings,
+                ))
             }
             Kind::Rays(r) => {
                 let rays = RayLookup::for_asset(asset, sh, settings.normal_bias, r);
@@ -372,9 +383,10 @@ impl<'a> Sampler<'a> {
             Kind::SkyPoint(rays) => {
                 let (black, sky_sh) = baked.sky.as_ref().context("the sky view was not kept")?;
                 let dark = vec![[0.0f32; 3]; black.surfels.len()];
+                // Its settings leave the sky terms out: it swaps the probes' sky itself.
                 let pair = (
-                    SurfaceSampler::new(asset, sh, &baked.irradiance, settings),
-                    SurfaceSampler::new(black, sky_sh, &dark, settings),
+                    SurfaceSampler::new(asset, sh, &baked.irradiance, baked.sky_mean, settings),
+                    SurfaceSampler::new(black, sky_sh, &dark, baked.sky_mean, settings),
                 );
                 Sampler::SkyPoint(Box::new(crate::sky_point_lookup::SkyPointLookup::new(
                     asset,
@@ -384,7 +396,8 @@ impl<'a> Sampler<'a> {
                 )))
             }
             Kind::Gather { rays, per_surfel } => {
-                let surface = SurfaceSampler::new(asset, sh, &baked.irradiance, settings);
+                let sky = baked.sky_mean;
+                let surface = SurfaceSampler::new(asset, sh, &baked.irradiance, sky, settings);
                 let with = (near()?, &baked.lighting.sky);
                 Sampler::Gather(GatherLookup::new(asset, surface, with, rays, per_surfel))
             }

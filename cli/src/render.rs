@@ -92,6 +92,10 @@ pub struct RenderArgs {
     /// probes each surfel sees, its near field; to compare).
     #[arg(long)]
     no_surface_terms: bool,
+    /// The sky as the probes see it, not as each surface sees it (without the asset's sky
+    /// terms; to compare).
+    #[arg(long)]
+    no_sky_terms: bool,
     /// Render even if the asset was baked from another scene file.
     #[arg(long)]
     force: bool,
@@ -124,6 +128,7 @@ fn job_of(args: RenderArgs) -> Result<RenderJob> {
             normal_bias: normal_bias(args.normal_bias)?,
             depth_moments: !args.no_depth_moments,
             surface_terms: !args.no_surface_terms,
+            sky_terms: !args.no_sky_terms,
         },
         bounces: prt_runtime::gpu::Bounces::Fixed(args.bounces),
         ..RuntimeSettings::default()

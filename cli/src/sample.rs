@@ -39,6 +39,10 @@ pub struct SampleArgs {
     /// sees, its near field).
     #[arg(long)]
     no_surface_terms: bool,
+    /// The sky as the probes see it, not as each surface sees it (without the asset's sky
+    /// terms).
+    #[arg(long)]
+    no_sky_terms: bool,
 }
 
 /// A surface point: position and unit normal.
@@ -51,6 +55,7 @@ pub fn run(args: SampleArgs) -> Result<()> {
             normal_bias,
             depth_moments: !args.no_depth_moments,
             surface_terms: !args.no_surface_terms,
+            sky_terms: !args.no_sky_terms,
         },
         ..RuntimeSettings::default()
     };
@@ -88,7 +93,7 @@ fn sample_cpu(
     points: &[Point],
 ) -> Vec<Sample> {
     let irradiance = &relit.surfel_irradiance;
-    let sampler = SurfaceSampler::new(asset, &relit.sh, irradiance, &settings.lookup);
+    let sampler = SurfaceSampler::new(asset, &relit.sh, irradiance, relit.sky, &settings.lookup);
     points.iter().map(|(p, n)| sampler.sample(*p, *n)).collect()
 }
 

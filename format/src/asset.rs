@@ -186,6 +186,32 @@ impl Grid {
         [index % n[0], index / n[0] % n[1], index / (n[0] * n[1])].map(|v| v as u32)
     }
 
+    /// The eight probes around `p` (world space) and their trilinear weights, as a sampler's
+    /// `ClampToEdge` reads them: grid coordinate `(p - origin) / step` clamped to the grid,
+    /// corner indices clamped to its last layer (so outside the grid, or on its last layer,
+    /// several corners are the same probe). Weights are zero for corners the point lies on the
+    /// far side of. The one corner walk of the lookup's CPU twin (`prt_runtime::sample`) and of
+    /// the bake's sky terms, which interpolate where the lookup does.
+    pub fn corners(&self, p: [f32; 3]) -> [(usize, f32); 8] {
+        let last: [f32; 3] = std::array::from_fn(|a| self.counts[a].saturating_sub(1) as f32);
+        let t: [f32; 3] = std::array::from_fn(|a| {
+            ((p[a] - self.origin[a]) / self.step[a])
+                .max(0.0)
+                .min(last[a])
+        });
+        let base = t.map(f32::floor);
+        std::array::from_fn(|corner| {
+            let (mut w, mut ijk) = (1.0f32, [0u32; 3]);
+            for a in 0..3 {
+                let o = (corner >> a & 1) as f32;
+                let f = t[a] - base[a];
+                w *= f * o + (1.0 - f) * (1.0 - o);
+                ijk[a] = (base[a] + o).min(last[a]) as u32;
+            }
+            (self.index(ijk[0], ijk[1], ijk[2]), w)
+        })
+    }
+
     /// Position of probe (i, j, k).
     pub fn position(&self, i: u32, j: u32, k: u32) -> [f32; 3] {
         [

@@ -88,7 +88,8 @@ pub(crate) fn write_payload<W: Write>(asset: &Asset, out: &mut W) -> Result<(), 
     pod(out, &t.groups)?;
     pod(out, &t.group_surfels)?;
     pod(out, &t.near_ranges)?;
-    pod(out, &t.near)
+    pod(out, &t.near)?;
+    pod(out, &t.sky)
 }
 
 /// Bytes of the payload of `asset` (a pass that copies nothing).
@@ -190,6 +191,7 @@ impl Sections<'_> {
                 group_surfels: self.pod("surface")?,
                 near_ranges: self.pod("surface")?,
                 near: self.pod("surface")?,
+                sky: self.pod("surface")?,
             },
         })
     }
@@ -360,6 +362,7 @@ mod tests {
                 group_surfels: vec![[0, 1]],
                 near_ranges: vec![[0, 1]],
                 near: vec![0x1ff],
+                sky: vec![0x3c00],
             },
         }
     }

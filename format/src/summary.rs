@@ -187,6 +187,7 @@ fn surface_bytes(t: &crate::surface::SurfaceTerms) -> u64 {
         + bytes(&t.group_surfels)
         + bytes(&t.near_ranges)
         + bytes(&t.near)
+        + bytes(&t.sky)
 }
 
 impl std::fmt::Display for Summary {

@@ -22,11 +22,18 @@
 //!   the normal's dominant axis) to brick ([`SurfaceSlot`], [`slot_hash`]), then a table of 64
 //!   bytes per brick giving each of its 4x4x4 cells its nearest surfel ([`SurfaceTerms::cells`]).
 //!
+//! - **its sky** ([`SurfaceTerms::sky`], format 14): probes a spacing off the surface see more
+//!   or less of the sky than the surface does (a wall under an overhang, a cave's skylight, a
+//!   gallery's ceiling beside an open court), and the near field, one spacing long, does not
+//!   reach what hides it. The bake stores per surfel the sky the surfel sees less the sky its
+//!   probes bring it ([`sky_term`]).
+//!
 //! The lookup then scales the interpolated irradiance by
 //! `(clamp(open . L, 0, A(n) . L) + hits / rays * near) / (A(n) . L)` per colour channel, with
 //! `L` the interpolated radiance SH and `A(n)` the clamped-cosine transfer of the surfel's
 //! normal (what `open` is when every ray escapes; the clamp since stop 52,
-//! `prt_runtime::surface`). All of it is optional: an asset baked without merging, or a point
+//! `prt_runtime::surface`), and adds pi times the sky term times the sky's mean radiance. All of
+//! it is optional: an asset baked without merging, or a point
 //! whose brick has no entry, is sampled by the default lookup.
 
 use bytemuck::{Pod, Zeroable};
@@ -153,6 +160,20 @@ pub struct SurfaceTerms {
     pub near_ranges: Vec<[u32; 2]>,
     /// The groups the near-field rays hit and their shares ([`near_entry`]).
     pub near: Vec<u32>,
+    /// Per surfel, its sky term ([`sky_term`]) as an IEEE half, two a word (surfel `2w` in
+    /// the low half of word `w`); format 14.
+    pub sky: Vec<u32>,
+}
+
+/// Surfel `surfel`'s sky term: the share of its cosine-weighted hemisphere that sees the sky
+/// (the scene's outside) less the share its probes' interpolated view of the sky brings
+/// through its near field's escaping rays (`prt_bake::sky_terms`). The lookup adds pi times
+/// it times the sky's mean radiance to the irradiance (`prt_runtime::surface`); 0 where the
+/// asset has none.
+pub fn sky_term(sky: &[u32], surfel: usize) -> f32 {
+    sky.get(surfel / 2).map_or(0.0, |w| {
+        crate::f16_to_f32((w >> (16 * (surfel % 2))) as u16)
+    })
 }
 
 impl SurfaceTerms {

@@ -241,9 +241,16 @@ pub struct VolumeInfo {
     pub bricks_at: u32,
     /// Near-field rays per surfel.
     pub near_rays: f32,
-    pub _pad: [u32; 2],
+    /// Word offset of the sky terms in `prt_surface` ([`SurfaceLayout`]).
+    pub sky_at: u32,
+    pub _pad0: u32,
+    /// Pi times the sky's mean radiance (`crate::SkyModel::mean_radiance`): the irradiance a
+    /// surfel's sky term of 1 adds (`prt_format::surface::sky_term`); set by every update
+    /// whose sky changed.
+    pub sky_irradiance: [f32; 3],
+    pub _pad1: f32,
 }
-const _: () = assert!(std::mem::size_of::<VolumeInfo>() == 96);
+const _: () = assert!(std::mem::size_of::<VolumeInfo>() == 112);
 
 /// `VolumeInfo::flags`: weight probes by their depth moments (`LookupSettings::depth_moments`).
 pub const VOLUME_DEPTH_MOMENTS: u32 = 1;
@@ -253,12 +260,14 @@ pub const VOLUME_SURFACE: u32 = 2;
 
 /// Where each table of the surface lookup starts in the snippet's one array of words
 /// (`prt_surface`): the brick table's slots (4 words each), the cells (16 words a brick), the
-/// surfel terms (8 words each), then per brick its first surfel and first near group.
+/// surfel terms (8 words each), per brick its first surfel and first near group, then the sky
+/// terms (two halves a word, `prt_format::surface::SurfaceTerms::sky`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct SurfaceLayout {
     pub cells_at: u32,
     pub terms_at: u32,
     pub bricks_at: u32,
+    pub sky_at: u32,
 }
 
 impl SurfaceLayout {
@@ -268,22 +277,27 @@ impl SurfaceLayout {
         let slots = 4 * t.slots.len() as u64;
         let cells = t.cells.len() as u64;
         let terms = 8 * t.surfels.len() as u64;
+        let bricks = 2 * t.groups.len() as u64;
         SurfaceLayout {
             cells_at: slots as u32,
             terms_at: (slots + cells) as u32,
             bricks_at: (slots + cells + terms) as u32,
+            sky_at: (slots + cells + terms + bricks) as u32,
         }
     }
 
     /// The words themselves.
     pub fn words(asset: &prt_format::Asset) -> Vec<u32> {
         let t = &asset.surface;
+        // `of` counts a brick entry per group start: validation holds one per brick.
+        debug_assert_eq!(t.groups.len(), asset.bricks.len());
         let mut w: Vec<u32> = bytemuck::cast_slice(&t.slots).to_vec();
         w.extend_from_slice(&t.cells);
         w.extend_from_slice(bytemuck::cast_slice(&t.surfels));
         for (b, g) in asset.bricks.iter().zip(&t.groups) {
             w.extend([b.first_surfel, *g]);
         }
+        w.extend_from_slice(&t.sky);
         w
     }
 }
@@ -305,7 +319,10 @@ impl From<&prt_format::Grid> for VolumeInfo {
             terms_at: 0,
             bricks_at: 0,
             near_rays: 1.0,
-            _pad: [0; 2],
+            sky_at: 0,
+            _pad0: 0,
+            sky_irradiance: [0.0; 3],
+            _pad1: 0.0,
         }
     }
 }

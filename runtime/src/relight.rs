@@ -127,6 +127,9 @@ pub struct Relit {
     /// Per surfel, the irradiance of the last bounce (direct, plus the volume's beyond the
     /// first): what the surface lookup's near field is lit by (`crate::surface`).
     pub surfel_irradiance: Vec<[f32; 3]>,
+    /// The sky's mean radiance ([`crate::SkyModel::mean_radiance`]): what the surface
+    /// lookup's sky term scales.
+    pub sky: [f32; 3],
     pub stats: RelightStats,
 }
 
@@ -178,6 +181,7 @@ impl<'a> CpuRelighter<'a> {
             lighting.rig.lights.iter().map(PreparedLight::new).collect();
         let (direct, mut stats) = self.direct_irradiance(&lights);
         let lattice = lighting.sky.lattice(self.asset.header.ray_count);
+        let sky_mean = lighting.sky.mean_radiance(&lattice);
         let sky: Vec<ShRgb> = (0..self.asset.probes.len())
             .into_par_iter()
             .map(|p| lighting.sky.probe_sky(self.asset, p, &lattice))
@@ -188,7 +192,8 @@ impl<'a> CpuRelighter<'a> {
                 direct.clone()
             } else {
                 // The previous bounce's light at the surfel, through the engine's lookup.
-                let volume = SurfaceSampler::new(self.asset, &sh, &surfel_irradiance, lookup);
+                let volume =
+                    SurfaceSampler::new(self.asset, &sh, &surfel_irradiance, sky_mean, lookup);
                 self.asset
                     .surfels
                     .par_iter()
@@ -211,6 +216,7 @@ impl<'a> CpuRelighter<'a> {
         Ok(Relit {
             sh,
             surfel_irradiance,
+            sky: sky_mean,
             stats,
         })
     }

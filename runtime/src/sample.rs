@@ -54,29 +54,11 @@ pub struct Sample {
     pub validity: f32,
 }
 
-/// The eight probes around `p` (world space) and their trilinear weights, as the sampler's
-/// `ClampToEdge` reads them: grid coordinate `(p - origin) / step` clamped to the grid, corner
-/// indices clamped to its last layer (so outside the grid, or on its last layer, several corners
-/// are the same probe). Weights are zero for corners the point lies on the far side of. The one
-/// corner walk of the CPU twin; `prt-bench` counts the probes surfaces read with it.
+/// The eight probes around `p` (world space) and their trilinear weights
+/// (`prt_format::Grid::corners`, shared with the bake's sky terms); `prt-bench` counts the
+/// probes surfaces read with it.
 pub fn corners(grid: &Grid, p: Vec3) -> [(usize, f32); 8] {
-    let last = Vec3::from(grid.counts.map(|c| c.saturating_sub(1) as f32));
-    let t = ((p - Vec3::from(grid.origin)) / Vec3::from(grid.step)).clamp(Vec3::ZERO, last);
-    let base = t.floor();
-    let f = t - base;
-    std::array::from_fn(|corner| {
-        let o = Vec3::new(
-            (corner & 1) as f32,
-            (corner >> 1 & 1) as f32,
-            (corner >> 2 & 1) as f32,
-        );
-        let tri = f * o + (Vec3::ONE - f) * (Vec3::ONE - o);
-        let ijk = (base + o).min(last);
-        (
-            grid.index(ijk.x as u32, ijk.y as u32, ijk.z as u32),
-            tri.x * tri.y * tri.z,
-        )
-    })
+    grid.corners(p.to_array())
 }
 
 /// DDGI's crush: `v` below the threshold becomes `v^3 / threshold^2` (continuous at it).

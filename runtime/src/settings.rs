@@ -74,6 +74,11 @@ pub struct LookupSettings {
     /// 3.8% (`docs/results/surface.md`). Off, or an asset without terms: the probe volume
     /// alone.
     pub surface_terms: bool,
+    /// Where the point has a surfel, swap the sky its probes bring it for the sky it sees
+    /// itself: add its sky term (`prt_format::surface::sky_term`, format 14) times pi times the
+    /// sky's mean radiance ([`crate::surface`]). Off, or an asset without terms: the probes'
+    /// view of the sky.
+    pub sky_terms: bool,
 }
 
 impl Default for LookupSettings {
@@ -82,6 +87,7 @@ impl Default for LookupSettings {
             normal_bias: 0.2,
             depth_moments: true,
             surface_terms: true,
+            sky_terms: true,
         }
     }
 }

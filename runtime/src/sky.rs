@@ -265,6 +265,24 @@ impl SkyModel {
         }
     }
 
+    /// The sky's mean radiance over the sphere (its SH band 0 over `Y_0`): what the surface
+    /// lookup's sky terms scale (`prt_format::surface::sky_term`). `lattice` is
+    /// [`SkyModel::lattice`]: an image sky is averaged as the probes see it, in the order the
+    /// GPU runtime sums it.
+    pub fn mean_radiance(&self, lattice: &[([f32; 3], [f32; 3])]) -> [f32; 3] {
+        match self {
+            SkyModel::Black => [0.0; 3],
+            SkyModel::Constant(c) => *c,
+            SkyModel::Equirect { .. } => {
+                let n = lattice.len().max(1) as f64;
+                let sum = lattice.iter().fold([0.0f64; 3], |acc, (_, l)| {
+                    std::array::from_fn(|c| acc[c] + f64::from(l[c]))
+                });
+                sum.map(|v| (v / n) as f32)
+            }
+        }
+    }
+
     /// SH9 of the sky radiance a probe sees through its sky rays (none for a probe the bake did
     /// not place); `lattice` is
     /// [`SkyModel::lattice`] for the asset's ray count, computed once for all probes.

@@ -24,6 +24,9 @@
 //!    field blocks, a sunlit court behind a parapet, spreads a third of its peak to the
 //!    opposite side) can. It has no constant to tune; [`scale_by_near_field`] says what it
 //!    measured.
+//! 4. **Sky**: add `pi * sky * L_sky` (clamped at 0), `sky` the surfel's sky term
+//!    (`prt_format::surface::sky_term`: the sky it sees less the sky its probes bring it,
+//!    `prt_bake::sky_terms`), `L_sky` the sky's mean radiance.
 //!
 //! The figures that chose it (the family's tuning seeds, and the held-out seeds it was then
 //! scored on) are in `docs/results/surface.md` (`prt-bench surface --lookup default`, every
@@ -31,7 +34,7 @@
 
 use prt_format::sh::{ShRgb, SH_COUNT};
 use prt_format::surface::{
-    cosine_transfer, decode_normal, dominant_axis, mask_bit, near_entry, SurfaceTerms,
+    cosine_transfer, decode_normal, dominant_axis, mask_bit, near_entry, sky_term, SurfaceTerms,
     BLOCKED_WEIGHT, TERMS_TRACED,
 };
 use prt_format::{f16_to_f32, Asset};
@@ -114,18 +117,22 @@ pub struct SurfaceSampler<'a> {
     trilinear: VolumeSampler<'a>,
     fallback: VolumeSampler<'a>,
     near: Vec<[f32; 3]>,
+    /// pi times the sky's mean radiance: what a sky term of 1 adds.
+    sky: [f32; 3],
     /// `LookupSettings::surface_terms`.
     enabled: bool,
 }
 
 impl<'a> SurfaceSampler<'a> {
     /// The lookup of `asset` relit to `sh` (per probe) and surfel irradiance `irradiance`
-    /// (`crate::Relit::surfel_irradiance`); the trilinear weights take `lookup`'s normal bias,
-    /// and the fallback is `lookup` itself.
+    /// (`crate::Relit::surfel_irradiance`) under a sky of mean radiance `sky`
+    /// (`crate::Relit::sky`); the trilinear weights take `lookup`'s normal bias, and the
+    /// fallback is `lookup` itself.
     pub fn new(
         asset: &'a Asset,
         sh: &'a [ShRgb],
         irradiance: &[[f32; 3]],
+        sky: [f32; 3],
         lookup: &LookupSettings,
     ) -> Self {
         let trilinear = LookupSettings {
@@ -137,8 +144,24 @@ impl<'a> SurfaceSampler<'a> {
             trilinear: VolumeSampler::for_asset(asset, sh, &trilinear),
             fallback: VolumeSampler::for_asset(asset, sh, lookup),
             near: near_radiance(&asset.surface, &group_radiance(asset, irradiance)),
+            sky: match lookup.sky_terms {
+                true => sky.map(|l| std::f32::consts::PI * l),
+                false => [0.0; 3],
+            },
             enabled: lookup.surface_terms,
         }
+    }
+
+    /// The lookup of `asset` as the CPU relight `relit` left it ([`Self::new`] with its SH,
+    /// surfel irradiance and sky).
+    pub fn for_relit(asset: &'a Asset, relit: &'a crate::Relit, lookup: &LookupSettings) -> Self {
+        Self::new(
+            asset,
+            &relit.sh,
+            &relit.surfel_irradiance,
+            relit.sky,
+            lookup,
+        )
     }
 
     /// The sample at `position` for a surface with unit normal `normal`.
@@ -169,6 +192,12 @@ impl<'a> SurfaceSampler<'a> {
         let group = self.asset.surface.groups[brick] + u32::from(terms.group);
         let near = self.near[group as usize].map(|l| share * l);
         scale_by_near_field(&mut out, &open, &all, near);
+        if self.sky != [0.0; 3] {
+            let sky = sky_term(&self.asset.surface.sky, surfel);
+            for (e, l) in out.irradiance.iter_mut().zip(self.sky) {
+                *e = (*e + sky * l).max(0.0);
+            }
+        }
         out
     }
 

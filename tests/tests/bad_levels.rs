@@ -66,6 +66,7 @@ fn sample_everywhere(
         asset,
         &relit.sh,
         &relit.surfel_irradiance,
+        relit.sky,
         &LookupSettings::default(),
     );
     let (device, queue) = gpu_device();

@@ -333,6 +333,18 @@ fn amortised_updates_and_skipped_work() {
     );
 }
 
+/// A 4x2 image sky: warm top row, cool bottom row (docs/conventions.md section 3 mapping).
+fn warm_over_cool() -> SkyModel {
+    SkyModel::Equirect {
+        width: 4,
+        height: 2,
+        texels: [[1.0, 0.8, 0.6]; 4]
+            .into_iter()
+            .chain([[0.1, 0.2, 0.4]; 4])
+            .collect(),
+    }
+}
+
 /// Hostile values: zero lights, sky only, all probes invalid, intensities from 1e-6 to 1e6
 /// (beyond half range: clamped, never infinite), and a long, thin volume at the device's largest
 /// 3D texture dimension.
@@ -364,15 +376,7 @@ fn hostile_values_stay_finite() {
             "equirect sky",
             Lighting {
                 rig: LightRig::default(),
-                // 4x2 image: warm top row, cool bottom row (docs/conventions.md section 3 mapping).
-                sky: SkyModel::Equirect {
-                    width: 4,
-                    height: 2,
-                    texels: [[1.0, 0.8, 0.6]; 4]
-                        .into_iter()
-                        .chain([[0.1, 0.2, 0.4]; 4])
-                        .collect(),
-                },
+                sky: warm_over_cool(),
             },
         ),
     ] {
@@ -697,7 +701,8 @@ fn sample_queries(asset: &Asset, count: usize) -> Vec<([f32; 3], [f32; 3])> {
 /// `sample_points` (the real snippet on the GPU, default normal bias) equals its CPU twin
 /// `SurfaceSampler` over the same probe SH at a few hundred points of the Cornell reference bake,
 /// including points between valid and invalid probes, and at a few hundred surfels (where the
-/// surface terms decide; near fields lit by the CPU relight). The volume is half-float (relative
+/// surface terms decide; near fields lit by the CPU relight; the sky terms under the rig's
+/// constant sky and under an image sky). The volume is half-float (relative
 /// rounding 2^-11 per texel) and the filter weights are the hardware's, so the tolerance is
 /// relative to the point's brightness: see the constants.
 #[test]
@@ -710,6 +715,8 @@ fn sample_points_matches_the_cpu_sampler() {
     };
     let asset = bake(&fixture("cornell/cornell.gltf"), &cornell);
     let lighting = load_rig(&fixture("cornell/rig.json")).unwrap();
+    // The room's opening: some surfels see more or less sky than their probes.
+    assert!(asset.surface.sky.iter().any(|&w| w != 0), "no sky terms");
     for depth_moments in [true, false] {
         let settings = RuntimeSettings {
             lookup: LookupSettings {
@@ -737,6 +744,26 @@ fn sample_points_matches_the_cpu_sampler() {
         RuntimeSettings::default(),
     );
     assert!(mixed > 0, "no point beside a probe left out");
+    // An image sky: the surface lookup's sky term takes its mean radiance over the lattice
+    // (format 14), on the GPU as on the CPU.
+    let image_sky = Lighting {
+        rig: lighting.rig.clone(),
+        sky: warm_over_cool(),
+    };
+    let settings = RuntimeSettings {
+        equirect_sky: true,
+        ..RuntimeSettings::default()
+    };
+    compare_samplers(&device, &queue, &asset, &image_sky, settings);
+    // Without the sky terms (`--no-sky-terms`), on an asset that has them.
+    let settings = RuntimeSettings {
+        lookup: LookupSettings {
+            sky_terms: false,
+            ..LookupSettings::default()
+        },
+        ..RuntimeSettings::default()
+    };
+    compare_samplers(&device, &queue, &asset, &lighting, settings);
     // Two rooms sharing a thin wall: the depth moments decide most of the weights there.
     let rooms = bake(&fixture("two_rooms.gltf"), &BakeSettings::default());
     let lighting = load_rig(&fixture("rigs/two_rooms.json")).unwrap();
@@ -747,6 +774,52 @@ fn sample_points_matches_the_cpu_sampler() {
         &lighting,
         RuntimeSettings::default(),
     );
+}
+
+/// The snippet's sky irradiance follows the sky (format 14): pi times its mean radiance after
+/// an update with the rig's constant sky, 0 under a black sky, and back again, and the snippet
+/// then samples what a runtime that only saw the rig's sky samples; always 0 with the sky
+/// terms off.
+#[test]
+fn the_sky_irradiance_follows_the_sky() {
+    let (device, queue) = gpu_device();
+    let asset = bake(&fixture("cornell/cornell.gltf"), &BakeSettings::default());
+    let lit = load_rig(&fixture("cornell/rig.json")).unwrap();
+    let SkyModel::Constant(sky) = lit.sky else {
+        panic!("the Cornell rig's sky is constant");
+    };
+    let black = Lighting {
+        rig: lit.rig.clone(),
+        sky: SkyModel::Black,
+    };
+    let points = sample_queries(&asset, 256);
+    let mut fresh = PrtRuntime::new(&device, &queue, &asset, RuntimeSettings::default()).unwrap();
+    gpu_update(&device, &queue, &mut fresh, &lit, None);
+    let want = sample_points(&device, &queue, &fresh, &points).unwrap();
+    for sky_terms in [true, false] {
+        let settings = RuntimeSettings {
+            lookup: LookupSettings {
+                sky_terms,
+                ..LookupSettings::default()
+            },
+            ..RuntimeSettings::default()
+        };
+        let mut runtime = PrtRuntime::new(&device, &queue, &asset, settings).unwrap();
+        for (lighting, on) in [(&lit, true), (&black, false), (&lit, true)] {
+            gpu_update(&device, &queue, &mut runtime, lighting, None);
+            let expected = match on && sky_terms {
+                true => sky.map(|l| std::f32::consts::PI * l),
+                false => [0.0; 3],
+            };
+            assert_eq!(runtime.volume_info().sky_irradiance, expected);
+        }
+        if sky_terms {
+            let got = sample_points(&device, &queue, &runtime, &points).unwrap();
+            for (g, w) in got.iter().zip(&want) {
+                assert_eq!(g.irradiance, w.irradiance);
+            }
+        }
+    }
 }
 
 fn compare_samplers(
@@ -763,7 +836,13 @@ fn compare_samplers(
         .unwrap()
         .relight(lighting, 1)
         .unwrap();
-    let cpu = SurfaceSampler::new(asset, &sh, &relit.surfel_irradiance, &settings.lookup);
+    let cpu = SurfaceSampler::new(
+        asset,
+        &sh,
+        &relit.surfel_irradiance,
+        relit.sky,
+        &settings.lookup,
+    );
     let mut points = sample_queries(asset, 384);
     let mixed = points.len() - 384;
     let step = (asset.surfels.len() / 300).max(1);

@@ -206,7 +206,7 @@ fn indirect_light_equals_the_cpu_lookup() {
         .relight(&lighting, 1)
         .unwrap();
     let irradiance = &relit.surfel_irradiance;
-    let sampler = SurfaceSampler::new(&s.asset, &sh, irradiance, &rt.settings().lookup);
+    let sampler = SurfaceSampler::new(&s.asset, &sh, irradiance, relit.sky, &rt.settings().lookup);
     let st = settings(16, Culling::Tiled, true);
     let (indirect, _) = render(&s, st, &lighting, View::Indirect, Some(&rt));
     let (albedo, _) = render(&s, st, &lighting, View::Albedo, None);

@@ -137,7 +137,7 @@ fn sparse_bakes_fill_only_the_holes_surfaces_need() {
         .relight(&lighting, 1)
         .unwrap();
     let lookup = LookupSettings::default();
-    let s = SurfaceSampler::new(&sparse, &relit.sh, &relit.surfel_irradiance, &lookup);
+    let s = SurfaceSampler::for_relit(&sparse, &relit, &lookup);
     let points = surfel_points(&sparse);
     assert!(!points.is_empty());
     for (p, n) in points {
@@ -184,7 +184,7 @@ fn sparse_bake_of_nothing_warns() {
         .relight(&load_rig(&fixture("rigs/sky_only.json")).unwrap(), 1)
         .unwrap();
     let lookup = LookupSettings::default();
-    let s = SurfaceSampler::new(&asset, &relit.sh, &relit.surfel_irradiance, &lookup);
+    let s = SurfaceSampler::for_relit(&asset, &relit, &lookup);
     // A constant sky of radiance 1 everywhere: E = pi on any surface, through the fills.
     for at in [[0.0; 3], [0.3, -0.6, 0.9], [1.0, 1.0, 1.0]] {
         let got = s.sample(at, [0.0, 1.0, 0.0]);

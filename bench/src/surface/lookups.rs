@@ -49,7 +49,7 @@ fn trilinear() -> LookupSettings {
 }
 
 /// Every lookup `--lookup` knows, by name, in table order.
-const LOOKUPS: [Variant; 11] = [
+const LOOKUPS: [Variant; 12] = [
     // Hardware trilinear over the probes' validity only: what depth moments are measured against.
     ("trilinear", || (trilinear(), Kind::Runtime)),
     // The probe volume with depth moments (DDGI's Chebyshev test), normal bias 0.2 spacings:
@@ -58,6 +58,17 @@ const LOOKUPS: [Variant; 11] = [
     // The runtime's: the bake's surface terms (prt_format::surface: which probes the point's
     // surfel sees, its near field) where the point has a surfel, `moments` elsewhere.
     ("default", || (LookupSettings::default(), Kind::Runtime)),
+    // The same without the sky terms (format 14): the sky as the probes see it, as before
+    // stop 55.
+    ("no_sky", || {
+        (
+            LookupSettings {
+                sky_terms: false,
+                ..LookupSettings::default()
+            },
+            Kind::Runtime,
+        )
+    }),
     // The same with plain trilinear weights where the point has no surfel: what the depth
     // moments add once surface terms decide the probes at surfaces (docs/results/packing.md).
     ("terms_trilinear", || {
@@ -110,7 +121,11 @@ const LOOKUPS: [Variant; 11] = [
     // traced with 4,096 rays: what a per-surfel sky term would bring (issue 31, stop 54).
     ("sky_point", || {
         let rays = crate::sky_point_lookup::SKY_RAYS;
-        (LookupSettings::default(), Kind::SkyPoint(rays))
+        let settings = LookupSettings {
+            sky_terms: false,
+            ..LookupSettings::default()
+        };
+        (settings, Kind::SkyPoint(rays))
     }),
 ];
 
@@ -136,9 +151,14 @@ impl Lookup {
             ),
             Kind::Runtime if s.surface_terms => format!(
                 "{}: the bake's surface terms where the point has a surfel (which probes it \
-                 sees, its near field; prt_runtime::surface), {} elsewhere, normal bias {bias} \
-                 spacings",
+                 sees, its near field, {}; prt_runtime::surface), {} elsewhere, normal bias \
+                 {bias} spacings",
                 self.name,
+                if s.sky_terms {
+                    "its sky term"
+                } else {
+                    "no sky term"
+                },
                 if s.depth_moments {
                     "depth moments"
                 } else {

@@ -31,7 +31,8 @@ fn count(found: usize, expected: usize) -> Result<(), FormatError> {
 /// surfels or those of the parts after it under its key (`surface_key_runs`, format 13);
 /// per brick, near groups that tile its surfels in order; per surfel, terms whose mask, centre
 /// probe, hit count and group (counted from its key's first brick) are in range and whose
-/// halves are finite; near fields in range naming groups that exist.
+/// halves are finite; near fields in range naming groups that exist; a sky term per surfel in
+/// [-2, 2].
 pub(super) fn surface_terms(asset: &Asset) -> Result<(), FormatError> {
     let st = &asset.surface;
     let empty = st.slots.is_empty()
@@ -40,7 +41,8 @@ pub(super) fn surface_terms(asset: &Asset) -> Result<(), FormatError> {
         && st.groups.is_empty()
         && st.group_surfels.is_empty()
         && st.near_ranges.is_empty()
-        && st.near.is_empty();
+        && st.near.is_empty()
+        && st.sky.is_empty();
     if st.header.brick_size == 0.0 && empty {
         return Ok(());
     }
@@ -60,7 +62,21 @@ pub(super) fn surface_terms(asset: &Asset) -> Result<(), FormatError> {
     cells(asset, &runs)?;
     groups(asset)?;
     surfels(asset, &runs)?;
-    near(st)
+    near(st)?;
+    sky(st)
+}
+
+/// Two halves a word, one per surfel, each in [-2, 2] (a share of the hemisphere less what the
+/// probes' clamped sky brings: [-1, 1] but for L2's ringing).
+fn sky(st: &SurfaceTerms) -> Result<(), FormatError> {
+    count(st.sky.len(), st.surfels.len().div_ceil(2))?;
+    for s in 0..st.surfels.len() {
+        let v = crate::surface::sky_term(&st.sky, s);
+        if !(-2.0..=2.0).contains(&v) {
+            return bad(s, format!("sky term {v}"));
+        }
+    }
+    Ok(())
 }
 
 fn header_and_table(st: &SurfaceTerms, bricks: usize) -> Result<(), FormatError> {

@@ -16,6 +16,8 @@ pub(super) struct State {
     pub(super) sky_mode: u32,
     pub(super) sky_color: [f32; 3],
     pub(super) sky_directions: Vec<[f32; 4]>,
+    /// The sky's mean radiance (`crate::SkyModel::mean_radiance`, as the CPU twin takes it).
+    pub(super) sky_mean: [f32; 3],
 }
 
 /// What one update does ([`PrtRuntime::plan`]).
@@ -99,11 +101,27 @@ impl PrtRuntime {
                 (SKY_DIRECTIONS, [0.0; 3], directions)
             }
         };
+        // The lattice's radiances are every other entry of the directions.
+        let sky_mean = match sky_mode {
+            SKY_DIRECTIONS => {
+                let n = (sky_directions.len() / 2).max(1) as f64;
+                let sum = sky_directions
+                    .iter()
+                    .skip(1)
+                    .step_by(2)
+                    .fold([0.0f64; 3], |a, l| {
+                        std::array::from_fn(|c| a[c] + f64::from(l[c]))
+                    });
+                sum.map(|v| (v / n) as f32)
+            }
+            _ => sky_color,
+        };
         Ok(State {
             lights,
             sky_mode,
             sky_color,
             sky_directions,
+            sky_mean,
         })
     }
 

@@ -451,6 +451,10 @@ impl PrtRuntime {
         // Serials from GATHERED_FIRST up, wrapping past the dirty word's other values.
         self.serial = self.serial.checked_add(1).unwrap_or(GATHERED_FIRST);
         let params = self.params(&new, changed, light_words, &plan);
+        if plan.sky_changed && self.settings.lookup.sky_terms {
+            let pi = std::f32::consts::PI;
+            self.res.info.sky_irradiance = new.sky_mean.map(|l| pi * l);
+        }
         if plan.relight() {
             self.cache_parity = params.cache_parity;
         }
@@ -515,6 +519,11 @@ impl PrtRuntime {
                 encoder,
                 &self.res.state.sky_directions,
                 bytemuck::cast_slice(&new.sky_directions),
+            );
+            copy(
+                encoder,
+                &self.res.volume_info,
+                bytemuck::bytes_of(&self.res.info),
             );
         }
         encoder.clear_buffer(&self.res.state.counters, 0, None);

@@ -434,6 +434,7 @@ pub fn volume_info(asset: &Asset, settings: &RuntimeSettings) -> VolumeInfo {
         cells_at: layout.cells_at,
         terms_at: layout.terms_at,
         bricks_at: layout.bricks_at,
+        sky_at: layout.sky_at,
         near_rays: t.header.rays.max(1) as f32,
         ..VolumeInfo::from(grid)
     }

@@ -361,6 +361,11 @@ pub(crate) mod tests {
                     ("terms_at", offset_of!(contract::VolumeInfo, terms_at)),
                     ("bricks_at", offset_of!(contract::VolumeInfo, bricks_at)),
                     ("near_rays", offset_of!(contract::VolumeInfo, near_rays)),
+                    ("sky_at", offset_of!(contract::VolumeInfo, sky_at)),
+                    (
+                        "sky_irradiance",
+                        offset_of!(contract::VolumeInfo, sky_irradiance),
+                    ),
                 ],
             ),
             (
