@@ -370,7 +370,7 @@ mod tests {
             .unwrap();
         assert!(
             err.to_string()
-                .contains("known: trilinear, moments, default, terms_trilinear, rays, rays_light, surfels, path, gather, surfel_gather, sky_point"),
+                .contains("known: trilinear, moments, default, no_sky, terms_trilinear, rays, rays_light, surfels, path, gather, surfel_gather, sky_point"),
             "{err}"
         );
     }
