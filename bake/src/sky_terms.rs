@@ -59,14 +59,14 @@
 use glam::Vec3;
 use prt_format::sh::SH_COUNT;
 use prt_format::surface::{
-    cosine_transfer, decode_normal, mask_bit, SurfaceTerms, BLOCKED_WEIGHT, TERMS_TRACED,
+    cosine_transfer, decode_normal, SurfaceTerms, BLOCKED_WEIGHT, TERMS_TRACED,
 };
 use prt_format::{f16_to_f32, f32_to_f16, tier, Asset};
 use rayon::prelude::*;
 
 use crate::accel::bvh::SceneBvh;
 use crate::accel::bvh8::PACKET;
-use crate::surface_terms::cosine_spiral;
+use crate::surface_terms::{cosine_spiral, ray_origin};
 
 /// Sky rays per surfel.
 pub const SKY_RAYS: u32 = 64;
@@ -78,10 +78,6 @@ pub const SHRINK: f32 = 1.0;
 /// `tests/tests/surface_terms.rs` checks that they agree): where the sky transfer is
 /// interpolated.
 pub const NORMAL_BIAS: f32 = 0.2;
-
-/// Where a surfel's rays start: as the near field's (`crate::surface_terms`).
-const START: f32 = 0.01;
-const START_MAGNITUDE: f32 = 1e-6;
 
 /// The asset's sky terms, two halves a word (empty when it has no surface terms).
 pub fn sky_terms(asset: &Asset, bvh: &SceneBvh) -> Vec<u32> {
@@ -131,7 +127,6 @@ fn interpolated_transfer(asset: &Asset, transfer: &[[f32; SH_COUNT]], s: usize) 
     let grid = &asset.header.grid;
     let n = decode_normal(terms.normal);
     let at = Vec3::from(asset.surfels[s].position) + Vec3::from(n) * NORMAL_BIAS * grid.spacing;
-    let centre = grid.ijk(terms.centre as usize).map(|v| v as i32);
     let mut seen = false;
     // Per corner: grid point, plain weight, masked weight.
     let mut corners: Vec<(usize, f32, f32)> = Vec::with_capacity(8);
@@ -140,8 +135,7 @@ fn interpolated_transfer(asset: &Asset, transfer: &[[f32; SH_COUNT]], s: usize) 
         if w <= 0.0 {
             continue;
         }
-        let ijk = grid.ijk(i).map(|v| v as i32);
-        let visible = mask_bit(centre, ijk).is_none_or(|b| terms.mask >> b & 1 != 0);
+        let visible = terms.sees(grid, i);
         seen |= visible;
         corners.push((i, w, if visible { w } else { w * BLOCKED_WEIGHT }));
     }
@@ -167,8 +161,7 @@ fn sky_view(asset: &Asset, bvh: &SceneBvh, t: &[f32; SH_COUNT], s: usize) -> (f3
         Vec3::from(surfel.position),
         Vec3::from(surfel.normal).normalize_or_zero(),
     );
-    let spacing = asset.header.grid.spacing;
-    let o = p + n * (START * spacing).max(START_MAGNITUDE * p.abs().max_element());
+    let o = ray_origin(p, n, asset.header.grid.spacing);
     let (tx, ty) = n.any_orthonormal_pair();
     // Turned about the normal by a golden-ratio step per surfel: the surfels of a group pool
     // different directions, not the same spiral.
@@ -244,15 +237,11 @@ fn grid_transfer(asset: &Asset) -> Vec<[f32; SH_COUNT]> {
         if !probe.is_filled() {
             continue;
         }
-        let ijk = grid.ijk(index);
         let (mut acc, mut total) = ([0.0f32; SH_COUNT], 0.0f32);
-        let corners = tier::fill_corners(grid, ijk, probe.fill_level(), probe.fill_hidden());
-        for (c, w) in corners {
-            if asset.probes.get(c).is_some_and(|p| p.is_valid()) {
-                total += w;
-                let tc = own(&asset.probes[c]);
-                (0..SH_COUNT).for_each(|k| acc[k] += w * tc[k]);
-            }
+        for (c, w) in tier::filled_from(grid, &asset.probes, index) {
+            total += w;
+            let tc = own(&asset.probes[c]);
+            (0..SH_COUNT).for_each(|k| acc[k] += w * tc[k]);
         }
         if total > 0.0 {
             t[index] = acc.map(|v| v / total);

@@ -396,11 +396,14 @@ fn near_field(
 /// Where a surfel's rays start, and its normal.
 fn start(input: &Inputs, s: &Surfel) -> (Vec3, Vec3) {
     let (p, n) = (Vec3::from(s.position), Vec3::from(s.normal));
-    let spacing = input.grid.spacing;
-    (
-        p + n * (START * spacing).max(START_MAGNITUDE * p.abs().max_element()),
-        n,
-    )
+    (ray_origin(p, n, input.grid.spacing), n)
+}
+
+/// Where rays from a surfel at `p` with unit normal `n` start on a grid of `spacing`: [`START`]
+/// spacings along the normal, or [`START_MAGNITUDE`] of the coordinates' magnitude if more
+/// (the near field's, and the sky terms', `crate::sky_terms`).
+pub(crate) fn ray_origin(p: Vec3, n: Vec3, spacing: f32) -> Vec3 {
+    p + n * (START * spacing).max(START_MAGNITUDE * p.abs().max_element())
 }
 
 /// A front-face surfel's [`SurfelTerms::mask`], with [`TERMS_TRACED`].

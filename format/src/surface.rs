@@ -122,6 +122,17 @@ pub struct SurfelTerms {
 }
 const _: () = assert!(std::mem::size_of::<SurfelTerms>() == 32);
 
+impl SurfelTerms {
+    /// Whether the surfel sees grid point `probe` of `grid`: its bit of [`SurfelTerms::mask`],
+    /// or true for a probe outside the 27 around its centre. The lookup weights a probe it does
+    /// not see by [`BLOCKED_WEIGHT`] (`prt_runtime::surface`, and the bake's sky terms, which
+    /// interpolate as it does).
+    pub fn sees(&self, grid: &crate::Grid, probe: usize) -> bool {
+        let ijk = |i: usize| grid.ijk(i).map(|v| v as i32);
+        mask_bit(ijk(self.centre as usize), ijk(probe)).is_none_or(|b| self.mask >> b & 1 != 0)
+    }
+}
+
 /// [`SurfaceTerms::near`] entry: bits 8.. the near group hit, bits 0..8 its weight in 255ths
 /// of the group's near hits.
 pub const NEAR_WEIGHT_BITS: u32 = 8;

@@ -103,6 +103,24 @@ pub fn fill_corners(
         .map(|(_, corner)| corner)
 }
 
+/// The points filled grid point `index` of `probes` is interpolated from, with their weights
+/// (not normalised): its [`fill_corners`] that are valid. What the runtime's fill averages
+/// (`prt_runtime::fill`) and the bake's sky terms interpolate the probes' sky transfer over.
+pub fn filled_from<'a>(
+    grid: &Grid,
+    probes: &'a [crate::Probe],
+    index: usize,
+) -> impl Iterator<Item = (usize, f32)> + 'a {
+    let probe = probes[index];
+    fill_corners(
+        grid,
+        grid.ijk(index),
+        probe.fill_level(),
+        probe.fill_hidden(),
+    )
+    .filter(|&(c, _)| probes.get(c).is_some_and(|p| p.is_valid()))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -333,9 +333,10 @@ fn filled_points(asset: &Asset) -> Result<(), FormatError> {
                 ));
             }
         }
-        let valid = crate::tier::fill_corners(grid, ijk, level, p.fill_hidden())
-            .any(|(c, _)| asset.probes[c].is_valid());
-        if !valid {
+        if crate::tier::filled_from(grid, &asset.probes, index)
+            .next()
+            .is_none()
+        {
             return Err(FormatError::invalid(
                 "probes",
                 index,

@@ -20,12 +20,10 @@ pub fn fill(asset: &Asset, sh: &mut [ShRgb]) {
         if !probe.is_filled() || index >= sh.len() {
             continue;
         }
-        let ijk = grid.ijk(index);
         let mut acc = [[0.0f32; 3]; SH_COUNT];
         let mut total = 0.0f32;
-        for (c, w) in tier::fill_corners(grid, ijk, probe.fill_level(), probe.fill_hidden()) {
-            let valid = asset.probes.get(c).is_some_and(|p| p.is_valid());
-            if !valid || c >= sh.len() {
+        for (c, w) in tier::filled_from(grid, &asset.probes, index) {
+            if c >= sh.len() {
                 continue;
             }
             total += w;

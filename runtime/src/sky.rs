@@ -267,8 +267,8 @@ impl SkyModel {
 
     /// The sky's mean radiance over the sphere (its SH band 0 over `Y_0`): what the surface
     /// lookup's sky terms scale (`prt_format::surface::sky_term`). `lattice` is
-    /// [`SkyModel::lattice`]: an image sky is averaged as the probes see it, in the order the
-    /// GPU runtime sums it.
+    /// [`SkyModel::lattice`]: an image sky is averaged as the probes see it (the GPU runtime
+    /// takes it from here too).
     pub fn mean_radiance(&self, lattice: &[([f32; 3], [f32; 3])]) -> [f32; 3] {
         match self {
             SkyModel::Black => [0.0; 3],

@@ -34,7 +34,7 @@
 
 use prt_format::sh::{ShRgb, SH_COUNT};
 use prt_format::surface::{
-    cosine_transfer, decode_normal, dominant_axis, mask_bit, near_entry, sky_term, SurfaceTerms,
+    cosine_transfer, decode_normal, dominant_axis, near_entry, sky_term, SurfaceTerms,
     BLOCKED_WEIGHT, TERMS_TRACED,
 };
 use prt_format::{f16_to_f32, Asset};
@@ -171,11 +171,9 @@ impl<'a> SurfaceSampler<'a> {
         };
         let terms = &self.asset.surface.surfels[surfel];
         let grid = &self.asset.header.grid;
-        let ijk = |i: usize| grid.ijk(i).map(|v| v as i32);
-        let centre = ijk(terms.centre as usize);
         let seen = std::cell::Cell::new(false);
         let mut out = self.trilinear.sample_weighted(position, normal, |i, _| {
-            let visible = mask_bit(centre, ijk(i)).is_none_or(|b| terms.mask >> b & 1 != 0);
+            let visible = terms.sees(grid, i);
             seen.set(seen.get() || visible);
             if visible {
                 1.0

@@ -78,43 +78,30 @@ impl PrtRuntime {
             .iter()
             .map(|l| GpuLight::from(&PreparedLight::new(l)))
             .collect();
-        let (sky_mode, sky_color, sky_directions) = match &lighting.sky {
-            SkyModel::Black => (SKY_BLACK, [0.0; 3], Vec::new()),
-            SkyModel::Constant(c) => (SKY_CONSTANT, *c, Vec::new()),
+        // The sky's mean radiance as the CPU twin takes it (`SkyModel::mean_radiance`).
+        let (sky_mode, sky_color, sky_directions, sky_mean) = match &lighting.sky {
+            SkyModel::Black => (SKY_BLACK, [0.0; 3], Vec::new(), [0.0; 3]),
+            SkyModel::Constant(c) => (SKY_CONSTANT, *c, Vec::new(), *c),
             SkyModel::Equirect { .. } if !self.settings.equirect_sky => {
                 return Err(GpuError::NoSkyMask)
             }
             sky @ SkyModel::Equirect { .. } => {
-                let cached = self.sky_cache.as_ref().filter(|(s, _)| s == sky);
-                let directions = match cached {
-                    Some((_, d)) => d.clone(),
+                let cached = self.sky_cache.as_ref().filter(|(s, _, _)| s == sky);
+                let (directions, mean) = match cached {
+                    Some((_, d, mean)) => (d.clone(), *mean),
                     None => {
-                        let d: Vec<[f32; 4]> = sky
-                            .lattice(self.ray_count)
+                        let lattice = sky.lattice(self.ray_count);
+                        let mean = sky.mean_radiance(&lattice);
+                        let d: Vec<[f32; 4]> = lattice
                             .into_iter()
                             .flat_map(|(d, l)| [[d[0], d[1], d[2], 0.0], [l[0], l[1], l[2], 0.0]])
                             .collect();
-                        self.sky_cache = Some((sky.clone(), d.clone()));
-                        d
+                        self.sky_cache = Some((sky.clone(), d.clone(), mean));
+                        (d, mean)
                     }
                 };
-                (SKY_DIRECTIONS, [0.0; 3], directions)
+                (SKY_DIRECTIONS, [0.0; 3], directions, mean)
             }
-        };
-        // The lattice's radiances are every other entry of the directions.
-        let sky_mean = match sky_mode {
-            SKY_DIRECTIONS => {
-                let n = (sky_directions.len() / 2).max(1) as f64;
-                let sum = sky_directions
-                    .iter()
-                    .skip(1)
-                    .step_by(2)
-                    .fold([0.0f64; 3], |a, l| {
-                        std::array::from_fn(|c| a[c] + f64::from(l[c]))
-                    });
-                sum.map(|v| (v / n) as f32)
-            }
-            _ => sky_color,
         };
         Ok(State {
             lights,

@@ -305,9 +305,10 @@ pub struct PrtRuntime {
     /// The stages built for these settings, in dispatch order.
     pipelines: Vec<Pipeline>,
     state: Option<State>,
-    /// The last equirect sky and its lattice radiance (`SkyModel::lattice` averages the map over
-    /// every direction's cell: computed again only when the sky changes, not every update).
-    sky_cache: Option<(SkyModel, Vec<[f32; 4]>)>,
+    /// The last equirect sky, its lattice radiance (`SkyModel::lattice` averages the map over
+    /// every direction's cell: computed again only when the sky changes, not every update)
+    /// and its mean (`SkyModel::mean_radiance`).
+    sky_cache: Option<(SkyModel, Vec<[f32; 4]>, [f32; 3])>,
     cursor: u32,
     /// Probes gathered in the current cycle (one pass of the gather over every valid probe).
     cycle_gathered: u32,
