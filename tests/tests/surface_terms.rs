@@ -291,7 +291,8 @@ fn a_sunlit_atrium_keeps_its_galleries_dark() {
 /// The truth at a point is then pi times the cosine-weighted share of its hemisphere that
 /// leaves the scene, traced here with 4,096 rays; at the front-face surfels the lookup with the
 /// sky terms is nearer it than the lookup without (measured at 402 surfels: mean absolute
-/// error 0.033 against 0.049, of a mean truth of 1.93).
+/// error 0.022 against 0.049, of a mean truth of 1.93; 0.033 with stop 55's 64 sky rays, which
+/// the bound of 0.6x fails).
 #[test]
 fn the_sky_term_gives_a_surface_its_own_sky() {
     use glam::Vec3;
@@ -351,7 +352,7 @@ fn the_sky_term_gives_a_surface_its_own_sky() {
         truth_sum / count
     );
     assert!(
-        err_with < 0.8 * err_without,
+        err_with < 0.6 * err_without,
         "{err_with} against {err_without}"
     );
 }
