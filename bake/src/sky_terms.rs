@@ -45,12 +45,16 @@
 //! - 256 rays, the baseline chosen per group, shrink 1, variance floor (stop 56, the default):
 //!   5.59 / 7.55% and 3.19 / 4.67%. On the other sets (held-out, unseen, fresh: median / worst
 //!   level) 5.22 / 7.42%, 4.88 / 6.63%, 5.78 / 12.91%; unseen cave_31's over-lit pixels 2.65%
-//!   -> 1.42%; Sponza under the sun 15.17% -> 14.74% (docs/results/surface_sky_256.md). It
-//!   costs the stage four times its rays: Sponza's default bake about twice its time;
+//!   -> 1.42% and Sponza under the sun 15.17% -> 14.74% against 64 rays with the same pooling
+//!   (docs/results/surface_sky_256.md, surface_sky_256_bundled.md, surface_sky_pool*.md). Worse
+//!   than that: cave_31's points 5.51% -> 5.78% (half 3.67% -> 3.93%), cave_7 at half spacing
+//!   4.58% -> 4.67%, fresh street_38's over-lit pixels 1.19% -> 1.35%. It costs the stage four
+//!   times its rays: Sponza's default bake about twice its time;
 //! - 64 rays, the same: 5.79 / 8.03% and 3.41 / 4.82% (and atrium_13, held out, 4 leaking
 //!   points of 297 -> 1 against always the probes' baseline); 128 rays 5.66 / 7.58% and 3.26 /
 //!   5.22% (cave_7 at half spacing 4.58% -> 5.22%, cave_31's pixels 2.55%); 512 rays 5.53 /
-//!   7.31% and 3.12 / 4.26%, Sponza under the sun 14.09%, at twice the 256 rays' cost;
+//!   7.31% and 3.12 / 4.26%, Sponza under the sun 14.09%, at twice the 256 rays' cost
+//!   (surface_sky_128.md, surface_sky_512.md: the tuning seeds, cave_31 and Sponza);
 //! - 64 rays, the difference to the probes always pooled (stop 55): 5.77 / 8.09% and 3.43 /
 //!   4.85% (docs/results/surface_sky.md, surface_sky_bundled.md); shrinking each surfel only
 //!   part of the way to its group's mean by the group's spread over the noise (empirical
@@ -235,11 +239,15 @@ struct Traced {
 /// group most uniform: `v - baseline` is averaged and each surfel adds its own baseline back.
 /// The rays' noise is the same whichever baseline is taken off, so the one whose differences
 /// spread least across the group is the one the sky varies least against. Where the probes'
-/// sky falls off across a gallery wall that sees none (atrium_13), `v` itself is uniform and
-/// the difference to the probes is not: pooling the difference gave each surfel the group's
-/// mean correction, half its own, and left 3 of 4 leaking points lit by the probes' sky. Where
-/// a skylight's edge crosses the group the probes follow it and the difference is the
-/// uniform one (cave_7, module docs).
+/// sky falls off across a gallery wall that sees none (atrium_13: 0.2% to 2.5% within one
+/// group of 16), `v` itself is uniform and the difference to the probes is not: pooling the
+/// difference gave each surfel the group's mean correction, about half its own, and left 3 of
+/// its 4 leaking points (1 at 64 rays with the baseline chosen, 8.31% -> 7.99%,
+/// docs/results/surface_sky_pool.md). Where a skylight's edge crosses the group the probes
+/// follow it and the difference is the uniform one (cave_7, module docs). The choice is made
+/// on the same noisy `v` it pools, clamped to [0, 1]: in a group that sees no sky, or all of
+/// it, the clamp makes `v` look uniform and "none" tends to win, which is the right baseline
+/// there.
 fn pooled(groups: &[[u32; 2]], traced: &[Traced]) -> Vec<(f32, f32)> {
     let mut out: Vec<(f32, f32)> = traced
         .iter()
@@ -256,17 +264,19 @@ fn pooled(groups: &[[u32; 2]], traced: &[Traced]) -> Vec<(f32, f32)> {
             continue;
         }
         let x = |s: usize, b: usize| f64::from(traced[s].view - traced[s].baselines[b]);
-        let mean = |b: usize| members.iter().map(|&(s, w)| w * x(s, b)).sum::<f64>() / weight;
-        let spread = |b: usize| {
-            let m = mean(b);
-            members
-                .iter()
-                .map(|&(s, w)| w * (x(s, b) - m).powi(2))
+        let means =
+            [0, 1, 2].map(|b| members.iter().map(|&(s, w)| w * x(s, b)).sum::<f64>() / weight);
+        let spreads = [0, 1, 2].map(|b| {
+            (members.iter())
+                .map(|&(s, w)| w * (x(s, b) - means[b]).powi(2))
                 .sum::<f64>()
-        };
+        });
         // The first of the least spread: the probes' baseline where they tie.
-        let best = (1..3).fold(0, |best, b| if spread(b) < spread(best) { b } else { best });
-        let m = mean(best);
+        let best = (1..3).fold(
+            0,
+            |best, b| if spreads[b] < spreads[best] { b } else { best },
+        );
+        let m = means[best];
         let variance = members
             .iter()
             .map(|&(s, w)| w * w * f64::from(traced[s].variance))
@@ -357,6 +367,35 @@ mod tests {
         for t in &terms[..4] {
             assert!((t.0 + 0.1).abs() < 1e-6, "{t:?}");
         }
+    }
+
+    #[test]
+    fn a_view_that_follows_the_cosine_integral_pools_against_it() {
+        // The view tracks the control variate's integral while the probes' sky (through the
+        // near field) does not: each surfel keeps its own integral less a common 0.05.
+        let traced: Vec<Traced> = [(0.4, 0.1), (0.3, 0.3), (0.2, 0.0), (0.1, 0.2)]
+            .iter()
+            .map(|&(cosine, probes)| surfel(cosine - 0.05, probes, cosine))
+            .collect();
+        let terms = pooled(&[[0, 4]], &traced);
+        for (t, s) in terms.iter().zip(&traced) {
+            let want = s.view - s.baselines[0];
+            assert!((t.0 - want).abs() < 1e-6, "{t:?} for {s:?}");
+        }
+    }
+
+    #[test]
+    fn an_untraced_surfel_takes_no_part_and_a_group_of_none_stays_zero() {
+        let mut traced = vec![surfel(0.0, 0.1, 0.1), surfel(0.2, 0.1, 0.1)];
+        // Untraced (weight 0) with a view that would pull the mean.
+        traced.push(Traced {
+            view: 1.0,
+            ..Traced::default()
+        });
+        let terms = pooled(&[[0, 3]], &traced);
+        assert!((terms[0].0 - 0.0).abs() < 1e-6, "{:?}", terms[0]);
+        let none = pooled(&[[0, 2]], &[Traced::default(); 2]);
+        assert_eq!(none, vec![(0.0, 0.0); 2]);
     }
 
     #[test]
