@@ -92,8 +92,7 @@ fn sample_cpu(
     settings: &RuntimeSettings,
     points: &[Point],
 ) -> Vec<Sample> {
-    let irradiance = &relit.surfel_irradiance;
-    let sampler = SurfaceSampler::new(asset, &relit.sh, irradiance, relit.sky, &settings.lookup);
+    let sampler = SurfaceSampler::for_relit(asset, relit, &settings.lookup);
     points.iter().map(|(p, n)| sampler.sample(*p, *n)).collect()
 }
 

@@ -166,9 +166,8 @@ pub fn surface_difference(
         relighter.relight(&lighting, 1).unwrap()
     };
     let (ra, rb) = (relit(a), relit(b));
-    let surface = prt_runtime::surface::SurfaceSampler::new;
-    let sa = surface(a, &ra.sh, &ra.surfel_irradiance, ra.sky, &lookup);
-    let sb = surface(b, &rb.sh, &rb.surfel_irradiance, rb.sky, &lookup);
+    let surface = prt_runtime::surface::SurfaceSampler::for_relit;
+    let (sa, sb) = (surface(a, &ra, &lookup), surface(b, &rb, &lookup));
     let (mut diff, mut total) = (0.0f64, 0.0f64);
     for &(p, n) in points.iter().step_by(step) {
         let (x, y) = (sa.sample(p, n), sb.sample(p, n));

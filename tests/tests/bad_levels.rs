@@ -62,13 +62,7 @@ fn sample_everywhere(
         .unwrap()
         .relight(lighting, 1)
         .unwrap();
-    let cpu = SurfaceSampler::new(
-        asset,
-        &relit.sh,
-        &relit.surfel_irradiance,
-        relit.sky,
-        &LookupSettings::default(),
-    );
+    let cpu = SurfaceSampler::for_relit(asset, &relit, &LookupSettings::default());
     let (device, queue) = gpu_device();
     let mut runtime = PrtRuntime::new(&device, &queue, asset, RuntimeSettings::default()).unwrap();
     loop {
