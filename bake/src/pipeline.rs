@@ -114,7 +114,7 @@ pub(crate) fn bake_in_pool(
     // The surfels as the asset keeps them, so that it equals itself read back.
     let precision = header.settings.surfel_precision;
     for s in &mut bricked.surfels {
-        *s = precision.quantize(s);
+        *s = precision.quantize(s, &bricked.bricks);
     }
     let mut asset = Asset {
         header,

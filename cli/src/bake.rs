@@ -35,7 +35,7 @@ enum Quality {
 enum Precision {
     /// 32-byte factors of halves.
     F16,
-    /// 56-byte factors of floats, and surfels of floats (80 bytes; 48 otherwise).
+    /// 56-byte factors of floats, and surfels of floats (80 bytes; 32 otherwise).
     F32,
     /// Factors of 8 bytes where a lobe toward the mean hit point fits their SH terms (`R` and
     /// the band-2 scale stored; most factors), 16 with 7-bit band-1 and 5-bit band-2 terms

@@ -246,7 +246,7 @@ pub struct BakeSettingsRecord {
 pub enum SurfelPrecision {
     /// [`Surfel`] as it is: 80 bytes, every field f32.
     F32,
-    /// `PackedSurfel`: 48 bytes.
+    /// `PackedSurfel`: 32 bytes (48 in formats 9-14).
     #[default]
     Packed,
 }

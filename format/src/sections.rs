@@ -15,12 +15,12 @@ use bytemuck::Pod;
 use serde::Serialize;
 
 use crate::asset::SurfelPrecision;
-use crate::asset::{Asset, Geometry, Header, Surfel};
+use crate::asset::{Asset, Brick, Geometry, Header, Surfel};
 use crate::coarse::CoarseBricks;
 use crate::error::FormatError;
 use crate::factors::Factors;
 use crate::surface::SurfaceTerms;
-use crate::surfel::PackedSurfel;
+use crate::surfel::{brick_of, PackedSurfel};
 
 /// Bincode's variant indices of [`Factors`] (its declaration order).
 const F32: u32 = 0;
@@ -75,7 +75,7 @@ pub(crate) fn write_payload<W: Write>(asset: &Asset, out: &mut W) -> Result<(), 
     pod(out, &asset.coarse.moments)?;
     match asset.header.settings.surfel_precision {
         SurfelPrecision::F32 => pod(out, &asset.surfels)?,
-        SurfelPrecision::Packed => packed_surfels(out, &asset.surfels)?,
+        SurfelPrecision::Packed => packed_surfels(out, &asset.surfels, &asset.bricks)?,
     }
     pod(out, &asset.geometry.nodes)?;
     pod(out, &asset.geometry.triangles)?;
@@ -137,16 +137,22 @@ fn pod<W: Write, T: Pod + Serialize>(out: &mut W, v: &[T]) -> Result<(), EncodeT
 }
 
 /// `surfels` packed ([`PackedSurfel`]), the bytes `pod` writes of a vector of them, packed a
-/// piece at a time: a packed copy of every surfel would add 48 bytes a surfel to the peak
+/// piece at a time: a packed copy of every surfel would add 32 bytes a surfel to the peak
 /// memory of a bake's write.
-fn packed_surfels<W: Write>(out: &mut W, surfels: &[Surfel]) -> Result<(), EncodeTo> {
+fn packed_surfels<W: Write>(
+    out: &mut W,
+    surfels: &[Surfel],
+    bricks: &[Brick],
+) -> Result<(), EncodeTo> {
     if !RAW {
-        return via_serde(out, &PackedSurfel::pack_all(surfels));
+        let bytes = SurfelPrecision::Packed.stored(surfels, bricks);
+        let packed: Vec<PackedSurfel> = bytemuck::pod_collect_to_vec(&bytes);
+        return via_serde(out, &packed);
     }
     out.write_all(&(surfels.len() as u64).to_le_bytes())
         .map_err(EncodeTo::Io)?;
     for piece in surfels.chunks(1 << 14) {
-        out.write_all(&SurfelPrecision::Packed.stored(piece))
+        out.write_all(&SurfelPrecision::Packed.stored(piece, bricks))
             .map_err(EncodeTo::Io)?;
     }
     Ok(())
@@ -163,20 +169,28 @@ impl Sections<'_> {
     pub fn asset(&mut self) -> Result<Asset, FormatError> {
         let header: Header = self.via_serde("header")?;
         let surfel_precision = header.settings.surfel_precision;
+        let probes = self.pod("probes")?;
+        let sky_mask = self.pod("sky_mask")?;
+        let sky_transfer = self.pod("sky_transfer")?;
+        let probe_depth = self.pod("probe_depth")?;
+        let factors = self.factors()?;
+        let bricks: Vec<Brick> = self.pod("bricks")?;
+        let coarse = CoarseBricks {
+            bricks: self.pod("coarse")?,
+            children: self.pod("coarse")?,
+            moments: self.pod("coarse")?,
+        };
+        let surfels = self.surfels(surfel_precision, &bricks)?;
         Ok(Asset {
             header,
-            probes: self.pod("probes")?,
-            sky_mask: self.pod("sky_mask")?,
-            sky_transfer: self.pod("sky_transfer")?,
-            probe_depth: self.pod("probe_depth")?,
-            factors: self.factors()?,
-            bricks: self.pod("bricks")?,
-            coarse: CoarseBricks {
-                bricks: self.pod("coarse")?,
-                children: self.pod("coarse")?,
-                moments: self.pod("coarse")?,
-            },
-            surfels: self.surfels(surfel_precision)?,
+            probes,
+            sky_mask,
+            sky_transfer,
+            probe_depth,
+            factors,
+            bricks,
+            coarse,
+            surfels,
             geometry: Geometry {
                 nodes: self.pod("geometry")?,
                 triangles: self.pod("geometry")?,
@@ -196,14 +210,19 @@ impl Sections<'_> {
         })
     }
 
-    /// The surfels, stored at `precision` ([`crate::surfel`]).
-    fn surfels(&mut self, precision: SurfelPrecision) -> Result<Vec<Surfel>, FormatError> {
+    /// The surfels, stored at `precision` ([`crate::surfel`]; a packed surfel's position is a
+    /// fraction of its brick's bounds, in `bricks`).
+    fn surfels(
+        &mut self,
+        precision: SurfelPrecision,
+        bricks: &[Brick],
+    ) -> Result<Vec<Surfel>, FormatError> {
         Ok(match precision {
             SurfelPrecision::F32 => self.pod("surfels")?,
             SurfelPrecision::Packed => self
                 .pod::<PackedSurfel>("surfels")?
                 .iter()
-                .map(PackedSurfel::surfel)
+                .map(|p| p.surfel(&brick_of(bricks, p.brick)))
                 .collect(),
         })
     }
@@ -437,7 +456,7 @@ mod tests {
             packed.surfels = packed
                 .surfels
                 .iter()
-                .map(|s| SurfelPrecision::Packed.quantize(s))
+                .map(|s| SurfelPrecision::Packed.quantize(s, &packed.bricks))
                 .collect();
             assert_eq!(back, packed);
         }

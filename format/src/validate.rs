@@ -465,6 +465,9 @@ fn bricks(asset: &Asset) -> Result<(), FormatError> {
     for (i, b) in asset.bricks.iter().enumerate() {
         finite("bricks", i, "min", &b.min)?;
         finite("bricks", i, "max", &b.max)?;
+        // A packed surfel decodes its position from the extent: it must be finite too.
+        let extent: [f32; 3] = std::array::from_fn(|a| b.max[a] - b.min[a]);
+        finite("bricks", i, "max - min", &extent)?;
         finite("bricks", i, "centroid", &b.centroid)?;
         if b.surfel_count == 0 {
             return Err(FormatError::invalid("bricks", i, "no surfels"));

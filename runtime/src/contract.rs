@@ -366,6 +366,14 @@ pub fn wgsl_constants() -> Vec<(&'static str, String)> {
             format!("{}u", prt_format::surfel::PACKED_BACKFACE),
         ),
         (
+            "PACKED_POSITION_STEP",
+            format!("{:e}", 1.0 / prt_format::surfel::POSITION_STEPS),
+        ),
+        (
+            "RGB9E5_EXPONENT_OFFSET",
+            format!("{}u", prt_format::surfel::RGB9E5_EXPONENT_OFFSET),
+        ),
+        (
             "NEAR_WEIGHT_BITS",
             format!("{}u", prt_format::surface::NEAR_WEIGHT_BITS),
         ),

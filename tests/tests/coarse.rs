@@ -9,9 +9,11 @@ use prt_tests::{bake_ok as bake, fixture};
 
 /// Every coarse brick's linear model (the stored `2^level` undone) predicts at each of its
 /// surfels what the weighted least-squares fit over the union of its bricks' surfels does,
-/// computed here from the surfels in f64, to 1e-4 of the brick's radiance scale. (Values at
-/// the surfels, not the gradients: along a flat brick's normal the fit's gradient is set by
-/// the regularisation and float noise, and no surfel or ray lies off the plane.)
+/// computed here from the surfels in f64, to 1e-3 of the brick's radiance scale: the stored
+/// gradient weights are halves since format 15 (`prt_format::PackedSurfel`, relative rounding
+/// 4.9e-4; 4.8e-4 measured here, 1e-4 held with f32 weights). (Values at the surfels, not the
+/// gradients: along a flat brick's normal the fit's gradient is set by the regularisation and
+/// float noise, and no surfel or ray lies off the plane.)
 #[test]
 fn coarse_radiance_is_the_fit_over_all_its_surfels() {
     let scene = fixture("cornell/cornell.gltf");
@@ -60,7 +62,7 @@ fn coarse_radiance_is_the_fit_over_all_its_surfels() {
             }
         }
     }
-    assert!(worst < 1e-4, "worst relative difference {worst:e}");
+    assert!(worst < 1e-3, "worst relative difference {worst:e}");
 }
 
 /// The weighted mean and the regularised least-squares gradient of the surfels' radiance.

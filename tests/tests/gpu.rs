@@ -516,7 +516,7 @@ fn chunked_factor_tables_match_the_unsplit_result() {
 }
 
 /// Surfel arrays larger than one storage binding are split into chunks of whole bricks: a
-/// runtime limited to 256 KiB of surfels per binding (dozens of chunks) gives exactly the
+/// runtime limited to 128 KiB of surfels per binding (dozens of chunks) gives exactly the
 /// unsplit result, with two bounces (the bounce stage reads the chunks too), and equals the
 /// CPU; a brick whose own surfels exceed the limit is a typed error.
 #[test]
@@ -527,7 +527,7 @@ fn chunked_surfels_match_the_unsplit_result() {
     // As uploaded: packed surfels.
     let bytes = asset.surfels.len() * asset.header.settings.surfel_precision.bytes();
     assert!(
-        bytes > 16 * 256 * 1024,
+        bytes > 16 * 128 * 1024,
         "the asset needs many chunks ({bytes} bytes)"
     );
     let settings = RuntimeSettings {
@@ -539,7 +539,7 @@ fn chunked_surfels_match_the_unsplit_result() {
     whole.settle(&lighting).unwrap();
     let expect = whole.read_probe_sh().unwrap();
     let small = RuntimeSettings {
-        max_surfel_chunk_bytes: Some(256 * 1024),
+        max_surfel_chunk_bytes: Some(128 * 1024),
         ..settings
     };
     let mut chunked = PrtRuntime::new(&device, &queue, &asset, small).unwrap();

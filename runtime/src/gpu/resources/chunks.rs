@@ -65,7 +65,7 @@ pub(super) fn surfel_buffers(
                         .header
                         .settings
                         .surfel_precision
-                        .stored(&asset.surfels[range]),
+                        .stored(&asset.surfels[range], &asset.bricks),
                     none,
                 )?,
                 alloc.zeroed("prt surfel radiance", radiance_bytes * n, none)?,
