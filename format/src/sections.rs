@@ -145,9 +145,7 @@ fn packed_surfels<W: Write>(
     bricks: &[Brick],
 ) -> Result<(), EncodeTo> {
     if !RAW {
-        let bytes = SurfelPrecision::Packed.stored(surfels, bricks);
-        let packed: Vec<PackedSurfel> = bytemuck::pod_collect_to_vec(&bytes);
-        return via_serde(out, &packed);
+        return via_serde(out, &PackedSurfel::pack_all(surfels, bricks));
     }
     out.write_all(&(surfels.len() as u64).to_le_bytes())
         .map_err(EncodeTo::Io)?;

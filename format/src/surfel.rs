@@ -124,7 +124,8 @@ pub struct PackedSurfel {
     pub position_z_weight: u32,
     /// Octahedral unit normal ([`encode_normal`]).
     pub normal: u32,
-    /// Gradient weights x and y times the brick's largest extent, as halves.
+    /// Gradient weights x and y times the power of two just above the brick's largest extent
+    /// (`gradient_exponent`), as halves.
     pub gradient_xy: u32,
     /// Gradient weight z (as above) and albedo red.
     pub gradient_z_albedo_r: u32,
@@ -248,6 +249,13 @@ pub fn from_rgb9e5(w: u32) -> [f32; 3] {
 }
 
 impl PackedSurfel {
+    /// The packing of every surfel of `surfels`, each within its brick of `bricks`.
+    pub fn pack_all(surfels: &[Surfel], bricks: &[Brick]) -> Vec<PackedSurfel> {
+        (surfels.iter())
+            .map(|s| PackedSurfel::of(s, &brick_of(bricks, s.brick)))
+            .collect()
+    }
+
     /// The packing of `s`, a surfel of brick `b` (finite albedo and weight beyond the half
     /// range are stored as its largest value, emission as RGB9E5's; the brick index below
     /// 2^31, as validation requires; a position outside the brick's bounds as the nearest
