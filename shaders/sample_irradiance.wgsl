@@ -85,8 +85,9 @@ struct PrtSample {
 @group(PRT_GROUP) @binding(10) var<storage, read> prt_probe_positions: array<vec4<u32>>;
 // The surface lookup's tables, one array of words (prt_format::surface): the brick table (four
 // words a slot: key xyz, axis << 29 | brick + 1), then from the offsets in prt_volume the cells
-// (16 words a brick), the surfel terms (8 words a surfel), per brick its first surfel and
-// first near group, and the sky terms (two halves a word, one per surfel).
+// (16 words a brick), the surfel terms (PRT_TERMS_WORDS a surfel), per brick its first surfel,
+// first near group and centre probe (PRT_BRICK_WORDS), and the sky terms (two halves a word,
+// one per surfel).
 @group(PRT_GROUP) @binding(11) var<storage, read> prt_surface: array<u32>;
 // Per near group, the mean radiance its surfels' near-field hits bring (xyz), as the runtime
 // last relit it.
@@ -332,8 +333,8 @@ fn prt_find_surfel(p: vec3<f32>, n: vec3<f32>) -> vec2<u32> {
     if within == PRT_NO_SURFEL {
         return vec2<u32>(PRT_NONE, 0u);
     }
-    let surfel = prt_surface[prt_volume.bricks_at + 2u * brick] + within;
-    if (prt_surface[prt_volume.terms_at + 8u * surfel] & PRT_TERMS_TRACED) == 0u {
+    let surfel = prt_surface[prt_volume.bricks_at + PRT_BRICK_WORDS * brick] + within;
+    if (prt_surface[prt_volume.terms_at + PRT_TERMS_WORDS * surfel] >> PRT_TERMS_CENTRE_SHIFT) == 0u {
         return vec2<u32>(PRT_NONE, 0u);
     }
     return vec2<u32>(surfel, brick);
@@ -347,6 +348,16 @@ fn prt_probe_ijk(index: u32) -> vec3<i32> {
 
 // prt_decode_normal (prt_format::surface::decode_normal) follows the snippet, from
 // oct_normal.wgsl, which the runtime's surfel stages share.
+
+// The unit normal of a surfel's terms: two octahedral snorm12
+// (prt_format::surfel_terms::SurfelTerms::normal).
+fn prt_terms_normal(word: u32) -> vec3<f32> {
+    let n = PRT_TERMS_NORMAL_BITS;
+    let levels = f32((1u << (n - 1u)) - 1u);
+    let x = f32(bitcast<i32>(word << (32u - n)) >> (32u - n));
+    let y = f32(bitcast<i32>(word << (32u - 2u * n)) >> (32u - n));
+    return prt_oct_unfold(max(vec2<f32>(x, y) / levels, vec2<f32>(-1.0)));
+}
 
 // The SH9 basis of docs/conventions.md section 2 at unit n.
 fn prt_basis(n: vec3<f32>) -> array<f32, 9> {
@@ -377,33 +388,51 @@ fn prt_sample_surface(world_pos: vec3<f32>, normal: vec3<f32>) -> PrtSurfaceSamp
         out.irradiance = prt_irradiance(s.sh, normal);
         return out;
     }
-    let t = prt_volume.terms_at + 8u * found.x;
+    let t = prt_volume.terms_at + PRT_TERMS_WORDS * found.x;
+    let b = prt_volume.bricks_at + PRT_BRICK_WORDS * found.y;
     let p = world_pos + normal * prt_volume.normal_bias;
-    var s = prt_sample_probes(world_pos, p, normal, true, prt_surface[t], prt_probe_ijk(prt_surface[t + 6u]));
+    // The surfel's centre probe: its code's offset from its brick key's (prt_format::surfel_terms).
+    let mask = prt_surface[t];
+    let code = max(mask >> PRT_TERMS_CENTRE_SHIFT, 1u) - 1u;
+    let offset = vec3<i32>(vec3<u32>(code % 3u, (code / 3u) % 3u, code / 9u)) - vec3<i32>(1);
+    let centre = prt_probe_ijk(prt_surface[b + 2u]) + offset;
+    var s = prt_sample_probes(world_pos, p, normal, true, mask, centre);
     if s.validity < 0.0 {
         s = prt_sample_sh(world_pos, normal);
     }
     out.sh = s.sh;
     out.validity = s.validity;
     out.irradiance = prt_irradiance(s.sh, normal);
-    var open: array<f32, 9>;
-    for (var k = 0u; k < 4u; k++) {
-        let pair = unpack2x16float(prt_surface[t + 1u + k]);
-        open[2u * k] = pair.x;
-        open[2u * k + 1u] = pair.y;
-    }
-    let last = prt_surface[t + 5u];
-    open[8] = unpack2x16float(last).x;
-    let share = f32((last >> 16u) & 0xffu) / prt_volume.near_rays;
-    let group = prt_surface[prt_volume.bricks_at + 2u * found.y + 1u] + (last >> 24u);
+    // The terms' words (prt_format::surfel_terms): normal and hits, group and open k = 1..3,
+    // open k = 4..8; open as codes from what a uniformly blocked hemisphere would see.
+    let normal_hits = prt_surface[t + 1u];
+    let group_open = prt_surface[t + 2u];
+    let open_l2 = prt_surface[t + 3u];
+    let hits = f32(normal_hits >> PRT_TERMS_HITS_AT);
+    let rays = prt_volume.near_rays;
+    let escape_share = (rays - hits) / rays;
+    let bound = min(escape_share, 1.0 - escape_share) + 1.0 / rays;
+    let share = hits / rays;
+    let group = prt_surface[b + 1u] + (group_open & 0xffu);
     let near = prt_near[group].xyz;
-    let y = prt_basis(prt_decode_normal(prt_surface[t + 7u]));
+    let y = prt_basis(prt_terms_normal(normal_hits));
+    var bits = PRT_OPEN_BITS;
+    var at = PRT_OPEN_AT;
+    var range = PRT_OPEN_RANGE;
     var lo = vec3<f32>(0.0);
     var all_l = vec3<f32>(0.0);
     for (var k = 0u; k < 9u; k++) {
         let a = select(select(0.25, 2.0 / 3.0, k < 4u), 1.0, k == 0u);
-        lo = lo + s.sh[k] * open[k];
-        all_l = all_l + s.sh[k] * (a * y[k]);
+        let transfer = a * y[k];
+        var open = escape_share * transfer;
+        if k > 0u {
+            let n = bits[k - 1u];
+            let word = select(open_l2, group_open, k < 4u);
+            let code = f32(bitcast<i32>(word << (32u - at[k - 1u] - n)) >> (32u - n));
+            open = open + code / f32((1u << (n - 1u)) - 1u) * (bound * range[k]);
+        }
+        lo = lo + s.sh[k] * open;
+        all_l = all_l + s.sh[k] * transfer;
     }
     let escaping = min(max(lo, vec3<f32>(0.0)), max(all_l, vec3<f32>(0.0)));
     let ratio = max((escaping + share * near) / all_l, vec3<f32>(0.0));

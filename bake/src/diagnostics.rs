@@ -217,7 +217,8 @@ mod tests {
     /// and the way out) above it; untraced surfels (back faces) do not count.
     #[test]
     fn surfels_that_see_no_probe_are_warned_about_past_a_tenth() {
-        use prt_format::surface::{SurfaceTerms, SurfelTerms, TERMS_TRACED};
+        use prt_format::surface::{SurfaceTerms, SurfelTerms};
+        use prt_format::surfel_terms::centre_code;
         let surfel = |mask: u32| SurfelTerms {
             mask,
             ..SurfelTerms::default()
@@ -225,8 +226,8 @@ mod tests {
         let terms = |blind: usize| SurfaceTerms {
             surfels: (0..20)
                 .map(|i| match i {
-                    _ if i < blind => surfel(TERMS_TRACED),
-                    _ if i < 18 => surfel(TERMS_TRACED | 1),
+                    _ if i < blind => surfel(centre_code([0; 3])),
+                    _ if i < 18 => surfel(centre_code([0; 3]) | 1),
                     _ => surfel(0),
                 })
                 .collect(),

@@ -73,8 +73,8 @@
 
 use glam::Vec3;
 use prt_format::sh::SH_COUNT;
-use prt_format::surface::{cosine_transfer, decode_normal, BLOCKED_WEIGHT, TERMS_TRACED};
-use prt_format::{f16_to_f32, f32_to_f16, tier, Asset};
+use prt_format::surface::{cosine_transfer, BLOCKED_WEIGHT};
+use prt_format::{f32_to_f16, tier, Asset};
 use rayon::prelude::*;
 
 use crate::accel::bvh::SceneBvh;
@@ -99,15 +99,16 @@ pub fn sky_terms(asset: &Asset, bvh: &SceneBvh) -> Vec<u32> {
         return Vec::new();
     }
     let transfer = grid_transfer(asset);
+    let centres = surfel_centres(asset);
     // Per surfel, its view of the sky, the baselines it may be pooled against, and the view's
     // variance.
     let traced: Vec<Traced> = (0..st.surfels.len())
         .into_par_iter()
         .map(|s| {
-            if st.surfels[s].mask & TERMS_TRACED == 0 {
+            if !st.surfels[s].is_traced() {
                 return Traced::default();
             }
-            let t = interpolated_transfer(asset, &transfer, s);
+            let t = interpolated_transfer(asset, &transfer, s, centres[s]);
             let (v, variance, cosine) = sky_view(asset, bvh, &t, s);
             let probes = probes_sky(asset, &t, s);
             let n = SKY_RAYS as f32;
@@ -122,9 +123,9 @@ pub fn sky_terms(asset: &Asset, bvh: &SceneBvh) -> Vec<u32> {
         .collect();
     let pooled = pooled(&st.group_surfels, &traced);
     let terms: Vec<f32> = (pooled.iter().zip(&st.surfels))
-        .map(|(&(d, variance), t)| match t.mask & TERMS_TRACED {
-            0 => 0.0,
-            _ => d.signum() * (d.abs() - SHRINK * variance.sqrt()).max(0.0),
+        .map(|(&(d, variance), t)| match t.is_traced() {
+            false => 0.0,
+            true => d.signum() * (d.abs() - SHRINK * variance.sqrt()).max(0.0),
         })
         .collect();
     terms
@@ -136,15 +137,33 @@ pub fn sky_terms(asset: &Asset, bvh: &SceneBvh) -> Vec<u32> {
         .collect()
 }
 
+/// Per surfel, its brick key's centre probe (`prt_format::surface::SurfaceTerms::key_centre`),
+/// which its terms' centre is stored from.
+fn surfel_centres(asset: &Asset) -> Vec<[i32; 3]> {
+    let st = &asset.surface;
+    let grid = &asset.header.grid;
+    let mut centres = Vec::with_capacity(asset.surfels.len());
+    for b in &asset.bricks {
+        let centre = st.key_centre(grid, st.key_of(b.centroid));
+        centres.extend(std::iter::repeat_n(centre, b.surfel_count as usize));
+    }
+    centres
+}
+
 /// The probes' sky transfer interpolated at surfel `s` with the lookup's weights: trilinear at
 /// the surfel moved [`NORMAL_BIAS`] spacings along its normal, times each probe's sample
 /// weight, a probe the surfel does not see times `BLOCKED_WEIGHT`; plain trilinear when it
 /// sees none of them (the lookup's fallback, less its depth moments). Zero where no probe has
 /// weight.
-fn interpolated_transfer(asset: &Asset, transfer: &[[f32; SH_COUNT]], s: usize) -> [f32; SH_COUNT] {
+fn interpolated_transfer(
+    asset: &Asset,
+    transfer: &[[f32; SH_COUNT]],
+    s: usize,
+    centre: [i32; 3],
+) -> [f32; SH_COUNT] {
     let terms = &asset.surface.surfels[s];
     let grid = &asset.header.grid;
-    let n = decode_normal(terms.normal);
+    let n = terms.normal();
     let at = Vec3::from(asset.surfels[s].position) + Vec3::from(n) * NORMAL_BIAS * grid.spacing;
     let mut seen = false;
     // Per corner: grid point, plain weight, masked weight.
@@ -154,7 +173,7 @@ fn interpolated_transfer(asset: &Asset, transfer: &[[f32; SH_COUNT]], s: usize) 
         if w <= 0.0 {
             continue;
         }
-        let visible = terms.sees(grid, i);
+        let visible = terms.sees(centre, grid, i);
         seen |= visible;
         corners.push((i, w, if visible { w } else { w * BLOCKED_WEIGHT }));
     }
@@ -214,8 +233,8 @@ fn sky_view(asset: &Asset, bvh: &SceneBvh, t: &[f32; SH_COUNT], s: usize) -> (f3
 /// the probes' sky `t` (in units of pi).
 fn probes_sky(asset: &Asset, t: &[f32; SH_COUNT], s: usize) -> f32 {
     let terms = &asset.surface.surfels[s];
-    let open = terms.open.map(f16_to_f32);
-    let all = cosine_transfer(decode_normal(terms.normal));
+    let open = terms.open(asset.surface.header.rays);
+    let all = cosine_transfer(terms.normal());
     let dot = |a: &[f32; SH_COUNT]| (0..SH_COUNT).map(|k| a[k] * t[k]).sum::<f32>();
     dot(&open).max(0.0).min(dot(&all).max(0.0))
 }

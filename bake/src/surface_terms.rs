@@ -30,11 +30,12 @@ use std::collections::BTreeMap;
 use glam::Vec3;
 use prt_format::sh::SH_COUNT;
 use prt_format::surface::{
-    centre_probe, encode_normal, mask_bit, slot_hash, SurfaceSlot, SurfaceTerms, SurfelTerms,
-    SurfelTermsHeader, CELL_WORDS, MAX_GROUPS, MAX_TABLE_BRICKS, NEAR_WEIGHT_BITS, NO_SURFEL,
-    SLOT_AXIS_SHIFT, TERMS_TRACED,
+    centre_probe, mask_bit, slot_hash, SurfaceSlot, SurfaceTerms, SurfelTerms, SurfelTermsHeader,
+    CELL_WORDS, MAX_GROUPS, MAX_TABLE_BRICKS, NEAR_WEIGHT_BITS, NO_SURFEL, PROBE_BITS,
+    SLOT_AXIS_SHIFT,
 };
-use prt_format::{f32_to_f16, Brick, Grid, Surfel, BRICK_AXIS_MASK, BRICK_BACKFACE};
+use prt_format::surfel_terms::{centre_code, CENTRE_SHIFT};
+use prt_format::{Brick, Grid, Surfel, BRICK_AXIS_MASK, BRICK_BACKFACE};
 use rayon::prelude::*;
 
 use crate::accel::bvh::SceneBvh;
@@ -146,6 +147,7 @@ struct Grouped {
 /// (further masks join the last). Fills `groups` and `group_surfels`.
 fn group_surfels(terms: &mut SurfaceTerms, input: &Inputs, surfels: &mut [Surfel]) -> Grouped {
     // Per brick: masks and group (within the brick) of its surfels, in their old order.
+    let view = &*terms;
     let per_brick: Vec<(Vec<u32>, Vec<u8>)> = input
         .bricks
         .par_iter()
@@ -154,17 +156,20 @@ fn group_surfels(terms: &mut SurfaceTerms, input: &Inputs, surfels: &mut [Surfel
             if b.flags & BRICK_BACKFACE != 0 {
                 return (vec![0; range.len()], vec![0; range.len()]);
             }
+            let key_centre = view.key_centre(input.grid, view.key_of(b.centroid));
             let masks: Vec<u32> = surfels[range]
                 .iter()
-                .map(|s| probe_mask(input, s))
+                .map(|s| probe_mask(input, s, key_centre))
                 .collect();
+            // Grouped by the bits alone, whatever probe they are about (as in format 15).
             let mut distinct: Vec<u32> = Vec::new();
             let group = masks
                 .iter()
-                .map(|m| match distinct.iter().position(|d| d == m) {
+                .map(|m| m & PROBE_BITS)
+                .map(|m| match distinct.iter().position(|&d| d == m) {
                     Some(g) => g as u8,
                     None if distinct.len() < 256 => {
-                        distinct.push(*m);
+                        distinct.push(m);
                         (distinct.len() - 1) as u8
                     }
                     None => 255,
@@ -355,17 +360,13 @@ fn near_field(
     mask: u32,
     group: (u8, u32),
 ) -> (SurfelTerms, Vec<NearHit>) {
-    let g = input.grid;
-    let [i, j, k] = centre_probe(g.origin, g.step, g.counts, s.position).map(|v| v as u32);
-    let mut t = SurfelTerms {
-        mask,
-        group: group.0,
-        centre: g.index(i, j, k) as u32,
-        normal: encode_normal(s.normal),
-        ..SurfelTerms::default()
-    };
-    if mask & TERMS_TRACED == 0 {
-        return (t, Vec::new());
+    if mask >> CENTRE_SHIFT == 0 {
+        let untraced = SurfelTerms {
+            mask,
+            group_open: u32::from(group.0),
+            ..SurfelTerms::default()
+        };
+        return (untraced, Vec::new());
     }
     let (o, n) = start(input, s);
     let reach = REACH * input.grid.spacing;
@@ -388,8 +389,8 @@ fn near_field(
             hits.push((o + d * hit.t, dominant_axis(facing)));
         }
     }
-    t.open = open.map(|v| f32_to_f16(v / RAYS as f32));
-    t.hits = hits.len() as u8;
+    let open = open.map(|v| v / RAYS as f32);
+    let t = SurfelTerms::new(mask, group.0, s.normal, hits.len() as u8, &open, RAYS);
     (t, hits)
 }
 
@@ -406,17 +407,23 @@ pub(crate) fn ray_origin(p: Vec3, n: Vec3, spacing: f32) -> Vec3 {
     p + n * (START * spacing).max(START_MAGNITUDE * p.abs().max_element())
 }
 
-/// A front-face surfel's [`SurfelTerms::mask`], with [`TERMS_TRACED`].
-fn probe_mask(input: &Inputs, s: &Surfel) -> u32 {
-    TERMS_TRACED | visible_probes(input, start(input, s).0, s.position)
+/// A front-face surfel's [`SurfelTerms::mask`]: the probes around its nearest probe that it
+/// sees, and that probe's code from `key_centre`, its brick key's
+/// (`SurfaceTerms::key_centre`; on a lattice too fine for the code to reach its nearest
+/// probe, the nearest probe the code names).
+fn probe_mask(input: &Inputs, s: &Surfel, key_centre: [i32; 3]) -> u32 {
+    let g = input.grid;
+    let nearest = centre_probe(g.origin, g.step, g.counts, s.position);
+    let offset: [i32; 3] = std::array::from_fn(|a| (nearest[a] - key_centre[a]).clamp(-1, 1));
+    let centre = std::array::from_fn(|a| key_centre[a] + offset[a]);
+    centre_code(offset) | visible_probes(input, start(input, s).0, centre)
 }
 
-/// Mask bits of the 27 probes around the surfel at `p` that a ray from `o` reaches (probes
-/// outside the grid, or at `o`, count as seen: no lookup reads the former). One packet: the
-/// rays run to the probes themselves (directions of their length, `tmax` 1).
-fn visible_probes(input: &Inputs, o: Vec3, p: [f32; 3]) -> u32 {
+/// Mask bits of the 27 probes around grid position `centre` that a ray from `o` reaches
+/// (probes outside the grid, or at `o`, count as seen: no lookup reads the former). One
+/// packet: the rays run to the probes themselves (directions of their length, `tmax` 1).
+fn visible_probes(input: &Inputs, o: Vec3, centre: [i32; 3]) -> u32 {
     let g = input.grid;
-    let centre = centre_probe(g.origin, g.step, g.counts, p);
     let mut mask = 0;
     let (mut bits, mut dirs) = (Vec::with_capacity(27), Vec::with_capacity(27));
     for bit in 0..27 {

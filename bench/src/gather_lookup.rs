@@ -76,7 +76,7 @@ impl<'a> GatherLookup<'a> {
             return self.surface.sample(position, normal);
         };
         let terms = &self.asset.surface;
-        let group = (terms.groups[brick] + u32::from(terms.surfels[surfel].group)) as usize;
+        let group = (terms.groups[brick] + terms.surfels[surfel].group()) as usize;
         let key = if self.per_surfel { surfel } else { group };
         if let Some(&(s, _)) = self.done.lock().expect("gather cache").get(&key) {
             return s;

@@ -311,8 +311,8 @@ fn report(b: &RenderBench, adapter: &str, rows: &[Row], sampling: [f64; 4]) -> R
     writeln!(
         md,
         "\nIndirect lookup, shading pass of the indirect view: {:.2} ms default (surface terms \
-         where a pixel has a surfel: a hash search of one or two 4-word slots, a cell word, 10 \
-         words of terms, 8 probes with 56 texel loads and one near value; depth moments \
+         where a pixel has a surfel: a hash search of one or two 4-word slots, a cell word, 4 \
+         words of terms and 3 of its brick, 8 probes with 56 texel loads and one near value; depth moments \
          elsewhere), {:.2} ms depth moments alone (8 \
          probes, 56 texel loads, 8 visibility words per pixel), {:.2} ms plain trilinear (7 \
          filtered fetches), {:.2} ms with an empty volume (no lookup work).",

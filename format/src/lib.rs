@@ -44,6 +44,7 @@ mod snorm;
 pub mod summary;
 pub mod surface;
 pub mod surfel;
+pub mod surfel_terms;
 pub mod tier;
 pub mod validate;
 

@@ -17,7 +17,9 @@
 //!   the others (`hits` of them) the relit radiance of the surfaces they hit. What those bring
 //!   is kept per **near group** (the surfels of a brick that see the same probes: one side of
 //!   whatever stands on the brick), as the groups its rays hit and their shares
-//!   ([`SurfaceTerms::near`], [`near_entry`]): a few bytes per surfel instead of a list each;
+//!   ([`SurfaceTerms::near`], [`near_entry`]): a few bytes per surfel instead of a list each.
+//!   The mask, `open`, `hits`, the group and the normal take 16 bytes a surfel since format 16
+//!   ([`crate::surfel_terms`]);
 //! - **how a point finds its surfel**: a hash table from brick key (the brick lattice cell and
 //!   the normal's dominant axis) to brick ([`SurfaceSlot`], [`slot_hash`]), then a table of 64
 //!   bytes per brick giving each of its 4x4x4 cells its nearest surfel ([`SurfaceTerms::cells`]).
@@ -39,17 +41,13 @@
 use bytemuck::{Pod, Zeroable};
 use serde::{Deserialize, Serialize};
 
-use crate::sh::SH_COUNT;
-
 /// Weight a probe keeps when the surfel cannot see it: small enough that the visible probes
 /// decide. (A surfel that sees none of the point's probes leaves their weights to the default
 /// lookup.)
 pub const BLOCKED_WEIGHT: f32 = 1e-4;
 
-/// [`SurfelTerms::mask`] bit set when the surfel's terms were traced (front-face surfels).
-pub const TERMS_TRACED: u32 = 1 << 31;
-
-/// Bits of [`SurfelTerms::mask`] that say which of the 27 probes the surfel sees.
+/// Bits of [`SurfelTerms::mask`] that say which of the 27 probes the surfel sees (its centre
+/// code sits above them, [`crate::surfel_terms::CENTRE_SHIFT`]).
 pub const PROBE_BITS: u32 = (1 << 27) - 1;
 
 /// [`SurfaceSlot::value`]: the axis sits above the brick index plus one (0: an empty slot).
@@ -97,41 +95,7 @@ impl SurfaceSlot {
     }
 }
 
-/// A surfel's terms (module docs). 32 bytes; as eight words in WGSL: `mask`, `open` two halves
-/// a word, then the last half with `hits` and `group` above it, `centre`, `normal`.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable, Serialize, Deserialize)]
-#[repr(C)]
-pub struct SurfelTerms {
-    /// Bit `(dx + 1) + 3 (dy + 1) + 9 (dz + 1)`: the surfel sees the probe at grid position
-    /// `centre + (dx, dy, dz)`; and [`TERMS_TRACED`].
-    pub mask: u32,
-    /// Mean over the near-field rays of `Y_k(w)` for those that escape, as IEEE halves.
-    pub open: [u16; SH_COUNT],
-    /// Near-field rays that hit a surface within reach (of [`SurfelTermsHeader::rays`]).
-    pub hits: u8,
-    /// The surfel's near group, counted from the first group of the first brick of its key's
-    /// run (its own brick unless the bake split it: format 13, `crate::surface_key_runs`;
-    /// [`SurfaceTerms::groups`]).
-    pub group: u8,
-    /// Grid index of the surfel's nearest probe, the centre of `mask` ([`centre_probe`]).
-    pub centre: u32,
-    /// The surfel's unit normal, octahedral, two snorm16 ([`encode_normal`]): `A(n)` is taken
-    /// at it (the point's own normal measured worse on curved shells: the tuning seeds' worst
-    /// image 17.0% against 15.1%).
-    pub normal: u32,
-}
-const _: () = assert!(std::mem::size_of::<SurfelTerms>() == 32);
-
-impl SurfelTerms {
-    /// Whether the surfel sees grid point `probe` of `grid`: its bit of [`SurfelTerms::mask`],
-    /// or true for a probe outside the 27 around its centre. The lookup weights a probe it does
-    /// not see by [`BLOCKED_WEIGHT`] (`prt_runtime::surface`, and the bake's sky terms, which
-    /// interpolate as it does).
-    pub fn sees(&self, grid: &crate::Grid, probe: usize) -> bool {
-        let ijk = |i: usize| grid.ijk(i).map(|v| v as i32);
-        mask_bit(ijk(self.centre as usize), ijk(probe)).is_none_or(|b| self.mask >> b & 1 != 0)
-    }
-}
+pub use crate::surfel_terms::{cosine_transfer, mask_bit, SurfelTerms};
 
 /// [`SurfaceTerms::near`] entry: bits 8.. the near group hit, bits 0..8 its weight in 255ths
 /// of the group's near hits.
@@ -200,7 +164,7 @@ impl SurfaceTerms {
     pub fn traced_and_blind(&self) -> (usize, usize) {
         self.surfels
             .iter()
-            .filter(|s| s.mask & TERMS_TRACED != 0)
+            .filter(|s| s.is_traced())
             .fold((0, 0), |(t, b), s| {
                 (t + 1, b + usize::from(s.mask & PROBE_BITS == 0))
             })
@@ -210,6 +174,17 @@ impl SurfaceTerms {
     pub fn key_of(&self, p: [f32; 3]) -> [i32; 3] {
         let h = &self.header;
         std::array::from_fn(|a| ((p[a] - h.anchor[a]) / h.brick_size).floor() as i32)
+    }
+
+    /// The probe the centres of the surfels under brick key `key` are stored from
+    /// ([`SurfelTerms::centre`]; format 16): the grid point of `grid` nearest the centre of
+    /// the key's lattice cell. The runtime computes it once per brick, on the CPU, and hands
+    /// it to the GPU with the brick (`prt_runtime::contract::SurfaceLayout`), so both read the
+    /// same.
+    pub fn key_centre(&self, grid: &crate::Grid, key: [i32; 3]) -> [i32; 3] {
+        let h = &self.header;
+        let p = std::array::from_fn(|a| h.anchor[a] + (key[a] as f32 + 0.5) * h.brick_size);
+        centre_probe(grid.origin, grid.step, grid.counts, p)
     }
 
     /// The brick of key `key` and dominant normal axis `axis` (0..6), if the table has it.
@@ -263,12 +238,7 @@ pub fn dominant_axis(n: [f32; 3]) -> u32 {
 /// A unit normal as two snorm16 of its octahedral projection (WGSL's `pack2x16snorm` layout:
 /// x in the low half).
 pub fn encode_normal(n: [f32; 3]) -> u32 {
-    let l1 = n[0].abs() + n[1].abs() + n[2].abs();
-    let (mut x, mut y) = (n[0] / l1, n[1] / l1);
-    if n[2] < 0.0 {
-        let sign = |v: f32| if v >= 0.0 { 1.0 } else { -1.0 };
-        (x, y) = ((1.0 - y.abs()) * sign(x), (1.0 - x.abs()) * sign(y));
-    }
+    let [x, y] = crate::surfel_terms::oct_fold(n);
     let q = |v: f32| u32::from((v.clamp(-1.0, 1.0) * 32767.0).round() as i16 as u16);
     q(x) | q(y) << 16
 }
@@ -276,13 +246,7 @@ pub fn encode_normal(n: [f32; 3]) -> u32 {
 /// The unit normal of [`encode_normal`]'s bits, computed as the WGSL snippet does.
 pub fn decode_normal(bits: u32) -> [f32; 3] {
     let f = |h: u32| (f32::from(h as u16 as i16) / 32767.0).max(-1.0);
-    let (x, y) = (f(bits & 0xffff), f(bits >> 16));
-    let z = 1.0 - x.abs() - y.abs();
-    let t = (-z).max(0.0);
-    let x = x + if x >= 0.0 { -t } else { t };
-    let y = y + if y >= 0.0 { -t } else { t };
-    let len = (x * x + y * y + z * z).sqrt();
-    [x / len, y / len, z / len]
+    crate::surfel_terms::oct_unfold(f(bits & 0xffff), f(bits >> 16))
 }
 
 /// Where the search for a brick key starts in the table (before masking by its length); the
@@ -306,37 +270,10 @@ pub fn centre_probe(origin: [f32; 3], step: [f32; 3], counts: [u32; 3], p: [f32;
     })
 }
 
-/// The bit of [`SurfelTerms::mask`] for probe `probe` around centre `centre`, or `None`
-/// when it is not among the 27.
-pub fn mask_bit(centre: [i32; 3], probe: [i32; 3]) -> Option<u32> {
-    let d: [i32; 3] = std::array::from_fn(|a| probe[a] - centre[a]);
-    d.iter()
-        .all(|v| (-1..=1).contains(v))
-        .then(|| ((d[0] + 1) + 3 * (d[1] + 1) + 9 * (d[2] + 1)) as u32)
-}
-
-/// `A(n)`: the mean of `Y_k(w)` over cosine-distributed directions `w` about unit `n`, the
-/// [`SurfelTerms::open`] of a surfel whose rays all escape (`A_l / pi * Y_k(n)` with the
-/// clamped cosine's `A_l` = pi, 2pi/3, pi/4).
-pub fn cosine_transfer(n: [f32; 3]) -> [f32; SH_COUNT] {
-    let y = crate::sh::basis(n);
-    const A: [f32; SH_COUNT] = [
-        1.0,
-        2.0 / 3.0,
-        2.0 / 3.0,
-        2.0 / 3.0,
-        0.25,
-        0.25,
-        0.25,
-        0.25,
-        0.25,
-    ];
-    std::array::from_fn(|k| A[k] * y[k])
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::sh::SH_COUNT;
 
     /// Every inserted key is found, absent keys are not, whatever the table's collisions.
     #[test]

@@ -11,7 +11,10 @@
 
 use bytemuck::{Pod, Zeroable};
 use prt_format::depth::{DEVIATION_STEP, MEAN_STEP, TOP};
-use prt_format::surface::{BLOCKED_WEIGHT, NO_SURFEL, SLOT_AXIS_SHIFT, TERMS_TRACED};
+use prt_format::surface::{BLOCKED_WEIGHT, NO_SURFEL, SLOT_AXIS_SHIFT};
+use prt_format::surfel_terms::{
+    CENTRE_SHIFT, HITS_AT, NORMAL_BITS, OPEN_AT, OPEN_BITS, OPEN_RANGE,
+};
 use prt_format::{
     LightKind, TransferPrecision, BRICK_BACKFACE, DEPTH_MAP_SIDE, DEPTH_WORDS, PROBE_VALID,
 };
@@ -260,8 +263,16 @@ pub const VOLUME_SURFACE: u32 = 2;
 
 /// Where each table of the surface lookup starts in the snippet's one array of words
 /// (`prt_surface`): the brick table's slots (4 words each), the cells (16 words a brick), the
-/// surfel terms (8 words each), per brick its first surfel and first near group, then the sky
-/// terms (two halves a word, `prt_format::surface::SurfaceTerms::sky`).
+/// surfel terms (4 words each, `prt_format::surfel_terms`), per brick its first surfel, first
+/// near group and the grid index of its key's centre probe (`SurfaceTerms::key_centre`,
+/// computed here once so that the GPU reads what the CPU twin computes), then the sky terms
+/// (two halves a word, `prt_format::surface::SurfaceTerms::sky`).
+/// Words of a surfel's terms in `prt_surface` (`prt_format::surfel_terms::SurfelTerms`).
+pub const TERMS_WORDS: u32 = (std::mem::size_of::<prt_format::surface::SurfelTerms>() / 4) as u32;
+
+/// Words per brick in `prt_surface`: first surfel, first near group, centre probe.
+pub const BRICK_WORDS: u32 = 3;
+
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct SurfaceLayout {
     pub cells_at: u32,
@@ -276,8 +287,8 @@ impl SurfaceLayout {
         let t = &asset.surface;
         let slots = 4 * t.slots.len() as u64;
         let cells = t.cells.len() as u64;
-        let terms = 8 * t.surfels.len() as u64;
-        let bricks = 2 * t.groups.len() as u64;
+        let terms = TERMS_WORDS as u64 * t.surfels.len() as u64;
+        let bricks = BRICK_WORDS as u64 * t.groups.len() as u64;
         SurfaceLayout {
             cells_at: slots as u32,
             terms_at: (slots + cells) as u32,
@@ -294,8 +305,10 @@ impl SurfaceLayout {
         let mut w: Vec<u32> = bytemuck::cast_slice(&t.slots).to_vec();
         w.extend_from_slice(&t.cells);
         w.extend_from_slice(bytemuck::cast_slice(&t.surfels));
+        let grid = &asset.header.grid;
         for (b, g) in asset.bricks.iter().zip(&t.groups) {
-            w.extend([b.first_surfel, *g]);
+            let [i, j, k] = t.key_centre(grid, t.key_of(b.centroid)).map(|v| v as u32);
+            w.extend([b.first_surfel, *g, grid.index(i, j, k) as u32]);
         }
         w.extend_from_slice(&t.sky);
         w
@@ -502,6 +515,11 @@ pub const MIN_DISTANCE: f32 = 1e-4;
 /// brighter than the point leaks visibly even at a weight of 1/1000.
 pub const CRUSH_THRESHOLD: f32 = 0.2;
 
+/// `array<ty, N>(items...)` as WGSL source text.
+fn wgsl_array(ty: &str, items: &[String]) -> String {
+    format!("array<{ty}, {}>({})", items.len(), items.join(", "))
+}
+
 /// `(name, value)` of the constants the engine-side sampling snippet shares with its CPU twin
 /// ([`crate::surface::SurfaceSampler`], [`crate::sample::VolumeSampler`]), as WGSL source text.
 pub fn snippet_constants() -> Vec<(&'static str, String)> {
@@ -522,8 +540,24 @@ pub fn snippet_constants() -> Vec<(&'static str, String)> {
         ("PRT_FLAG_SURFACE", format!("{VOLUME_SURFACE}u")),
         ("PRT_NONE", format!("{}u", u32::MAX)),
         ("PRT_SLOT_AXIS_SHIFT", format!("{SLOT_AXIS_SHIFT}u")),
-        ("PRT_TERMS_TRACED", format!("{TERMS_TRACED}u")),
+        ("PRT_TERMS_CENTRE_SHIFT", format!("{CENTRE_SHIFT}u")),
         ("PRT_NO_SURFEL", format!("{NO_SURFEL}u")),
+        ("PRT_TERMS_WORDS", format!("{TERMS_WORDS}u")),
+        ("PRT_BRICK_WORDS", format!("{BRICK_WORDS}u")),
+        ("PRT_TERMS_NORMAL_BITS", format!("{NORMAL_BITS}u")),
+        ("PRT_TERMS_HITS_AT", format!("{HITS_AT}u")),
+        (
+            "PRT_OPEN_BITS",
+            wgsl_array("u32", &OPEN_BITS.map(|v| format!("{v}u"))),
+        ),
+        (
+            "PRT_OPEN_AT",
+            wgsl_array("u32", &OPEN_AT.map(|v| format!("{v}u"))),
+        ),
+        (
+            "PRT_OPEN_RANGE",
+            wgsl_array("f32", &OPEN_RANGE.map(|v| format!("{v:?}"))),
+        ),
         ("PRT_BLOCKED_WEIGHT", format!("{BLOCKED_WEIGHT:e}")),
         ("PRT_NO_SLOT", format!("{}u", prt_format::NO_SLOT)),
     ]

@@ -34,10 +34,9 @@
 
 use prt_format::sh::{ShRgb, SH_COUNT};
 use prt_format::surface::{
-    cosine_transfer, decode_normal, dominant_axis, near_entry, sky_term, SurfaceTerms,
-    BLOCKED_WEIGHT, TERMS_TRACED,
+    cosine_transfer, dominant_axis, near_entry, sky_term, SurfaceTerms, BLOCKED_WEIGHT,
 };
-use prt_format::{f16_to_f32, Asset};
+use prt_format::Asset;
 use rayon::prelude::*;
 
 use std::f32::consts::FRAC_1_PI;
@@ -169,11 +168,13 @@ impl<'a> SurfaceSampler<'a> {
         let Some((brick, surfel)) = self.surfel_of(position, normal) else {
             return self.fallback.sample(position, normal);
         };
-        let terms = &self.asset.surface.surfels[surfel];
+        let st = &self.asset.surface;
+        let terms = &st.surfels[surfel];
         let grid = &self.asset.header.grid;
+        let centre = st.key_centre(grid, st.key_of(position));
         let seen = std::cell::Cell::new(false);
         let mut out = self.trilinear.sample_weighted(position, normal, |i, _| {
-            let visible = terms.sees(grid, i);
+            let visible = terms.sees(centre, grid, i);
             seen.set(seen.get() || visible);
             if visible {
                 1.0
@@ -184,10 +185,10 @@ impl<'a> SurfaceSampler<'a> {
         if !seen.get() {
             out = self.fallback.sample(position, normal);
         }
-        let open = terms.open.map(f16_to_f32);
-        let all = cosine_transfer(decode_normal(terms.normal));
-        let share = f32::from(terms.hits) / self.asset.surface.header.rays as f32;
-        let group = self.asset.surface.groups[brick] + u32::from(terms.group);
+        let open = terms.open(st.header.rays);
+        let all = cosine_transfer(terms.normal());
+        let share = terms.hits() as f32 / st.header.rays as f32;
+        let group = st.groups[brick] + terms.group();
         let near = self.near[group as usize].map(|l| share * l);
         scale_by_near_field(&mut out, &open, &all, near);
         if self.sky != [0.0; 3] {
@@ -217,7 +218,9 @@ impl<'a> SurfaceSampler<'a> {
         let brick = t.find(key, dominant_axis(normal))?;
         let within = t.surfel_in(brick, key, position)?;
         let surfel = (self.asset.bricks[brick as usize].first_surfel + within) as usize;
-        (t.surfels[surfel].mask & TERMS_TRACED != 0).then_some((brick as usize, surfel))
+        t.surfels[surfel]
+            .is_traced()
+            .then_some((brick as usize, surfel))
     }
 }
 

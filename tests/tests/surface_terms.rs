@@ -159,8 +159,8 @@ fn without_terms_the_lookup_is_the_volume_lookup() {
 }
 
 /// A slot naming a brick that does not exist, a near entry naming a group that does not, a
-/// cell naming a surfel its brick does not have, groups out of order, a centre probe beyond
-/// the grid, a search bound longer than the table needs, a surfel naming another brick's group,
+/// cell naming a surfel its brick does not have, groups out of order, a centre code past the
+/// 27 offsets, a search bound longer than the table needs, a surfel naming another brick's group,
 /// a sky term that is not a number, a sky term missing: each refused, naming the surface
 /// section.
 #[test]
@@ -182,12 +182,12 @@ fn damaged_terms_are_refused() {
         |a| a.surface.header.rays = 0,
         // Groups out of order: the GPU's per-brick loop would run to 2^32.
         |a| a.surface.groups.swap(1, 2),
-        // A centre probe beyond the grid.
-        |a| a.surface.surfels[0].centre = u32::MAX,
+        // A centre code past the 27 offsets (format 16).
+        |a| a.surface.surfels[0].mask |= 31 << 27,
         // A search bound larger than the slots need: every miss would walk the table.
         |a| a.surface.header.max_probe = a.surface.slots.len() as u32 - 1,
         // A surfel naming a group beyond its brick's.
-        |a| a.surface.surfels[0].group = 255,
+        |a| a.surface.surfels[0].group_open |= 0xff,
         // A sky term that is a NaN (format 14).
         |a| a.surface.sky[0] = 0x7e00,
     ];

@@ -4,11 +4,8 @@
 
 use crate::asset::Asset;
 use crate::error::FormatError;
-use crate::factors::f16_to_f32;
-use crate::surface::{
-    near_entry, slot_hash, SurfaceTerms, CELL_WORDS, NO_SURFEL, PROBE_BITS, SLOT_AXIS_SHIFT,
-    TERMS_TRACED,
-};
+use crate::surface::{near_entry, slot_hash, SurfaceTerms, CELL_WORDS, NO_SURFEL, SLOT_AXIS_SHIFT};
+use crate::surfel_terms::{CENTRE_SHIFT, MAX_CENTRE_CODE};
 
 fn bad(index: usize, what: String) -> Result<(), FormatError> {
     Err(FormatError::invalid("surface", index, what))
@@ -167,7 +164,6 @@ fn groups(asset: &Asset) -> Result<(), FormatError> {
 fn surfels(asset: &Asset, runs: &[(u32, u32)]) -> Result<(), FormatError> {
     let st = &asset.surface;
     let h = &st.header;
-    let probes = asset.probes.len() as u64;
     count(st.surfels.len(), asset.surfels.len())?;
     for (b, brick) in asset.bricks.iter().enumerate() {
         // A surfel's group counts from the first brick under its key's.
@@ -179,15 +175,21 @@ fn surfels(asset: &Asset, runs: &[(u32, u32)]) -> Result<(), FormatError> {
             .map_or(st.group_surfels.len(), |&g| g as usize);
         let range = brick.first_surfel as usize..(brick.first_surfel + brick.surfel_count) as usize;
         for (i, t) in st.surfels[range.clone()].iter().enumerate() {
-            let ok = t.open.iter().all(|&v| f16_to_f32(v).is_finite())
-                && u32::from(t.hits) <= h.rays
-                && usize::from(t.group) < next - first
-                && u64::from(t.centre) < probes
-                && t.mask & !(PROBE_BITS | TERMS_TRACED) == 0;
+            // Every code decodes to a finite value; the spare bits stay zero.
+            let ok = t.hits() <= h.rays
+                && (t.group() as usize) < next - first
+                && t.open_l2 >> 30 == 0
+                && t.mask >> CENTRE_SHIFT <= MAX_CENTRE_CODE;
             if !ok {
                 return bad(
                     range.start + i,
-                    format!("surfel terms {t:?} (probes: {probes})"),
+                    format!(
+                        "surfel terms {t:?}: hits {} of {} rays, group {} of {}",
+                        t.hits(),
+                        h.rays,
+                        t.group(),
+                        next - first
+                    ),
                 );
             }
         }
