@@ -18,10 +18,11 @@
 //!   as its offset, -1..=1 along each axis, from its brick key's centre probe
 //!   ([`crate::surface::SurfaceTerms::key_centre`], which the runtime hands the GPU once per
 //!   brick): a code of 1 + 27 values, 0 for a surfel whose terms were not traced (back
-//!   faces). A surfel lies in its key's cell, half a brick (a quarter spacing) from its
-//!   centre, so the offset is -1..=1 wherever the lattice step is over half the spacing; on a
-//!   grid so fine that it is not, the bake stores the nearest it can and traces the mask
-//!   about that probe.
+//!   faces). A surfel lies in its key's cell, at most half a brick from its centre, so the
+//!   offset is -1..=1 wherever a brick is under two lattice steps across: always with the
+//!   default cells (a brick is half a spacing, a step at least half a spacing wherever the
+//!   grid has three points along the axis). With cells so large that it is not (`--cell-size`),
+//!   the bake stores the nearest probe the code can name and traces the mask about it.
 //! - **`open`** is coded as its difference from what a surfel with `hits` of its rays blocked
 //!   uniformly would see: `e A(n)` with `e` the share of rays that escape and `A(n)` the
 //!   clamped-cosine transfer of the decoded normal ([`crate::surface::cosine_transfer`]). The
