@@ -318,17 +318,7 @@ mod tests {
     /// Normals survive the octahedral encoding to within 1e-4, on every octant and the axes.
     #[test]
     fn normals_round_trip() {
-        let mut n = vec![
-            [0.0, 0.0, 1.0],
-            [0.0, 0.0, -1.0],
-            [1.0, 0.0, 0.0],
-            [0.0, -1.0, 0.0],
-        ];
-        for i in 0..200 {
-            let (a, b) = (i as f32 * 0.7, i as f32 * 1.3);
-            n.push([a.sin() * b.cos(), a.sin() * b.sin(), a.cos()]);
-        }
-        for v in n {
+        for v in crate::surfel_terms::tests::normals() {
             let got = decode_normal(encode_normal(v));
             let len = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
             for a in 0..3 {

@@ -278,10 +278,11 @@ impl SurfelTerms {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    fn normals() -> Vec<[f32; 3]> {
+    /// Unit normals on every octant and the axes (`crate::surface`'s tests share them).
+    pub(crate) fn normals() -> Vec<[f32; 3]> {
         let mut n = vec![
             [0.0, 0.0, 1.0],
             [0.0, 0.0, -1.0],
