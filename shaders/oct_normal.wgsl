@@ -1,7 +1,8 @@
 
-// prt_format::surface::decode_normal: a unit normal from two octahedral snorm16 (the surface
-// terms' normals and packed surfels'). Part of the engine-side snippet, and of the runtime
-// stages that read packed surfels (`surfel.wgsl`).
+// prt_format::surface::decode_normal: a unit normal from two octahedral snorm16 (packed
+// surfels'; the surface terms' two snorm12 go through prt_oct_unfold, from
+// sample_irradiance.wgsl). Part of the engine-side snippet, and of the runtime stages that read
+// packed surfels (`surfel.wgsl`).
 fn prt_decode_normal(bits: u32) -> vec3<f32> {
     return prt_oct_unfold(unpack2x16snorm(bits));
 }

@@ -346,7 +346,7 @@ fn prt_probe_ijk(index: u32) -> vec3<i32> {
     return vec3<i32>(vec3<u32>(index % c.x, (index / c.x) % c.y, index / (c.x * c.y)));
 }
 
-// prt_decode_normal (prt_format::surface::decode_normal) follows the snippet, from
+// prt_oct_unfold (prt_format::surfel_terms::oct_unfold) follows the snippet, from
 // oct_normal.wgsl, which the runtime's surfel stages share.
 
 // The unit normal of a surfel's terms: two octahedral snorm12
@@ -393,8 +393,8 @@ fn prt_sample_surface(world_pos: vec3<f32>, normal: vec3<f32>) -> PrtSurfaceSamp
     let p = world_pos + normal * prt_volume.normal_bias;
     // The surfel's centre probe: its code's offset from its brick key's (prt_format::surfel_terms).
     let mask = prt_surface[t];
-    let code = max(mask >> PRT_TERMS_CENTRE_SHIFT, 1u) - 1u;
-    let offset = vec3<i32>(vec3<u32>(code % 3u, (code / 3u) % 3u, code / 9u)) - vec3<i32>(1);
+    let centre_code = max(mask >> PRT_TERMS_CENTRE_SHIFT, 1u) - 1u;
+    let offset = vec3<i32>(vec3<u32>(centre_code % 3u, (centre_code / 3u) % 3u, centre_code / 9u)) - vec3<i32>(1);
     let centre = prt_probe_ijk(prt_surface[b + 2u]) + offset;
     var s = prt_sample_probes(world_pos, p, normal, true, mask, centre);
     if s.validity < 0.0 {

@@ -123,9 +123,12 @@ pub fn sky_terms(asset: &Asset, bvh: &SceneBvh) -> Vec<u32> {
         .collect();
     let pooled = pooled(&st.group_surfels, &traced);
     let terms: Vec<f32> = (pooled.iter().zip(&st.surfels))
-        .map(|(&(d, variance), t)| match t.is_traced() {
-            false => 0.0,
-            true => d.signum() * (d.abs() - SHRINK * variance.sqrt()).max(0.0),
+        .map(|(&(d, variance), t)| {
+            if t.is_traced() {
+                d.signum() * (d.abs() - SHRINK * variance.sqrt()).max(0.0)
+            } else {
+                0.0
+            }
         })
         .collect();
     terms
@@ -142,12 +145,12 @@ pub fn sky_terms(asset: &Asset, bvh: &SceneBvh) -> Vec<u32> {
 fn surfel_centres(asset: &Asset) -> Vec<[i32; 3]> {
     let st = &asset.surface;
     let grid = &asset.header.grid;
-    let mut centres = Vec::with_capacity(asset.surfels.len());
-    for b in &asset.bricks {
-        let centre = st.key_centre(grid, st.key_of(b.centroid));
-        centres.extend(std::iter::repeat_n(centre, b.surfel_count as usize));
-    }
-    centres
+    let bricks: Vec<[i32; 3]> = (asset.bricks.iter())
+        .map(|b| st.brick_centre(grid, b))
+        .collect();
+    (asset.surfels.iter())
+        .map(|s| bricks[s.brick as usize])
+        .collect()
 }
 
 /// The probes' sky transfer interpolated at surfel `s` with the lookup's weights: trilinear at

@@ -156,7 +156,7 @@ fn group_surfels(terms: &mut SurfaceTerms, input: &Inputs, surfels: &mut [Surfel
             if b.flags & BRICK_BACKFACE != 0 {
                 return (vec![0; range.len()], vec![0; range.len()]);
             }
-            let key_centre = view.key_centre(input.grid, view.key_of(b.centroid));
+            let key_centre = view.brick_centre(input.grid, b);
             let masks: Vec<u32> = surfels[range]
                 .iter()
                 .map(|s| probe_mask(input, s, key_centre))
@@ -409,8 +409,8 @@ pub(crate) fn ray_origin(p: Vec3, n: Vec3, spacing: f32) -> Vec3 {
 
 /// A front-face surfel's [`SurfelTerms::mask`]: the probes around its nearest probe that it
 /// sees, and that probe's code from `key_centre`, its brick key's
-/// (`SurfaceTerms::key_centre`; on a lattice too fine for the code to reach its nearest
-/// probe, the nearest probe the code names).
+/// (`SurfaceTerms::brick_centre`; where the probe grid is too fine for its bricks for the code
+/// to reach the surfel's nearest probe, the nearest probe the code names).
 fn probe_mask(input: &Inputs, s: &Surfel, key_centre: [i32; 3]) -> u32 {
     let g = input.grid;
     let nearest = centre_probe(g.origin, g.step, g.counts, s.position);

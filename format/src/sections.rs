@@ -372,7 +372,7 @@ mod tests {
                 }],
                 cells: vec![0x0302_0100; 16],
                 surfels: vec![crate::surface::SurfelTerms {
-                    mask: 0x8000_0001,
+                    mask: crate::surfel_terms::centre_code([0; 3]) | 1,
                     ..Default::default()
                 }],
                 groups: vec![0],

@@ -187,6 +187,13 @@ impl SurfaceTerms {
         centre_probe(grid.origin, grid.step, grid.counts, p)
     }
 
+    /// [`Self::key_centre`] of brick `brick`'s key (of its centroid: the key the table files
+    /// it under, which validation checks): the bake, the CPU lookup and the runtime's upload
+    /// for the GPU all take it from here.
+    pub fn brick_centre(&self, grid: &crate::Grid, brick: &crate::Brick) -> [i32; 3] {
+        self.key_centre(grid, self.key_of(brick.centroid))
+    }
+
     /// The brick of key `key` and dominant normal axis `axis` (0..6), if the table has it.
     pub fn find(&self, key: [i32; 3], axis: u32) -> Option<u32> {
         if self.slots.is_empty() {

@@ -18,7 +18,7 @@
 //!   as its offset, -1..=1 along each axis, from its brick key's centre probe
 //!   ([`crate::surface::SurfaceTerms::key_centre`], which the runtime hands the GPU once per
 //!   brick): a code of 1 + 27 values, 0 for a surfel whose terms were not traced (back
-//!   faces). A surfel lies in its key's cell, at most half a brick from its centre, so the
+//!   faces). A surfel lies about its key's cell, some half a brick from its centre, so the
 //!   offset is -1..=1 wherever a brick is under two lattice steps across: always with the
 //!   default cells (a brick is half a spacing, a step at least half a spacing wherever the
 //!   grid has three points along the axis). With cells so large that it is not (`--cell-size`),
@@ -32,9 +32,9 @@
 //!   codes are steps of that bound. `open_0` is `e Y_00` exactly.
 //!
 //! What the precision costs: with the Cornell room, fixtures/two_rooms and thick walls baked
-//! with the codes' rounding simulated (`prt-bench surface`, default spacing and half), 8-bit
-//! codes for band 1 and 6-bit for band 2 moved the open-point mean by at most 0.03 points
-//! (2.81 -> 2.80%, 4.03 -> 4.01%, 2.62 -> 2.63%), as did 12-bit codes of the plain values;
+//! with the codes' rounding simulated (`prt-bench surface`, default spacing), 8-bit codes for
+//! band 1 and 6-bit for band 2 moved the open-point mean by at most 0.02 points (2.81 ->
+//! 2.80%, 4.03 -> 4.02%, 2.62 -> 2.63%), as did 12-bit codes of the plain values;
 //! 8 / 7 bits of the plain values (not of the difference) cost 0.1 point on Cornell. A
 //! normal of two snorm10 moved nothing; two snorm12 are kept. docs/results/packing.md, format
 //! 16, has the figures of the level family.
@@ -73,7 +73,8 @@ pub const OPEN_BITS: [u32; 8] = [8, 8, 8, 6, 6, 6, 6, 6];
 pub const OPEN_AT: [u32; 8] = [8, 16, 24, 0, 6, 12, 18, 24];
 
 /// Range (largest less smallest) of `Y_k` over the sphere, k = 0..8 (docs/conventions.md
-/// section 2): the bound of an `open` term's difference, per share of rays.
+/// section 2): the bound of an `open` term's difference, per share of rays (k = 0 has no
+/// code: `open_0` follows from the hits).
 pub const OPEN_RANGE: [f32; SH_COUNT] = [
     0.0,
     2.0 * Y1,

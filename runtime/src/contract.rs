@@ -261,18 +261,18 @@ pub const VOLUME_DEPTH_MOMENTS: u32 = 1;
 /// surface terms).
 pub const VOLUME_SURFACE: u32 = 2;
 
-/// Where each table of the surface lookup starts in the snippet's one array of words
-/// (`prt_surface`): the brick table's slots (4 words each), the cells (16 words a brick), the
-/// surfel terms (4 words each, `prt_format::surfel_terms`), per brick its first surfel, first
-/// near group and the grid index of its key's centre probe (`SurfaceTerms::key_centre`,
-/// computed here once so that the GPU reads what the CPU twin computes), then the sky terms
-/// (two halves a word, `prt_format::surface::SurfaceTerms::sky`).
 /// Words of a surfel's terms in `prt_surface` (`prt_format::surfel_terms::SurfelTerms`).
 pub const TERMS_WORDS: u32 = (std::mem::size_of::<prt_format::surface::SurfelTerms>() / 4) as u32;
 
 /// Words per brick in `prt_surface`: first surfel, first near group, centre probe.
 pub const BRICK_WORDS: u32 = 3;
 
+/// Where each table of the surface lookup starts in the snippet's one array of words
+/// (`prt_surface`): the brick table's slots (4 words each), the cells (16 words a brick), the
+/// surfel terms (4 words each, `prt_format::surfel_terms`), per brick its first surfel, first
+/// near group and the grid index of its key's centre probe (`SurfaceTerms::brick_centre`,
+/// computed here once so that the GPU reads what the CPU twin computes), then the sky terms
+/// (two halves a word, `prt_format::surface::SurfaceTerms::sky`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct SurfaceLayout {
     pub cells_at: u32,
@@ -307,7 +307,7 @@ impl SurfaceLayout {
         w.extend_from_slice(bytemuck::cast_slice(&t.surfels));
         let grid = &asset.header.grid;
         for (b, g) in asset.bricks.iter().zip(&t.groups) {
-            let [i, j, k] = t.key_centre(grid, t.key_of(b.centroid)).map(|v| v as u32);
+            let [i, j, k] = t.brick_centre(grid, b).map(|v| v as u32);
             w.extend([b.first_surfel, *g, grid.index(i, j, k) as u32]);
         }
         w.extend_from_slice(&t.sky);

@@ -171,7 +171,7 @@ impl<'a> SurfaceSampler<'a> {
         let st = &self.asset.surface;
         let terms = &st.surfels[surfel];
         let grid = &self.asset.header.grid;
-        let centre = st.key_centre(grid, st.key_of(position));
+        let centre = st.brick_centre(grid, &self.asset.bricks[brick]);
         let seen = std::cell::Cell::new(false);
         let mut out = self.trilinear.sample_weighted(position, normal, |i, _| {
             let visible = terms.sees(centre, grid, i);

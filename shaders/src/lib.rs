@@ -27,7 +27,7 @@ pub const LIGHT_SAMPLE: &str = include_str!("../light_sample.wgsl");
 pub const MARK_PROBES: &str = include_str!("../mark_probes.wgsl");
 /// `near_radiance.wgsl`: Runtime stage 6: what each near group's near-field rays bring.
 pub const NEAR_RADIANCE: &str = include_str!("../near_radiance.wgsl");
-/// `oct_normal.wgsl`: `prt_decode_normal`, octahedral normals, for the snippet and the surfel stages.
+/// `oct_normal.wgsl`: `prt_decode_normal` and `prt_oct_unfold`, octahedral normals, for the snippet and the surfel stages.
 pub const OCT_NORMAL: &str = include_str!("../oct_normal.wgsl");
 /// `relight_surfels.wgsl`: Runtime stage 2: direct irradiance at surfels with cached shadow rays.
 pub const RELIGHT_SURFELS: &str = include_str!("../relight_surfels.wgsl");

@@ -160,7 +160,7 @@ fn without_terms_the_lookup_is_the_volume_lookup() {
 
 /// A slot naming a brick that does not exist, a near entry naming a group that does not, a
 /// cell naming a surfel its brick does not have, groups out of order, a centre code past the
-/// 27 offsets, a search bound longer than the table needs, a surfel naming another brick's group,
+/// 27 offsets, more hits than rays, a spare bit set, a brick moved off its slot's key, a search bound longer than the table needs, a surfel naming another brick's group,
 /// a sky term that is not a number, a sky term missing: each refused, naming the surface
 /// section.
 #[test]
@@ -172,7 +172,7 @@ fn damaged_terms_are_refused() {
     };
     let asset = bake_ok(&fixture("two_rooms.gltf"), &settings);
     decode(&encode(&asset).unwrap()).expect("the undamaged asset loads");
-    let damages: [fn(&mut Asset); 9] = [
+    let damages: [fn(&mut Asset); 12] = [
         |a| {
             let s = a.surface.slots.iter_mut().find(|s| s.value != 0).unwrap();
             s.value = (s.value & !0x1fff_ffff) | (a.bricks.len() as u32 + 1);
@@ -188,6 +188,16 @@ fn damaged_terms_are_refused() {
         |a| a.surface.header.max_probe = a.surface.slots.len() as u32 - 1,
         // A surfel naming a group beyond its brick's.
         |a| a.surface.surfels[0].group_open |= 0xff,
+        // More near-field hits than rays (format 16: the hits sit in the normal's word).
+        |a| a.surface.surfels[0].normal_hits |= 0xff << 24,
+        // A spare bit of the band-2 codes set.
+        |a| a.surface.surfels[0].open_l2 |= 1 << 31,
+        // A brick whose centroid moved to another key than its slot's (the centre probe the
+        // lookup reads is its key's).
+        |a| {
+            let b = a.surface.slots.iter().find_map(|s| s.brick()).unwrap() as usize;
+            a.bricks[b].centroid[0] += a.surface.header.brick_size;
+        },
         // A sky term that is a NaN (format 14).
         |a| a.surface.sky[0] = 0x7e00,
     ];

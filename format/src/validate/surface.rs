@@ -26,10 +26,10 @@ fn count(found: usize, expected: usize) -> Result<(), FormatError> {
 /// None at all, or: a header of finite positive sizes; a power-of-two table naming bricks that
 /// exist, whose longest search is what its slots need; a cell table per brick naming its own
 /// surfels or those of the parts after it under its key (`surface_key_runs`, format 13);
-/// per brick, near groups that tile its surfels in order; per surfel, terms whose mask, centre
-/// probe, hit count and group (counted from its key's first brick) are in range and whose
-/// halves are finite; near fields in range naming groups that exist; a sky term per surfel in
-/// [-2, 2].
+/// per brick, near groups that tile its surfels in order; per surfel, terms whose centre code,
+/// hit count and group (counted from its key's first brick) are in range and whose spare bits
+/// are zero (format 16: every code decodes to a finite value); near fields in range naming
+/// groups that exist; a sky term per surfel in [-2, 2]. A slot's key is its brick's.
 pub(super) fn surface_terms(asset: &Asset) -> Result<(), FormatError> {
     let st = &asset.surface;
     let empty = st.slots.is_empty()
@@ -49,6 +49,13 @@ pub(super) fn surface_terms(asset: &Asset) -> Result<(), FormatError> {
     // key's run, as the cells and groups are checked below.
     let named = (st.slots.iter().enumerate()).filter_map(|(i, s)| Some((i, s.brick()? as usize)));
     for (i, brick) in named {
+        // The lookup's key is the slot's; the centre probe it reads is the brick's key's.
+        if st.key_of(asset.bricks[brick].centroid) != st.slots[i].key {
+            return bad(
+                i,
+                format!("slot key {:?} is not its brick {brick}'s", st.slots[i].key),
+            );
+        }
         if runs[brick].0 as usize != brick {
             return bad(
                 i,
@@ -184,11 +191,13 @@ fn surfels(asset: &Asset, runs: &[(u32, u32)]) -> Result<(), FormatError> {
                 return bad(
                     range.start + i,
                     format!(
-                        "surfel terms {t:?}: hits {} of {} rays, group {} of {}",
+                        "surfel terms {t:?}: centre code {} (at most {MAX_CENTRE_CODE}), hits {} of {} rays, group {} of {}, spare bits {:#x}",
+                        t.mask >> CENTRE_SHIFT,
                         t.hits(),
                         h.rays,
                         t.group(),
-                        next - first
+                        next - first,
+                        t.open_l2 >> 30
                     ),
                 );
             }
