@@ -349,14 +349,18 @@ fn prt_probe_ijk(index: u32) -> vec3<i32> {
 // prt_oct_unfold (prt_format::surfel_terms::oct_unfold) follows the snippet, from
 // oct_normal.wgsl, which the runtime's surfel stages share.
 
+// The signed field of `bits` bits at `at` of `word` in units of its levels
+// (prt_format::surfel_terms::unit_field).
+fn prt_unit_field(word: u32, at: u32, bits: u32) -> f32 {
+    return f32(bitcast<i32>(word << (32u - at - bits)) >> (32u - bits)) / f32((1u << (bits - 1u)) - 1u);
+}
+
 // The unit normal of a surfel's terms: two octahedral snorm12
 // (prt_format::surfel_terms::SurfelTerms::normal).
 fn prt_terms_normal(word: u32) -> vec3<f32> {
     let n = PRT_TERMS_NORMAL_BITS;
-    let levels = f32((1u << (n - 1u)) - 1u);
-    let x = f32(bitcast<i32>(word << (32u - n)) >> (32u - n));
-    let y = f32(bitcast<i32>(word << (32u - 2u * n)) >> (32u - n));
-    return prt_oct_unfold(max(vec2<f32>(x, y) / levels, vec2<f32>(-1.0)));
+    let e = vec2<f32>(prt_unit_field(word, 0u, n), prt_unit_field(word, n, n));
+    return prt_oct_unfold(max(e, vec2<f32>(-1.0)));
 }
 
 // The SH9 basis of docs/conventions.md section 2 at unit n.
@@ -426,10 +430,8 @@ fn prt_sample_surface(world_pos: vec3<f32>, normal: vec3<f32>) -> PrtSurfaceSamp
         let transfer = a * y[k];
         var open = escape_share * transfer;
         if k > 0u {
-            let n = bits[k - 1u];
             let word = select(open_l2, group_open, k < 4u);
-            let code = f32(bitcast<i32>(word << (32u - at[k - 1u] - n)) >> (32u - n));
-            open = open + code / f32((1u << (n - 1u)) - 1u) * (bound * range[k]);
+            open = open + prt_unit_field(word, at[k - 1u], bits[k - 1u]) * (bound * range[k]);
         }
         lo = lo + s.sh[k] * open;
         all_l = all_l + s.sh[k] * transfer;

@@ -99,7 +99,11 @@ pub fn sky_terms(asset: &Asset, bvh: &SceneBvh) -> Vec<u32> {
         return Vec::new();
     }
     let transfer = grid_transfer(asset);
-    let centres = surfel_centres(asset);
+    // Per brick, its key's centre probe, which its surfels' centres are stored from.
+    let grid = &asset.header.grid;
+    let centres: Vec<[i32; 3]> = (asset.bricks.iter())
+        .map(|b| st.brick_centre(grid, b))
+        .collect();
     // Per surfel, its view of the sky, the baselines it may be pooled against, and the view's
     // variance.
     let traced: Vec<Traced> = (0..st.surfels.len())
@@ -108,7 +112,8 @@ pub fn sky_terms(asset: &Asset, bvh: &SceneBvh) -> Vec<u32> {
             if !st.surfels[s].is_traced() {
                 return Traced::default();
             }
-            let t = interpolated_transfer(asset, &transfer, s, centres[s]);
+            let key_centre = centres[asset.surfels[s].brick as usize];
+            let t = interpolated_transfer(asset, &transfer, s, key_centre);
             let (v, variance, cosine) = sky_view(asset, bvh, &t, s);
             let probes = probes_sky(asset, &t, s);
             let n = SKY_RAYS as f32;
@@ -140,19 +145,6 @@ pub fn sky_terms(asset: &Asset, bvh: &SceneBvh) -> Vec<u32> {
         .collect()
 }
 
-/// Per surfel, its brick key's centre probe (`prt_format::surface::SurfaceTerms::key_centre`),
-/// which its terms' centre is stored from.
-fn surfel_centres(asset: &Asset) -> Vec<[i32; 3]> {
-    let st = &asset.surface;
-    let grid = &asset.header.grid;
-    let bricks: Vec<[i32; 3]> = (asset.bricks.iter())
-        .map(|b| st.brick_centre(grid, b))
-        .collect();
-    (asset.surfels.iter())
-        .map(|s| bricks[s.brick as usize])
-        .collect()
-}
-
 /// The probes' sky transfer interpolated at surfel `s` with the lookup's weights: trilinear at
 /// the surfel moved [`NORMAL_BIAS`] spacings along its normal, times each probe's sample
 /// weight, a probe the surfel does not see times `BLOCKED_WEIGHT`; plain trilinear when it
@@ -162,7 +154,7 @@ fn interpolated_transfer(
     asset: &Asset,
     transfer: &[[f32; SH_COUNT]],
     s: usize,
-    centre: [i32; 3],
+    key_centre: [i32; 3],
 ) -> [f32; SH_COUNT] {
     let terms = &asset.surface.surfels[s];
     let grid = &asset.header.grid;
@@ -176,7 +168,7 @@ fn interpolated_transfer(
         if w <= 0.0 {
             continue;
         }
-        let visible = terms.sees(centre, grid, i);
+        let visible = terms.sees(key_centre, grid, i);
         seen |= visible;
         corners.push((i, w, if visible { w } else { w * BLOCKED_WEIGHT }));
     }
@@ -236,8 +228,7 @@ fn sky_view(asset: &Asset, bvh: &SceneBvh, t: &[f32; SH_COUNT], s: usize) -> (f3
 /// the probes' sky `t` (in units of pi).
 fn probes_sky(asset: &Asset, t: &[f32; SH_COUNT], s: usize) -> f32 {
     let terms = &asset.surface.surfels[s];
-    let open = terms.open(asset.surface.header.rays);
-    let all = cosine_transfer(terms.normal());
+    let (open, all) = terms.open_and_cosine(asset.surface.header.rays);
     let dot = |a: &[f32; SH_COUNT]| (0..SH_COUNT).map(|k| a[k] * t[k]).sum::<f32>();
     dot(&open).max(0.0).min(dot(&all).max(0.0))
 }

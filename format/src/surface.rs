@@ -10,7 +10,7 @@
 //!   the surfel's nearest probe, set when a ray from the surfel reaches it. The lookup weights
 //!   a probe the surfel cannot see by [`BLOCKED_WEIGHT`] only (exact visibility from the bake,
 //!   not the depth moments' estimate);
-//! - **its near field** ([`SurfelTerms::open`], [`SurfelTerms::hits`]): of
+//! - **its near field** ([`SurfelTerms::open_and_cosine`], [`SurfelTerms::hits`]): of
 //!   [`SurfelTermsHeader::rays`] cosine-distributed rays over its hemisphere, those that escape
 //!   within [`SurfelTermsHeader::reach`] spacings carry the probes' radiance (`open` is the
 //!   mean of their SH9 basis values: a precomputed radiance transfer vector, Sloan et al. 2002),

@@ -117,7 +117,7 @@ pub fn mask_bit(centre: [i32; 3], probe: [i32; 3]) -> Option<u32> {
 }
 
 /// `A(n)`: the mean of `Y_k(w)` over cosine-distributed directions `w` about unit `n`, the
-/// [`SurfelTerms::open`] of a surfel whose rays all escape (`A_l / pi * Y_k(n)` with the
+/// `open` ([`SurfelTerms::open_and_cosine`]) of a surfel whose rays all escape (`A_l / pi * Y_k(n)` with the
 /// clamped cosine's `A_l` = pi, 2pi/3, pi/4).
 pub fn cosine_transfer(n: [f32; 3]) -> [f32; SH_COUNT] {
     let y = crate::sh::basis(n);
@@ -140,9 +140,10 @@ fn levels(bits: u32) -> f32 {
     ((1u32 << (bits - 1)) - 1) as f32
 }
 
-/// The signed field of `bits` bits at `at` of `word`.
-fn signed_field(word: u32, at: u32, bits: u32) -> i32 {
-    ((word << (32 - at - bits)) as i32) >> (32 - bits)
+/// The signed field of `bits` bits at `at` of `word` in units of its levels, [-1, 1] but for
+/// the most negative code (the inverse of [`field`]; `prt_unit_field` in WGSL).
+fn unit_field(word: u32, at: u32, bits: u32) -> f32 {
+    (((word << (32 - at - bits)) as i32) >> (32 - bits)) as f32 / levels(bits)
 }
 
 /// `v` in [-1, 1] as a signed `bits`-bit field at `at`.
@@ -194,10 +195,10 @@ impl SurfelTerms {
             group_open: u32::from(group),
             open_l2: 0,
         };
-        let (base, scale) = t.open_base(rays);
+        let (escaping, bound, a) = t.open_frame(rays);
         for k in 1..SH_COUNT {
             let code = field(
-                (open[k] - base[k]) / scale[k],
+                (open[k] - escaping * a[k]) / (bound * OPEN_RANGE[k]),
                 OPEN_AT[k - 1],
                 OPEN_BITS[k - 1],
             );
@@ -243,38 +244,35 @@ impl SurfelTerms {
 
     /// The unit normal (as decoded: `A(n)` is taken at it).
     pub fn normal(&self) -> [f32; 3] {
-        let snorm = |at| {
-            let v = signed_field(self.normal_hits, at, NORMAL_BITS) as f32;
-            (v / levels(NORMAL_BITS)).max(-1.0)
-        };
+        let snorm = |at| unit_field(self.normal_hits, at, NORMAL_BITS).max(-1.0);
         oct_unfold(snorm(0), snorm(NORMAL_BITS))
     }
 
-    /// `open` of a surfel with `rays` near-field rays (module docs): what the codes are taken
-    /// from, and the bound a code of 1 stands for, per term.
-    fn open_base(&self, rays: u32) -> ([f32; SH_COUNT], [f32; SH_COUNT]) {
+    /// What `open`'s codes of a surfel with `rays` near-field rays are taken from (module
+    /// docs): the escaping share `e`, the bound per unit of range `min(e, 1 - e) + 1 / rays`,
+    /// and `A(n)` at the decoded normal.
+    fn open_frame(&self, rays: u32) -> (f32, f32, [f32; SH_COUNT]) {
         let n = rays.max(1) as f32;
         let escaping = (n - self.hits() as f32) / n;
         let bound = escaping.min(1.0 - escaping) + 1.0 / n;
-        let a = cosine_transfer(self.normal());
-        let base = std::array::from_fn(|k| escaping * a[k]);
-        (base, OPEN_RANGE.map(|r| bound * r))
+        (escaping, bound, cosine_transfer(self.normal()))
     }
 
-    /// The mean over the near-field rays of `Y_k` for those that escape, as stored, for a
-    /// surfel of `rays` rays.
-    pub fn open(&self, rays: u32) -> [f32; SH_COUNT] {
-        let (base, scale) = self.open_base(rays);
-        std::array::from_fn(|k| match k {
-            0 => base[0],
-            1..=3 => base[k] + self.code(self.group_open, k) * scale[k],
-            _ => base[k] + self.code(self.open_l2, k) * scale[k],
-        })
-    }
-
-    /// Term k's code in units of its bound, in [-1, 1].
-    fn code(&self, word: u32, k: usize) -> f32 {
-        signed_field(word, OPEN_AT[k - 1], OPEN_BITS[k - 1]) as f32 / levels(OPEN_BITS[k - 1])
+    /// `open` (the mean over the near-field rays of `Y_k` for those that escape) as stored, for
+    /// a surfel of `rays` rays, and `A(n)` at its normal: the lookup reads both, and the codes
+    /// are taken from the latter.
+    pub fn open_and_cosine(&self, rays: u32) -> ([f32; SH_COUNT], [f32; SH_COUNT]) {
+        let (escaping, bound, a) = self.open_frame(rays);
+        let open = std::array::from_fn(|k| {
+            let base = escaping * a[k];
+            if k == 0 {
+                return base;
+            }
+            let word = if k < 4 { self.group_open } else { self.open_l2 };
+            let code = unit_field(word, OPEN_AT[k - 1], OPEN_BITS[k - 1]);
+            base + code * (bound * OPEN_RANGE[k])
+        });
+        (open, a)
     }
 }
 
@@ -366,7 +364,7 @@ pub(crate) mod tests {
                     }
                 }
                 let t = SurfelTerms::new(centre_code([0; 3]), 0, n, hits as u8, &open, rays);
-                let got = t.open(rays);
+                let (got, _) = t.open_and_cosine(rays);
                 let e = (rays - hits) as f32 / rays as f32;
                 let bound = e.min(1.0 - e) + 1.0 / rays as f32;
                 assert!((got[0] - open[0]).abs() < 1e-6, "{hits}: {got:?} {open:?}");

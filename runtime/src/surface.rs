@@ -33,9 +33,7 @@
 //! lookup at stop 49); today's default in `docs/results/surface_clamp.md` (stop 52).
 
 use prt_format::sh::{ShRgb, SH_COUNT};
-use prt_format::surface::{
-    cosine_transfer, dominant_axis, near_entry, sky_term, SurfaceTerms, BLOCKED_WEIGHT,
-};
+use prt_format::surface::{dominant_axis, near_entry, sky_term, SurfaceTerms, BLOCKED_WEIGHT};
 use prt_format::Asset;
 use rayon::prelude::*;
 
@@ -185,8 +183,7 @@ impl<'a> SurfaceSampler<'a> {
         if !seen.get() {
             out = self.fallback.sample(position, normal);
         }
-        let open = terms.open(st.header.rays);
-        let all = cosine_transfer(terms.normal());
+        let (open, all) = terms.open_and_cosine(st.header.rays);
         let share = terms.hits() as f32 / st.header.rays as f32;
         let group = st.groups[brick] + terms.group();
         let near = self.near[group as usize].map(|l| share * l);
