@@ -194,9 +194,14 @@ fn accumulate(p: u32, lid: u32) -> array<vec3<f32>, 9> {
         }
     }
     if params.sky_mode == SKY_DIRECTIONS {
+        // A word of 32 rays per thread: sky_directions are in sky order, as the masks' bits,
+        // and a word no ray of which escaped costs one or two loads.
         let words = (params.ray_count + 31u) / 32u;
-        for (var i = lid; i < params.ray_count; i = i + GATHER_WORKGROUP) {
-            if (sky_mask[probe.slot * words + i / 32u] & (1u << (i % 32u))) != 0u {
+        for (var w = lid; w < words; w = w + GATHER_WORKGROUP) {
+            var m = sky_word(probe.slot, w);
+            while m != 0u {
+                let i = 32u * w + countTrailingZeros(m);
+                m = m & (m - 1u);
                 let y = sh_basis(sky_directions[2u * i].xyz);
                 let l = sky_directions[2u * i + 1u].xyz;
                 for (var k = 0u; k < 9u; k = k + 1u) {
@@ -206,6 +211,29 @@ fn accumulate(p: u32, lid: u32) -> array<vec3<f32>, 9> {
         }
     }
     return acc;
+}
+
+// Word w of the sky mask of the probe in `slot` (bit j: the ray at sky-order position
+// 32 w + j escaped). Its record (after the index of where each starts) is a bitmap of mixed
+// words, one of full words, then the mixed words (twin: prt_format::sky_mask::decode).
+fn sky_word(slot: u32, w: u32) -> u32 {
+    let base = sky_mask[slot];
+    let h = ((params.ray_count + 31u) / 32u + 31u) / 32u;
+    let bit = 1u << (w % 32u);
+    if (sky_mask[base + h + w / 32u] & bit) != 0u {
+        // Full: every ray of the word, of which the last word has ray_count % 32.
+        let rays = min(params.ray_count - 32u * w, 32u);
+        return select((1u << rays) - 1u, 0xffffffffu, rays == 32u);
+    }
+    let mixed = sky_mask[base + w / 32u];
+    if (mixed & bit) == 0u {
+        return 0u;
+    }
+    var before = countOneBits(mixed & (bit - 1u));
+    for (var k = 0u; k < w / 32u; k = k + 1u) {
+        before = before + countOneBits(sky_mask[base + k]);
+    }
+    return sky_mask[base + 2u * h + before];
 }
 
 // Thread 0: store the finished probe.

@@ -272,6 +272,7 @@ struct Lattice {
     dirs: Vec<Vec3>,
     weight: f32,
     order: Vec<u32>,
+    sky_positions: Vec<u32>,
 }
 
 impl Lattice {
@@ -284,6 +285,7 @@ impl Lattice {
         Lattice {
             weight: directions::direction_weight(n),
             order: trace::coherent_order(&dirs),
+            sky_positions: prt_format::sky_mask::sky_positions(n),
             dirs,
         }
     }
@@ -305,6 +307,7 @@ impl Lattice {
                 .map(|d| prt_format::sh::basis(d.to_array()))
                 .collect(),
             order: &self.order,
+            sky_positions: &self.sky_positions,
             weight: self.weight,
             double_sided,
             srgb: prt_scene::texture::srgb_to_linear_table(),

@@ -47,6 +47,8 @@ impl Hit {
 #[derive(Clone, Debug, Default)]
 pub struct ProbeRays {
     pub hits: Vec<Hit>,
+    /// While tracing, a bit per ray at its sky-order position; once traced, the probe's sky
+    /// mask record ([`prt_format::sky_mask`]).
     pub sky_mask: Vec<u32>,
     pub sky_transfer: [f32; SH_COUNT],
     pub sky_rays: u32,
@@ -73,6 +75,8 @@ pub struct Tracer<'a> {
     pub basis: Vec<[f32; SH_COUNT]>,
     /// The order the lattice is traced in (`coherent_order`).
     pub order: &'a [u32],
+    /// Where each ray's bit sits in a sky mask ([`prt_format::sky_mask::sky_positions`]).
+    pub sky_positions: &'a [u32],
     pub weight: f32,
     pub double_sided: bool,
     pub srgb: [f32; 256],
@@ -130,6 +134,7 @@ impl Tracer<'_> {
                 self.record(&mut out, origin, i as usize, dir, hit);
             }
         }
+        out.sky_mask = prt_format::sky_mask::encode(&out.sky_mask, n as u32);
         out
     }
 
@@ -151,7 +156,8 @@ impl Tracer<'_> {
                 out.hits.push(hit);
             }
             None => {
-                out.sky_mask[i / 32] |= 1 << (i % 32);
+                let at = self.sky_positions[i] as usize;
+                out.sky_mask[at / 32] |= 1 << (at % 32);
                 out.sky_rays += 1;
                 let y = &self.basis[i];
                 for k in 0..SH_COUNT {

@@ -16,8 +16,9 @@ pub struct Asset {
     /// One per grid point, in grid order (x fastest, then y, then z), placed or not
     /// ([`Probe::slot`]).
     pub probes: Vec<Probe>,
-    /// Per placed probe (in slot order, [`Probe::slot`]), `header.sky_mask_words()` words: bit i
-    /// set when lattice ray i escaped to the sky.
+    /// Per placed probe (in slot order, [`Probe::slot`]), which of its rays escaped to the sky,
+    /// stored sparse after an index of where each probe's record starts
+    /// ([`crate::sky_mask`]; [`Asset::sky_record`]).
     pub sky_mask: Vec<u32>,
     /// Per placed probe, the SH9 projection of its sky directions (`4pi/N sum_{i in sky} Y_k(w_i)`):
     /// multiply by a constant sky radiance to get the probe's sky term without touching the mask.
@@ -85,6 +86,12 @@ impl Asset {
         self.factors.transfer(f, self.header.ray_count, toward)
     }
 
+    /// The sky mask record of the probe in `slot` ([`crate::sky_mask::decode`] reads it;
+    /// validated assets only).
+    pub fn sky_record(&self, slot: usize) -> &[u32] {
+        crate::sky_mask::record(&self.sky_mask, slot)
+    }
+
     /// The visibility map ([`DEPTH_WORDS`] words) of probe `p`, found by its slot; `None` for a
     /// probe without data or out of range.
     pub fn visibility_map(&self, p: usize) -> Option<&[u32]> {
@@ -132,13 +139,6 @@ fn string_from_input<'de, D: serde::Deserializer<'de>>(d: D) -> Result<String, D
         }
     }
     d.deserialize_str(Visitor)
-}
-
-impl Header {
-    /// Words of sky mask per probe.
-    pub fn sky_mask_words(&self) -> usize {
-        (self.ray_count as usize).div_ceil(32)
-    }
 }
 
 /// The probe grid: probe (i, j, k) sits at `origin + step * (i, j, k)`.

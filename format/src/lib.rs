@@ -40,6 +40,7 @@ pub mod lobe;
 pub mod rig;
 mod sections;
 pub mod sh;
+pub mod sky_mask;
 mod snorm;
 pub mod summary;
 pub mod surface;

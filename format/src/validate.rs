@@ -132,11 +132,7 @@ fn probe_sections(asset: &Asset) -> Result<(), FormatError> {
         });
     }
     let probes = asset.probes.iter().filter(|p| p.has_data()).count();
-    count(
-        "sky_mask",
-        asset.sky_mask.len(),
-        probes * h.sky_mask_words(),
-    )?;
+    crate::sky_mask::validate(&asset.sky_mask, probes, h.ray_count)?;
     count("sky_transfer", asset.sky_transfer.len(), probes)?;
     for (i, t) in asset.sky_transfer.iter().enumerate() {
         finite("sky_transfer", i, "transfer", t)?;

@@ -193,7 +193,8 @@ impl SkyModel {
     }
 
     /// Direction and radiance of every direction of the `n`-ray lattice, for skies that vary
-    /// with direction (empty for black and constant skies, which need no lookup).
+    /// with direction (empty for black and constant skies, which need no lookup), in sky order
+    /// (`prt_format::sky_mask::sky_order`): entry `j` is the ray of bit `j` of a probe's mask.
     ///
     /// Each direction's radiance is the sky's mean over its Voronoi cell: every texel goes to
     /// its nearest lattice direction, weighted by its solid angle. A constant sky stays exactly
@@ -248,9 +249,10 @@ impl SkyModel {
                         e.1 += ba;
                     }
                 }
-                dirs.iter()
-                    .zip(energy)
-                    .map(|(&d, (e, area))| {
+                prt_format::sky_mask::sky_order(n)
+                    .into_iter()
+                    .map(|i| {
+                        let (d, (e, area)) = (dirs[i as usize], energy[i as usize]);
                         // A cell no sample fell in (a map far coarser than the lattice, past
                         // the sample cap) takes the radiance at its direction.
                         let l = if area > 0.0 {
@@ -304,8 +306,7 @@ impl SkyModel {
             }
             SkyModel::Equirect { .. } => {
                 let n = asset.header.ray_count;
-                let words = asset.header.sky_mask_words();
-                let mask = &asset.sky_mask[slot * words..(slot + 1) * words];
+                let mask = prt_format::sky_mask::decode(asset.sky_record(slot), n);
                 let w = direction_weight(n);
                 let mut acc = [[0.0; 3]; SH_COUNT];
                 for (i, &(d, l)) in lattice.iter().enumerate() {

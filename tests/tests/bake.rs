@@ -231,10 +231,10 @@ fn empty_scene_with_bounds_is_all_sky() {
         assert!(p.is_valid(), "probe {i}");
     }
     assert!(asset.factors.is_empty() && asset.bricks.is_empty() && asset.surfels.is_empty());
-    assert!(
-        asset.sky_mask.iter().all(|&w| w == u32::MAX),
-        "every ray is sky"
-    );
+    for slot in 0..asset.sky_transfer.len() {
+        let mask = prt_format::sky_mask::decode(asset.sky_record(slot), asset.header.ray_count);
+        assert!(mask.iter().all(|&w| w == u32::MAX), "every ray is sky");
+    }
     // The sky transfer of the full sphere is the constant function: c0 = 4pi Y00, rest ~0.
     let t = asset.sky_transfer[0];
     assert!((t[0] - 4.0 * PI * Y00).abs() < 1e-4, "{t:?}");

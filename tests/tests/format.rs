@@ -502,8 +502,8 @@ fn structurally_broken_assets_are_invalid() {
         let last = a.probes.last_mut().unwrap();
         assert!(last.is_valid());
         last.slot = prt_format::NO_SLOT;
-        let words = a.header.sky_mask_words();
-        a.sky_mask.truncate(a.sky_mask.len() - words);
+        let slots = a.sky_transfer.len() - 1;
+        a.sky_mask = prt_format::sky_mask::with_index((0..slots).map(|s| a.sky_record(s).to_vec()));
         a.sky_transfer.pop();
         a.probe_depth
             .truncate(a.probe_depth.len() - prt_format::DEPTH_WORDS);
@@ -521,6 +521,27 @@ fn structurally_broken_assets_are_invalid() {
     });
     assert_count("missing sky mask word", "sky_mask", |a| {
         a.sky_mask.pop();
+    });
+    // 64 rays: two mask words, a bitmap word each for mixed and full words.
+    assert_invalid("a sky mask word marked mixed and full", "sky_mask", |a| {
+        let at = a.sky_mask[0] as usize;
+        a.sky_mask[at] |= 1;
+        a.sky_mask[at + 1] |= 1;
+    });
+    assert_invalid(
+        "a sky mask word past the rays marked full",
+        "sky_mask",
+        |a| {
+            let at = a.sky_mask[0] as usize;
+            a.sky_mask[at + 1] |= 1 << 2;
+        },
+    );
+    assert_invalid("an empty sky mask word stored as mixed", "sky_mask", |a| {
+        let slot = (0..a.sky_transfer.len())
+            .find(|&s| a.sky_mask[a.sky_mask[s] as usize] != 0)
+            .expect("a probe sees sky over part of a word");
+        let at = a.sky_mask[slot] as usize;
+        a.sky_mask[at + 2] = 0;
     });
     assert_invalid("NaN sky transfer", "sky_transfer", |a| {
         a.sky_transfer[1][4] = f32::NAN

@@ -424,8 +424,8 @@ fn broken_fills_are_invalid() {
             slot: prt_format::NO_SLOT,
             ..prt_format::Probe::default()
         };
-        let words = a.header.sky_mask_words();
-        a.sky_mask.truncate(a.sky_mask.len() - words);
+        let slots = a.sky_transfer.len() - 1;
+        a.sky_mask = prt_format::sky_mask::with_index((0..slots).map(|s| a.sky_record(s).to_vec()));
         a.sky_transfer.pop();
         a.probe_depth.truncate(a.probe_depth.len() - DEPTH_WORDS);
     });

@@ -27,11 +27,7 @@ pub(super) fn assemble_probes(
 ) -> Assembled {
     let mut probes = Vec::with_capacity(traced.len());
     let placed = carried.from.iter().filter(|f| f.is_some()).count();
-    let mask_words = traced
-        .iter()
-        .find(|r| r.placed)
-        .map_or(0, |r| r.sky_mask.len());
-    let mut sky_mask = Vec::with_capacity(mask_words * placed);
+    let mut sky_records: Vec<&[u32]> = Vec::with_capacity(placed);
     let mut sky_transfer = Vec::with_capacity(placed);
     let mut first_factor = 0u32;
     let mut slot = 0u32;
@@ -67,7 +63,7 @@ pub(super) fn assemble_probes(
         // many placed probes as grid points.
         first_factor += len;
         slot += 1;
-        sky_mask.extend_from_slice(&traced[from].sky_mask);
+        sky_records.push(&traced[from].sky_mask);
         sky_transfer.push(traced[from].sky_transfer);
     }
     for (p, from) in carried.from.iter().enumerate() {
@@ -78,7 +74,7 @@ pub(super) fn assemble_probes(
     }
     Assembled {
         probes,
-        sky_mask,
+        sky_mask: prt_format::sky_mask::with_index(sky_records.into_iter().map(<[u32]>::to_vec)),
         sky_transfer,
     }
 }
