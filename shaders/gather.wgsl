@@ -194,11 +194,14 @@ fn accumulate(p: u32, lid: u32) -> array<vec3<f32>, 9> {
         }
     }
     if params.sky_mode == SKY_DIRECTIONS {
-        // A word of 32 rays per thread: sky_directions are in sky order, as the masks' bits,
-        // and a word no ray of which escaped costs one or two loads.
+        // A word of 32 rays per thread, its set bits one by one: a word no ray of which
+        // escaped costs its two loads. sky_directions are in sky order, as the masks' bits.
+        // (Every thread the same word and a bit each measured slower on lavapipe than the
+        // mask word per ray this replaced: docs/results/packing.md, format 17.)
+        let base = sky_mask[probe.slot];
         let words = (params.ray_count + 31u) / 32u;
         for (var w = lid; w < words; w = w + GATHER_WORKGROUP) {
-            var m = sky_word(probe.slot, w);
+            var m = sky_word(base, w);
             while m != 0u {
                 let i = 32u * w + countTrailingZeros(m);
                 m = m & (m - 1u);
@@ -213,17 +216,17 @@ fn accumulate(p: u32, lid: u32) -> array<vec3<f32>, 9> {
     return acc;
 }
 
-// Word w of the sky mask of the probe in `slot` (bit j: the ray at sky-order position
-// 32 w + j escaped). Its record (after the index of where each starts) is a bitmap of mixed
-// words, one of full words, then the mixed words (twin: prt_format::sky_mask::decode).
-fn sky_word(slot: u32, w: u32) -> u32 {
-    let base = sky_mask[slot];
+// Word w of the sky mask of the probe whose record starts at `base` (bit j: the ray at
+// sky-order position 32 w + j escaped). The record is a bitmap of mixed words, one of full
+// words, then the mixed words: two loads for a full word, two for an empty one, three and a
+// popcount (and one more load per 32 words before it) for a mixed one (twin:
+// prt_format::sky_mask::word).
+fn sky_word(base: u32, w: u32) -> u32 {
     let h = ((params.ray_count + 31u) / 32u + 31u) / 32u;
     let bit = 1u << (w % 32u);
     if (sky_mask[base + h + w / 32u] & bit) != 0u {
-        // Full: every ray of the word, of which the last word has ray_count % 32.
-        let rays = min(params.ray_count - 32u * w, 32u);
-        return select((1u << rays) - 1u, 0xffffffffu, rays == 32u);
+        // Full: every ray of the word; the last word holds ray_count - 32 w of them (1..=32).
+        return 0xffffffffu >> (32u - min(params.ray_count - 32u * w, 32u));
     }
     let mixed = sky_mask[base + w / 32u];
     if (mixed & bit) == 0u {

@@ -267,7 +267,8 @@ fn bvh_stage(
     })
 }
 
-/// A bake's ray lattice: its directions, their weight, and the order they are traced in.
+/// A bake's ray lattice: its directions, their weight, the order they are traced in, and where
+/// each ray's bit sits in a sky mask (`prt_format::sky_mask::sky_positions`).
 struct Lattice {
     dirs: Vec<Vec3>,
     weight: f32,

@@ -29,10 +29,10 @@
 //!   uniform, [`pooled`]), averaged over the near group (the surfels of its brick that see the
 //!   same probes), weighted by the surfels' hits, each surfel adding its own baseline back;
 //! - **shrunk** toward 0 by [`SHRINK`] standard deviations of its noise (soft threshold), a
-//!   darkening one by [`SHRINK_DARKER`]: a correction smaller than its noise is dropped. The variance is the rays' sample variance,
-//!   and at least the binomial one of the larger of the two shares (and of one ray): a sky
-//!   seen through a crack is missed by every ray as often as not, and the sample variance of
-//!   no hits is zero.
+//!   darkening one by [`SHRINK_DARKER`]: a correction smaller than its noise is dropped. The
+//!   variance is the rays' sample variance, and at least the binomial one of the larger of the
+//!   two shares (and of one ray): a sky seen through a crack is missed by every ray as often
+//!   as not, and the sample variance of no hits is zero.
 //!
 //! The lookup adds `pi * sky * L_sky` to the irradiance, `L_sky` the sky's mean radiance
 //! (`prt_runtime::surface`): for a constant sky the surfel's own sky replaces its probes'; for
@@ -42,6 +42,14 @@
 //! of the median / worst level, default spacing and half; without sky terms 6.36 / 8.60% and
 //! 3.63 / 4.81%, docs/results/surface_sky.md):
 //!
+//! - a darkening term (`d < 0`) shrunk by half a standard deviation, a brightening one by one
+//!   (stop 59, the default: [`SHRINK_DARKER`]): 5.55 / 7.74% and 3.10 / 5.46%, every tuning
+//!   level better but cave_7 (7.08% -> 7.74%, half 4.66% -> 5.46%: a cave floor under a small
+//!   skylight read too dark); on the sets not tuned on 5.13 / 7.29%, 4.84 / 6.57%, 5.80 /
+//!   12.82%, worst over-lit pixels 0.72% -> 0.47% (held-out) and 1.42% -> 0.99% (unseen);
+//!   Sponza under the sun 4 -> 2 of 284 leaking (docs/results/sky_shrink_darker/). Both signs
+//!   at half a deviation (stop 57): 5.54 / 7.50% and 3.12 / 5.75%, Sponza 4 leaking (two other
+//!   points brightened over the line); 0.75 for a darkening term: Sponza 3 leaking;
 //! - 256 rays, the baseline chosen per group, shrink 1, variance floor (stop 56):
 //!   5.59 / 7.55% and 3.19 / 4.67%. On the other sets (held-out, unseen, fresh: median / worst
 //!   level) 5.22 / 7.42%, 4.88 / 6.63%, 5.78 / 12.91%; unseen cave_31's over-lit pixels 2.65%
@@ -67,15 +75,6 @@
 //!   twice the stage's time;
 //! - 1,024 rays per surfel, unpooled: cave_3 6.60% (the 4,096-ray reference 6.17%), at 6.6x
 //!   that level's bake time.
-//!
-//! - a darkening term (`d < 0`) shrunk by half a standard deviation, a brightening one by one
-//!   (stop 59, the default: [`SHRINK_DARKER`]): 5.55 / 7.74% and 3.10 / 5.46%, every tuning
-//!   level better but cave_7 (7.08% -> 7.74%, half 4.66% -> 5.46%: a cave floor under a small
-//!   skylight read too dark); on the sets not tuned on 5.13 / 7.29%, 4.84 / 6.57%, 5.80 /
-//!   12.82%, worst over-lit pixels 0.72% -> 0.47% (held-out) and 1.42% -> 0.99% (unseen);
-//!   Sponza under the sun 4 -> 2 of 284 leaking (docs/results/sky_shrink_darker/). Both signs
-//!   at half a deviation (stop 57): 5.54 / 7.50% and 3.12 / 5.75%, Sponza 4 leaking (two other
-//!   points brightened over the line); 0.75 for a darkening term: Sponza 3 leaking;
 //!
 //! Deterministic: each surfel's term depends only on the asset and fixed ray sets, and groups
 //! are summed in surfel order.

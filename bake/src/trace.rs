@@ -47,8 +47,7 @@ impl Hit {
 #[derive(Clone, Debug, Default)]
 pub struct ProbeRays {
     pub hits: Vec<Hit>,
-    /// While tracing, a bit per ray at its sky-order position; once traced, the probe's sky
-    /// mask record ([`prt_format::sky_mask`]).
+    /// The probe's sky mask record ([`prt_format::sky_mask`]): which rays escaped.
     pub sky_mask: Vec<u32>,
     pub sky_transfer: [f32; SH_COUNT],
     pub sky_rays: u32,
@@ -118,10 +117,11 @@ impl Tracer<'_> {
         let n = self.directions.len();
         let mut out = ProbeRays {
             hits: Vec::with_capacity(n),
-            sky_mask: vec![0; n.div_ceil(32)],
             placed: true,
             ..ProbeRays::default()
         };
+        // A bit per ray at its sky-order position, encoded once the rays are traced.
+        let mut sky = vec![0u32; n.div_ceil(32)];
         for packet in self.order.chunks(PACKET) {
             let mut dirs = [Vec3::ZERO; PACKET];
             for (d, &i) in dirs.iter_mut().zip(packet) {
@@ -131,18 +131,19 @@ impl Tracer<'_> {
                 .bvh
                 .closest_hits(origin, &dirs[..packet.len()], f32::INFINITY);
             for ((&i, &dir), hit) in packet.iter().zip(&dirs).zip(hits) {
-                self.record(&mut out, origin, i as usize, dir, hit);
+                self.record((&mut out, &mut sky), origin, i as usize, dir, hit);
             }
         }
-        out.sky_mask = prt_format::sky_mask::encode(&out.sky_mask, n as u32);
+        out.sky_mask = prt_format::sky_mask::encode(&sky, n as u32);
         out
     }
 
-    /// Adds one ray's hit or miss to `out`.
+    /// Adds one ray's hit to `out`, or its miss to `out`'s sky transfer and to its bit in `sky`
+    /// (at its sky-order position).
     #[inline]
     fn record(
         &self,
-        out: &mut ProbeRays,
+        (out, sky): (&mut ProbeRays, &mut [u32]),
         origin: Vec3,
         i: usize,
         dir: Vec3,
@@ -157,7 +158,7 @@ impl Tracer<'_> {
             }
             None => {
                 let at = self.sky_positions[i] as usize;
-                out.sky_mask[at / 32] |= 1 << (at % 32);
+                sky[at / 32] |= 1 << (at % 32);
                 out.sky_rays += 1;
                 let y = &self.basis[i];
                 for k in 0..SH_COUNT {

@@ -21,17 +21,21 @@
 //!   each probe's record starts (in words from the array's start) and where the last ends. The
 //!   GPU reads the array as it is (`shaders/gather.wgsl`, `sky_word`).
 //!
+//! The order and the record are the format: changing [`sky_order`] (its band count included)
+//! or the record's layout needs a new `FORMAT_VERSION`, or older assets would read their bits
+//! as other rays (`sky_order_is_pinned` fails first).
+//!
 //! Default bakes (`prt bake`, 2048 rays, `prt inspect`), bytes per placed probe with the index,
-//! against 256 before: Cornell 52, `fixtures/two_rooms` 24 (no sky), Sponza 88, the 120 m
-//! street at 1 m 82 (in the lattice's own order, 81 / 24 / 157 / 185: a word there is a thin
+//! against 256 before: Cornell 52, `fixtures/two_rooms` 20 (no sky), Sponza 88, the 120 m
+//! street at 1 m 82 (in the lattice's own order, 81 / 20 / 157 / 185: a word there is a thin
 //! ring of every azimuth, which a sky's edge crosses nearly always).
 //!
 //! [`Asset::sky_mask`]: crate::Asset::sky_mask
 
 use crate::FormatError;
 
-/// Bands the lattice is cut into for [`sky_order`]: about as many as a band has words, so
-/// that a word's patch is about as high as it is wide.
+/// Bands the lattice is cut into for [`sky_order`]: as many as a band has words, which
+/// measured best of 4, 8, 16 and 32 bands at 2048 rays (docs/results/packing.md, format 17).
 fn bands(n: u32) -> u32 {
     ((f64::from(n) / 32.0).sqrt().round() as u32).clamp(1, n.max(1))
 }
@@ -71,6 +75,7 @@ pub fn header_words(n: u32) -> usize {
 
 /// One probe's record from its mask in sky order ([`mask_words`] words, bits past `n` clear).
 pub fn encode(mask: &[u32], n: u32) -> Vec<u32> {
+    debug_assert_eq!(mask.len(), mask_words(n));
     let h = header_words(n);
     let mut record = vec![0u32; 2 * h];
     for (w, &word) in mask.iter().enumerate() {
@@ -116,14 +121,15 @@ pub fn word(record: &[u32], n: u32, w: usize) -> u32 {
 }
 
 /// Builds [`crate::Asset::sky_mask`] from each placed probe's record, in slot order.
-pub fn with_index(records: impl ExactSizeIterator<Item = Vec<u32>>) -> Vec<u32> {
+pub fn with_index<R: AsRef<[u32]>>(records: impl ExactSizeIterator<Item = R>) -> Vec<u32> {
     let count = records.len();
     let mut out = vec![0u32; count + 1];
+    let at = |len: usize| u32::try_from(len).expect("a sky mask array under 2^32 words");
     for (slot, record) in records.enumerate() {
-        out[slot] = out.len() as u32;
-        out.extend_from_slice(&record);
+        out[slot] = at(out.len());
+        out.extend_from_slice(record.as_ref());
     }
-    out[count] = out.len() as u32;
+    out[count] = at(out.len());
     out
 }
 
@@ -137,11 +143,7 @@ pub fn record(sky_mask: &[u32], slot: usize) -> &[u32] {
 /// the mask's words) and exactly as many words as it marks mixed, none of them empty or full,
 /// no bit past `n`.
 pub fn validate(sky_mask: &[u32], slots: usize, n: u32) -> Result<(), FormatError> {
-    let bad = |index: usize, what: String| FormatError::Invalid {
-        section: "sky_mask",
-        index,
-        what,
-    };
+    let bad = |index: usize, what: String| FormatError::invalid("sky_mask", index, what);
     if sky_mask.len() < slots + 1 {
         return Err(FormatError::Count {
             section: "sky_mask",
@@ -169,12 +171,23 @@ pub fn validate(sky_mask: &[u32], slots: usize, n: u32) -> Result<(), FormatErro
     }
     for slot in 0..slots {
         let (a, b) = (ends(slot), ends(slot + 1));
-        if b < a + 2 * h || b > sky_mask.len() {
+        if b < a || b > sky_mask.len() {
+            return Err(bad(
+                slot + 1,
+                format!(
+                    "index entry {} is {b}: before the previous record's start {a} or past the \
+                     array's {} words",
+                    slot + 1,
+                    sky_mask.len()
+                ),
+            ));
+        }
+        if b < a + 2 * h {
             return Err(bad(
                 slot,
                 format!(
                     "record of {} words, shorter than its {} bitmap words",
-                    b.saturating_sub(a),
+                    b - a,
                     2 * h
                 ),
             ));
@@ -199,9 +212,8 @@ pub fn validate(sky_mask: &[u32], slots: usize, n: u32) -> Result<(), FormatErro
                 ),
             ));
         }
-        let mut stored = r[2 * h..].iter();
-        for w in (0..words).filter(|&w| r[w / 32] >> (w % 32) & 1 != 0) {
-            let word = *stored.next().unwrap_or(&0);
+        let marked = (0..words).filter(|&w| r[w / 32] >> (w % 32) & 1 != 0);
+        for (w, &word) in marked.zip(&r[2 * h..]) {
             if word == 0 || word == full_word(w, n) || word & !full_word(w, n) != 0 {
                 return Err(bad(
                     slot,
@@ -245,6 +257,24 @@ mod tests {
                 assert_eq!(decode(super::record(&indexed, 1), n), mask, "{n} {pattern}");
             }
         }
+    }
+
+    /// The order is the format's: these values are format 17's (module docs).
+    #[test]
+    fn sky_order_is_pinned() {
+        let sum = |n: u32| -> u64 {
+            (sky_order(n).iter().enumerate())
+                .map(|(j, &i)| (j as u64 + 1) * u64::from(i))
+                .sum()
+        };
+        assert_eq!(
+            &sky_order(64)[..12],
+            &[0, 55, 21, 42, 8, 63, 29, 50, 16, 37, 3, 58]
+        );
+        assert_eq!(
+            [sum(64), sum(2048), sum(2049)],
+            [65_708, 2_852_111_216, 2_856_311_920]
+        );
     }
 
     /// At 2048 rays the sky of a probe beside a tall wall (the upper hemisphere on one side of

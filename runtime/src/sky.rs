@@ -309,8 +309,9 @@ impl SkyModel {
                 let mask = prt_format::sky_mask::decode(asset.sky_record(slot), n);
                 let w = direction_weight(n);
                 let mut acc = [[0.0; 3]; SH_COUNT];
-                for (i, &(d, l)) in lattice.iter().enumerate() {
-                    if mask[i / 32] & (1 << (i % 32)) != 0 {
+                // `lattice` is in sky order: entry j is the ray of the masks' bit j.
+                for (j, &(d, l)) in lattice.iter().enumerate() {
+                    if mask[j / 32] & (1 << (j % 32)) != 0 {
                         sh::accumulate(&mut acc, d, w, l);
                     }
                 }

@@ -536,6 +536,16 @@ fn structurally_broken_assets_are_invalid() {
             a.sky_mask[at + 1] |= 1 << 2;
         },
     );
+    // The index in front of the records: a record's end before its start, past the array.
+    assert_invalid("a sky mask index that runs backwards", "sky_mask", |a| {
+        a.sky_mask.swap(1, 2);
+    });
+    assert_invalid("a sky mask index past the array", "sky_mask", |a| {
+        a.sky_mask[1] = u32::MAX;
+    });
+    assert_count("a sky mask index of one probe too many", "sky_mask", |a| {
+        a.sky_mask[0] += 1;
+    });
     assert_invalid("an empty sky mask word stored as mixed", "sky_mask", |a| {
         let slot = (0..a.sky_transfer.len())
             .find(|&s| a.sky_mask[a.sky_mask[s] as usize] != 0)

@@ -395,6 +395,28 @@ fn hostile_values_stay_finite() {
         }
     }
 
+    // 100 rays: the sky masks' last word holds 4 rays (`sky_word`'s partial word), full in
+    // an empty scene.
+    let image_sky = Lighting {
+        rig: LightRig::default(),
+        sky: warm_over_cool(),
+    };
+    for (scene, bounds) in [
+        ("cornell/cornell.gltf", None),
+        ("empty.gltf", Some([-1.0, -1.0, -1.0, 1.0, 1.0, 1.0])),
+    ] {
+        let settings = BakeSettings {
+            rays: 100,
+            bounds,
+            ..BakeSettings::default()
+        };
+        let asset = bake(&fixture(scene), &settings);
+        let mut runtime =
+            PrtRuntime::new(&device, &queue, &asset, RuntimeSettings::default()).unwrap();
+        let gpu = gpu_update(&device, &queue, &mut runtime, &image_sky, None);
+        assert_close(scene, &asset, &gpu, &cpu(&asset, &image_sky), 1e-4);
+    }
+
     let inside = BakeSettings {
         spacing: Some(0.5),
         bounds: Some([-0.5, -0.5, -0.5, 0.5, 0.5, 0.5]),

@@ -74,7 +74,7 @@ pub(super) fn assemble_probes(
     }
     Assembled {
         probes,
-        sky_mask: prt_format::sky_mask::with_index(sky_records.into_iter().map(<[u32]>::to_vec)),
+        sky_mask: prt_format::sky_mask::with_index(sky_records.into_iter()),
         sky_transfer,
     }
 }

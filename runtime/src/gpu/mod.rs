@@ -174,8 +174,8 @@ pub struct RuntimeSettings {
     pub shadow_cache_words: Option<u64>,
     /// Whether the runtime can relight with an equirect sky (`SkyModel::Equirect`), which
     /// reads each probe's sky mask (`prt_format::sky_mask`: 82 bytes a probe on average on
-    /// `street_20_L120` at 1 m, 2.5 MB). Without it the mask is not uploaded and such a sky is refused
-    /// ([`GpuError::NoSkyMask`]); constant and black skies need none [default: true].
+    /// `street_20_L120` at 1 m, 2.5 MB). Without it the mask is not uploaded and such a sky is
+    /// refused ([`GpuError::NoSkyMask`]); constant and black skies need none [default: true].
     pub equirect_sky: bool,
 }
 
@@ -187,8 +187,8 @@ impl RuntimeSettings {
     /// had. The per-brick light masks and the shadow-ray cache then take what the rig needs
     /// rather than what 256 lights would: on `street_20_L120` at 1 m (60k bricks, 860k
     /// surfels, 8 lights, a constant sky) the masks go from 3.9 to 0.5 MB, the cache from 13.8
-    /// to 6.9 MB and the sky masks from 2.5 MB (7.7 before format 17) to none, with the same relit result
-    /// (`tests/tests/lights.rs`). An engine whose rig may grow keeps
+    /// to 6.9 MB and the sky masks from 2.5 MB (7.7 before format 17) to none, with the same
+    /// relit result (`tests/tests/lights.rs`). An engine whose rig may grow keeps
     /// [`RuntimeSettings::with_room_for`].
     pub fn fitted_to(self, lighting: &crate::Lighting) -> RuntimeSettings {
         RuntimeSettings {
