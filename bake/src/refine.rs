@@ -304,7 +304,8 @@ fn field(k: usize, at: Vec3, grid: &prt_format::Grid) -> bool {
 fn rewrite(asset: &mut Asset, drop: &[Option<u32>]) {
     let grid = asset.header.grid;
     let mut ranges: Vec<Range<usize>> = Vec::new();
-    let (mut sky_records, mut sky_transfer, mut depth) = (Vec::new(), Vec::new(), Vec::new());
+    // The kept probes' old slots, in their new order.
+    let (mut kept, mut sky_transfer, mut depth) = (Vec::new(), Vec::new(), Vec::new());
     let (mut first_factor, mut slot) = (0u32, 0u32);
     // Where each kept table of a probe that is not dilated starts, by where it started.
     let mut moved_to: HashMap<u32, u32> = HashMap::new();
@@ -329,7 +330,7 @@ fn rewrite(asset: &mut Asset, drop: &[Option<u32>]) {
         }
         if probe.has_data() {
             let s = probe.slot as usize;
-            sky_records.push(prt_format::sky_mask::record(&asset.sky_mask, s).to_vec());
+            kept.push(s);
             sky_transfer.push(asset.sky_transfer[s]);
             depth.extend_from_slice(&asset.probe_depth[s * DEPTH_WORDS..(s + 1) * DEPTH_WORDS]);
             probe.slot = slot;
@@ -344,6 +345,6 @@ fn rewrite(asset: &mut Asset, drop: &[Option<u32>]) {
         };
     }
     asset.factors = asset.factors.select(&ranges);
-    let sky_mask = prt_format::sky_mask::with_index(sky_records.into_iter());
+    let sky_mask = prt_format::sky_mask::with_index(kept.iter().map(|&s| asset.sky_record(s)));
     (asset.sky_mask, asset.sky_transfer, asset.probe_depth) = (sky_mask, sky_transfer, depth);
 }

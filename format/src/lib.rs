@@ -8,10 +8,10 @@
 //! For every probe of a regular grid the baker shot `ray_count` rays along a fixed spherical
 //! Fibonacci lattice ([`directions`]). Rays that escaped are sky: they are kept as a per-probe bit
 //! mask over the lattice (stored sparse, [`sky_mask`]) plus the SH9 projection of those
-//! directions, so that any sky can be applied at runtime. Rays that hit geometry became surfels; surfels were merged into normal-keyed bricks,
-//! and each probe keeps a factor table: for every brick its rays hit, the number of those rays,
-//! the SH9 projection of their directions (weight 4pi/N each) and their mean hit point relative
-//! to the brick's centroid. A brick's radiance is a linear model (mean and gradient, fitted over
+//! directions, so that any sky can be applied at runtime. Rays that hit geometry became surfels;
+//! surfels were merged into normal-keyed bricks, and each probe keeps a factor table: for every
+//! brick its rays hit, the number of those rays, the SH9 projection of their directions
+//! (weight 4pi/N each) and their mean hit point relative to the brick's centroid. A brick's radiance is a linear model (mean and gradient, fitted over
 //! its surfels); at runtime, with `L_b(x)` that model evaluated at offset `x`:
 //!
 //! `c_k(probe) = sum over factors f of transfer_k(f) * L_{brick(f)}(offset(f)) + sky term`

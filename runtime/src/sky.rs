@@ -306,13 +306,17 @@ impl SkyModel {
             }
             SkyModel::Equirect { .. } => {
                 let n = asset.header.ray_count;
-                let mask = prt_format::sky_mask::decode(asset.sky_record(slot), n);
+                let record = asset.sky_record(slot);
                 let w = direction_weight(n);
                 let mut acc = [[0.0; 3]; SH_COUNT];
-                // `lattice` is in sky order: entry j is the ray of the masks' bit j.
-                for (j, &(d, l)) in lattice.iter().enumerate() {
-                    if mask[j / 32] & (1 << (j % 32)) != 0 {
-                        sh::accumulate(&mut acc, d, w, l);
+                // `lattice` is in sky order: its chunk `w` is the rays of the mask's word `w`
+                // (read from the record as the GPU reads it, no whole mask decoded per probe).
+                for (at, rays) in lattice.chunks(32).enumerate() {
+                    let word = prt_format::sky_mask::word(record, n, at);
+                    for (b, &(d, l)) in rays.iter().enumerate() {
+                        if word >> b & 1 != 0 {
+                            sh::accumulate(&mut acc, d, w, l);
+                        }
                     }
                 }
                 acc
