@@ -8,7 +8,7 @@
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> bricks: array<Brick>;
 @group(0) @binding(2) var<storage, read> surfels: array<u32>;
-@group(0) @binding(3) var<storage, read_write> surfel_bounce: array<f32>;
+@group(0) @binding(3) var<storage, read_write> surfel_bounce: array<u32>;
 @group(0) @binding(4) var<storage, read_write> brick_dirty: array<u32>;
 // surfels and surfel_bounce hold this chunk's surfels only (dispatched once per chunk).
 @group(0) @binding(5) var<uniform> chunk: SurfelChunk;
@@ -25,10 +25,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     }
     let e = sample_irradiance(surfel.position, surfel.normal);
     let l = surfel.albedo * (params.bounce_damping / PI) * e;
-    // SURFEL_RADIANCE_FLOATS a surfel, as relight_surfels.wgsl writes surfel_radiance.
-    let at = SURFEL_RADIANCE_FLOATS * c;
-    surfel_bounce[at] = l.x;
-    surfel_bounce[at + 1u] = l.y;
-    surfel_bounce[at + 2u] = l.z;
+    // A radiance word a surfel, as relight_surfels.wgsl writes surfel_radiance.
+    surfel_bounce[c] = pack_radiance(l);
     brick_dirty[surfel.brick] = 1u;
 }

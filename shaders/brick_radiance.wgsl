@@ -9,9 +9,9 @@
 @group(0) @binding(1) var<storage, read> bricks: array<Brick>;
 @group(0) @binding(2) var<storage, read> surfels: array<u32>;
 @group(0) @binding(3) var<storage, read> brick_dirty: array<u32>;
-@group(0) @binding(4) var<storage, read> surfel_radiance: array<f32>;
+@group(0) @binding(4) var<storage, read> surfel_radiance: array<u32>;
 @group(0) @binding(5) var<storage, read_write> brick_radiance: array<vec4<f32>>;
-@group(0) @binding(6) var<storage, read> surfel_bounce: array<f32>;
+@group(0) @binding(6) var<storage, read> surfel_bounce: array<u32>;
 // The per-surfel arrays hold this chunk's surfels only (dispatched once per chunk).
 @group(0) @binding(7) var<uniform> chunk: SurfelChunk;
 // Brick count, per brick its first near group and group count, per group its first surfel and
@@ -20,11 +20,10 @@
 @group(0) @binding(9) var<storage, read_write> group_radiance: array<vec4<f32>>;
 
 fn surfel_radiance_at(s: u32) -> vec3<f32> {
-    // SURFEL_RADIANCE_FLOATS a surfel, rgb (relight_surfels.wgsl, bounce_surfels.wgsl).
-    let at = SURFEL_RADIANCE_FLOATS * s;
-    var l = vec3<f32>(surfel_radiance[at], surfel_radiance[at + 1u], surfel_radiance[at + 2u]);
+    // A radiance word a surfel (relight_surfels.wgsl, bounce_surfels.wgsl).
+    var l = unpack_radiance(surfel_radiance[s]);
     if BOUNCES {
-        l = l + vec3<f32>(surfel_bounce[at], surfel_bounce[at + 1u], surfel_bounce[at + 2u]);
+        l = l + unpack_radiance(surfel_bounce[s]);
     }
     return l;
 }

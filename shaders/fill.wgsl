@@ -65,7 +65,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         }
         total = total + w;
         for (var k = 0u; k < 9u; k = k + 1u) {
-            let at = PROBE_SH_FLOATS * q + 3u * k;
+            // A corner is a valid probe: its entry is its slot (store_probe.wgsl).
+            let at = PROBE_SH_FLOATS * probes[q].slot + 3u * k;
             c[k] = c[k] + w * vec3<f32>(probe_sh[at], probe_sh[at + 1u], probe_sh[at + 2u]);
         }
     }
@@ -75,5 +76,5 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     for (var k = 0u; k < 9u; k = k + 1u) {
         c[k] = c[k] / total;
     }
-    store_probe(p, c);
+    store_probe(p, params.slot_count + i, c);
 }

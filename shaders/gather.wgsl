@@ -241,7 +241,7 @@ fn sky_word(base: u32, w: u32) -> u32 {
 
 // Thread 0: store the finished probe.
 fn finish(p: u32, c: array<vec3<f32>, 9>) {
-    store_probe(p, c);
+    store_probe(p, probes[p].slot, c);
     // Clean, and gathered by this update (the fill redoes the points beside it).
     probe_dirty[p] = params.update_serial;
     atomicAdd(&counters.probes_gathered, 1u);

@@ -15,7 +15,7 @@
 @group(0) @binding(6) var<storage, read> brick_cache: array<u32>;
 @group(0) @binding(7) var<storage, read_write> shadow_cache: array<u32>;
 @group(0) @binding(8) var<storage, read> light_changes: array<u32>;
-@group(0) @binding(9) var<storage, read_write> surfel_radiance: array<f32>;
+@group(0) @binding(9) var<storage, read_write> surfel_radiance: array<u32>;
 @group(0) @binding(10) var<storage, read_write> counters: Counters;
 // surfels and surfel_radiance hold this chunk's surfels only (dispatched once per chunk).
 @group(0) @binding(11) var<uniform> chunk: SurfelChunk;
@@ -108,11 +108,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         shadow_cache[new_first + rank_new / 32u] = word;
     }
     let l = surfel.emission + surfel.albedo * (1.0 / PI) * e;
-    // SURFEL_RADIANCE_FLOATS a surfel, rgb.
-    let at = SURFEL_RADIANCE_FLOATS * c;
-    surfel_radiance[at] = l.x;
-    surfel_radiance[at + 1u] = l.y;
-    surfel_radiance[at + 2u] = l.z;
+    // A radiance word a surfel (pack_radiance, types.wgsl).
+    surfel_radiance[c] = pack_radiance(l);
     atomicAdd(&counters.surfels_relit, 1u);
     if rays > 0u {
         atomicAdd(&counters.shadow_rays, rays);

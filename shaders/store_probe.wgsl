@@ -1,7 +1,8 @@
 // Writing one probe's SH, shared by the stages that produce it (gather.wgsl, fill.wgsl): its
-// nine coefficients to `probe_sh` (which the stage declares; PROBE_SH_FLOATS a probe, rgb by
-// coefficient, the layout `PrtRuntime::read_probe_sh` reads) and all seven volume texels at
-// once, so a texel never holds half of an update.
+// nine coefficients to `probe_sh` (which the stage declares; PROBE_SH_FLOATS an entry, rgb by
+// coefficient, the layout `PrtRuntime::read_probe_sh` reads; a probe's entry is its slot, a
+// filled point's follows them, prt_runtime::contract::probe_sh_entries) and all seven volume
+// texels at once, so a texel never holds half of an update.
 //
 // Volume layout (premultiplied by validity, so hardware trilinear filtering weights valid
 // probes only): texture 0 = (c0.rgb, validity); textures 1..6 = the 24 values c1.r, c1.g, c1.b,
@@ -20,10 +21,10 @@ fn texel(v: vec4<f32>) -> vec4<f32> {
     return clamp(v, vec4<f32>(-params.texel_limit), vec4<f32>(params.texel_limit));
 }
 
-// Probe p's SH c, to probe_sh and its seven texels.
-fn store_probe(p: u32, c: array<vec3<f32>, 9>) {
+// Grid point p's SH c, to its probe_sh entry and its seven texels.
+fn store_probe(p: u32, entry: u32, c: array<vec3<f32>, 9>) {
     for (var k = 0u; k < 9u; k = k + 1u) {
-        let at = PROBE_SH_FLOATS * p + 3u * k;
+        let at = PROBE_SH_FLOATS * entry + 3u * k;
         probe_sh[at] = c[k].x;
         probe_sh[at + 1u] = c[k].y;
         probe_sh[at + 2u] = c[k].z;

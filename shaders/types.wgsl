@@ -183,10 +183,39 @@ struct Params {
     fill_count: u32,
     // This update's number: the gather leaves it in the dirty word of each probe it gathers.
     update_serial: u32,
-    _pad2: u32,
+    // Probes with data: probe_sh holds them by slot, then the filled points in fill_list order
+    // (prt_runtime::contract::probe_sh_entries).
+    slot_count: u32,
 }
 
 const PI: f32 = 3.14159265358979;
+
+// A surfel's radiance as one word: Ward's shared-exponent RGBE, three 8-bit mantissas (red from
+// bit 0) and the exponent byte at bit 24, whose bits << 23 are the mantissas' step. Exact
+// arithmetic, so it gives the word of its twin prt_runtime::radiance_word::pack_radiance
+// (which says why, and what it keeps).
+fn radiance_scale(e: i32) -> f32 {
+    return bitcast<f32>(u32(135 - e) << 23u);
+}
+
+fn pack_radiance(rgb: vec3<f32>) -> u32 {
+    let c = select(vec3<f32>(0.0), min(rgb, vec3<f32>(3.40282347e38)), rgb > vec3<f32>(0.0));
+    let largest = max(max(c.x, c.y), c.z);
+    if largest <= 0.0 {
+        return 0u;
+    }
+    var e = max(i32(bitcast<u32>(largest) >> 23u) - 127, -100) + 1;
+    if floor(largest * radiance_scale(e) + 0.5) >= 256.0 {
+        e = e + 1;
+    }
+    let m = min(vec3<u32>(floor(c * radiance_scale(e) + 0.5)), vec3<u32>(255u));
+    return m.x | (m.y << 8u) | (m.z << 16u) | (u32(e + 119) << 24u);
+}
+
+fn unpack_radiance(w: u32) -> vec3<f32> {
+    let step = bitcast<f32>((w >> 24u) << 23u);
+    return vec3<f32>(vec3<u32>(w & 255u, (w >> 8u) & 255u, (w >> 16u) & 255u)) * step;
+}
 
 // Real SH up to L2, docs/conventions.md section 2.
 fn sh_basis(d: vec3<f32>) -> array<f32, 9> {

@@ -150,8 +150,8 @@ struct Baked<'l> {
     /// The relit bricks, for the near-field hits of the reference lookups that need them.
     near: Option<NearLight>,
     sh: Vec<ShRgb>,
-    /// The relit surfels' irradiance (the surface lookup's near field).
-    irradiance: Vec<[f32; 3]>,
+    /// The relit surfels' radiance (the surface lookup's near field).
+    radiance: Vec<[f32; 3]>,
     /// The sky's mean radiance (the surface lookup's sky term).
     sky_mean: [f32; 3],
     /// The rig it was relit with (the path lookup lights its hits with it).
@@ -301,14 +301,14 @@ fn bake<'l>(
         .with_context(|| format!("{}: relighting with {}", case.name, case.rig.display()))?;
     let relight_s = t.elapsed().as_secs_f64();
     let near = bricks
-        .then(|| NearLight::for_asset(&asset, relighter.brick_radiance(&relit.surfel_irradiance)));
+        .then(|| NearLight::for_asset(&asset, relighter.brick_radiance(&relit.surfel_radiance)));
     let sky = sky.then(|| sky_view(&asset, lighting)).transpose()?;
     Ok(Baked {
         sky,
         asset,
         lighting,
         sh: relit.sh,
-        irradiance: relit.surfel_irradiance,
+        radiance: relit.surfel_radiance,
         sky_mean: relit.sky,
         near,
         bake_s,
@@ -363,7 +363,7 @@ impl<'a> Sampler<'a> {
                 Sampler::Runtime(SurfaceSampler::new(
                     asset,
                     sh,
-                    &baked.irradiance,
+                    &baked.radiance,
                     sky,
                     settings,
                 ))
@@ -385,7 +385,7 @@ impl<'a> Sampler<'a> {
                 let dark = vec![[0.0f32; 3]; black.surfels.len()];
                 // Its settings leave the sky terms out: it swaps the probes' sky itself.
                 let pair = (
-                    SurfaceSampler::new(asset, sh, &baked.irradiance, baked.sky_mean, settings),
+                    SurfaceSampler::new(asset, sh, &baked.radiance, baked.sky_mean, settings),
                     SurfaceSampler::new(black, sky_sh, &dark, baked.sky_mean, settings),
                 );
                 Sampler::SkyPoint(Box::new(crate::sky_point_lookup::SkyPointLookup::new(
@@ -397,7 +397,7 @@ impl<'a> Sampler<'a> {
             }
             Kind::Gather { rays, per_surfel } => {
                 let sky = baked.sky_mean;
-                let surface = SurfaceSampler::new(asset, sh, &baked.irradiance, sky, settings);
+                let surface = SurfaceSampler::new(asset, sh, &baked.radiance, sky, settings);
                 let with = (near()?, &baked.lighting.sky);
                 Sampler::Gather(GatherLookup::new(asset, surface, with, rays, per_surfel))
             }

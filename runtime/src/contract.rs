@@ -30,13 +30,11 @@ pub const GATHER_WORKGROUP: u32 = 32;
 /// the last), 64 MiB for 64k bricks at this limit, and the CPU reference's own limit
 /// ([`crate::relight::MAX_CPU_LIGHTS`]), which every GPU result is checked against.
 pub const MAX_LIGHTS: usize = 4096;
-/// Floats per probe in the runtime's `probe_sh` buffer: the nine SH coefficients, rgb each,
+/// Floats per entry of the runtime's `probe_sh` buffer: the nine SH coefficients, rgb each,
 /// unpadded (`store_probe.wgsl` writes them, `fill.wgsl` and `PrtRuntime::read_probe_sh` read
-/// them; a vec4 per coefficient spent a quarter on padding).
+/// them; a vec4 per coefficient spent a quarter on padding). Entries are
+/// [`probe_sh_entries`]'s, not grid points.
 pub const PROBE_SH_FLOATS: u32 = 27;
-/// Floats per surfel in the runtime's direct and bounce radiance buffers: rgb, unpadded
-/// (`relight_surfels.wgsl`, `bounce_surfels.wgsl`, `brick_radiance.wgsl`).
-pub const SURFEL_RADIANCE_FLOATS: u32 = 3;
 /// A brick without room in the shadow-ray cache (its lights are traced whenever it is relit).
 pub const NO_CACHE: u32 = u32::MAX;
 /// Workgroups along x of every dispatch; more work continues along y.
@@ -78,6 +76,30 @@ pub struct GpuLight {
     pub _pad: [u32; 2],
 }
 const _: () = assert!(std::mem::size_of::<GpuLight>() == 64);
+
+/// Where each grid point's SH sits in the runtime's `probe_sh` buffer, in entries of
+/// [`PROBE_SH_FLOATS`], and how many entries there are: a probe with data at its slot
+/// (`prt_format::Probe::slot`; every valid probe has one), a filled grid point after them in
+/// grid order (as `fill_list` lists them), `None` for a point never written. Grid points without
+/// data need no room: they were 63% of the street level's 82,280 at 1 m.
+pub fn probe_sh_entries(probes: &[prt_format::Probe]) -> (Vec<Option<u32>>, u32) {
+    let slots = probes.iter().filter(|p| p.has_data()).count() as u32;
+    let mut filled = 0u32;
+    let entries = probes
+        .iter()
+        .map(|p| {
+            if p.has_data() {
+                Some(p.slot)
+            } else if p.is_filled() {
+                filled += 1;
+                Some(slots + filled - 1)
+            } else {
+                None
+            }
+        })
+        .collect();
+    (entries, slots + filled)
+}
 
 /// WGSL code of a light kind.
 pub fn light_kind_code(kind: LightKind) -> u32 {
@@ -210,7 +232,9 @@ pub struct Params {
     /// This update's number: the gather leaves it in the dirty word of each probe it gathers,
     /// and the fill redoes only the points with such a probe among their corners.
     pub update_serial: u32,
-    pub _pad: u32,
+    /// Probes with data (`prt_format::Probe::slot`): `probe_sh` holds them by slot, then the
+    /// filled grid points in `fill_list` order ([`probe_sh_entries`]).
+    pub slot_count: u32,
 }
 const _: () = assert!(std::mem::size_of::<Params>() == 128);
 
@@ -347,10 +371,6 @@ pub fn wgsl_constants() -> Vec<(&'static str, String)> {
         ("WORKGROUP", format!("{WORKGROUP}u")),
         ("NO_CACHE", format!("{NO_CACHE}u")),
         ("PROBE_SH_FLOATS", format!("{PROBE_SH_FLOATS}u")),
-        (
-            "SURFEL_RADIANCE_FLOATS",
-            format!("{SURFEL_RADIANCE_FLOATS}u"),
-        ),
         ("GATHER_WORKGROUP", format!("{GATHER_WORKGROUP}u")),
         ("BVH_STACK", format!("{MAX_STACK}u")),
         (

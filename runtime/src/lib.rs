@@ -12,6 +12,7 @@ pub mod fill;
 pub mod gpu;
 pub mod lights;
 pub mod output;
+pub mod radiance_word;
 pub mod relight;
 pub mod rig;
 pub mod sample;

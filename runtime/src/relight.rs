@@ -25,6 +25,7 @@ use crate::contract::MAX_STACK;
 use crate::lights::{
     brick_normal_bounds, surfel_spread_sq, CullReason, NormalBounds, PreparedLight,
 };
+use crate::radiance_word::quantize_radiance;
 use crate::rig::Lighting;
 use crate::settings::{LookupSettings, MAX_BOUNCES};
 use crate::shadow_rays::lit;
@@ -125,8 +126,12 @@ pub struct Relit {
     /// SH9 of incident radiance per probe (zero for invalid probes).
     pub sh: Vec<ShRgb>,
     /// Per surfel, the irradiance of the last bounce (direct, plus the volume's beyond the
-    /// first): what the surface lookup's near field is lit by (`crate::surface`).
+    /// first).
     pub surfel_irradiance: Vec<[f32; 3]>,
+    /// Per surfel, the radiance of the last bounce as the runtime keeps it
+    /// ([`CpuRelighter::surfel_radiance`]): what the bricks and the surface lookup's near field
+    /// are lit by (`crate::surface`).
+    pub surfel_radiance: Vec<[f32; 3]>,
     /// The sky's mean radiance ([`crate::SkyModel::mean_radiance`]): what the surface
     /// lookup's sky term scales.
     pub sky: [f32; 3],
@@ -187,27 +192,28 @@ impl<'a> CpuRelighter<'a> {
             .map(|p| lighting.sky.probe_sky(self.asset, p, &lattice))
             .collect();
         let (mut sh, mut surfel_irradiance) = (Vec::new(), Vec::new());
+        let mut surfel_radiance = Vec::new();
         for bounce in 0..bounces {
-            let irradiance = if bounce == 0 {
-                direct.clone()
+            let (irradiance, radiance) = if bounce == 0 {
+                (direct.clone(), self.surfel_radiance(&direct, None))
             } else {
                 // The previous bounce's light at the surfel, through the engine's lookup.
                 let volume =
-                    SurfaceSampler::new(self.asset, &sh, &surfel_irradiance, sky_mean, lookup);
-                self.asset
-                    .surfels
-                    .par_iter()
-                    .zip(&direct)
-                    .map(|(s, e)| {
-                        let ind = volume.sample(s.position, s.normal).irradiance;
-                        std::array::from_fn(|c| e[c] + ind[c])
-                    })
-                    .collect()
+                    SurfaceSampler::new(self.asset, &sh, &surfel_radiance, sky_mean, lookup);
+                let volume: Vec<[f32; 3]> = (self.asset.surfels.par_iter())
+                    .map(|s| volume.sample(s.position, s.normal).irradiance)
+                    .collect();
+                let total = direct.iter().zip(&volume);
+                (
+                    total
+                        .map(|(e, v)| std::array::from_fn(|c| e[c] + v[c]))
+                        .collect(),
+                    self.surfel_radiance(&direct, Some(&volume)),
+                )
             };
-            let radiance = self.brick_radiance(&irradiance);
-            let (g, gather_stats) = self.gather(&radiance, &sky);
+            let (g, gather_stats) = self.gather(&self.brick_radiance(&radiance), &sky);
             sh = g;
-            surfel_irradiance = irradiance;
+            (surfel_irradiance, surfel_radiance) = (irradiance, radiance);
             if bounce + 1 == bounces {
                 stats = stats + gather_stats;
             }
@@ -216,6 +222,7 @@ impl<'a> CpuRelighter<'a> {
         Ok(Relit {
             sh,
             surfel_irradiance,
+            surfel_radiance,
             sky: sky_mean,
             stats,
         })
@@ -280,10 +287,38 @@ impl<'a> CpuRelighter<'a> {
         (out, stats)
     }
 
-    /// Steps 2 and 3: brick radiance (mean and gradient) from surfel irradiance, then the
-    /// coarse bricks' from their bricks' ([`coarse_radiance`]), after them.
-    pub fn brick_radiance(&self, irradiance: &[[f32; 3]]) -> Vec<BrickRadiance> {
-        let mut radiance = self.fine_radiance(irradiance);
+    /// Step 2: per surfel, its radiance as the GPU runtime keeps it: the direct radiance
+    /// `emission + albedo / pi * E` from the direct irradiance `direct`, plus with bounces the
+    /// bounce radiance `albedo / pi * E` from the volume's irradiance `bounce`, each as a radiance
+    /// word ([`crate::radiance_word`]), decoded and summed as stage 4 does.
+    pub fn surfel_radiance(
+        &self,
+        direct: &[[f32; 3]],
+        bounce: Option<&[[f32; 3]]>,
+    ) -> Vec<[f32; 3]> {
+        let surfels = &self.asset.surfels;
+        (surfels.par_iter().enumerate())
+            .map(|(i, s)| {
+                let e = direct[i];
+                let mut l = quantize_radiance(std::array::from_fn(|c| {
+                    s.emission[c] + s.albedo[c] * std::f32::consts::FRAC_1_PI * e[c]
+                }));
+                if let Some(b) = bounce {
+                    let more = quantize_radiance(std::array::from_fn(|c| {
+                        s.albedo[c] * std::f32::consts::FRAC_1_PI * b[i][c]
+                    }));
+                    l = std::array::from_fn(|c| l[c] + more[c]);
+                }
+                l
+            })
+            .collect()
+    }
+
+    /// Step 3: brick radiance (mean and gradient) from surfel radiance `radiance`
+    /// ([`Self::surfel_radiance`]), then the coarse bricks' from their bricks'
+    /// ([`coarse_radiance`]), after them.
+    pub fn brick_radiance(&self, radiance: &[[f32; 3]]) -> Vec<BrickRadiance> {
+        let mut radiance = self.fine_radiance(radiance);
         let coarse = &self.asset.coarse;
         let fine = &radiance[..];
         let far: Vec<BrickRadiance> = (coarse.bricks.par_iter())
@@ -294,7 +329,7 @@ impl<'a> CpuRelighter<'a> {
     }
 
     /// Step 3 for the bricks.
-    fn fine_radiance(&self, irradiance: &[[f32; 3]]) -> Vec<BrickRadiance> {
+    fn fine_radiance(&self, radiance: &[[f32; 3]]) -> Vec<BrickRadiance> {
         let asset = self.asset;
         asset
             .bricks
@@ -306,12 +341,11 @@ impl<'a> CpuRelighter<'a> {
                 }
                 let range = b.first_surfel as usize..(b.first_surfel + b.surfel_count) as usize;
                 let mut weight = 0.0f32;
-                for (s, e) in asset.surfels[range.clone()].iter().zip(&irradiance[range]) {
+                for (s, l) in asset.surfels[range.clone()].iter().zip(&radiance[range]) {
                     for c in 0..3 {
-                        let l = s.emission[c] + s.albedo[c] * std::f32::consts::FRAC_1_PI * e[c];
-                        out.mean[c] += s.weight * l;
+                        out.mean[c] += s.weight * l[c];
                         for a in 0..3 {
-                            out.gradient[c][a] += s.gradient[a] * l;
+                            out.gradient[c][a] += s.gradient[a] * l[c];
                         }
                     }
                     weight += s.weight;

@@ -37,8 +37,6 @@ use prt_format::surface::{dominant_axis, near_entry, sky_term, SurfaceTerms, BLO
 use prt_format::Asset;
 use rayon::prelude::*;
 
-use std::f32::consts::FRAC_1_PI;
-
 use crate::sample::{Sample, VolumeSampler};
 use crate::settings::LookupSettings;
 
@@ -60,9 +58,9 @@ pub fn near_radiance(terms: &SurfaceTerms, group_radiance: &[[f32; 3]]) -> Vec<[
         .collect()
 }
 
-/// Per near group, the weighted mean radiance `emission + albedo / pi * E` of its surfels,
-/// `E` their irradiance (`irradiance`, per surfel): a brick's mean, side by side.
-pub fn group_radiance(asset: &Asset, irradiance: &[[f32; 3]]) -> Vec<[f32; 3]> {
+/// Per near group, the weighted mean of its surfels' radiance `radiance` (per surfel,
+/// `crate::Relit::surfel_radiance`): a brick's mean, side by side.
+pub fn group_radiance(asset: &Asset, radiance: &[[f32; 3]]) -> Vec<[f32; 3]> {
     asset
         .surface
         .group_surfels
@@ -70,9 +68,9 @@ pub fn group_radiance(asset: &Asset, irradiance: &[[f32; 3]]) -> Vec<[f32; 3]> {
         .map(|&[first, count]| {
             let range = first as usize..(first + count) as usize;
             let (mut sum, mut weight) = ([0.0f32; 3], 0.0f32);
-            for (s, e) in asset.surfels[range.clone()].iter().zip(&irradiance[range]) {
+            for (s, l) in asset.surfels[range.clone()].iter().zip(&radiance[range]) {
                 for c in 0..3 {
-                    sum[c] += s.weight * (s.emission[c] + s.albedo[c] * FRAC_1_PI * e[c]);
+                    sum[c] += s.weight * l[c];
                 }
                 weight += s.weight;
             }
@@ -121,14 +119,14 @@ pub struct SurfaceSampler<'a> {
 }
 
 impl<'a> SurfaceSampler<'a> {
-    /// The lookup of `asset` relit to `sh` (per probe) and surfel irradiance `irradiance`
-    /// (`crate::Relit::surfel_irradiance`) under a sky of mean radiance `sky`
+    /// The lookup of `asset` relit to `sh` (per probe) and surfel radiance `radiance`
+    /// (`crate::Relit::surfel_radiance`) under a sky of mean radiance `sky`
     /// (`crate::Relit::sky`); the trilinear weights take `lookup`'s normal bias, and the
     /// fallback is `lookup` itself.
     pub fn new(
         asset: &'a Asset,
         sh: &'a [ShRgb],
-        irradiance: &[[f32; 3]],
+        radiance: &[[f32; 3]],
         sky: [f32; 3],
         lookup: &LookupSettings,
     ) -> Self {
@@ -140,7 +138,7 @@ impl<'a> SurfaceSampler<'a> {
             asset,
             trilinear: VolumeSampler::for_asset(asset, sh, &trilinear),
             fallback: VolumeSampler::for_asset(asset, sh, lookup),
-            near: near_radiance(&asset.surface, &group_radiance(asset, irradiance)),
+            near: near_radiance(&asset.surface, &group_radiance(asset, radiance)),
             sky: match lookup.sky_terms {
                 true => sky.map(|l| std::f32::consts::PI * l),
                 false => [0.0; 3],
@@ -150,15 +148,9 @@ impl<'a> SurfaceSampler<'a> {
     }
 
     /// The lookup of `asset` as the CPU relight `relit` left it ([`Self::new`] with its SH,
-    /// surfel irradiance and sky).
+    /// surfel radiance and sky).
     pub fn for_relit(asset: &'a Asset, relit: &'a crate::Relit, lookup: &LookupSettings) -> Self {
-        Self::new(
-            asset,
-            &relit.sh,
-            &relit.surfel_irradiance,
-            relit.sky,
-            lookup,
-        )
+        Self::new(asset, &relit.sh, &relit.surfel_radiance, relit.sky, lookup)
     }
 
     /// The sample at `position` for a surface with unit normal `normal`.

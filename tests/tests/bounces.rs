@@ -48,12 +48,17 @@ fn settle(
     (runtime.read_probe_sh().unwrap(), updates)
 }
 
-/// GPU = CPU within 1e-4 of SH0 for 1, 2, 4 and 8 bounces on the Cornell fixture and every
-/// shared scene (sun, spot, point and sky), each bounce sampled through the engine's lookup,
-/// but for Sponza's coarse bricks (the default's far hits): within 5e-4 there. Measured: every
-/// case at most 3e-6 of its probe's SH0, but Sponza at 2 bounces 2.9e-4, in the blue channel of
-/// one probe only (its red and green agree to 7 digits; not traced further), and 2.1e-6 with
-/// far hits in their own bricks.
+/// GPU = CPU for 1, 2, 4 and 8 bounces on the Cornell fixture and every shared scene (sun,
+/// spot, point and sky), each bounce sampled through the engine's lookup: within 1e-4 of SH0 at
+/// one bounce (5e-4 for Sponza's coarse bricks, the default's far hits), 1e-3 beyond. Measured
+/// before radiance words: every case at most 3e-6 of its probe's SH0, but Sponza at 2 bounces
+/// 2.9e-4, in the blue channel of one probe only (its red and green agree to 7 digits; not
+/// traced further), and 2.1e-6 with far hits in their own bricks. Since radiance words
+/// (`prt_runtime::radiance_word`, 8-bit mantissas): one bounce at most 1.3e-6, beyond it up to
+/// 4.3e-4 (Cornell, 4 bounces). The fed-back irradiance differs from the CPU's by float
+/// rounding (hardware trilinear filtering), which now and then rounds a surfel's bounce word
+/// the other way: a step, up to 2^-8 of its radiance, and a small brick's surfel can carry a
+/// tenth of a probe's light.
 #[test]
 fn gpu_bounces_equal_the_cpu_bounce_by_bounce() {
     let (device, queue) = gpu_device();
@@ -97,7 +102,9 @@ fn gpu_bounces_equal_the_cpu_bounce_by_bounce() {
                 e(&gpu) / e(p)
             });
             report.push((name.clone(), n, w, gain));
-            let bound = if name.starts_with("sponza") && !asset.coarse.bricks.is_empty() {
+            let bound = if n > 1 {
+                1e-3
+            } else if name.starts_with("sponza") && !asset.coarse.bricks.is_empty() {
                 5e-4
             } else {
                 1e-4

@@ -32,7 +32,8 @@ fn coarse_radiance_is_the_fit_over_all_its_surfels() {
         .map(prt_runtime::lights::PreparedLight::new)
         .collect();
     let (irradiance, _) = relighter.direct_irradiance(&lights);
-    let radiance = relighter.brick_radiance(&irradiance);
+    let surfel_radiance = relighter.surfel_radiance(&irradiance, None);
+    let radiance = relighter.brick_radiance(&surfel_radiance);
     let fine = &radiance[..asset.bricks.len()];
     let mut worst = 0.0f64;
     for (i, c) in asset.coarse.bricks.iter().enumerate() {
@@ -46,7 +47,7 @@ fn coarse_radiance_is_the_fit_over_all_its_surfels() {
                 b.first_surfel as usize..(b.first_surfel + b.surfel_count) as usize
             })
             .collect();
-        let (mean, gradient) = fit(&asset, &irradiance, &surfels);
+        let (mean, gradient) = fit(&asset, &surfel_radiance, &surfels);
         let scale = mean.iter().fold(1e-3, |m: f64, v| m.max(v.abs()));
         let inverse_scale = 1.0 / f64::from(1u32 << c.level);
         for &s in &surfels {
@@ -65,19 +66,14 @@ fn coarse_radiance_is_the_fit_over_all_its_surfels() {
     assert!(worst < 1e-3, "worst relative difference {worst:e}");
 }
 
-/// The weighted mean and the regularised least-squares gradient of the surfels' radiance.
+/// The weighted mean and the regularised least-squares gradient of the surfels' radiance
+/// `surfel_radiance` (per surfel, as the runtime keeps it: `CpuRelighter::surfel_radiance`).
 fn fit(
     asset: &prt_format::Asset,
-    irradiance: &[[f32; 3]],
+    surfel_radiance: &[[f32; 3]],
     surfels: &[usize],
 ) -> ([f64; 3], [[f64; 3]; 3]) {
-    let radiance = |s: usize| -> [f64; 3] {
-        let f = &asset.surfels[s];
-        std::array::from_fn(|c| {
-            f64::from(f.emission[c])
-                + f64::from(f.albedo[c]) * std::f64::consts::FRAC_1_PI * f64::from(irradiance[s][c])
-        })
-    };
+    let radiance = |s: usize| surfel_radiance[s].map(f64::from);
     let pos = |s: usize| DVec3::from(asset.surfels[s].position.map(f64::from));
     let w = |s: usize| f64::from(asset.surfels[s].weight);
     let weight: f64 = surfels.iter().map(|&s| w(s)).sum();
@@ -227,11 +223,9 @@ fn bricks_split_at_a_wall_keep_the_dark_side_dark() {
     let lighting = load_rig(&fixture("levels/interior_32_rig.json")).expect("rig");
     let asset = bake(&scene, &BakeSettings::default());
     let relighter = CpuRelighter::new(&asset).expect("relighter");
-    let e = relighter
-        .relight(&lighting, 1)
-        .expect("relight")
-        .surfel_irradiance;
-    let models = relighter.brick_radiance(&e);
+    let relit = relighter.relight(&lighting, 1).expect("relight");
+    let (e, l) = (relit.surfel_irradiance, relit.surfel_radiance);
+    let models = relighter.brick_radiance(&l);
     let runs = prt_format::surface_key_runs(&asset.surface, &asset.bricks);
     let sum = |v: [f32; 3]| f64::from(v[0] + v[1] + v[2]);
     let radiance = |s: usize| {
@@ -257,7 +251,7 @@ fn bricks_split_at_a_wall_keep_the_dark_side_dark() {
                 q.first_surfel as usize..(q.first_surfel + q.surfel_count) as usize
             })
             .collect();
-        let (mean, gradient) = fit(&asset, &e, &run);
+        let (mean, gradient) = fit(&asset, &l, &run);
         let w = |s: usize| f64::from(asset.surfels[s].weight);
         let pos = |s: usize| DVec3::from(asset.surfels[s].position.map(f64::from));
         let mu = run.iter().map(|&s| pos(s) * w(s)).sum::<DVec3>()

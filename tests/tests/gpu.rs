@@ -861,7 +861,7 @@ fn compare_samplers(
     let cpu = SurfaceSampler::new(
         asset,
         &sh,
-        &relit.surfel_irradiance,
+        &relit.surfel_radiance,
         relit.sky,
         &settings.lookup,
     );

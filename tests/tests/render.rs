@@ -205,8 +205,8 @@ fn indirect_light_equals_the_cpu_lookup() {
         .unwrap()
         .relight(&lighting, 1)
         .unwrap();
-    let irradiance = &relit.surfel_irradiance;
-    let sampler = SurfaceSampler::new(&s.asset, &sh, irradiance, relit.sky, &rt.settings().lookup);
+    let radiance = &relit.surfel_radiance;
+    let sampler = SurfaceSampler::new(&s.asset, &sh, radiance, relit.sky, &rt.settings().lookup);
     let st = settings(16, Culling::Tiled, true);
     let (indirect, _) = render(&s, st, &lighting, View::Indirect, Some(&rt));
     let (albedo, _) = render(&s, st, &lighting, View::Albedo, None);

@@ -323,13 +323,7 @@ fn the_sky_term_gives_a_surface_its_own_sky() {
     assert_eq!(relit.sky, [1.0; 3]);
     let lookup = LookupSettings::default();
     let with = SurfaceSampler::for_relit(&asset, &relit, &lookup);
-    let without = SurfaceSampler::new(
-        &asset,
-        &relit.sh,
-        &relit.surfel_irradiance,
-        [0.0; 3],
-        &lookup,
-    );
+    let without = SurfaceSampler::new(&asset, &relit.sh, &relit.surfel_radiance, [0.0; 3], &lookup);
     let spacing = asset.header.grid.spacing;
     let traced: Vec<usize> = (0..asset.surfels.len())
         .filter(|&s| with.surfel(asset.surfels[s].position, asset.surfels[s].normal) == Some(s))

@@ -13,10 +13,12 @@
 //!    in the shadow-ray cache (two halves, written in turn).
 //! 2. **relight_surfels** (per surfel, per surfel chunk; for a dirty brick's): direct irradiance from the brick's
 //!    lights, shadowed by shadow rays through the asset's BVH, cached per pair and
-//!    re-traced only for lights that moved; other bricks' bits move to the new half.
+//!    re-traced only for lights that moved; other bricks' bits move to the new half. The
+//!    surfel's radiance is kept as one word ([`crate::radiance_word`]).
 //! 3. **bounce_surfels** (per surfel, per surfel chunk; built for multi-bounce only, run at the
 //!    start of a cycle): the volume's
-//!    irradiance at the surfel through the engine's `sample_irradiance`, as bounce radiance;
+//!    irradiance at the surfel through the engine's `sample_irradiance`, as bounce radiance
+//!    (a word, as stage 2's);
 //!    every front-face brick becomes dirty ([`Bounces`]).
 //! 4. **brick_radiance** (per brick, per surfel chunk; for a dirty brick, or every front-face
 //!    brick when a fixed bounce count restarts): mean and gradient of the brick's radiance, direct plus bounce,
@@ -290,6 +292,12 @@ pub struct PrtRuntime {
     gather_count: u32,
     /// Grid points the coarse levels fill (`resources::fill_list`).
     fill_count: u32,
+    /// Probes with data: the first entries of `probe_sh`, by slot.
+    slot_count: u32,
+    /// Per grid point, its entry in `probe_sh` ([`contract::probe_sh_entries`]).
+    sh_entries: Vec<Option<u32>>,
+    /// Entries of `probe_sh` in use.
+    sh_entry_count: u32,
     brick_count: u32,
     coarse_count: u32,
     surfel_spread_sq: f32,
@@ -394,12 +402,16 @@ impl PrtRuntime {
             .filter(|stage| !stage.bounces_only || settings.bounces.feeds_back())
             .map(|stage| Pipeline::new(device, &res, stage, &config, counts))
             .collect::<Result<_, GpuError>>()?;
+        let (sh_entries, sh_entry_count) = probe_sh_entries(&asset.probes);
         Ok(PrtRuntime {
             device: device.clone(),
             queue: queue.clone(),
             probe_count: asset.probes.len() as u32,
             gather_count: res.asset.gather_count,
             fill_count: res.asset.fill_count,
+            slot_count: asset.probes.iter().filter(|p| p.has_data()).count() as u32,
+            sh_entries,
+            sh_entry_count,
             brick_count: asset.bricks.len() as u32,
             coarse_count: asset.coarse.bricks.len() as u32,
             surfel_spread_sq: crate::lights::surfel_spread_sq(asset.header.settings.cell_size),
@@ -570,7 +582,7 @@ impl PrtRuntime {
             gather_count: self.gather_count,
             fill_count: self.fill_count,
             update_serial: self.serial,
-            _pad: 0,
+            slot_count: self.slot_count,
         }
     }
 

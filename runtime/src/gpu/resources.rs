@@ -311,7 +311,8 @@ impl StateBuffers {
             probe_dirty: alloc.zeroed("prt probe dirty", 4 * n_probes, none)?,
             probe_sh: alloc.zeroed(
                 "prt probe sh",
-                4 * u64::from(PROBE_SH_FLOATS) * n_probes,
+                4 * u64::from(PROBE_SH_FLOATS)
+                    * u64::from(probe_sh_entries(&asset.probes).1.max(1)),
                 copy_src,
             )?,
             counters: alloc.zeroed("prt counters", size_of::<Counters>() as u64, copy_src)?,

@@ -77,18 +77,24 @@ impl PrtRuntime {
         shaders::sample_irradiance_snippet(group)
     }
 
-    /// Blocks until the GPU is done and returns every probe's SH as last gathered.
+    /// Blocks until the GPU is done and returns every grid point's SH as last gathered or
+    /// filled (zero for a point without data).
     pub fn read_probe_sh(&self) -> Result<Vec<ShRgb>, GpuError> {
         let bytes = read_buffer(
             &self.device,
             &self.queue,
             &self.res.state.probe_sh,
-            4 * u64::from(crate::contract::PROBE_SH_FLOATS) * u64::from(self.probe_count.max(1)),
+            // At least one entry is allocated, so that the buffer binds.
+            4 * u64::from(crate::contract::PROBE_SH_FLOATS) * u64::from(self.sh_entry_count.max(1)),
         )?;
-        // `PROBE_SH_FLOATS` a probe, rgb by coefficient (`store_probe.wgsl`).
+        // `PROBE_SH_FLOATS` an entry, rgb by coefficient (`store_probe.wgsl`).
         let v: &[[f32; 3]] = bytemuck::cast_slice(&bytes);
-        Ok((0..self.probe_count as usize)
-            .map(|p| std::array::from_fn(|k| v[9 * p + k]))
+        Ok((self.sh_entries.iter())
+            .map(|e| {
+                e.map_or([[0.0; 3]; 9], |e| {
+                    std::array::from_fn(|k| v[9 * e as usize + k])
+                })
+            })
             .collect())
     }
 
