@@ -25,7 +25,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     }
     let e = sample_irradiance(surfel.position, surfel.normal);
     let l = surfel.albedo * (params.bounce_damping / PI) * e;
-    // A radiance word a surfel, as relight_surfels.wgsl writes surfel_radiance.
-    surfel_bounce[c] = pack_radiance(l);
+    // RADIANCE_WORDS a surfel, as relight_surfels.wgsl writes surfel_radiance.
+    let w = encode_radiance(l);
+    for (var i = 0u; i < RADIANCE_WORDS; i = i + 1u) {
+        surfel_bounce[RADIANCE_WORDS * c + i] = w[i];
+    }
     brick_dirty[surfel.brick] = 1u;
 }

@@ -20,10 +20,18 @@
 @group(0) @binding(9) var<storage, read_write> group_radiance: array<vec4<f32>>;
 
 fn surfel_radiance_at(s: u32) -> vec3<f32> {
-    // A radiance word a surfel (relight_surfels.wgsl, bounce_surfels.wgsl).
-    var l = unpack_radiance(surfel_radiance[s]);
+    // RADIANCE_WORDS a surfel (relight_surfels.wgsl, bounce_surfels.wgsl).
+    var direct = vec3<u32>(0u);
+    var bounce = vec3<u32>(0u);
+    for (var i = 0u; i < RADIANCE_WORDS; i = i + 1u) {
+        direct[i] = surfel_radiance[RADIANCE_WORDS * s + i];
+        if BOUNCES {
+            bounce[i] = surfel_bounce[RADIANCE_WORDS * s + i];
+        }
+    }
+    var l = decode_radiance(direct);
     if BOUNCES {
-        l = l + unpack_radiance(surfel_bounce[s]);
+        l = l + decode_radiance(bounce);
     }
     return l;
 }

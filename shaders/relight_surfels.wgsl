@@ -108,8 +108,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         shadow_cache[new_first + rank_new / 32u] = word;
     }
     let l = surfel.emission + surfel.albedo * (1.0 / PI) * e;
-    // A radiance word a surfel (pack_radiance, types.wgsl).
-    surfel_radiance[c] = pack_radiance(l);
+    // RADIANCE_WORDS a surfel (encode_radiance, types.wgsl).
+    let w = encode_radiance(l);
+    for (var i = 0u; i < RADIANCE_WORDS; i = i + 1u) {
+        surfel_radiance[RADIANCE_WORDS * c + i] = w[i];
+    }
     atomicAdd(&counters.surfels_relit, 1u);
     if rays > 0u {
         atomicAdd(&counters.shadow_rays, rays);

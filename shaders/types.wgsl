@@ -193,28 +193,47 @@ const PI: f32 = 3.14159265358979;
 // A surfel's radiance as one word: Ward's shared-exponent RGBE, three 8-bit mantissas (red from
 // bit 0) and the exponent byte at bit 24, whose bits << 23 are the mantissas' step. Exact
 // arithmetic, so it gives the word of its twin prt_runtime::radiance_word::pack_radiance
-// (which says why, and what it keeps).
+// (which says why, and what it keeps) for any finite colour.
 fn radiance_scale(e: i32) -> f32 {
     return bitcast<f32>(u32(135 - e) << 23u);
 }
 
 fn pack_radiance(rgb: vec3<f32>) -> u32 {
-    let c = select(vec3<f32>(0.0), min(rgb, vec3<f32>(3.40282347e38)), rgb > vec3<f32>(0.0));
+    // RADIANCE_MAX, 255 * 2^120, from its bits.
+    let top = vec3<f32>(bitcast<f32>(0x7f7f0000u));
+    let c = select(vec3<f32>(0.0), min(rgb, top), rgb > vec3<f32>(0.0));
     let largest = max(max(c.x, c.y), c.z);
-    if largest <= 0.0 {
+    if largest < 1.17549435e-38 {
         return 0u;
     }
     var e = max(i32(bitcast<u32>(largest) >> 23u) - 127, -100) + 1;
-    if floor(largest * radiance_scale(e) + 0.5) >= 256.0 {
+    if round(largest * radiance_scale(e)) >= 256.0 {
         e = e + 1;
     }
-    let m = min(vec3<u32>(floor(c * radiance_scale(e) + 0.5)), vec3<u32>(255u));
+    let m = vec3<u32>(round(c * radiance_scale(e)));
     return m.x | (m.y << 8u) | (m.z << 16u) | (u32(e + 119) << 24u);
 }
 
 fn unpack_radiance(w: u32) -> vec3<f32> {
     let step = bitcast<f32>((w >> 24u) << 23u);
     return vec3<f32>(vec3<u32>(w & 255u, (w >> 8u) & 255u, (w >> 16u) & 255u)) * step;
+}
+
+// A surfel's radiance as the RADIANCE_WORDS words the radiance buffers keep per surfel
+// (prt_runtime::radiance_word::words_per_surfel): a radiance word for packed surfels, three
+// f32 for the exact preset's f32 surfels (the unused words zero).
+fn encode_radiance(l: vec3<f32>) -> vec3<u32> {
+    if RADIANCE_WORDS == 1u {
+        return vec3<u32>(pack_radiance(l), 0u, 0u);
+    }
+    return bitcast<vec3<u32>>(l);
+}
+
+fn decode_radiance(w: vec3<u32>) -> vec3<f32> {
+    if RADIANCE_WORDS == 1u {
+        return unpack_radiance(w.x);
+    }
+    return bitcast<vec3<f32>>(w);
 }
 
 // Real SH up to L2, docs/conventions.md section 2.

@@ -78,11 +78,11 @@ pub struct GpuLight {
 const _: () = assert!(std::mem::size_of::<GpuLight>() == 64);
 
 /// Where each grid point's SH sits in the runtime's `probe_sh` buffer, in entries of
-/// [`PROBE_SH_FLOATS`], and how many entries there are: a probe with data at its slot
-/// (`prt_format::Probe::slot`; every valid probe has one), a filled grid point after them in
-/// grid order (as `fill_list` lists them), `None` for a point never written. Grid points without
-/// data need no room: they were 63% of the street level's 82,280 at 1 m.
-pub fn probe_sh_entries(probes: &[prt_format::Probe]) -> (Vec<Option<u32>>, u32) {
+/// [`PROBE_SH_FLOATS`]; how many entries there are; and how many of them are probes with data.
+/// A probe with data sits at its slot (`prt_format::Probe::slot`; every valid probe has one), a
+/// filled grid point after them in grid order (as `fill_list` lists them); a point with neither
+/// is `None` and takes no room (21,523 of the street level's 82,280 grid points at 1 m).
+pub fn probe_sh_entries(probes: &[prt_format::Probe]) -> (Vec<Option<u32>>, u32, u32) {
     let slots = probes.iter().filter(|p| p.has_data()).count() as u32;
     let mut filled = 0u32;
     let entries = probes
@@ -98,7 +98,7 @@ pub fn probe_sh_entries(probes: &[prt_format::Probe]) -> (Vec<Option<u32>>, u32)
             }
         })
         .collect();
-    (entries, slots + filled)
+    (entries, slots + filled, slots)
 }
 
 /// WGSL code of a light kind.

@@ -4,7 +4,8 @@
 //!    ([`PreparedLight::cull`]); for the lights left, every surfel gets the irradiance of
 //!    docs/conventions.md section 3, with a shadow ray through the asset's BVH
 //!    ([`crate::shadow_rays`]). Back-face bricks are black and skipped.
-//! 2. **Surfel radiance** `L = emission + albedo / pi * E`.
+//! 2. **Surfel radiance** `L = emission + albedo / pi * E`, kept as the GPU keeps it
+//!    ([`crate::radiance_word`]: a word for packed surfels, f32 for the exact preset's).
 //! 3. **Brick radiance**: the weighted mean of its surfels'.
 //! 4. **Gather**: probe SH9 = sum over its factors of transfer x brick radiance, plus the sky
 //!    term. Invalid probes are skipped (zero, flagged invalid); then the grid points a sparse
@@ -13,7 +14,8 @@
 //!    volume from the previous iteration, sampled at the surfel with its normal through the
 //!    engine's lookup (`sample_irradiance`: normal bias, validity and depth-moment weights), and
 //!    steps 2-4 repeat. `bounces = 1` is the one-bounce contract of
-//!    docs/conventions.md section 5, exactly when the bake did not merge surfels.
+//!    docs/conventions.md section 5, exactly when the bake did not merge surfels and kept them
+//!    in f32 (the exact preset).
 
 use glam::Vec3;
 use prt_format::coarse::{symmetric_times, CoarseBrick};
@@ -25,7 +27,7 @@ use crate::contract::MAX_STACK;
 use crate::lights::{
     brick_normal_bounds, surfel_spread_sq, CullReason, NormalBounds, PreparedLight,
 };
-use crate::radiance_word::quantize_radiance;
+use crate::radiance_word::kept_radiance;
 use crate::rig::Lighting;
 use crate::settings::{LookupSettings, MAX_BOUNCES};
 use crate::shadow_rays::lit;
@@ -289,24 +291,32 @@ impl<'a> CpuRelighter<'a> {
 
     /// Step 2: per surfel, its radiance as the GPU runtime keeps it: the direct radiance
     /// `emission + albedo / pi * E` from the direct irradiance `direct`, plus with bounces the
-    /// bounce radiance `albedo / pi * E` from the volume's irradiance `bounce`, each as a radiance
-    /// word ([`crate::radiance_word`]), decoded and summed as stage 4 does.
+    /// bounce radiance `albedo / pi * E` from the volume's irradiance `bounce`, each kept as the
+    /// asset's surfel precision says ([`crate::radiance_word`]: a radiance word for packed
+    /// surfels) and summed as stage 4 does.
     pub fn surfel_radiance(
         &self,
         direct: &[[f32; 3]],
         bounce: Option<&[[f32; 3]]>,
     ) -> Vec<[f32; 3]> {
         let surfels = &self.asset.surfels;
+        let precision = self.asset.header.settings.surfel_precision;
         (surfels.par_iter().enumerate())
             .map(|(i, s)| {
                 let e = direct[i];
-                let mut l = quantize_radiance(std::array::from_fn(|c| {
-                    s.emission[c] + s.albedo[c] * std::f32::consts::FRAC_1_PI * e[c]
-                }));
+                let mut l = kept_radiance(
+                    std::array::from_fn(|c| {
+                        s.emission[c] + s.albedo[c] * std::f32::consts::FRAC_1_PI * e[c]
+                    }),
+                    precision,
+                );
                 if let Some(b) = bounce {
-                    let more = quantize_radiance(std::array::from_fn(|c| {
-                        s.albedo[c] * std::f32::consts::FRAC_1_PI * b[i][c]
-                    }));
+                    let more = kept_radiance(
+                        std::array::from_fn(|c| {
+                            s.albedo[c] * std::f32::consts::FRAC_1_PI * b[i][c]
+                        }),
+                        precision,
+                    );
                     l = std::array::from_fn(|c| l[c] + more[c]);
                 }
                 l

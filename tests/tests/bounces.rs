@@ -54,11 +54,11 @@ fn settle(
 /// before radiance words: every case at most 3e-6 of its probe's SH0, but Sponza at 2 bounces
 /// 2.9e-4, in the blue channel of one probe only (its red and green agree to 7 digits; not
 /// traced further), and 2.1e-6 with far hits in their own bricks. Since radiance words
-/// (`prt_runtime::radiance_word`, 8-bit mantissas): one bounce at most 1.3e-6, beyond it up to
-/// 4.3e-4 (Cornell, 4 bounces). The fed-back irradiance differs from the CPU's by float
-/// rounding (hardware trilinear filtering), which now and then rounds a surfel's bounce word
-/// the other way: a step, up to 2^-8 of its radiance, and a small brick's surfel can carry a
-/// tenth of a probe's light.
+/// (`prt_runtime::radiance_word`, 8-bit mantissas; these default bakes have packed surfels):
+/// one bounce at most 1.3e-6, beyond it up to 4.3e-4 (Cornell, 4 bounces). The fed-back
+/// irradiance differs from the CPU's by float rounding (hardware trilinear filtering), which now
+/// and then rounds a surfel's bounce word the other way: a step, up to 2^-7 of its largest
+/// channel, and a small brick's surfel can carry a tenth of a probe's light.
 #[test]
 fn gpu_bounces_equal_the_cpu_bounce_by_bounce() {
     let (device, queue) = gpu_device();

@@ -402,14 +402,14 @@ impl PrtRuntime {
             .filter(|stage| !stage.bounces_only || settings.bounces.feeds_back())
             .map(|stage| Pipeline::new(device, &res, stage, &config, counts))
             .collect::<Result<_, GpuError>>()?;
-        let (sh_entries, sh_entry_count) = probe_sh_entries(&asset.probes);
+        let (sh_entries, sh_entry_count, slot_count) = probe_sh_entries(&asset.probes);
         Ok(PrtRuntime {
             device: device.clone(),
             queue: queue.clone(),
             probe_count: asset.probes.len() as u32,
             gather_count: res.asset.gather_count,
             fill_count: res.asset.fill_count,
-            slot_count: asset.probes.iter().filter(|p| p.has_data()).count() as u32,
+            slot_count,
             sh_entries,
             sh_entry_count,
             brick_count: asset.bricks.len() as u32,

@@ -284,6 +284,7 @@ impl StateBuffers {
         let n_probes = asset.probes.len() as u64;
         let n_groups = asset.surface.group_surfels.len() as u64;
         let stride = u64::from(mask_stride);
+        let (_, sh_entries, _) = probe_sh_entries(&asset.probes);
         let cache_capacity = settings
             .shadow_cache_words
             .unwrap_or(stride.min(2) * asset.surfels.len() as u64)
@@ -311,8 +312,7 @@ impl StateBuffers {
             probe_dirty: alloc.zeroed("prt probe dirty", 4 * n_probes, none)?,
             probe_sh: alloc.zeroed(
                 "prt probe sh",
-                4 * u64::from(PROBE_SH_FLOATS)
-                    * u64::from(probe_sh_entries(&asset.probes).1.max(1)),
+                4 * u64::from(PROBE_SH_FLOATS) * u64::from(sh_entries.max(1)),
                 copy_src,
             )?,
             counters: alloc.zeroed("prt counters", size_of::<Counters>() as u64, copy_src)?,

@@ -14,7 +14,8 @@ use crate::contract;
 pub struct ShaderConfig {
     /// Storage of the asset's factors.
     pub factors: prt_format::TransferPrecision,
-    /// Storage of the asset's surfels (`SURFEL_WORDS`, `shaders/surfel.wgsl`).
+    /// Storage of the asset's surfels (`SURFEL_WORDS`, `shaders/surfel.wgsl`), and so of their
+    /// radiance (`RADIANCE_WORDS`, [`crate::radiance_word::words_per_surfel`]).
     pub surfels: prt_format::SurfelPrecision,
     /// Volume texel format: `rgba16float` or `rgba32float`.
     pub volume_format: &'static str,
@@ -33,10 +34,11 @@ pub fn prelude(config: &ShaderConfig) -> String {
         s.push_str(&format!("const {name} = {value};\n"));
     }
     s.push_str(&format!(
-        "const FACTOR_WORDS = {}u;\nconst FACTOR_FORMAT = {}u;\nconst SURFEL_WORDS = {}u;\nconst MASK_STRIDE = {}u;\nconst BOUNCES = {};\n",
+        "const FACTOR_WORDS = {}u;\nconst FACTOR_FORMAT = {}u;\nconst SURFEL_WORDS = {}u;\nconst RADIANCE_WORDS = {}u;\nconst MASK_STRIDE = {}u;\nconst BOUNCES = {};\n",
         contract::factor_words(config.factors),
         contract::factor_format_code(config.factors),
         config.surfels.words(),
+        crate::radiance_word::words_per_surfel(config.surfels),
         config.mask_stride,
         config.bounces
     ));

@@ -51,8 +51,8 @@ pub(super) fn surfel_buffers(
     let none = wgpu::BufferUsages::empty();
     let surfel_chunks = surfel_chunks(asset, alloc.chunk_bytes(settings.max_surfel_chunk_bytes))?;
     let feeds_back = settings.bounces.feeds_back();
-    // A radiance word a surfel (`crate::radiance_word`).
-    let radiance_bytes = 4;
+    let precision = asset.header.settings.surfel_precision;
+    let radiance_bytes = 4 * u64::from(crate::radiance_word::words_per_surfel(precision));
     // Per chunk: its surfels, their direct radiance and their bounce radiance.
     let chunk_surfels: Vec<[wgpu::Buffer; 4]> = surfel_chunks
         .iter()
