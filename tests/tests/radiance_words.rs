@@ -2,7 +2,7 @@
 //! (`prt_runtime::radiance_word`), word for word: the CPU reference averages the words the GPU
 //! would write only if both sides round every colour the same way.
 
-use prt_runtime::gpu::shaders::{prelude, ShaderConfig};
+use prt_runtime::gpu::shaders::light_model_source;
 use prt_runtime::gpu::{read_buffer, wgpu};
 use prt_runtime::radiance_word::{pack_radiance, unpack_radiance, RADIANCE_MAX};
 use prt_tests::gpu_device;
@@ -57,15 +57,8 @@ fn colours() -> Vec<[f32; 3]> {
 #[test]
 fn wgsl_words_equal_the_rust_words() {
     let (device, queue) = gpu_device();
-    let config = ShaderConfig {
-        factors: prt_format::TransferPrecision::U8,
-        surfels: prt_format::SurfelPrecision::Packed,
-        volume_format: "rgba16float",
-        subgroups: false,
-        mask_stride: 1,
-        bounces: false,
-    };
-    let source = format!("{}{}{KERNEL}", prelude(&config), prt_shaders::TYPES);
+    // The prelude and types.wgsl, as every stage starts (with the light model after them).
+    let source = format!("{}{KERNEL}", light_model_source());
     let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some("radiance words"),
         source: wgpu::ShaderSource::Wgsl(source.into()),
