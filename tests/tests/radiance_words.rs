@@ -24,8 +24,10 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
 ";
 
 /// Colours at every scale a rig may set (2^-110 to 2^127), the largest channel anywhere in its
-/// octave, the others from zero to it; plus the cases at the edges: black, channels a hair
-/// under a rounding tie, a largest channel that carries into the next exponent, the clamp.
+/// octave, the others from zero to it; plus the edges: black, exact rounding ties (a largest
+/// channel of 1 has steps of 2^-7: 2.5 and 3.5 steps round to even, 2 and 4; 0.5 and 1.5 to
+/// 0 and 2), a largest channel that carries into the next exponent, channels at and beyond
+/// the clamp (f32::MAX; WGSL may assume floats finite, so no infinity), a subnormal colour.
 fn colours() -> Vec<[f32; 3]> {
     let mut state = 0x9e37_79b9_7f4a_7c15u64;
     let mut next = || {
@@ -34,15 +36,19 @@ fn colours() -> Vec<[f32; 3]> {
             .wrapping_add(1);
         (state >> 40) as f32 / (1u64 << 24) as f32
     };
+    let step = 1.0 / 128.0;
     let mut out = vec![
         [0.0; 3],
         [1.0, 0.5, 0.25],
+        [1.0, 2.5 * step, 3.5 * step],
+        [1.0, 0.5 * step, 1.5 * step],
         [0.9995, 0.0, 0.0],
         [0.9999, 0.9999, 0.9999],
         [RADIANCE_MAX, 1.0, 0.0],
+        [f32::MAX, RADIANCE_MAX * 0.5, 1.0],
         [RADIANCE_MAX * 0.999, RADIANCE_MAX * 0.5, 0.0],
-        [1.0, 0.5 / 256.0 - 1e-9, 1.5 / 256.0],
         [1e-31, 1e-32, 0.0],
+        [1e-39, 0.0, 5e-40],
     ];
     for _ in 0..100_000 {
         let octave = (next() * 237.0) as i32 - 110;

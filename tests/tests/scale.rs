@@ -180,8 +180,8 @@ fn relit_sh_far_from_the_origin() {
 /// Brightness is linear: every light's intensity and the sky times k from about 1e-6 to 1e7
 /// gives the SH times k, finite: to within float rounding for k a power of two (the surfels'
 /// radiance words, `prt_runtime::radiance_word`, then shift their exponent and nothing else),
-/// and to within their rounding, a step of up to 2^-7 of a surfel's largest channel, for k a
-/// power of ten (measured up to 2.5e-3 of a probe's SH0 on this coarse grid). Relative error
+/// and to within their rounding, a step of up to 1/127 of a surfel's largest channel, for k a
+/// power of ten (measured 2.4-3.8e-3 of a probe's SH0 on this coarse grid). Relative error
 /// per decade printed.
 #[test]
 fn relit_sh_are_linear_in_brightness() {

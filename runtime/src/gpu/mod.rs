@@ -14,11 +14,12 @@
 //! 2. **relight_surfels** (per surfel, per surfel chunk; for a dirty brick's): direct irradiance from the brick's
 //!    lights, shadowed by shadow rays through the asset's BVH, cached per pair and
 //!    re-traced only for lights that moved; other bricks' bits move to the new half. The
-//!    surfel's radiance is kept as one word ([`crate::radiance_word`]).
+//!    surfel's radiance is kept as one word ([`crate::radiance_word`]; three f32 for the exact
+//!    preset's f32 surfels).
 //! 3. **bounce_surfels** (per surfel, per surfel chunk; built for multi-bounce only, run at the
 //!    start of a cycle): the volume's
 //!    irradiance at the surfel through the engine's `sample_irradiance`, as bounce radiance
-//!    (a word, as stage 2's);
+//!    (kept as stage 2 keeps its radiance);
 //!    every front-face brick becomes dirty ([`Bounces`]).
 //! 4. **brick_radiance** (per brick, per surfel chunk; for a dirty brick, or every front-face
 //!    brick when a fixed bounce count restarts): mean and gradient of the brick's radiance, direct plus bounce,
@@ -389,7 +390,8 @@ impl PrtRuntime {
             mask_stride,
             bounces: settings.bounces.feeds_back(),
         };
-        let res = Resources::new(device, asset, &settings, mask_stride)?;
+        let (sh_entries, sh_entry_count, slot_count) = probe_sh_entries(&asset.probes);
+        let res = Resources::new(device, asset, &settings, mask_stride, sh_entry_count)?;
         let counts = Counts {
             bricks: asset.bricks.len() as u32,
             probes: asset.probes.len() as u32,
@@ -402,7 +404,6 @@ impl PrtRuntime {
             .filter(|stage| !stage.bounces_only || settings.bounces.feeds_back())
             .map(|stage| Pipeline::new(device, &res, stage, &config, counts))
             .collect::<Result<_, GpuError>>()?;
-        let (sh_entries, sh_entry_count, slot_count) = probe_sh_entries(&asset.probes);
         Ok(PrtRuntime {
             device: device.clone(),
             queue: queue.clone(),

@@ -118,12 +118,14 @@ pub struct StateBuffers {
 impl Resources {
     /// Uploads `asset` and allocates every buffer and texture for `settings` (already checked
     /// by the caller), within `device`'s limits: past them a [`GpuError::Limit`] names the
-    /// array, its size and the limit.
+    /// array, its size and the limit. `probe_sh` gets `sh_entries` entries
+    /// ([`probe_sh_entries`]).
     pub fn new(
         device: &wgpu::Device,
         asset: &Asset,
         settings: &RuntimeSettings,
         mask_stride: u32,
+        sh_entries: u32,
     ) -> Result<Resources, GpuError> {
         let g = asset.header.grid;
         let max_binding = check_limits(&device.limits(), &g)?;
@@ -134,7 +136,7 @@ impl Resources {
         let (chunks, chunk_factors, chunk_uniforms) = factor_buffers(&alloc, asset, settings)?;
         let (surfel_chunks, chunk_surfels) = surfel_buffers(&alloc, asset, settings)?;
         let asset_buffers = AssetBuffers::new(&alloc, asset, settings.equirect_sky)?;
-        let state = StateBuffers::new(&alloc, asset, settings, mask_stride)?;
+        let state = StateBuffers::new(&alloc, asset, settings, mask_stride, sh_entries)?;
         let (textures, views, sampler) = volume(device, &g, settings);
         let info = volume_info(asset, settings);
         let volume_info = alloc.uniform("prt volume info", &info);
@@ -270,12 +272,13 @@ fn probe_list(asset: &Asset, keep: fn(&prt_format::Probe) -> bool) -> (Vec<u32>,
 
 impl StateBuffers {
     /// Allocates the runtime's state, zeroed (every brick uncached), sized for `asset` and
-    /// `settings`.
+    /// `settings`, with `sh_entries` entries of `probe_sh`.
     fn new(
         alloc: &Alloc,
         asset: &Asset,
         settings: &RuntimeSettings,
         mask_stride: u32,
+        sh_entries: u32,
     ) -> Result<StateBuffers, GpuError> {
         let none = wgpu::BufferUsages::empty();
         let n_bricks = asset.bricks.len() as u64;
@@ -284,7 +287,6 @@ impl StateBuffers {
         let n_probes = asset.probes.len() as u64;
         let n_groups = asset.surface.group_surfels.len() as u64;
         let stride = u64::from(mask_stride);
-        let (_, sh_entries, _) = probe_sh_entries(&asset.probes);
         let cache_capacity = settings
             .shadow_cache_words
             .unwrap_or(stride.min(2) * asset.surfels.len() as u64)
