@@ -525,7 +525,7 @@ fn plot_family(rows: &[Row], args: &FrontierArgs) -> String {
     plot::svg(
         "The level family: surface error against runtime bytes and bake time",
         &format!(
-            "median of {} levels per setting; labels: spacing relative to each level's default; uniform grid",
+            "median of {} levels per setting; labels: spacing relative to each level's default; settings not marked sparse: the uniform grid",
             levels.len()
         ),
         &by_knob.panels("open-point error, median level"),
@@ -556,7 +556,7 @@ fn plot_case(rows: &[Row], case: &str) -> String {
     }
     plot::svg(
         &format!("{case}: surface error against runtime bytes and bake time"),
-        "labels: probe spacing; uniform grid",
+        "labels: probe spacing; settings not marked sparse: the uniform grid",
         &by_knob.panels("open-point error"),
     )
 }
