@@ -193,25 +193,26 @@ const PI: f32 = 3.14159265358979;
 // A surfel's radiance as one word: Ward's shared-exponent RGBE, three 8-bit mantissas (red from
 // bit 0) and the exponent byte at bit 24, whose bits << 23 are the mantissas' step. Exact
 // arithmetic, so it gives the word of its twin prt_runtime::radiance_word::pack_radiance
-// (which says why, and what it keeps) for any finite colour.
+// (which says why, and what it keeps; the RADIANCE_ constants are its) for any finite colour.
+// 2^(8 - e): the reciprocal of the step of exponent byte e + RADIANCE_EXPONENT_BIAS.
 fn radiance_scale(e: i32) -> f32 {
-    return bitcast<f32>(u32(135 - e) << 23u);
+    return bitcast<f32>(u32(254 - (e + RADIANCE_EXPONENT_BIAS)) << 23u);
 }
 
 fn pack_radiance(rgb: vec3<f32>) -> u32 {
-    // RADIANCE_MAX, 255 * 2^120, from its bits.
-    let top = vec3<f32>(bitcast<f32>(0x7f7f0000u));
+    let top = vec3<f32>(bitcast<f32>(RADIANCE_MAX_BITS));
     let c = select(vec3<f32>(0.0), min(rgb, top), rgb > vec3<f32>(0.0));
     let largest = max(max(c.x, c.y), c.z);
-    if largest < 1.17549435e-38 {
+    // Below the smallest normal float (its bits 0x00800000): black.
+    if largest < bitcast<f32>(0x00800000u) {
         return 0u;
     }
-    var e = max(i32(bitcast<u32>(largest) >> 23u) - 127, -100) + 1;
+    var e = max(i32(bitcast<u32>(largest) >> 23u) - 127, RADIANCE_LOWEST_LOG2) + 1;
     if round(largest * radiance_scale(e)) >= 256.0 {
         e = e + 1;
     }
     let m = vec3<u32>(round(c * radiance_scale(e)));
-    return m.x | (m.y << 8u) | (m.z << 16u) | (u32(e + 119) << 24u);
+    return m.x | (m.y << 8u) | (m.z << 16u) | (u32(e + RADIANCE_EXPONENT_BIAS) << 24u);
 }
 
 fn unpack_radiance(w: u32) -> vec3<f32> {

@@ -35,6 +35,16 @@ pub const MAX_LIGHTS: usize = 4096;
 /// them; a vec4 per coefficient spent a quarter on padding). Entries are
 /// [`probe_sh_entries`]'s, not grid points.
 pub const PROBE_SH_FLOATS: u32 = 27;
+/// Radiance words (`crate::radiance_word`, `pack_radiance` in `shaders/types.wgsl`): what
+/// turns `e` (a colour's largest channel is below 2^e) into the stored exponent byte, whose
+/// f32 bits `byte << 23` are the 8-bit mantissas' step `2^(e - 8)`.
+pub const RADIANCE_EXPONENT_BIAS: i32 = 119;
+/// Radiance words: the lowest `floor(log2)` of a colour's largest channel the exponent follows;
+/// below it the step stays 2^-107, so that subnormals (which a GPU may flush) round to zero.
+pub const RADIANCE_LOWEST_LOG2: i32 = -100;
+/// Radiance words: f32 bits of the largest channel a word holds, `255 * 2^120`; brighter
+/// channels are clamped to it, so that no word decodes to infinity.
+pub const RADIANCE_MAX_BITS: u32 = 0x7f7f_0000;
 /// A brick without room in the shadow-ray cache (its lights are traced whenever it is relit).
 pub const NO_CACHE: u32 = u32::MAX;
 /// Workgroups along x of every dispatch; more work continues along y.
@@ -371,6 +381,12 @@ pub fn wgsl_constants() -> Vec<(&'static str, String)> {
         ("WORKGROUP", format!("{WORKGROUP}u")),
         ("NO_CACHE", format!("{NO_CACHE}u")),
         ("PROBE_SH_FLOATS", format!("{PROBE_SH_FLOATS}u")),
+        (
+            "RADIANCE_EXPONENT_BIAS",
+            format!("{RADIANCE_EXPONENT_BIAS}i"),
+        ),
+        ("RADIANCE_LOWEST_LOG2", format!("{RADIANCE_LOWEST_LOG2}i")),
+        ("RADIANCE_MAX_BITS", format!("{RADIANCE_MAX_BITS:#x}u")),
         ("GATHER_WORKGROUP", format!("{GATHER_WORKGROUP}u")),
         ("BVH_STACK", format!("{MAX_STACK}u")),
         (

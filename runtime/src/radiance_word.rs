@@ -28,17 +28,11 @@
 
 use prt_format::SurfelPrecision;
 
-/// Lowest `floor(log2)` of a colour's largest channel the exponent follows: below it the step
-/// stays 2^-107, so that subnormals (which a GPU may flush) always round to zero.
-const LOWEST_LOG2: i32 = -100;
+use crate::contract::{RADIANCE_EXPONENT_BIAS, RADIANCE_LOWEST_LOG2, RADIANCE_MAX_BITS};
 
-/// What turns `e` (the largest channel is below 2^e) into the stored exponent byte, whose
-/// f32 bits `byte << 23` are the step `2^(e - 8)` of the mantissas.
-const EXPONENT_BIAS: i32 = 119;
-
-/// The largest channel value a word holds, `255 * 2^120` (f32 bits `0x7f7f0000`): brighter
+/// The largest channel value a word holds, `255 * 2^120` ([`RADIANCE_MAX_BITS`]): brighter
 /// channels are clamped to it, so that no word decodes to infinity.
-pub const RADIANCE_MAX: f32 = f32::from_bits(0x7f7f_0000);
+pub const RADIANCE_MAX: f32 = f32::from_bits(RADIANCE_MAX_BITS);
 
 /// Words per surfel of the runtime's radiance buffers for surfels stored at `precision`: a
 /// radiance word for packed surfels, three f32 for the exact preset's f32 surfels.
@@ -49,9 +43,10 @@ pub fn words_per_surfel(precision: SurfelPrecision) -> u32 {
     }
 }
 
-/// `2^(8 - e)`, from its bits (exact).
+/// `2^(8 - e)`, the reciprocal of the step of exponent byte `e + RADIANCE_EXPONENT_BIAS`:
+/// its exponent field is 254 less that byte (exact).
 fn scale(e: i32) -> f32 {
-    f32::from_bits(((135 - e) as u32) << 23)
+    f32::from_bits(((254 - (e + RADIANCE_EXPONENT_BIAS)) as u32) << 23)
 }
 
 /// `rgb` as a radiance word: negative and NaN channels as 0, channels above [`RADIANCE_MAX`]
@@ -62,12 +57,12 @@ pub fn pack_radiance(rgb: [f32; 3]) -> u32 {
     if largest < f32::MIN_POSITIVE {
         return 0;
     }
-    let mut e = ((largest.to_bits() >> 23) as i32 - 127).max(LOWEST_LOG2) + 1;
+    let mut e = ((largest.to_bits() >> 23) as i32 - 127).max(RADIANCE_LOWEST_LOG2) + 1;
     if (largest * scale(e)).round_ties_even() >= 256.0 {
         e += 1;
     }
     let m = c.map(|v| (v * scale(e)).round_ties_even() as u32);
-    m[0] | m[1] << 8 | m[2] << 16 | ((e + EXPONENT_BIAS) as u32) << 24
+    m[0] | m[1] << 8 | m[2] << 16 | ((e + RADIANCE_EXPONENT_BIAS) as u32) << 24
 }
 
 /// The colour of a radiance word (as `unpack_radiance` in `shaders/types.wgsl` decodes it).
@@ -93,7 +88,8 @@ mod tests {
         kept_radiance(rgb, SurfelPrecision::Packed)
     }
 
-    /// Every channel within 1/255 of the largest, at every scale a rig may set.
+    /// Every channel within 2^-8 of the largest, at every scale a rig may set (none of these
+    /// colours carries into the next exponent, where the bound is 1/255).
     #[test]
     fn words_keep_radiance_to_half_a_step_at_any_scale() {
         let mut worst = 0.0f32;
