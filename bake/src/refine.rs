@@ -252,11 +252,10 @@ fn hidden_corners(asset: &Asset, bvh: &SceneBvh, p: usize) -> u32 {
         .collect();
     let dirs: Vec<Vec3> = to.iter().map(|&(_, d)| d).collect();
     // Rays of their corner's length: a hit before `t = 1` stands between.
-    let hits = bvh.closest_hits(from, &dirs, 1.0);
-    to.iter()
-        .zip(hits)
-        .filter(|(_, hit)| hit.is_some())
-        .fold(0, |mask, (&(c, _), _)| mask | 1 << c)
+    let blocked = bvh.occluded(from, &dirs, 1.0);
+    (to.iter().enumerate())
+        .filter(|&(j, _)| blocked >> j & 1 == 1)
+        .fold(0, |mask, (_, &(c, _))| mask | 1 << c)
 }
 
 /// Probe `p`'s irradiance at the six axis normals under each test lighting.

@@ -87,7 +87,7 @@ use rayon::prelude::*;
 
 use crate::accel::bvh::SceneBvh;
 use crate::accel::bvh8::PACKET;
-use crate::surface_terms::{cosine_spiral, ray_origin};
+use crate::surface_terms::{cosine_spiral, ray_origin, spiral_order};
 
 /// Sky rays per surfel.
 pub const SKY_RAYS: u32 = 256;
@@ -115,6 +115,7 @@ pub fn sky_terms(asset: &Asset, bvh: &SceneBvh) -> Vec<u32> {
         return Vec::new();
     }
     let transfer = grid_transfer(asset);
+    let order = spiral_order(SKY_RAYS);
     // Per brick, its key's centre probe, which its surfels' centres are stored from.
     let grid = &asset.header.grid;
     let centres: Vec<[i32; 3]> = (asset.bricks.iter())
@@ -130,7 +131,7 @@ pub fn sky_terms(asset: &Asset, bvh: &SceneBvh) -> Vec<u32> {
             }
             let key_centre = centres[asset.surfels[s].brick as usize];
             let t = interpolated_transfer(asset, &transfer, s, key_centre);
-            let (v, variance, cosine) = sky_view(asset, bvh, &t, s);
+            let (v, variance, cosine) = sky_view(asset, bvh, &order, &t, s);
             let probes = probes_sky(asset, &t, s);
             let n = SKY_RAYS as f32;
             let q = v.max(probes).clamp(1.0 / n, 1.0);
@@ -210,8 +211,16 @@ fn interpolated_transfer(
 
 /// `v` of surfel `s` (module docs: the share of its cosine-weighted hemisphere that sees the
 /// sky, with the probes' sky `t` as control variate), clamped to [0, 1], the variance of its
-/// mean over the rays, and the control variate's integral `A(n) . t`.
-fn sky_view(asset: &Asset, bvh: &SceneBvh, t: &[f32; SH_COUNT], s: usize) -> (f32, f32, f32) {
+/// mean over the rays, and the control variate's integral `A(n) . t`. The rays are traced in
+/// packets of neighbouring directions (`order`, [`spiral_order`]) and summed in spiral order,
+/// so the packets change the time, not the bits.
+fn sky_view(
+    asset: &Asset,
+    bvh: &SceneBvh,
+    order: &[u32],
+    t: &[f32; SH_COUNT],
+    s: usize,
+) -> (f32, f32, f32) {
     let surfel = &asset.surfels[s];
     let (p, n) = (
         Vec3::from(surfel.position),
@@ -228,16 +237,21 @@ fn sky_view(asset: &Asset, bvh: &SceneBvh, t: &[f32; SH_COUNT], s: usize) -> (f3
     let dirs: Vec<Vec3> = (0..SKY_RAYS)
         .map(|k| cosine_spiral(k, SKY_RAYS, tx, ty, n))
         .collect();
-    let (mut sum, mut square) = (0.0f32, 0.0f32);
-    for packet in dirs.chunks(PACKET) {
-        let hits = bvh.closest_hits(o, packet, f32::INFINITY);
-        for (d, hit) in packet.iter().zip(&hits) {
-            let y = prt_format::sh::basis(d.to_array());
-            let probes: f32 = (0..SH_COUNT).map(|k| y[k] * t[k]).sum();
-            let x = f32::from(u8::from(hit.is_none())) - probes;
-            sum += x;
-            square += x * x;
+    let mut escaped = [false; SKY_RAYS as usize];
+    for packet in order.chunks(PACKET) {
+        let ray: Vec<Vec3> = packet.iter().map(|&k| dirs[k as usize]).collect();
+        let blocked = bvh.occluded(o, &ray, f32::INFINITY);
+        for (j, &k) in packet.iter().enumerate() {
+            escaped[k as usize] = blocked >> j & 1 == 0;
         }
+    }
+    let (mut sum, mut square) = (0.0f32, 0.0f32);
+    for (d, &escaped) in dirs.iter().zip(&escaped) {
+        let y = prt_format::sh::basis(d.to_array());
+        let probes: f32 = (0..SH_COUNT).map(|k| y[k] * t[k]).sum();
+        let x = f32::from(u8::from(escaped)) - probes;
+        sum += x;
+        square += x * x;
     }
     let rays = SKY_RAYS as f32;
     let mean = sum / rays;

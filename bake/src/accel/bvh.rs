@@ -243,6 +243,15 @@ impl SceneBvh {
             .map(|hit| self.unscaled(hit))
     }
 
+    /// Which of up to `PACKET` rays from one origin hit anything within `tmax` (bit `k` for ray
+    /// `k`): exactly those [`SceneBvh::closest_hits`] finds a hit for, each stopped at its
+    /// first (`Bvh8::occluded`). For visibility: shadow rays, sky rays, probe-to-probe segments.
+    #[inline]
+    pub fn occluded(&self, origin: Vec3, dirs: &[Vec3], tmax: f32) -> u32 {
+        self.bvh8
+            .occluded(origin * self.scale, dirs, tmax * self.scale)
+    }
+
     /// A hit of the traced frame, its distance back in world units.
     fn unscaled(&self, hit: Option<(u32, f32)>) -> Option<TriangleHit> {
         hit.map(|(triangle, t)| TriangleHit {

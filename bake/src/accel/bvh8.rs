@@ -257,43 +257,56 @@ impl Bvh8 {
         dirs: &[Vec3],
         tmax: f32,
     ) -> [Option<(u32, f32)>; PACKET] {
+        let p = self.traced::<false>(origin, dirs, tmax);
+        std::array::from_fn(|k| p.hit(k))
+    }
+
+    /// Which of up to `PACKET` rays from `origin` along `dirs` hit anything within `tmax`: bit
+    /// `k` for ray `k`, set exactly when [`Bvh8::closest_hits`] finds ray `k` a hit. A visibility
+    /// test (shadow or any-hit ray) needs no more, and stops a ray at the first triangle it
+    /// hits instead of searching on for a nearer one. Until its first hit a ray visits the same
+    /// nodes in the same order as the closest-hit search (its own distance alone decides what
+    /// it enters), so the two agree on whether there is one (`tests`).
+    pub fn occluded(&self, origin: Vec3, dirs: &[Vec3], tmax: f32) -> u32 {
+        let p = self.traced::<true>(origin, dirs, tmax);
+        (0..dirs.len())
+            .filter(|&k| p.hit[k] != u32::MAX)
+            .fold(0, |mask, k| mask | 1 << k)
+    }
+
+    /// The traced packet (closest hits, or with `ANY` each ray's first), in the copy for the
+    /// CPU's instruction set.
+    fn traced<const ANY: bool>(&self, origin: Vec3, dirs: &[Vec3], tmax: f32) -> Packet {
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx") {
             // SAFETY: the CPU has AVX.
-            return unsafe { self.closest_hits_avx(origin, dirs, tmax) };
+            return unsafe { self.traced_avx::<ANY>(origin, dirs, tmax) };
         }
-        self.closest_hits_in(origin, dirs, tmax)
+        self.traced_in::<ANY>(origin, dirs, tmax)
     }
 
-    /// [`Bvh8::closest_hits`] compiled for AVX (a node's eight boxes in one vector). The
-    /// results are the same bits: the same IEEE operations, lane for lane.
+    /// [`Bvh8::traced`] compiled for AVX (a node's eight boxes in one vector). The results
+    /// are the same bits: the same IEEE operations, lane for lane.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx")]
-    fn closest_hits_avx(
-        &self,
-        origin: Vec3,
-        dirs: &[Vec3],
-        tmax: f32,
-    ) -> [Option<(u32, f32)>; PACKET] {
-        self.closest_hits_in(origin, dirs, tmax)
+    fn traced_avx<const ANY: bool>(&self, origin: Vec3, dirs: &[Vec3], tmax: f32) -> Packet {
+        self.traced_in::<ANY>(origin, dirs, tmax)
     }
 
-    /// The body of [`Bvh8::closest_hits`], inlined into each instruction set's copy.
+    /// The body of [`Bvh8::traced`], inlined into each instruction set's copy. With `ANY`, a
+    /// ray that has a hit retires: its distance becomes minus infinity, which no box or
+    /// triangle test passes and every stack entry is skipped for, and the traversal ends when
+    /// every ray has one.
     #[inline(always)]
-    fn closest_hits_in(
-        &self,
-        origin: Vec3,
-        dirs: &[Vec3],
-        tmax: f32,
-    ) -> [Option<(u32, f32)>; PACKET] {
+    fn traced_in<const ANY: bool>(&self, origin: Vec3, dirs: &[Vec3], tmax: f32) -> Packet {
         assert!(dirs.len() <= PACKET, "a packet holds at most {PACKET} rays");
-        let mut hits = [None; PACKET];
-        if self.nodes.is_empty() || dirs.is_empty() {
-            return hits;
-        }
         let mut p = Packet::new(origin, dirs, tmax);
+        if self.nodes.is_empty() || dirs.is_empty() {
+            return p;
+        }
         let all = RayMask::MAX >> (RayMask::BITS as usize - dirs.len());
-        // Empty: every traversal pops it empty before putting it back.
+        let mut live = all;
+        // Empty: every traversal leaves it empty before putting it back.
         let mut stack = STACK.take();
         stack.push(Entry {
             index: 0,
@@ -302,23 +315,30 @@ impl Bvh8 {
             near: 0.0,
         });
         while let Some(e) = stack.pop() {
+            let mask = if ANY { e.mask & live } else { e.mask };
             // Every ray in the entry has a hit nearer than its box: skip.
-            if each_bit(e.mask).all(|k| e.near > p.t[k]) {
+            if each_bit(mask).all(|k| e.near > p.t[k]) {
                 continue;
             }
             if e.count == 0 {
-                self.visit(&self.nodes[e.index as usize], &p, e.mask, &mut stack);
-            } else {
-                for tri in self.leaf(e.index, e.count) {
-                    p.intersect(tri, e.mask);
+                self.visit(&self.nodes[e.index as usize], &p, mask, &mut stack);
+                continue;
+            }
+            for tri in self.leaf(e.index, e.count) {
+                p.intersect(tri, mask);
+            }
+            if ANY {
+                for k in each_bit(mask).filter(|&k| p.hit[k] != u32::MAX) {
+                    p.t[k] = f32::NEG_INFINITY;
+                    live &= !(1 << k);
+                }
+                if live == 0 {
+                    stack.clear();
                 }
             }
         }
         STACK.set(stack);
-        for (k, hit) in hits.iter_mut().enumerate().take(dirs.len()) {
-            *hit = p.hit(k);
-        }
-        hits
+        p
     }
 
     /// The triangles of the leaf whose first [`Tri4`] is `first`.
@@ -375,7 +395,7 @@ impl Bvh8 {
     /// Written over plain arrays of eight lanes, one per child, with `min` and `max` as `minps`
     /// and `maxps` compute them (the second operand when either is NaN), so that the compiler
     /// can vectorize it for the instruction set it compiles for: AVX in
-    /// [`Bvh8::closest_hits_avx`], SSE elsewhere (`tests` hold the two to the same bits);
+    /// [`Bvh8::traced_avx`], SSE elsewhere (`tests` hold the two to the same bits);
     /// written as two glam `Vec4`s, the same test ran slower even than the SSE build of this.
     #[inline(always)]
     fn visit(&self, node: &Node, p: &Packet, mask: RayMask, stack: &mut Vec<Entry>) {

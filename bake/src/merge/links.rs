@@ -72,10 +72,10 @@ pub fn links(keys: &[Key], fits: &[BrickFit], lift: f32, bvh: &SceneBvh) -> Vec<
             let dirs: Vec<Vec3> = others.iter().map(|&b| lifted(b) - from).collect();
             let seen: Vec<(u32, u32)> = (others.chunks(PACKET).zip(dirs.chunks(PACKET)))
                 .flat_map(|(others, dirs)| {
-                    let hits = bvh.closest_hits(from, dirs, 1.0);
-                    (others.iter().zip(hits))
-                        .filter(|(_, hit)| hit.is_none())
-                        .map(|(&b, _)| (a.min(b), a.max(b)))
+                    let blocked = bvh.occluded(from, dirs, 1.0);
+                    (others.iter().enumerate())
+                        .filter(|&(j, _)| blocked >> j & 1 == 0)
+                        .map(|(_, &b)| (a.min(b), a.max(b)))
                         .collect::<Vec<_>>()
                 })
                 .collect();

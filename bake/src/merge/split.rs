@@ -204,9 +204,9 @@ fn labels(run: &[Surfel], lift: f32, bvh: &SceneBvh) -> Vec<u32> {
             .collect();
         for chunk in others.chunks(PACKET) {
             let dirs: Vec<Vec3> = chunk.iter().map(|&j| lifted[j] - lifted[i]).collect();
-            let hits = bvh.closest_hits(lifted[i], &dirs, 1.0);
-            for (&j, hit) in chunk.iter().zip(hits) {
-                if hit.is_none() {
+            let blocked = bvh.occluded(lifted[i], &dirs, 1.0);
+            for (n, &j) in chunk.iter().enumerate() {
+                if blocked >> n & 1 == 0 {
                     let (a, b) = (root(&mut parent, i as u32), root(&mut parent, j as u32));
                     parent[a.max(b) as usize] = a.min(b);
                 }

@@ -79,7 +79,15 @@ fn check_with(bvh: &Bvh8, tris: &[Triangle], origins: &[Vec3], dirs: &[Vec3]) ->
             let got = bvh.closest_hits(o, packet, f32::INFINITY);
             // The copy compiled for the baseline instruction set agrees with the one the CPU
             // runs (AVX where it has it).
-            assert_eq!(bvh.closest_hits_in(o, packet, f32::INFINITY), got);
+            let baseline = bvh.traced_in::<false>(o, packet, f32::INFINITY);
+            assert_eq!(std::array::from_fn(|k| baseline.hit(k)), got);
+            // The any-hit test finds a hit for exactly the rays that have one, in either copy.
+            let occluded = bvh.occluded(o, packet, f32::INFINITY);
+            let any = bvh.traced_in::<true>(o, packet, f32::INFINITY);
+            for (k, hit) in got.iter().enumerate().take(packet.len()) {
+                assert_eq!(occluded >> k & 1 == 1, hit.is_some(), "origin {o}, ray {k}");
+                assert_eq!(any.hit[k] != u32::MAX, hit.is_some());
+            }
             for (k, &d) in packet.iter().enumerate() {
                 let want = brute(tris, o, d);
                 assert_eq!(got[k], want, "origin {o}, direction {d}");
@@ -88,6 +96,7 @@ fn check_with(bvh: &Bvh8, tris: &[Triangle], origins: &[Vec3], dirs: &[Vec3]) ->
                 let r = Vec3::splat(reach);
                 let near = bvh.leaves_in(o - r, o + r);
                 let short = bvh.closest_hits(o, &[d], reach)[0];
+                assert_eq!(bvh.occluded(o, &[d], reach) == 1, short.is_some());
                 assert_eq!(bvh.closest_hit_among(&near, o, d, reach), short);
                 // Alone, the ray gets the same hit as in its packet.
                 assert_eq!(bvh.closest_hits(o, &[d], f32::INFINITY)[0], want);
@@ -95,6 +104,8 @@ fn check_with(bvh: &Bvh8, tris: &[Triangle], origins: &[Vec3], dirs: &[Vec3]) ->
                 if let Some((_, t)) = want.filter(|&(_, t)| t > 0.0) {
                     assert_eq!(bvh.closest_hits(o, &[d], t)[0], want);
                     assert_eq!(bvh.closest_hits(o, &[d], t * 0.999)[0], None);
+                    assert_eq!(bvh.occluded(o, &[d], t), 1);
+                    assert_eq!(bvh.occluded(o, &[d], t * 0.999), 0);
                 }
                 hits += usize::from(size == PACKET && want.is_some());
             }
