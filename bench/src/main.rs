@@ -15,6 +15,7 @@ mod plot;
 mod ray_lookup;
 mod render;
 mod results;
+mod scaling;
 mod sky_point_lookup;
 mod surface;
 mod surfel_lookup;
@@ -58,6 +59,9 @@ enum Kind {
     /// The coarse levels of sparse placement against the fine grid in open air: at every grid
     /// point a sparse bake fills, the filled SH against a uniform bake's probe there.
     OpenAir(surface::open_air::OpenAirArgs),
+    /// Bake seconds per placed probe and GPU memory across sizes of one level (sparse
+    /// placement at one spacing).
+    Scaling(scaling::ScalingArgs),
     /// Mutation fuzzing of the glTF path or the asset loader for a fixed time (issue 8).
     Fuzz(fuzz::FuzzArgs),
 }
@@ -76,6 +80,7 @@ fn run(cli: Cli) -> Result<()> {
         Kind::Surface(args) => surface::run(args),
         Kind::Frontier(args) => surface::frontier::run(args),
         Kind::OpenAir(args) => surface::open_air::run(args),
+        Kind::Scaling(args) => scaling::run(args),
         Kind::Fuzz(args) => fuzz::run(args),
     }
 }

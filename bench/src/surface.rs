@@ -66,7 +66,7 @@ pub struct SurfaceArgs {
     /// sponza_sun_2, and each level of fixtures/levels/levels.json) and groups: bundled,
     /// tuning, held-out, family (tuning + held-out), unseen (seeds 24-31), fresh (seeds
     /// 32-39), all [default: bundled,family,unseen,fresh;
-    /// street_20_L120 runs only when named or with all].
+    /// street_20_L120 and plaza_40 run only when named or with all].
     #[arg(long = "case", value_delimiter = ',')]
     cases: Vec<String>,
     /// Lookups to sample with (comma-separated): default (the runtime's), no_sky (the same
@@ -100,6 +100,10 @@ pub struct SurfaceArgs {
     /// Bake on the uniform grid (`prt bake --uniform`) instead of the default sparse placement.
     #[arg(long)]
     uniform: bool,
+    /// Bake at the default spacing (or `--spacing`) only, not at half of it too: for a level
+    /// whose grid at half the spacing would not fit (an open level's uniform grid at 0.5 m).
+    #[arg(long)]
+    no_half: bool,
     /// Rays per probe (`prt bake --rays`) [default: the bake's].
     #[arg(long)]
     rays: Option<u32>,
@@ -212,21 +216,21 @@ pub fn run(args: SurfaceArgs) -> Result<()> {
                 args.probe_budget,
                 args.prune_error,
             ),
-            (!args.no_split_bricks, args.far_ratio, args.rays),
+            (!args.no_split_bricks, args.far_ratio, args.rays, !args.no_half),
         )?);
     }
     args.out
         .report("surface", &report::markdown(&rows, &oracle)?)
 }
 
-/// Bakes and relights `case` at its default spacing (or `spacing`) and at half of it, with
-/// sparse placement or not, a row per lookup each.
+/// Bakes and relights `case` at its default spacing (or `spacing`) and, with `half`, at half of
+/// it, with sparse placement or not, a row per lookup each.
 fn measure(
     case: &Case,
     refs: &Refs,
     lookups: &[Lookup],
     (spacing, sparse, probe_budget, prune_error): (Option<f32>, bool, Option<usize>, Option<f32>),
-    (split_bricks, far_ratio, rays): (bool, Option<f32>, Option<u32>),
+    (split_bricks, far_ratio, rays, half): (bool, Option<f32>, Option<u32>, bool),
 ) -> Result<Vec<Row>> {
     let lighting = prt_runtime::load_rig(&case.rig)
         .with_context(|| format!("{}: loading the rig {}", case.name, case.rig.display()))?;
@@ -247,6 +251,9 @@ fn measure(
     );
     let baked = bake(case, &base, &lighting, needs)?;
     let mut rows = sample_all(case, &baked, Setting::Default, refs, lookups)?;
+    if !half {
+        return Ok(rows);
+    }
     let half = BakeSettings {
         spacing: Some(baked.asset.header.grid.spacing / 2.0),
         probe_budget: probe_budget.map(|b| 2 * b),
