@@ -2,8 +2,9 @@
 // prt_runtime::fill): after the gather, its SH is the trilinear interpolation of the points of
 // its level (its flags' FILL_LEVEL_SHIFT bits) around it, each weighted by its trilinear weight
 // times its validity and renormalised (corners in its FILL_HIDDEN_SHIFT bits left out: the bake
-// found a wall between them and the point), written as the gather writes a probe (store_probe.wgsl,
-// validity 1). Validation guarantees that a filled point reads no filled point, so the threads
+// found a wall between them and the point), written to its seven texels as the gather writes a
+// probe's (store_texels in store_probe.wgsl, validity 1); probe_sh has no entry for it
+// (prt_runtime::contract::probe_sh_entries: the CPU fills it from its corners on readback). Validation guarantees that a filled point reads no filled point, so the threads
 // are independent. Every recorded update runs a thread per filled point, but only a point with a corner this update gathered (its dirty word holds the update's
 // serial) reads and writes SH: an amortised update redoes the points beside its window, and a
 // point's texels follow its corners' latest gather.
@@ -76,5 +77,5 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     for (var k = 0u; k < 9u; k = k + 1u) {
         c[k] = c[k] / total;
     }
-    store_probe(p, params.slot_count + i, c);
+    store_texels(p, c);
 }

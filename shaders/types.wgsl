@@ -183,9 +183,7 @@ struct Params {
     fill_count: u32,
     // This update's number: the gather leaves it in the dirty word of each probe it gathers.
     update_serial: u32,
-    // Probes with data: probe_sh holds them by slot, then the filled points in fill_list order
-    // (prt_runtime::contract::probe_sh_entries).
-    slot_count: u32,
+    _pad: u32,
 }
 
 const PI: f32 = 3.14159265358979;

@@ -96,9 +96,10 @@ fn measure(scene: &Path, spacing: f32, runs: u32, gpu: bool) -> Result<Scaled> {
     let asset = asset.context("no run")?;
     let mut sorted = times.clone();
     sorted.sort_by(f64::total_cmp);
-    let name = scene
-        .file_stem()
-        .map_or_else(|| scene.display().to_string(), |s| s.to_string_lossy().into());
+    let name = scene.file_stem().map_or_else(
+        || scene.display().to_string(),
+        |s| s.to_string_lossy().into(),
+    );
     let gpu = gpu.then(|| gpu_memory(scene, &asset)).transpose()?;
     Ok(Scaled {
         summary: Summary::of(&asset, 0),
@@ -173,9 +174,10 @@ fn markdown(args: &ScalingArgs, scaled: &[Scaled]) -> String {
             per_probe_ms(s),
             100.0 * (per_probe_ms(s) / median - 1.0),
             m.probe_count as f64 / m.probes_with_data.max(1) as f64,
-            s.gpu
-                .as_ref()
-                .map_or("-".into(), |(_, total)| format!("{:.1}", *total as f64 / 1e6))
+            s.gpu.as_ref().map_or("-".into(), |(_, total)| format!(
+                "{:.1}",
+                *total as f64 / 1e6
+            ))
         );
     }
     for s in scaled {

@@ -216,7 +216,12 @@ pub fn run(args: SurfaceArgs) -> Result<()> {
                 args.probe_budget,
                 args.prune_error,
             ),
-            (!args.no_split_bricks, args.far_ratio, args.rays, !args.no_half),
+            (
+                !args.no_split_bricks,
+                args.far_ratio,
+                args.rays,
+                !args.no_half,
+            ),
         )?);
     }
     args.out

@@ -32,8 +32,8 @@ pub const GATHER_WORKGROUP: u32 = 32;
 pub const MAX_LIGHTS: usize = 4096;
 /// Floats per entry of the runtime's `probe_sh` buffer: the nine SH coefficients, rgb each,
 /// unpadded (`store_probe.wgsl` writes them, `fill.wgsl` and `PrtRuntime::read_probe_sh` read
-/// them; a vec4 per coefficient spent a quarter on padding). Entries are
-/// [`probe_sh_entries`]'s, not grid points.
+/// them; a vec4 per coefficient spent a quarter on padding). One entry per probe with data, at
+/// its slot ([`probe_sh_entries`]), not per grid point.
 pub const PROBE_SH_FLOATS: u32 = 27;
 /// Radiance words (`crate::radiance_word`, `pack_radiance` in `shaders/types.wgsl`): what
 /// turns `e` (a colour's largest channel is below 2^e) into the stored exponent byte, whose
@@ -88,27 +88,17 @@ pub struct GpuLight {
 const _: () = assert!(std::mem::size_of::<GpuLight>() == 64);
 
 /// Where each grid point's SH sits in the runtime's `probe_sh` buffer, in entries of
-/// [`PROBE_SH_FLOATS`]; how many entries there are; and how many of them are probes with data.
-/// A probe with data sits at its slot (`prt_format::Probe::slot`; every valid probe has one), a
-/// filled grid point after them in grid order (as `fill_list` lists them); a point with neither
-/// is `None` and takes no room (21,523 of the street level's 82,280 grid points at 1 m).
-pub fn probe_sh_entries(probes: &[prt_format::Probe]) -> (Vec<Option<u32>>, u32, u32) {
-    let slots = probes.iter().filter(|p| p.has_data()).count() as u32;
-    let mut filled = 0u32;
-    let entries = probes
-        .iter()
-        .map(|p| {
-            if p.has_data() {
-                Some(p.slot)
-            } else if p.is_filled() {
-                filled += 1;
-                Some(slots + filled - 1)
-            } else {
-                None
-            }
-        })
+/// [`PROBE_SH_FLOATS`], and how many entries there are: a probe with data at its slot
+/// (`prt_format::Probe::slot`; every valid probe has one), any other point `None`. A filled
+/// point's SH goes to its texels only (`fill.wgsl` reads its corners, which all have data;
+/// `PrtRuntime::read_probe_sh` fills it on the CPU from them): on an open level most grid
+/// points are filled (457,398 of the 110 m plaza's 526,848 at 1 m, 49 MB as entries).
+pub fn probe_sh_entries(probes: &[prt_format::Probe]) -> (Vec<Option<u32>>, u32) {
+    let entries = (probes.iter())
+        .map(|p| p.has_data().then_some(p.slot))
         .collect();
-    (entries, slots + filled, slots)
+    let slots = probes.iter().filter(|p| p.has_data()).count() as u32;
+    (entries, slots)
 }
 
 /// WGSL code of a light kind.
@@ -242,9 +232,7 @@ pub struct Params {
     /// This update's number: the gather leaves it in the dirty word of each probe it gathers,
     /// and the fill redoes only the points with such a probe among their corners.
     pub update_serial: u32,
-    /// Probes with data (`prt_format::Probe::slot`): `probe_sh` holds them by slot, then the
-    /// filled grid points in `fill_list` order ([`probe_sh_entries`]).
-    pub slot_count: u32,
+    pub _pad: u32,
 }
 const _: () = assert!(std::mem::size_of::<Params>() == 128);
 

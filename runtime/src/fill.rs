@@ -10,19 +10,23 @@
 //! filled one, so the order of the fills does not matter.
 
 use prt_format::sh::{ShRgb, SH_COUNT};
-use prt_format::{tier, Asset};
+use prt_format::{tier, Asset, Grid, Probe};
 
 /// Sets the SH of every filled grid point of `asset` in `sh` (one per probe, grid order) from
 /// the coarse points around it.
 pub fn fill(asset: &Asset, sh: &mut [ShRgb]) {
-    let grid = &asset.header.grid;
-    for (index, probe) in asset.probes.iter().enumerate() {
+    fill_points(&asset.header.grid, &asset.probes, sh);
+}
+
+/// [`fill`] of the grid points `probes` on `grid`.
+pub fn fill_points(grid: &Grid, probes: &[Probe], sh: &mut [ShRgb]) {
+    for (index, probe) in probes.iter().enumerate() {
         if !probe.is_filled() || index >= sh.len() {
             continue;
         }
         let mut acc = [[0.0f32; 3]; SH_COUNT];
         let mut total = 0.0f32;
-        for (c, w) in tier::filled_from(grid, &asset.probes, index) {
+        for (c, w) in tier::filled_from(grid, probes, index) {
             if c >= sh.len() {
                 continue;
             }

@@ -39,7 +39,8 @@ pub const RENDER_SHADE: &str = include_str!("../render_shade.wgsl");
 pub const RENDER_TYPES: &str = include_str!("../render_types.wgsl");
 /// `sample_irradiance.wgsl`: The engine-side snippet: `sample_irradiance(world_pos, normal)` over the volume.
 pub const SAMPLE_IRRADIANCE: &str = include_str!("../sample_irradiance.wgsl");
-/// `store_probe.wgsl`: Stages 8 and 9: a probe's SH to `probe_sh` and its seven volume texels.
+/// `store_probe.wgsl`: Stages 8 and 9: a probe's SH to `probe_sh` and a grid point's seven volume
+/// texels.
 pub const STORE_PROBE: &str = include_str!("../store_probe.wgsl");
 /// `surfel.wgsl`: The asset's surfels as stored, decoded (`surfel_at`) for the stages that read them.
 pub const SURFEL: &str = include_str!("../surfel.wgsl");

@@ -293,12 +293,13 @@ pub struct PrtRuntime {
     gather_count: u32,
     /// Grid points the coarse levels fill (`resources::fill_list`).
     fill_count: u32,
-    /// Probes with data: the first entries of `probe_sh`, by slot.
-    slot_count: u32,
     /// Per grid point, its entry in `probe_sh` ([`contract::probe_sh_entries`]).
     sh_entries: Vec<Option<u32>>,
-    /// Entries of `probe_sh` in use.
+    /// Entries of `probe_sh` in use: the probes with data.
     sh_entry_count: u32,
+    /// The asset's grid points, which [`PrtRuntime::read_probe_sh`] fills from their corners
+    /// as `fill.wgsl` does (`crate::fill`).
+    probes: Vec<prt_format::Probe>,
     brick_count: u32,
     coarse_count: u32,
     surfel_spread_sq: f32,
@@ -390,7 +391,7 @@ impl PrtRuntime {
             mask_stride,
             bounces: settings.bounces.feeds_back(),
         };
-        let (sh_entries, sh_entry_count, slot_count) = probe_sh_entries(&asset.probes);
+        let (sh_entries, sh_entry_count) = probe_sh_entries(&asset.probes);
         let res = Resources::new(device, asset, &settings, mask_stride, sh_entry_count)?;
         let counts = Counts {
             bricks: asset.bricks.len() as u32,
@@ -410,9 +411,9 @@ impl PrtRuntime {
             probe_count: asset.probes.len() as u32,
             gather_count: res.asset.gather_count,
             fill_count: res.asset.fill_count,
-            slot_count,
             sh_entries,
             sh_entry_count,
+            probes: asset.probes.clone(),
             brick_count: asset.bricks.len() as u32,
             coarse_count: asset.coarse.bricks.len() as u32,
             surfel_spread_sq: crate::lights::surfel_spread_sq(asset.header.settings.cell_size),
@@ -583,7 +584,7 @@ impl PrtRuntime {
             gather_count: self.gather_count,
             fill_count: self.fill_count,
             update_serial: self.serial,
-            slot_count: self.slot_count,
+            _pad: 0,
         }
     }
 

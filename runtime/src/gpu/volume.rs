@@ -78,7 +78,9 @@ impl PrtRuntime {
     }
 
     /// Blocks until the GPU is done and returns every grid point's SH as last gathered or
-    /// filled (zero for a point without data).
+    /// filled (zero for a point without data). A filled point's is its corners' interpolation
+    /// made here (`crate::fill`, as `fill.wgsl` made its texels: `probe_sh` holds probes with
+    /// data only).
     pub fn read_probe_sh(&self) -> Result<Vec<ShRgb>, GpuError> {
         let bytes = read_buffer(
             &self.device,
@@ -89,13 +91,15 @@ impl PrtRuntime {
         )?;
         // `PROBE_SH_FLOATS` an entry, rgb by coefficient (`store_probe.wgsl`).
         let v: &[[f32; 3]] = bytemuck::cast_slice(&bytes);
-        Ok((self.sh_entries.iter())
+        let mut sh: Vec<ShRgb> = (self.sh_entries.iter())
             .map(|e| {
                 e.map_or([[0.0; 3]; 9], |e| {
                     std::array::from_fn(|k| v[9 * e as usize + k])
                 })
             })
-            .collect())
+            .collect();
+        crate::fill::fill_points(&self.grid, &self.probes, &mut sh);
+        Ok(sh)
     }
 
     /// Blocks and returns the work counters of the last submitted update.
