@@ -87,7 +87,7 @@ use rayon::prelude::*;
 
 use crate::accel::bvh::SceneBvh;
 use crate::accel::bvh8::PACKET;
-use crate::surface_terms::{cosine_spiral, ray_origin, spiral_order};
+use crate::surface_terms::{cosine_spiral, ray_origin};
 
 /// Sky rays per surfel.
 pub const SKY_RAYS: u32 = 256;
@@ -261,6 +261,21 @@ fn sky_view(
     ((integral + mean).clamp(0.0, 1.0), variance, integral)
 }
 
+/// The indices `0..count` of `cosine_spiral`'s directions in an order where consecutive ones
+/// are neighbours: Morton order of their projection on the disc about the normal (the spiral's
+/// own lattice, in a fixed frame: turning the spiral about its normal keeps neighbours
+/// neighbours). The spiral's own order steps by the golden angle, so that a packet of
+/// consecutive directions would span the hemisphere and visit most of the BVH.
+pub fn spiral_order(count: u32) -> Vec<u32> {
+    let morton = |k: u32| {
+        let d = cosine_spiral(k, count, Vec3::X, Vec3::Y, Vec3::Z);
+        crate::trace::morton_2d(d.x, d.y)
+    };
+    let mut order: Vec<u32> = (0..count).collect();
+    order.sort_by_key(|&k| (morton(k), k));
+    order
+}
+
 /// `clamp(open . t, 0, A(n) . t)` of surfel `s`: what its near field's escaping rays bring of
 /// the probes' sky `t` (in units of pi).
 fn probes_sky(asset: &Asset, t: &[f32; SH_COUNT], s: usize) -> f32 {
@@ -373,6 +388,31 @@ fn grid_transfer(asset: &Asset) -> Vec<[f32; SH_COUNT]> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `spiral_order` is a permutation whose packets are narrow cones: on average a ray is less
+    /// than half as far from its packet's mean direction as in the spiral's own order, whose 32
+    /// consecutive directions span the hemisphere.
+    #[test]
+    fn the_spiral_order_packs_neighbouring_directions() {
+        let spread = |dirs: &[Vec3]| {
+            let mean = dirs.iter().copied().sum::<Vec3>().normalize();
+            dirs.iter().map(|d| d.angle_between(mean)).sum::<f32>()
+        };
+        let order = spiral_order(SKY_RAYS);
+        let mut sorted = order.clone();
+        sorted.sort_unstable();
+        assert_eq!(sorted, (0..SKY_RAYS).collect::<Vec<_>>());
+        let dir = |k: u32| cosine_spiral(k, SKY_RAYS, Vec3::X, Vec3::Y, Vec3::Z);
+        let spiral: Vec<Vec3> = (0..SKY_RAYS).map(dir).collect();
+        let packed: Vec<Vec3> = order.iter().map(|&k| dir(k)).collect();
+        let mean = |d: &[Vec3]| d.chunks(PACKET).map(spread).sum::<f32>() / d.len() as f32;
+        assert!(
+            mean(&packed) < 0.5 * mean(&spiral),
+            "a ray {} rad from its packet's mean against {}",
+            mean(&packed),
+            mean(&spiral)
+        );
+    }
 
     /// A term that darkens its surfel loses half a standard deviation, one that brightens a
     /// whole one, and either is dropped under that.

@@ -108,18 +108,9 @@ pub fn surface_terms(input: &Inputs, surfels: &mut [Surfel]) -> SurfaceTerms {
         })
         .collect();
     let surfels = &*surfels;
-    let spiral = spiral_order(RAYS);
     let traced: Vec<(SurfelTerms, Vec<NearHit>)> = (0..surfels.len())
         .into_par_iter()
-        .map(|i| {
-            near_field(
-                input,
-                &spiral,
-                &surfels[i],
-                grouped.masks[i],
-                grouped.group[i],
-            )
-        })
+        .map(|i| near_field(input, &surfels[i], grouped.masks[i], grouped.group[i]))
         .collect();
     let fields: Vec<Vec<u32>> = terms
         .group_surfels
@@ -365,7 +356,6 @@ fn cells(
 /// A surfel's terms (with `mask` and its `group`, [`Grouped`]) and its near hits.
 fn near_field(
     input: &Inputs,
-    spiral: &[u32],
     s: &Surfel,
     mask: u32,
     group: (u8, u32),
@@ -383,27 +373,21 @@ fn near_field(
     let (tx, ty) = n.any_orthonormal_pair();
     let dirs: [Vec3; RAYS as usize] =
         std::array::from_fn(|k| cosine_spiral(k as u32, RAYS, tx, ty, n));
-    // Traced in packets of neighbouring directions, kept in spiral order (`spiral_order`).
-    let mut traced = [None; RAYS as usize];
-    for packet in spiral.chunks(PACKET) {
-        let ray: Vec<Vec3> = packet.iter().map(|&k| dirs[k as usize]).collect();
-        let hits = input.bvh.closest_hits(o, &ray, reach);
-        for (&k, hit) in packet.iter().zip(hits) {
-            traced[k as usize] = hit;
-        }
-    }
     let mut open = [0.0f32; SH_COUNT];
     let mut hits = Vec::new();
-    for (&d, &hit) in dirs.iter().zip(&traced) {
-        let Some(hit) = hit else {
-            let y = prt_format::sh::basis(d.to_array());
-            (0..SH_COUNT).for_each(|i| open[i] += y[i]);
-            continue;
-        };
-        let [v0, v1, v2] = input.triangles[hit.triangle as usize];
-        let normal = (v1 - v0).cross(v2 - v0);
-        let facing = if normal.dot(d) > 0.0 { -normal } else { normal };
-        hits.push((o + d * hit.t, dominant_axis(facing)));
+    for packet in dirs.chunks(PACKET) {
+        let traced = input.bvh.closest_hits(o, packet, reach);
+        for (&d, hit) in packet.iter().zip(traced) {
+            let Some(hit) = hit else {
+                let y = prt_format::sh::basis(d.to_array());
+                (0..SH_COUNT).for_each(|i| open[i] += y[i]);
+                continue;
+            };
+            let [v0, v1, v2] = input.triangles[hit.triangle as usize];
+            let normal = (v1 - v0).cross(v2 - v0);
+            let facing = if normal.dot(d) > 0.0 { -normal } else { normal };
+            hits.push((o + d * hit.t, dominant_axis(facing)));
+        }
     }
     let open = open.map(|v| v / RAYS as f32);
     let t = SurfelTerms::new(mask, group.0, s.normal, hits.len() as u8, &open, RAYS);
@@ -489,18 +473,6 @@ fn brick_at(terms: &SurfaceTerms, bricks: &[Brick], h: Vec3, axis: u32) -> Optio
         }
     }
     best.map(|(_, b)| b)
-}
-
-/// The indices `0..count` of [`cosine_spiral`]'s directions in an order where consecutive ones
-/// are neighbours (Morton order of their octahedral map, `crate::trace::coherent_order`, about
-/// a fixed frame: turning the spiral about its normal keeps neighbours neighbours). The
-/// spiral's own order steps by the golden angle, so that a packet of consecutive directions
-/// would span the hemisphere and visit most of the BVH; packets of this order span narrow cones.
-pub fn spiral_order(count: u32) -> Vec<u32> {
-    let dirs: Vec<Vec3> = (0..count)
-        .map(|k| cosine_spiral(k, count, Vec3::X, Vec3::Y, Vec3::Z))
-        .collect();
-    crate::trace::coherent_order(&dirs)
 }
 
 /// Direction `k` of `count` cosine-distributed ones about `n` (tangents `t`, `b`): a golden-angle

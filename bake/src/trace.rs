@@ -251,21 +251,26 @@ impl Tracer<'_> {
 /// changes float sums (sky transfer, surfel means) in their last bits, never which ray hits
 /// what.
 pub(crate) fn coherent_order(directions: &[Vec3]) -> Vec<u32> {
-    let morton = |d: Vec3| -> u32 {
+    let morton = |d: Vec3| {
         let [u, v] = prt_format::depth::oct_encode(d.to_array());
-        let q = |x: f32| ((x * 0.5 + 0.5).clamp(0.0, 1.0) * 65535.0) as u32;
-        let spread = |mut x: u32| {
-            x &= 0xffff;
-            x = (x | x << 8) & 0x00ff_00ff;
-            x = (x | x << 4) & 0x0f0f_0f0f;
-            x = (x | x << 2) & 0x3333_3333;
-            (x | x << 1) & 0x5555_5555
-        };
-        spread(q(u)) | spread(q(v)) << 1
+        morton_2d(u, v)
     };
     let mut order: Vec<u32> = (0..directions.len() as u32).collect();
     order.sort_by_key(|&i| (morton(directions[i as usize]), i));
     order
+}
+
+/// The Morton code (Z order) of a point of the square `[-1, 1]^2`, on a 65,536^2 lattice.
+pub(crate) fn morton_2d(u: f32, v: f32) -> u32 {
+    let q = |x: f32| ((x * 0.5 + 0.5).clamp(0.0, 1.0) * 65535.0) as u32;
+    let spread = |mut x: u32| {
+        x &= 0xffff;
+        x = (x | x << 8) & 0x00ff_00ff;
+        x = (x | x << 4) & 0x0f0f_0f0f;
+        x = (x | x << 2) & 0x3333_3333;
+        (x | x << 1) & 0x5555_5555
+    };
+    spread(q(u)) | spread(q(v)) << 1
 }
 
 /// Barycentric coordinates of `p` (on the triangle's plane).
