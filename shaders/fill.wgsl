@@ -3,14 +3,18 @@
 // its level (its flags' FILL_LEVEL_SHIFT bits) around it, each weighted by its trilinear weight
 // times its validity and renormalised (corners in its FILL_HIDDEN_SHIFT bits left out: the bake
 // found a wall between them and the point), written to its seven texels as the gather writes a
-// probe's (store_texels in store_probe.wgsl, validity 1); probe_sh has no entry for it
-// (prt_runtime::contract::probe_sh_entries: the CPU fills it from its corners on readback). Validation guarantees that a filled point reads no filled point, so the threads
-// are independent. Every recorded update runs a thread per filled point, but only a point with a corner this update gathered (its dirty word holds the update's
-// serial) reads and writes SH: an amortised update redoes the points beside its window, and a
-// point's texels follow its corners' latest gather.
+// probe's (store_texels in store_probe.wgsl, validity 1). probe_sh has no entry for it
+// (prt_runtime::contract::probe_sh_entry: the CPU fills it from its corners on readback).
+// Validation guarantees that a filled point reads no filled point, so the threads are
+// independent. Every recorded update runs a thread per filled point, but only a point with a
+// corner this update gathered (its dirty word holds the update's serial) reads and writes SH:
+// an amortised update redoes the points beside its window, and a point's texels follow its
+// corners' latest gather.
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read> probes: array<Probe>;
+// Read only here, but read_write: store_probe.wgsl, included whole, has store_probe(), which
+// writes it, and naga validates every function.
 @group(0) @binding(2) var<storage, read_write> probe_sh: array<f32>;
 // The filled grid points, in grid order.
 @group(0) @binding(3) var<storage, read> fill_list: array<u32>;

@@ -1,7 +1,7 @@
 // Writing one grid point's SH, shared by the stages that produce it: a gathered probe's nine
-// coefficients to `probe_sh` (gather.wgsl, which declares it; PROBE_SH_FLOATS an entry at the
+// coefficients to `probe_sh` (which the stage declares; PROBE_SH_FLOATS an entry at the
 // probe's slot, rgb by coefficient, the layout `PrtRuntime::read_probe_sh` reads,
-// prt_runtime::contract::probe_sh_entries) and, for it and a filled point (fill.wgsl), all seven
+// prt_runtime::contract::probe_sh_entry) and, for it and a filled point (fill.wgsl), all seven
 // volume texels at once, so a texel never holds half of an update.
 //
 // Volume layout (premultiplied by validity, so hardware trilinear filtering weights valid

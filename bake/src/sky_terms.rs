@@ -237,19 +237,23 @@ fn sky_view(
     let dirs: Vec<Vec3> = (0..SKY_RAYS)
         .map(|k| cosine_spiral(k, SKY_RAYS, tx, ty, n))
         .collect();
+    debug_assert_eq!(order.len(), SKY_RAYS as usize, "a permutation of the rays");
     let mut escaped = [false; SKY_RAYS as usize];
     for packet in order.chunks(PACKET) {
-        let ray: Vec<Vec3> = packet.iter().map(|&k| dirs[k as usize]).collect();
-        let blocked = bvh.occluded(o, &ray, f32::INFINITY);
+        let mut ray = [Vec3::ZERO; PACKET];
+        for (r, &k) in ray.iter_mut().zip(packet) {
+            *r = dirs[k as usize];
+        }
+        let blocked = bvh.occluded(o, &ray[..packet.len()], f32::INFINITY);
         for (j, &k) in packet.iter().enumerate() {
             escaped[k as usize] = blocked >> j & 1 == 0;
         }
     }
     let (mut sum, mut square) = (0.0f32, 0.0f32);
-    for (d, &escaped) in dirs.iter().zip(&escaped) {
+    for (d, &open) in dirs.iter().zip(&escaped) {
         let y = prt_format::sh::basis(d.to_array());
         let probes: f32 = (0..SH_COUNT).map(|k| y[k] * t[k]).sum();
-        let x = f32::from(u8::from(escaped)) - probes;
+        let x = f32::from(u8::from(open)) - probes;
         sum += x;
         square += x * x;
     }
@@ -266,7 +270,7 @@ fn sky_view(
 /// own lattice, in a fixed frame: turning the spiral about its normal keeps neighbours
 /// neighbours). The spiral's own order steps by the golden angle, so that a packet of
 /// consecutive directions would span the hemisphere and visit most of the BVH.
-pub fn spiral_order(count: u32) -> Vec<u32> {
+pub(crate) fn spiral_order(count: u32) -> Vec<u32> {
     let morton = |k: u32| {
         let d = cosine_spiral(k, count, Vec3::X, Vec3::Y, Vec3::Z);
         crate::trace::morton_2d(d.x, d.y)

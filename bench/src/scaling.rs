@@ -93,9 +93,8 @@ fn measure(scene: &Path, spacing: f32, runs: u32, gpu: bool) -> Result<Scaled> {
         times.push(t.elapsed().as_secs_f64());
         asset = Some(baked);
     }
-    let asset = asset.context("no run")?;
-    let mut sorted = times.clone();
-    sorted.sort_by(f64::total_cmp);
+    let asset =
+        asset.with_context(|| format!("{}: --runs {runs} baked nothing", scene.display()))?;
     let name = scene.file_stem().map_or_else(
         || scene.display().to_string(),
         |s| s.to_string_lossy().into(),
@@ -104,7 +103,7 @@ fn measure(scene: &Path, spacing: f32, runs: u32, gpu: bool) -> Result<Scaled> {
     Ok(Scaled {
         summary: Summary::of(&asset, 0),
         name,
-        seconds: sorted[sorted.len() / 2],
+        seconds: median(&times),
         runs: times,
         gpu,
     })
@@ -126,15 +125,26 @@ fn gpu_memory(scene: &Path, asset: &prt_format::Asset) -> Result<(Vec<(String, u
     Ok((named, total))
 }
 
+/// The median of `v` (the mean of the two middle values of an even count; 0 for none).
+fn median(v: &[f64]) -> f64 {
+    let mut sorted = v.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    match sorted.len() {
+        0 => 0.0,
+        n if n % 2 == 1 => sorted[n / 2],
+        n => 0.5 * (sorted[n / 2 - 1] + sorted[n / 2]),
+    }
+}
+
+/// Milliseconds of bake per placed probe (probe with data).
 fn per_probe_ms(s: &Scaled) -> f64 {
     1e3 * s.seconds / s.summary.probes_with_data.max(1) as f64
 }
 
 /// The report: a row per scene, each one's time per placed probe against the median's.
 fn markdown(args: &ScalingArgs, scaled: &[Scaled]) -> String {
-    let mut per: Vec<f64> = scaled.iter().map(per_probe_ms).collect();
-    per.sort_by(f64::total_cmp);
-    let median = per[per.len() / 2];
+    let per: Vec<f64> = scaled.iter().map(per_probe_ms).collect();
+    let median = median(&per);
     let mut md = String::new();
     let _ = writeln!(
         md,

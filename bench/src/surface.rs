@@ -93,8 +93,8 @@ pub struct SurfaceArgs {
     /// and `surfel_gather` [default: 512], and per point of `sky_point` [default: 4096].
     #[arg(long)]
     path_rays: Option<u32>,
-    /// Bake at this spacing in metres instead of the default, and at half of it [default: the
-    /// bake's default for each case].
+    /// Bake at this spacing in metres instead of the default, and at half of it (unless
+    /// `--no-half`) [default: the bake's default for each case].
     #[arg(long)]
     spacing: Option<f32>,
     /// Bake on the uniform grid (`prt bake --uniform`) instead of the default sparse placement.

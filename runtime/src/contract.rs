@@ -33,7 +33,7 @@ pub const MAX_LIGHTS: usize = 4096;
 /// Floats per entry of the runtime's `probe_sh` buffer: the nine SH coefficients, rgb each,
 /// unpadded (`store_probe.wgsl` writes them, `fill.wgsl` and `PrtRuntime::read_probe_sh` read
 /// them; a vec4 per coefficient spent a quarter on padding). One entry per probe with data, at
-/// its slot ([`probe_sh_entries`]), not per grid point.
+/// its slot ([`probe_sh_entry`]), not per grid point.
 pub const PROBE_SH_FLOATS: u32 = 27;
 /// Radiance words (`crate::radiance_word`, `pack_radiance` in `shaders/types.wgsl`): what
 /// turns `e` (a colour's largest channel is below 2^e) into the stored exponent byte, whose
@@ -87,18 +87,14 @@ pub struct GpuLight {
 }
 const _: () = assert!(std::mem::size_of::<GpuLight>() == 64);
 
-/// Where each grid point's SH sits in the runtime's `probe_sh` buffer, in entries of
-/// [`PROBE_SH_FLOATS`], and how many entries there are: a probe with data at its slot
-/// (`prt_format::Probe::slot`; every valid probe has one), any other point `None`. A filled
-/// point's SH goes to its texels only (`fill.wgsl` reads its corners, which all have data;
-/// `PrtRuntime::read_probe_sh` fills it on the CPU from them): on an open level most grid
-/// points are filled (457,398 of the 110 m plaza's 526,848 at 1 m, 49 MB as entries).
-pub fn probe_sh_entries(probes: &[prt_format::Probe]) -> (Vec<Option<u32>>, u32) {
-    let entries = (probes.iter())
-        .map(|p| p.has_data().then_some(p.slot))
-        .collect();
-    let slots = probes.iter().filter(|p| p.has_data()).count() as u32;
-    (entries, slots)
+/// Where a grid point's SH sits in the runtime's `probe_sh` buffer, in entries of
+/// [`PROBE_SH_FLOATS`]: a probe with data at its slot (`prt_format::Probe::slot`; every valid
+/// probe has one), any other point `None`. A filled point's SH goes to its texels only
+/// (`fill.wgsl` reads its corners, which all have data; `PrtRuntime::read_probe_sh` fills it on
+/// the CPU from them): on an open level most grid points are filled (457,398 of the 110 m
+/// plaza's 526,848 at 1 m, 49 MB as entries).
+pub fn probe_sh_entry(probe: &prt_format::Probe) -> Option<u32> {
+    probe.has_data().then_some(probe.slot)
 }
 
 /// WGSL code of a light kind.

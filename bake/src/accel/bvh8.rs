@@ -6,7 +6,7 @@
 //! Coherent Ray Tracing", 2001) fetches each node once for the packet. Inside a node the work is
 //! per ray, SIMD across the node (as Embree's single-ray BVH8 traversal): each ray still in the
 //! packet tests the eight child boxes in one AVX vector (two SSE vectors where the CPU lacks AVX,
-//! [`Bvh8::closest_hits`] choosing at run time), and each leaf's four triangles, stored structure
+//! [`Bvh8::traced`] choosing at run time), and each leaf's four triangles, stored structure
 //! of arrays, in one SSE vector. Rays that left the packet cost nothing, which matters: a packet
 //! reaches most nodes, and most leaves, with only a few of its rays.
 //! The shared origin makes `box - origin`, `v0 - origin` and `ng . (v0 - origin)` one value per
@@ -263,10 +263,11 @@ impl Bvh8 {
 
     /// Which of up to `PACKET` rays from `origin` along `dirs` hit anything within `tmax`: bit
     /// `k` for ray `k`, set exactly when [`Bvh8::closest_hits`] finds ray `k` a hit. A visibility
-    /// test (shadow or any-hit ray) needs no more, and stops a ray at the first triangle it
-    /// hits instead of searching on for a nearer one. Until its first hit a ray visits the same
-    /// nodes in the same order as the closest-hit search (its own distance alone decides what
-    /// it enters), so the two agree on whether there is one (`tests`).
+    /// test (shadow or any-hit ray) needs no more, and a ray leaves the search at the end of the
+    /// first leaf it hits in instead of searching on for a nearer hit. Until then its limit is
+    /// `tmax` in both searches, and its own box tests against that limit decide which children
+    /// it enters, whatever the order the other rays' hits give the stack: it reaches the same
+    /// leaves, so the two agree on whether there is a hit (`tests`).
     pub fn occluded(&self, origin: Vec3, dirs: &[Vec3], tmax: f32) -> u32 {
         let p = self.traced::<true>(origin, dirs, tmax);
         (0..dirs.len())
@@ -294,9 +295,8 @@ impl Bvh8 {
     }
 
     /// The body of [`Bvh8::traced`], inlined into each instruction set's copy. With `ANY`, a
-    /// ray that has a hit retires: its distance becomes minus infinity, which no box or
-    /// triangle test passes and every stack entry is skipped for, and the traversal ends when
-    /// every ray has one.
+    /// ray that has a hit retires: it leaves `live`, and so every entry's rays from then on
+    /// (an entry left with none is skipped), and the traversal ends when every ray has one.
     #[inline(always)]
     fn traced_in<const ANY: bool>(&self, origin: Vec3, dirs: &[Vec3], tmax: f32) -> Packet {
         assert!(dirs.len() <= PACKET, "a packet holds at most {PACKET} rays");
@@ -329,7 +329,6 @@ impl Bvh8 {
             }
             if ANY {
                 for k in each_bit(mask).filter(|&k| p.hit[k] != u32::MAX) {
-                    p.t[k] = f32::NEG_INFINITY;
                     live &= !(1 << k);
                 }
                 if live == 0 {

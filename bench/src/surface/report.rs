@@ -93,17 +93,28 @@ pub fn progress(r: &Row) -> String {
 /// The whole report. `oracle`: the oracle's time per reference, where recorded.
 pub fn markdown(rows: &[Row], oracle: &[(String, Option<f64>)]) -> Result<String> {
     let mut md = String::new();
+    let half = rows.iter().any(|r| r.setting == Setting::Half);
     writeln!(
         md,
         "Surface irradiance against the oracle's references: the bundled scenes \
          (`fixtures/surface/`) and the level family of issue 31 (`fixtures/levels/`, tuning set \
          seeds 0-7, held-out set seeds 8-15, unseen set seeds 24-31, fresh set seeds 32-39). Each case baked as a new user would (whole scene, \
-         default spacing) and at half that spacing, relit on the CPU (one bounce) and sampled \
+         default spacing){}, relit on the CPU (one bounce) and sampled \
          with each lookup: `trilinear` and `default` are the CPU twin of `sample_irradiance`, \
          which is what `prt render` shows; `rays`, `rays_light` and `surfels` are references \
-         that trace rays (issue 31's candidates, not in the runtime)."
+         that trace rays (issue 31's candidates, not in the runtime).",
+        if half {
+            " and at half that spacing"
+        } else {
+            " only (`--no-half`)"
+        }
     )?;
-    summary(&mut md, rows)?;
+    if rows
+        .iter()
+        .any(|r| matches!(r.set, Set::Tuning | Set::HeldOut | Set::Unseen | Set::Fresh))
+    {
+        summary(&mut md, rows)?;
+    }
     definitions(&mut md, rows)?;
     cases(&mut md, rows)?;
     timings(&mut md, rows)?;

@@ -119,7 +119,7 @@ impl Resources {
     /// Uploads `asset` and allocates every buffer and texture for `settings` (already checked
     /// by the caller), within `device`'s limits: past them a [`GpuError::Limit`] names the
     /// array, its size and the limit. `probe_sh` gets `sh_entries` entries
-    /// ([`probe_sh_entries`]).
+    /// (the probes with data, [`probe_sh_entry`]).
     pub fn new(
         device: &wgpu::Device,
         asset: &Asset,

@@ -91,9 +91,9 @@ impl PrtRuntime {
         )?;
         // `PROBE_SH_FLOATS` an entry, rgb by coefficient (`store_probe.wgsl`).
         let v: &[[f32; 3]] = bytemuck::cast_slice(&bytes);
-        let mut sh: Vec<ShRgb> = (self.sh_entries.iter())
-            .map(|e| {
-                e.map_or([[0.0; 3]; 9], |e| {
+        let mut sh: Vec<ShRgb> = (self.probes.iter())
+            .map(|p| {
+                crate::contract::probe_sh_entry(p).map_or([[0.0; 3]; 9], |e| {
                     std::array::from_fn(|k| v[9 * e as usize + k])
                 })
             })
