@@ -234,9 +234,8 @@ fn sky_view(
     let turn = (s as f64 * 0.618_033_988_749_895).fract() as f32 * std::f32::consts::TAU;
     let (sin, cos) = turn.sin_cos();
     let (tx, ty) = (tx * cos + ty * sin, ty * cos - tx * sin);
-    let dirs: Vec<Vec3> = (0..SKY_RAYS)
-        .map(|k| cosine_spiral(k, SKY_RAYS, tx, ty, n))
-        .collect();
+    let dirs: [Vec3; SKY_RAYS as usize] =
+        std::array::from_fn(|k| cosine_spiral(k as u32, SKY_RAYS, tx, ty, n));
     debug_assert_eq!(order.len(), SKY_RAYS as usize, "a permutation of the rays");
     let mut escaped = [false; SKY_RAYS as usize];
     for packet in order.chunks(PACKET) {

@@ -144,7 +144,7 @@ fn per_probe_ms(s: &Scaled) -> f64 {
 /// The report: a row per scene, each one's time per placed probe against the median's.
 fn markdown(args: &ScalingArgs, scaled: &[Scaled]) -> String {
     let per: Vec<f64> = scaled.iter().map(per_probe_ms).collect();
-    let median = median(&per);
+    let mid = median(&per);
     let mut md = String::new();
     let _ = writeln!(
         md,
@@ -182,7 +182,7 @@ fn markdown(args: &ScalingArgs, scaled: &[Scaled]) -> String {
             s.seconds,
             runs.join(", "),
             per_probe_ms(s),
-            100.0 * (per_probe_ms(s) / median - 1.0),
+            100.0 * (per_probe_ms(s) / mid - 1.0),
             m.probe_count as f64 / m.probes_with_data.max(1) as f64,
             s.gpu.as_ref().map_or("-".into(), |(_, total)| format!(
                 "{:.1}",

@@ -8,7 +8,8 @@
 //!
 //! Probe SH are accurate at probe centres; surfaces sample the volume between probes, often with a
 //! wall between the point and some of its eight probes. Each case is baked as a new user would
-//! (whole scene, default spacing) and at half that spacing, relit on the CPU, and sampled with the
+//! (whole scene, default spacing) and at half that spacing (not with `--no-half`), relit on the
+//! CPU, and sampled with the
 //! CPU twin of the engine's `sample_irradiance` (normal offset included) at the reference points
 //! and pixels, with each lookup of [`lookups`].
 //!

@@ -6,7 +6,7 @@
 //! Coherent Ray Tracing", 2001) fetches each node once for the packet. Inside a node the work is
 //! per ray, SIMD across the node (as Embree's single-ray BVH8 traversal): each ray still in the
 //! packet tests the eight child boxes in one AVX vector (two SSE vectors where the CPU lacks AVX,
-//! [`Bvh8::traced`] choosing at run time), and each leaf's four triangles, stored structure
+//! [`Bvh8::closest_hits`] and [`Bvh8::occluded`] choosing at run time), and each leaf's four triangles, stored structure
 //! of arrays, in one SSE vector. Rays that left the packet cost nothing, which matters: a packet
 //! reaches most nodes, and most leaves, with only a few of its rays.
 //! The shared origin makes `box - origin`, `v0 - origin` and `ng . (v0 - origin)` one value per
@@ -316,7 +316,7 @@ impl Bvh8 {
         });
         while let Some(e) = stack.pop() {
             let mask = if ANY { e.mask & live } else { e.mask };
-            // Every ray in the entry has a hit nearer than its box: skip.
+            // Every ray in the entry has a hit nearer than its box (or none is left live): skip.
             if each_bit(mask).all(|k| e.near > p.t[k]) {
                 continue;
             }

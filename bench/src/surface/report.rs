@@ -99,7 +99,7 @@ pub fn markdown(rows: &[Row], oracle: &[(String, Option<f64>)]) -> Result<String
         "Surface irradiance against the oracle's references: the bundled scenes \
          (`fixtures/surface/`) and the level family of issue 31 (`fixtures/levels/`, tuning set \
          seeds 0-7, held-out set seeds 8-15, unseen set seeds 24-31, fresh set seeds 32-39). Each case baked as a new user would (whole scene, \
-         default spacing){}, relit on the CPU (one bounce) and sampled \
+         at the bake's default spacing or `--spacing`){}, relit on the CPU (one bounce) and sampled \
          with each lookup: `trilinear` and `default` are the CPU twin of `sample_irradiance`, \
          which is what `prt render` shows; `rays`, `rays_light` and `surfels` are references \
          that trace rays (issue 31's candidates, not in the runtime).",

@@ -391,7 +391,7 @@ impl PrtRuntime {
             mask_stride,
             bounces: settings.bounces.feeds_back(),
         };
-        let sh_entry_count = asset.probes.iter().filter(|p| p.has_data()).count() as u32;
+        let sh_entry_count = asset.probes.iter().filter_map(probe_sh_entry).count() as u32;
         let res = Resources::new(device, asset, &settings, mask_stride, sh_entry_count)?;
         let counts = Counts {
             bricks: asset.bricks.len() as u32,

@@ -118,14 +118,14 @@ pub struct StateBuffers {
 impl Resources {
     /// Uploads `asset` and allocates every buffer and texture for `settings` (already checked
     /// by the caller), within `device`'s limits: past them a [`GpuError::Limit`] names the
-    /// array, its size and the limit. `probe_sh` gets `sh_entries` entries
+    /// array, its size and the limit. `probe_sh` gets `sh_entry_count` entries
     /// (the probes with data, [`probe_sh_entry`]).
     pub fn new(
         device: &wgpu::Device,
         asset: &Asset,
         settings: &RuntimeSettings,
         mask_stride: u32,
-        sh_entries: u32,
+        sh_entry_count: u32,
     ) -> Result<Resources, GpuError> {
         let g = asset.header.grid;
         let max_binding = check_limits(&device.limits(), &g)?;
@@ -136,7 +136,7 @@ impl Resources {
         let (chunks, chunk_factors, chunk_uniforms) = factor_buffers(&alloc, asset, settings)?;
         let (surfel_chunks, chunk_surfels) = surfel_buffers(&alloc, asset, settings)?;
         let asset_buffers = AssetBuffers::new(&alloc, asset, settings.equirect_sky)?;
-        let state = StateBuffers::new(&alloc, asset, settings, mask_stride, sh_entries)?;
+        let state = StateBuffers::new(&alloc, asset, settings, mask_stride, sh_entry_count)?;
         let (textures, views, sampler) = volume(device, &g, settings);
         let info = volume_info(asset, settings);
         let volume_info = alloc.uniform("prt volume info", &info);
@@ -272,13 +272,13 @@ fn probe_list(asset: &Asset, keep: fn(&prt_format::Probe) -> bool) -> (Vec<u32>,
 
 impl StateBuffers {
     /// Allocates the runtime's state, zeroed (every brick uncached), sized for `asset` and
-    /// `settings`, with `sh_entries` entries of `probe_sh`.
+    /// `settings`, with `sh_entry_count` entries of `probe_sh`.
     fn new(
         alloc: &Alloc,
         asset: &Asset,
         settings: &RuntimeSettings,
         mask_stride: u32,
-        sh_entries: u32,
+        sh_entry_count: u32,
     ) -> Result<StateBuffers, GpuError> {
         let none = wgpu::BufferUsages::empty();
         let n_bricks = asset.bricks.len() as u64;
@@ -314,7 +314,7 @@ impl StateBuffers {
             probe_dirty: alloc.zeroed("prt probe dirty", 4 * n_probes, none)?,
             probe_sh: alloc.zeroed(
                 "prt probe sh",
-                4 * u64::from(PROBE_SH_FLOATS) * u64::from(sh_entries.max(1)),
+                4 * u64::from(PROBE_SH_FLOATS) * u64::from(sh_entry_count.max(1)),
                 copy_src,
             )?,
             counters: alloc.zeroed("prt counters", size_of::<Counters>() as u64, copy_src)?,
