@@ -19,6 +19,7 @@ use prt_bake::{BakeSettings, NoProgress};
 use prt_format::summary::Summary;
 
 use crate::results::Out;
+use crate::surface::score::percentile;
 
 #[derive(clap::Args)]
 pub struct ScalingArgs {
@@ -103,7 +104,7 @@ fn measure(scene: &Path, spacing: f32, runs: u32, gpu: bool) -> Result<Scaled> {
     Ok(Scaled {
         summary: Summary::of(&asset, 0),
         name,
-        seconds: median(&times),
+        seconds: percentile(&times, 0.5),
         runs: times,
         gpu,
     })
@@ -125,17 +126,6 @@ fn gpu_memory(scene: &Path, asset: &prt_format::Asset) -> Result<(Vec<(String, u
     Ok((named, total))
 }
 
-/// The median of `v` (the mean of the two middle values of an even count; 0 for none).
-fn median(v: &[f64]) -> f64 {
-    let mut sorted = v.to_vec();
-    sorted.sort_by(f64::total_cmp);
-    match sorted.len() {
-        0 => 0.0,
-        n if n % 2 == 1 => sorted[n / 2],
-        n => 0.5 * (sorted[n / 2 - 1] + sorted[n / 2]),
-    }
-}
-
 /// Milliseconds of bake per placed probe (probe with data).
 fn per_probe_ms(s: &Scaled) -> f64 {
     1e3 * s.seconds / s.summary.probes_with_data.max(1) as f64
@@ -144,7 +134,7 @@ fn per_probe_ms(s: &Scaled) -> f64 {
 /// The report: a row per scene, each one's time per placed probe against the median's.
 fn markdown(args: &ScalingArgs, scaled: &[Scaled]) -> String {
     let per: Vec<f64> = scaled.iter().map(per_probe_ms).collect();
-    let mid = median(&per);
+    let mid = percentile(&per, 0.5);
     let mut md = String::new();
     let _ = writeln!(
         md,

@@ -37,7 +37,7 @@ mod pictures;
 mod placement;
 mod refs;
 mod report;
-mod score;
+pub(crate) mod score;
 
 use std::path::PathBuf;
 use std::time::Instant;

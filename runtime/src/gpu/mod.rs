@@ -288,14 +288,14 @@ const GATHERED_FIRST: u32 = 2;
 pub struct PrtRuntime {
     device: wgpu::Device,
     queue: wgpu::Queue,
-    probe_count: u32,
     /// Valid probes: what the gather's round robin cycles over (`resources::gather_list`).
     gather_count: u32,
     /// Grid points the coarse levels fill (`resources::fill_list`).
     fill_count: u32,
     /// Entries of `probe_sh` in use: the probes with data.
     sh_entry_count: u32,
-    /// The asset's grid points: where [`PrtRuntime::read_probe_sh`] finds a probe's entry
+    /// The asset's grid points (`Params::probe_count` is their count): where
+    /// [`PrtRuntime::read_probe_sh`] finds a probe's entry
     /// ([`probe_sh_entry`]) and how it fills the other points from their corners, as
     /// `fill.wgsl` does (`crate::fill`). A host copy of 32 bytes a grid point (17 MB for the
     /// 110 m plaza at 1 m) that spares the GPU 108 bytes a filled point.
@@ -408,7 +408,6 @@ impl PrtRuntime {
         Ok(PrtRuntime {
             device: device.clone(),
             queue: queue.clone(),
-            probe_count: asset.probes.len() as u32,
             gather_count: res.asset.gather_count,
             fill_count: res.asset.fill_count,
             sh_entry_count,
@@ -546,7 +545,7 @@ impl PrtRuntime {
     /// The uniform block of this update.
     fn params(&self, new: &State, changed: u32, light_words: u32, plan: &Plan) -> Params {
         Params {
-            probe_count: self.probe_count,
+            probe_count: self.probes.len() as u32,
             brick_count: self.brick_count,
             ray_count: self.ray_count,
             light_count: new.lights.len() as u32,
