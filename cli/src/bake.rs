@@ -87,6 +87,12 @@ pub struct BakeArgs {
     /// Surfel cell size in metres (bricks are 4x4x4 cells) [default: spacing / 8, or / 24 with --quality high]; 0 = no merging.
     #[arg(long)]
     cell_size: Option<f32>,
+    /// Surfel cells per probe spacing where --cell-size is not given: a point of
+    /// `prt-bench frontier --cells`. 6 takes about a quarter fewer runtime bytes than 8 at about
+    /// the same error on the level family and Sponza under 31 lights, but is worse under
+    /// Sponza's hard sun (docs/results/cells.md) [default: the --quality preset's: 8, high 24].
+    #[arg(long, conflicts_with_all = ["cell_size", "no_merge"])]
+    cells_per_spacing: Option<f32>,
     /// Keep every ray hit as its own surfel and brick (same as --cell-size 0).
     #[arg(long)]
     no_merge: bool,
@@ -155,6 +161,7 @@ pub fn run(args: BakeArgs) -> Result<()> {
         probe_budget,
         prune_error,
         cell_size,
+        cells_per_spacing,
         no_merge,
         far_ratio,
         double_sided,
@@ -189,6 +196,7 @@ pub fn run(args: BakeArgs) -> Result<()> {
         probe_budget,
         prune_error: prune_error.unwrap_or(preset.prune_error),
         cell_size: if no_merge { Some(0.0) } else { cell_size },
+        cells_per_spacing: cells_per_spacing.unwrap_or(preset.cells_per_spacing),
         far_ratio: far_ratio.unwrap_or(preset.far_ratio),
         double_sided,
         virtual_offset: !no_virtual_offset,

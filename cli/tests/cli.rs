@@ -905,3 +905,45 @@ fn probe_budget_and_prune_error() {
     let stdout = text(&out.stdout);
     assert!(!stdout.lines().any(|l| l.starts_with("refine")), "{stdout}");
 }
+
+/// `--cells-per-spacing` is the frontier's `--cells`: the asset records a cell of the spacing
+/// over it, the same bytes as `--cell-size` of that many metres; 0 is refused naming the value
+/// and writes nothing, and it cannot be combined with `--cell-size`.
+#[test]
+fn cells_per_spacing_sets_the_cell_size() {
+    let dir = Scratch::new("cells");
+    let bake = |name: &str, extra: &[&str]| {
+        let args = [&["--spacing", "0.5", "--rays", "64"], extra].concat();
+        bake_cornell_with(&dir, name, &args)
+    };
+    let (out, sixth) = bake("sixth.prt", &["--cells-per-spacing", "6"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let asset = prt_format::read_asset(&sixth).unwrap();
+    let cell = asset.header.settings.cell_size;
+    assert!((cell - 0.5 / 6.0).abs() < 1e-6, "cell {cell}");
+    let (out, metres) = bake("metres.prt", &["--cell-size", &(0.5f32 / 6.0).to_string()]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert_eq!(
+        std::fs::read(&sixth).unwrap(),
+        std::fs::read(&metres).unwrap()
+    );
+
+    let (out, zero) = bake("zero.prt", &["--cells-per-spacing", "0"]);
+    assert!(!out.status.success());
+    let stderr = text(&out.stderr);
+    assert!(
+        stderr.contains("cells_per_spacing") && stderr.contains('0'),
+        "{stderr}"
+    );
+    assert!(!zero.exists());
+    let (out, _) = bake(
+        "both.prt",
+        &["--cells-per-spacing", "6", "--cell-size", "0.1"],
+    );
+    assert!(!out.status.success());
+    assert!(
+        text(&out.stderr).contains("--cell-size"),
+        "{}",
+        text(&out.stderr)
+    );
+}
