@@ -53,7 +53,11 @@ pub struct BakeSettings {
     /// probe count ([`crate::probes::DEFAULT_PROBES`]) 8 measured as 12 on the level family's
     /// tuning seeds (median level 7.0% against 6.9%, worst 10.0% against 9.9%) at 0.64x the
     /// runtime bytes; 6 saved a quarter more but cost Sponza's detail (16.0% against 14.5% at
-    /// 8 and 12.5% at 12; `prt-bench frontier --cells 6,8,12`).
+    /// 8 and 12.5% at 12; `prt-bench frontier --cells 6,8,12`). Re-measured at stop 62
+    /// (docs/results/cells.md): 6 is a quarter fewer bytes at about the same error on five
+    /// tuning levels and the bundled scenes, better under Sponza's 31 lights (9.21% against
+    /// 10.21% at 1.5 m), worse under its sun (16.54% against 14.81%) and on the open plaza:
+    /// 8 stays. 1 to [`MAX_CELLS_PER_SPACING`].
     pub cells_per_spacing: f32,
     /// Hits at least this many brick sizes from their probe go to coarse bricks, one level
     /// coarser each time the distance doubles up to cells of 8 bricks
@@ -258,11 +262,14 @@ impl BakeSettings {
         if self.probe_budget == Some(0) {
             return bad("probe_budget", "0".into(), "must be at least 1 probe");
         }
-        if !(self.cells_per_spacing.is_finite() && self.cells_per_spacing > 0.0) {
+        // A cell wider than the spacing would merge hits a probe apart into one surfel (and
+        // below 1e-38 per spacing the cell is no longer a finite size); past 256 a default
+        // grid's cells pass a ray hit each, which merging is for.
+        if !(1.0..=MAX_CELLS_PER_SPACING).contains(&self.cells_per_spacing) {
             return bad(
                 "cells_per_spacing",
                 self.cells_per_spacing.to_string(),
-                "must be positive",
+                "must be between 1 and 256 (surfel cells per probe spacing)",
             );
         }
         if !(-1.0..=1.0).contains(&self.merge_normal_cos) {
@@ -299,3 +306,7 @@ impl BakeSettings {
 
 /// Most worker threads a bake starts.
 pub const MAX_THREADS: usize = 1024;
+
+/// Most surfel cells per probe spacing ([`BakeSettings::cells_per_spacing`]): `--quality high`
+/// takes 24.
+pub const MAX_CELLS_PER_SPACING: f32 = 256.0;

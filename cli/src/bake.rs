@@ -84,13 +84,13 @@ pub struct BakeArgs {
     /// only].
     #[arg(long)]
     prune_error: Option<f32>,
-    /// Surfel cell size in metres (bricks are 4x4x4 cells) [default: spacing / 8, or / 24 with --quality high]; 0 = no merging.
+    /// Surfel cell size in metres (bricks are 4x4x4 cells) [default: spacing / --cells-per-spacing]; 0 = no merging.
     #[arg(long)]
     cell_size: Option<f32>,
-    /// Surfel cells per probe spacing where --cell-size is not given: a point of
-    /// `prt-bench frontier --cells`. 6 takes about a quarter fewer runtime bytes than 8 at about
-    /// the same error on the level family and Sponza under 31 lights, but is worse under
-    /// Sponza's hard sun (docs/results/cells.md) [default: the --quality preset's: 8, high 24].
+    /// Surfel cells per probe spacing, 1 to 256, whatever spacing the bake picks. 6 takes
+    /// about a quarter fewer runtime bytes than 8 at about the same error on Sponza under 31
+    /// lights and small levels, but is worse under a hard sun (docs/results/cells.md)
+    /// [default: the --quality preset's: 8, high 24].
     #[arg(long, conflicts_with_all = ["cell_size", "no_merge"])]
     cells_per_spacing: Option<f32>,
     /// Keep every ray hit as its own surfel and brick (same as --cell-size 0).

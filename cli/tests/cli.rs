@@ -907,8 +907,9 @@ fn probe_budget_and_prune_error() {
 }
 
 /// `--cells-per-spacing` is the frontier's `--cells`: the asset records a cell of the spacing
-/// over it, the same bytes as `--cell-size` of that many metres; 0 is refused naming the value
-/// and writes nothing, and it cannot be combined with `--cell-size`.
+/// over it, the same bytes as `--cell-size` of that many metres, and `--quality high` keeps its
+/// 24th without it; a value outside 1..=256 is refused naming it and writes nothing, and it
+/// cannot be combined with `--cell-size` or `--no-merge`.
 #[test]
 fn cells_per_spacing_sets_the_cell_size() {
     let dir = Scratch::new("cells");
@@ -928,14 +929,36 @@ fn cells_per_spacing_sets_the_cell_size() {
         std::fs::read(&metres).unwrap()
     );
 
-    let (out, zero) = bake("zero.prt", &["--cells-per-spacing", "0"]);
-    assert!(!out.status.success());
-    let stderr = text(&out.stderr);
+    let (out, high) = bake("high.prt", &["--quality", "high"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let cell = prt_format::read_asset(&high)
+        .unwrap()
+        .header
+        .settings
+        .cell_size;
     assert!(
-        stderr.contains("cells_per_spacing") && stderr.contains('0'),
-        "{stderr}"
+        (cell - 0.5 / 24.0).abs() < 1e-6,
+        "high keeps a 24th: {cell}"
     );
-    assert!(!zero.exists());
+
+    for bad in ["0", "0.5", "300", "NaN"] {
+        let (out, asset) = bake("bad.prt", &["--cells-per-spacing", bad]);
+        assert!(!out.status.success(), "{bad}");
+        let stderr = text(&out.stderr);
+        assert!(
+            stderr.contains(&format!("cells_per_spacing = {bad}"))
+                && stderr.contains("between 1 and 256"),
+            "{bad}: {stderr}"
+        );
+        assert!(!asset.exists(), "{bad}");
+    }
+    let (out, _) = bake("no_merge.prt", &["--cells-per-spacing", "6", "--no-merge"]);
+    assert!(!out.status.success());
+    assert!(
+        text(&out.stderr).contains("--no-merge"),
+        "{}",
+        text(&out.stderr)
+    );
     let (out, _) = bake(
         "both.prt",
         &["--cells-per-spacing", "6", "--cell-size", "0.1"],
