@@ -182,6 +182,26 @@ fn bake_then_inspect_json() {
         Some(u64::from(prt_format::FORMAT_VERSION))
     );
     assert!(v["valid_probe_count"].as_u64() <= v["probe_count"].as_u64());
+    // Every factor reads a brick or a coarse brick of some level; the default bake has coarse
+    // ones (far ratio 5) at 64 rays too.
+    let levels: Vec<u64> = v["factors_by_level"]
+        .as_array()
+        .expect("factors_by_level")
+        .iter()
+        .map(|n| n.as_u64().expect("count"))
+        .collect();
+    assert!(levels.len() >= 2, "{levels:?}");
+    assert_eq!(
+        levels.iter().sum::<u64>(),
+        v["factor_count"].as_u64().unwrap()
+    );
+    assert!(v["single_ray_factors"].as_u64() <= v["factor_count"].as_u64());
+    let text_out = prt(&["inspect".as_ref(), out.as_os_str()], None);
+    assert!(
+        text(&text_out.stdout).contains("factor levels    per probe: "),
+        "{}",
+        text(&text_out.stdout)
+    );
 }
 
 /// A scene with an external buffer bakes when given relative to another working directory.

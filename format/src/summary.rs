@@ -47,6 +47,12 @@ pub struct Summary {
     /// Of those, lobe factors (`crate::lobe`; 0 but in u8 tables).
     pub lobe_factor_count: usize,
     pub factors_per_probe: f64,
+    /// Factors by what they read: `[0]` a brick, `[l]` a coarse brick of level `l`
+    /// (`crate::coarse`), as many entries as the coarsest level used plus one. Transport per
+    /// probe follows these counts: the far ratio sets the coarse ones (docs/results/cells.md).
+    pub factors_by_level: Vec<usize>,
+    /// Factors of a single ray: a grazing or partly seen brick, most of them coarse.
+    pub single_ray_factors: usize,
     pub transfer_precision: TransferPrecision,
     pub triangle_count: usize,
     pub light_count: usize,
@@ -110,6 +116,7 @@ impl Summary {
             }
         };
         let (factor_count, lobe_factor_count) = asset.factors.factor_counts();
+        let (factors_by_level, single_ray_factors) = factor_levels(asset);
         let s = &section_bytes;
         let (traced, blind) = asset.surface.traced_and_blind();
         let probes_in_gaps = (0..asset.probes.len())
@@ -144,6 +151,8 @@ impl Summary {
             factor_count,
             lobe_factor_count,
             factors_per_probe: per_probe(factor_count as u64),
+            factors_by_level,
+            single_ray_factors,
             transfer_precision: asset.factors.precision(),
             triangle_count: asset.geometry.triangles.len(),
             light_count: asset.lights.len(),
@@ -188,6 +197,30 @@ fn surface_bytes(t: &crate::surface::SurfaceTerms) -> u64 {
         + bytes(&t.near_ranges)
         + bytes(&t.near)
         + bytes(&t.sky)
+}
+
+/// Factors by the level of what they read, and those of one ray ([`Summary::factors_by_level`]).
+/// A continuation slot is no factor; a brick index past the coarse bricks (an asset not
+/// validated) counts as level 0.
+fn factor_levels(asset: &Asset) -> (Vec<usize>, usize) {
+    let bricks = asset.bricks.len();
+    let (mut by_level, mut single) = (vec![0usize], 0);
+    for f in 0..asset.factors.len() {
+        let (brick, rays) = asset.factors.brick_and_rays(f);
+        if rays == 0 {
+            continue;
+        }
+        let level = (brick as usize)
+            .checked_sub(bricks)
+            .and_then(|c| asset.coarse.bricks.get(c))
+            .map_or(0, |c| c.level as usize);
+        if by_level.len() <= level {
+            by_level.resize(level + 1, 0);
+        }
+        by_level[level] += 1;
+        single += usize::from(rays == 1);
+    }
+    (by_level, single)
 }
 
 impl std::fmt::Display for Summary {
@@ -251,6 +284,22 @@ impl std::fmt::Display for Summary {
                 _ => String::new(),
             }
         )?;
+        if self.probes_with_data > 0 && self.factor_count > 0 {
+            let per = |n: usize| n as f64 / self.probes_with_data as f64;
+            let coarse: Vec<String> = (self.factors_by_level.iter().enumerate().skip(1))
+                .map(|(l, &n)| format!("{l}: {:.1}", per(n)))
+                .collect();
+            writeln!(
+                f,
+                "factor levels    per probe: {:.1} read bricks{}; {:.1} have one ray",
+                per(self.factors_by_level[0]),
+                match coarse.is_empty() {
+                    true => String::new(),
+                    false => format!(", coarse bricks of level {}", coarse.join(", ")),
+                },
+                per(self.single_ray_factors)
+            )?;
+        }
         writeln!(
             f,
             "geometry         {} triangles, {} lights",
