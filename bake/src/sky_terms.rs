@@ -270,13 +270,10 @@ fn sky_view(
 /// neighbours). The spiral's own order steps by the golden angle, so that a packet of
 /// consecutive directions would span the hemisphere and visit most of the BVH.
 pub(crate) fn spiral_order(count: u32) -> Vec<u32> {
-    let morton = |k: u32| {
+    crate::trace::morton_order(count, |k| {
         let d = cosine_spiral(k, count, Vec3::X, Vec3::Y, Vec3::Z);
-        crate::trace::morton_2d(d.x, d.y)
-    };
-    let mut order: Vec<u32> = (0..count).collect();
-    order.sort_by_key(|&k| (morton(k), k));
-    order
+        [d.x, d.y]
+    })
 }
 
 /// `clamp(open . t, 0, A(n) . t)` of surfel `s`: what its near field's escaping rays bring of

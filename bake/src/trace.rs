@@ -251,17 +251,26 @@ impl Tracer<'_> {
 /// changes float sums (sky transfer, surfel means) in their last bits, never which ray hits
 /// what.
 pub(crate) fn coherent_order(directions: &[Vec3]) -> Vec<u32> {
-    let morton = |d: Vec3| {
-        let [u, v] = prt_format::depth::oct_encode(d.to_array());
-        morton_2d(u, v)
-    };
-    let mut order: Vec<u32> = (0..directions.len() as u32).collect();
-    order.sort_by_key(|&i| (morton(directions[i as usize]), i));
+    morton_order(directions.len() as u32, |i| {
+        prt_format::depth::oct_encode(directions[i as usize].to_array())
+    })
+}
+
+/// The indices `0..count` in Morton (Z) order of `point(i)`, a point of the square `[-1, 1]^2`
+/// (ties by index): neighbouring points, consecutive indices. Rays go to packets in it, by
+/// their octahedral map ([`coherent_order`]) or by their projection on the disc about a
+/// surfel's normal (`crate::sky_terms::spiral_order`).
+pub(crate) fn morton_order(count: u32, point: impl Fn(u32) -> [f32; 2]) -> Vec<u32> {
+    let mut order: Vec<u32> = (0..count).collect();
+    order.sort_by_key(|&i| {
+        let [u, v] = point(i);
+        (morton_2d(u, v), i)
+    });
     order
 }
 
 /// The Morton code (Z order) of a point of the square `[-1, 1]^2`, on a 65,536^2 lattice.
-pub(crate) fn morton_2d(u: f32, v: f32) -> u32 {
+fn morton_2d(u: f32, v: f32) -> u32 {
     let q = |x: f32| ((x * 0.5 + 0.5).clamp(0.0, 1.0) * 65535.0) as u32;
     let spread = |mut x: u32| {
         x &= 0xffff;
