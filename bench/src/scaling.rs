@@ -37,6 +37,10 @@ pub struct ScalingArgs {
     /// and list the GPU memory the runtime allocates.
     #[arg(long)]
     gpu: bool,
+    /// Drop probes whose prediction error is below this (`prt bake --prune-error`) [default:
+    /// the bake's].
+    #[arg(long)]
+    prune_error: Option<f32>,
     #[command(flatten)]
     out: Out,
 }
@@ -63,7 +67,7 @@ pub fn run(args: ScalingArgs) -> Result<()> {
     );
     let mut scaled = Vec::new();
     for scene in &args.scenes {
-        let s = measure(scene, args.spacing, args.runs, args.gpu)?;
+        let s = measure(scene, &settings(&args), args.runs, args.gpu)?;
         eprintln!(
             "{}: {} probes placed, {:.2} s, {:.3} ms a probe",
             s.name,
@@ -76,12 +80,18 @@ pub fn run(args: ScalingArgs) -> Result<()> {
     args.out.report("scaling", &markdown(&args, &scaled))
 }
 
-/// Bakes `scene` `runs` times (and relights it once with `gpu`).
-fn measure(scene: &Path, spacing: f32, runs: u32, gpu: bool) -> Result<Scaled> {
-    let settings = BakeSettings {
-        spacing: Some(spacing),
-        ..BakeSettings::default()
-    };
+/// The bake settings of `args`: the defaults at its spacing (and prune error).
+fn settings(args: &ScalingArgs) -> BakeSettings {
+    let defaults = BakeSettings::default();
+    BakeSettings {
+        spacing: Some(args.spacing),
+        prune_error: args.prune_error.unwrap_or(defaults.prune_error),
+        ..defaults
+    }
+}
+
+/// Bakes `scene` with `settings` `runs` times (and relights it once with `gpu`).
+fn measure(scene: &Path, settings: &BakeSettings, runs: u32, gpu: bool) -> Result<Scaled> {
     let mut times = Vec::new();
     let mut asset = None;
     for _ in 0..runs {
@@ -89,7 +99,7 @@ fn measure(scene: &Path, spacing: f32, runs: u32, gpu: bool) -> Result<Scaled> {
         // costs.
         drop(asset.take());
         let t = Instant::now();
-        let (baked, _) = prt_bake::bake(scene, &settings, &NoProgress)
+        let (baked, _) = prt_bake::bake(scene, settings, &NoProgress)
             .with_context(|| format!("baking {}", scene.display()))?;
         times.push(t.elapsed().as_secs_f64());
         asset = Some(baked);
@@ -138,8 +148,8 @@ fn markdown(args: &ScalingArgs, scaled: &[Scaled]) -> String {
     let mut md = String::new();
     let _ = writeln!(
         md,
-        "# Bake time against level size\n\n`prt-bench scaling {} --spacing {} --runs {}{}`: \
-         each scene baked with the default settings (sparse placement) at {} m, timed in \
+        "# Bake time against level size\n\n`prt-bench scaling {} --spacing {} --runs {}{}{}`: \
+         each scene baked with the default settings{} (sparse placement) at {} m, timed in \
          process from the scene file to the asset, median of {} run(s). Placed: probes with \
          data; filled: grid points the runtime fills from coarse levels.\n",
         (args.scenes.iter())
@@ -149,6 +159,10 @@ fn markdown(args: &ScalingArgs, scaled: &[Scaled]) -> String {
         args.spacing,
         args.runs,
         if args.gpu { " --gpu" } else { "" },
+        args.prune_error
+            .map_or(String::new(), |e| format!(" --prune-error {e}")),
+        args.prune_error
+            .map_or(String::new(), |e| format!(" but a prune error of {e}")),
         args.spacing,
         args.runs
     );
