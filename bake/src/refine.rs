@@ -14,7 +14,9 @@
 //!   under a sky of radiance 1, the others under a black sky;
 //! - a point light at the probe's grid point, lighting every surface within a spacing with
 //!   radiance 1 and farther ones with the inverse square of the distance (a hotspot the points
-//!   around see from aside).
+//!   around see from aside);
+//! - per axis, the surfaces on one side of the probe's grid point lit and those on the other
+//!   dark, then the reverse (a lit room behind a wall or door beside the probe; stop 63).
 //!
 //! A probe's SH under such a lighting is its factor table applied to it, as the runtime's
 //! gather does, each factor's radiance the field's value at its mean hit point.
@@ -207,11 +209,17 @@ fn prediction_error(
     let at = Vec3::from(grid.position(i, j, k));
     let mut mean = [[0.0f32; NORMALS.len()]; FIELDS];
     let mut lit = [0.0f32; NORMALS.len()];
+    let mut half_mean = [[0.0f32; NORMALS.len()]; 6];
     let mut total = 0.0;
     for (c, w) in tier::fill_corners(grid, ijk, 1, hidden) {
         let Some(r) = response[c].as_ref() else {
             continue;
         };
+        for (m, r) in half_mean.iter_mut().zip(half_response(asset, c, at)) {
+            for (m, r) in m.iter_mut().zip(r) {
+                *m += w * r;
+            }
+        }
         total += w;
         for (m, r) in mean.iter_mut().zip(r) {
             for (m, r) in m.iter_mut().zip(r) {
@@ -226,11 +234,18 @@ fn prediction_error(
         return None;
     }
     let own_lit = point_response(asset, p, at);
+    let own_half = half_response(asset, p, at);
     let worst = own
         .iter()
         .flatten()
         .chain(&own_lit)
-        .zip(mean.iter().flatten().chain(&lit))
+        .chain(own_half.iter().flatten())
+        .zip(
+            mean.iter()
+                .flatten()
+                .chain(&lit)
+                .chain(half_mean.iter().flatten()),
+        )
         .map(|(e, m)| (e - m / total).abs())
         .fold(0.0f32, f32::max);
     Some((worst / PI, hidden))
@@ -255,6 +270,33 @@ fn point_response(asset: &Asset, q: usize, light: Vec3) -> [f32; NORMALS.len()] 
         }
     }
     axis_irradiance(sh)
+}
+
+/// Probe `q`'s irradiance at the six axis normals under six lightings, two per axis: the
+/// surfaces below `at` along it of radiance 1 (the others 0), and those above it. Each puts a
+/// light's edge through the tested probe, as a wall does between a lit room and a dark one:
+/// the stripes, laid from the grid's origin, light a thin wall's two sides alike, so a probe
+/// in a doorway, which its level-1 corners on either side see through the door, passed the
+/// test and was filled half from the lit room (stop 63: a blind level, interior_112, 33.3% ->
+/// 11.7% open mean; `docs/results/refine.md`).
+fn half_response(asset: &Asset, q: usize, at: Vec3) -> [[f32; NORMALS.len()]; 6] {
+    let probe = &asset.probes[q];
+    let mut sh = [[0.0f32; SH_COUNT]; 6];
+    let first = probe.first_factor as usize;
+    for f in first..first + probe.factor_count as usize {
+        if asset.factors.brick_and_rays(f).1 == 0 {
+            continue;
+        }
+        let x = Vec3::from(asset.factor_point(f));
+        let t = asset.factor_transfer(probe, f);
+        for a in 0..3 {
+            let k = 2 * a + usize::from(x[a] > at[a]);
+            for (s, t) in sh[k].iter_mut().zip(&t) {
+                *s += t;
+            }
+        }
+    }
+    sh.map(axis_irradiance)
 }
 
 /// The irradiance of one channel's SH `c` at the six axis normals.

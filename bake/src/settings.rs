@@ -91,8 +91,8 @@ pub struct BakeSettings {
     pub surface_offset: bool,
     /// At most this many probes with data: past it the bake drops the probes between the
     /// points of level 1 (every other grid point) whose light that level's interpolation
-    /// predicts best ([`crate::refine`]), and the runtime fills them from it. `None` keeps every
-    /// probe.
+    /// predicts best, those that see all their level-1 corners first ([`crate::refine`]), and
+    /// the runtime fills them from it. `None` keeps every probe.
     pub probe_budget: Option<usize>,
     /// Sparse bakes drop the probes between the points of level 1 whose prediction error
     /// ([`crate::refine`]) is below this, whatever the budget; 0 keeps them. 0.15 was chosen

@@ -2,7 +2,8 @@
 //! placed probe within +-25% across three sizes of an open level, and the GPU memory
 //! `PrtRuntime` allocates for it).
 //!
-//! Each scene is baked with the default settings at one spacing (sparse placement), timed in
+//! Each scene is baked with the default settings at one spacing (sparse placement; with
+//! `--prune-error`, that prune error), timed in
 //! process from the scene file to the finished asset, `--runs` times (the median is kept: one
 //! run swings by 10-20% on a shared machine). A *placed* probe is one with data (traced, or
 //! inside geometry reading a neighbour's: `Summary::probes_with_data`); the grid points the
@@ -65,9 +66,16 @@ pub fn run(args: ScalingArgs) -> Result<()> {
         "--spacing {}: give a positive spacing in metres",
         args.spacing
     );
+    if let Some(e) = args.prune_error {
+        anyhow::ensure!(
+            e.is_finite() && e >= 0.0,
+            "--prune-error {e}: give an error of 0 or more (0 keeps every probe)"
+        );
+    }
+    let settings = settings(&args);
     let mut scaled = Vec::new();
     for scene in &args.scenes {
-        let s = measure(scene, &settings(&args), args.runs, args.gpu)?;
+        let s = measure(scene, &settings, args.runs, args.gpu)?;
         eprintln!(
             "{}: {} probes placed, {:.2} s, {:.3} ms a probe",
             s.name,
@@ -149,7 +157,7 @@ fn markdown(args: &ScalingArgs, scaled: &[Scaled]) -> String {
     let _ = writeln!(
         md,
         "# Bake time against level size\n\n`prt-bench scaling {} --spacing {} --runs {}{}{}`: \
-         each scene baked with the default settings{} (sparse placement) at {} m, timed in \
+         each scene baked with the default settings (sparse placement){}, at {} m, timed in \
          process from the scene file to the asset, median of {} run(s). Placed: probes with \
          data; filled: grid points the runtime fills from coarse levels.\n",
         (args.scenes.iter())
@@ -162,7 +170,7 @@ fn markdown(args: &ScalingArgs, scaled: &[Scaled]) -> String {
         args.prune_error
             .map_or(String::new(), |e| format!(" --prune-error {e}")),
         args.prune_error
-            .map_or(String::new(), |e| format!(" but a prune error of {e}")),
+            .map_or(String::new(), |e| format!(", but a prune error of {e}")),
         args.spacing,
         args.runs
     );

@@ -74,8 +74,9 @@ pub struct BakeArgs {
     #[arg(long, default_value_t = 1 << 20)]
     max_probes: u64,
     /// At most this many probes with data: past it the bake drops the probes between every
-    /// other grid point whose light those points predict best, and the runtime fills them
-    /// from those points [default: no budget].
+    /// other grid point whose light those points predict best (those that see all those
+    /// points around them first), and the runtime fills them from those points [default: no
+    /// budget].
     #[arg(long)]
     probe_budget: Option<usize>,
     /// Drop the probes between every other grid point whose light those points predict

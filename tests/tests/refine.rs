@@ -129,3 +129,32 @@ fn broken_hidden_corners_are_invalid() {
     });
     assert!(e.contains("is valid among those it sees"), "{e}");
 }
+
+/// `fixtures/levels/interior_112.gltf` (`generate.py --kind interior --seed 112`, a level of a
+/// blind set): a zero-thickness wall at x = 9.872 between a lit room and a dark one, with a
+/// door. The probe in the doorway a step into the dark room, at (10.01, 2.00, -8.87), sees its
+/// level-1 corners in the lit room through the door. Under the stripes, which light the wall's
+/// two sides alike, the coarse points predicted it and it was filled half from the lit room:
+/// the wall above the door read 17x its truth, and the level's open mean was 33.3%. The
+/// lightings with an edge through the probe keep it (stop 63: 11.7%).
+#[test]
+fn a_probe_in_a_doorway_is_kept() {
+    let (asset, report) = prt_bake::bake(
+        &fixture("levels/interior_112.gltf"),
+        &BakeSettings::default(),
+        &NoProgress,
+    )
+    .unwrap();
+    assert!(
+        report.refined.is_some_and(|r| r.dropped > 0),
+        "the threshold drops probes"
+    );
+    let g = asset.header.grid;
+    let at = [10.008, 2.005, -8.874];
+    let (p, w) = (g.corners(at).into_iter())
+        .max_by(|a, b| a.1.total_cmp(&b.1))
+        .unwrap();
+    assert!(w > 0.99, "the grid moved: weight {w}");
+    let probe = &asset.probes[p];
+    assert!(probe.has_data() && !probe.is_filled(), "{probe:?}");
+}
