@@ -61,7 +61,8 @@ use crate::accel::bvh::SceneBvh;
 /// Widths of the test stripes (one lit and one dark band), in grid spacings.
 pub const PERIODS: [f32; 4] = [1.0, 2.0, 4.0, 8.0];
 
-/// Test lightings: three stripe directions per period.
+/// Stripe lightings: three stripe directions per period (the half-space and point lightings
+/// are [`half_response`]'s and [`point_response`]'s).
 pub const FIELDS: usize = 3 * PERIODS.len();
 
 /// Normals the irradiance is compared at.
@@ -147,7 +148,8 @@ pub fn prune(
 /// with no surfel) would weigh it by its facing term alone, and a point filled beside a wall
 /// reads the corners it sees, not those the surface sees. A budget drops those last (stop 63:
 /// in one order of error, Sponza under its sun at 3,400 probes scored 15.04% with 5.50% of
-/// pixels over-lit, seen-first 14.94% and 4.42%; the 110 m plaza at 1.5 m cut to 15,000
+/// pixels over-lit, seen-first 14.94% and 4.42% (before the half-space lightings); the 110 m
+/// plaza at 1.5 m cut to 15,000
 /// probes 0.71% and 0.62%; `docs/results/refine.md`).
 fn drop_order(
     mut scored: Vec<(f32, usize, u32)>,
@@ -274,11 +276,11 @@ fn point_response(asset: &Asset, q: usize, light: Vec3) -> [f32; NORMALS.len()] 
 
 /// Probe `q`'s irradiance at the six axis normals under six lightings, two per axis: the
 /// surfaces below `at` along it of radiance 1 (the others 0), and those above it. Each puts a
-/// light's edge through the tested probe, as a wall does between a lit room and a dark one:
-/// the stripes, laid from the grid's origin, light a thin wall's two sides alike, so a probe
-/// in a doorway, which its level-1 corners on either side see through the door, passed the
-/// test and was filled half from the lit room (stop 63: a blind level, interior_112, 33.3% ->
-/// 11.7% open mean; `docs/results/refine.md`).
+/// light's edge through the tested probe, as a door does between a lit room and a dark one:
+/// the stripes, laid from the grid's origin, light both rooms alike, so a probe in a doorway,
+/// which its level-1 corners in either room see through the door, passed the test and was
+/// filled half from the lit room (stop 63: interior_112, a level of the then-blind set
+/// 112-119, 33.3% -> 11.7% open mean; `docs/results/refine.md`).
 fn half_response(asset: &Asset, q: usize, at: Vec3) -> [[f32; NORMALS.len()]; 6] {
     let probe = &asset.probes[q];
     let mut sh = [[0.0f32; SH_COUNT]; 6];

@@ -80,7 +80,7 @@ pub struct BakeArgs {
     #[arg(long)]
     probe_budget: Option<usize>,
     /// Drop the probes between every other grid point whose light those points predict
-    /// within this error (in units of pi, under test lightings of stripes and sky) whatever
+    /// within this error (in units of pi, under test lightings of stripes, sky, a point light and half-spaces) whatever
     /// the budget; 0 keeps them [default: the --quality preset's: 0.15, high 0; sparse bakes
     /// only].
     #[arg(long)]

@@ -5,7 +5,7 @@
 use prt_bake::{BakeSettings, NoProgress};
 use prt_format::{
     decode, encode, tier, Asset, FILL_HIDDEN_MASK, FILL_HIDDEN_SHIFT, FILL_LEVEL_SHIFT,
-    PROBE_FILLED,
+    PROBE_FILLED, PROBE_OFFSET,
 };
 use prt_tests::{fixture, rays, surface_difference, surfel_points};
 
@@ -130,8 +130,8 @@ fn broken_hidden_corners_are_invalid() {
     assert!(e.contains("is valid among those it sees"), "{e}");
 }
 
-/// `fixtures/levels/interior_112.gltf` (`generate.py --kind interior --seed 112`, a level of a
-/// blind set): a zero-thickness wall at x = 9.872 between a lit room and a dark one, with a
+/// `fixtures/levels/interior_112.gltf` (`generate.py --kind interior --seed 112`, a level of
+/// the then-blind set 112-119): a zero-thickness wall at x = 9.872 between a lit room and a dark one, with a
 /// door. The probe in the doorway a step into the dark room, at (10.01, 2.00, -8.87), sees its
 /// level-1 corners in the lit room through the door. Under the stripes, which light the wall's
 /// two sides alike, the coarse points predicted it and it was filled half from the lit room:
@@ -156,5 +156,8 @@ fn a_probe_in_a_doorway_is_kept() {
         .unwrap();
     assert!(w > 0.99, "the grid moved: weight {w}");
     let probe = &asset.probes[p];
+    // Kept for its prediction, not because it was moved or is on level 1 (never dropped).
+    assert!(probe.flags & PROBE_OFFSET == 0, "{probe:?}");
+    assert!(!tier::on_level_point(&g, g.ijk(p), 1));
     assert!(probe.has_data() && !probe.is_filled(), "{probe:?}");
 }
