@@ -30,8 +30,8 @@
 //! [`crate::BakeSettings::prune_error`]; a filled point has no visibility map for the lookups
 //! without surface terms), then more until a budget of probes with data holds
 //! ([`crate::BakeSettings::probe_budget`]): those that see all their corners in order of
-//! error, then those with a hidden corner ([`drop_order`]). It keeps every probe that was moved off a
-//! surface or out of a wall, and every dilation source (dilated probes read its table,
+//! error, then those with a hidden corner ([`drop_order`]). It keeps every probe that was
+//! moved off a surface or out of a wall, and every dilation source (dilated probes read its table,
 //! [`prt_format::PROBE_DILATED`]). The dropped ones are flagged filled from level 1
 //! ([`prt_format::PROBE_FILLED`]): the runtime fills them
 //! after every gather, so the lookup reads the coarse interpolation there, continuous where kept
@@ -61,9 +61,13 @@ use crate::accel::bvh::SceneBvh;
 /// Widths of the test stripes (one lit and one dark band), in grid spacings.
 pub const PERIODS: [f32; 4] = [1.0, 2.0, 4.0, 8.0];
 
-/// Stripe lightings: three stripe directions per period (the half-space and point lightings
-/// are [`half_response`]'s and [`point_response`]'s).
+/// Stripe lightings: three stripe directions per period (the point and half-space lightings
+/// are [`local_response`]'s).
 pub const FIELDS: usize = 3 * PERIODS.len();
+
+/// Lightings placed at the tested probe ([`local_response`]): the point light, then per axis
+/// the surfaces below the probe lit, and those above.
+const LOCAL: usize = 1 + 6;
 
 /// Normals the irradiance is compared at.
 const NORMALS: [[f32; 3]; 6] = sh::AXIS_NORMALS;
@@ -149,8 +153,7 @@ pub fn prune(
 /// reads the corners it sees, not those the surface sees. A budget drops those last (stop 63:
 /// in one order of error, Sponza under its sun at 3,400 probes scored 15.04% with 5.50% of
 /// pixels over-lit, seen-first 14.94% and 4.42% (before the half-space lightings); the 110 m
-/// plaza at 1.5 m cut to 15,000
-/// probes 0.71% and 0.62%; `docs/results/refine.md`).
+/// plaza at 1.5 m cut to 15,000 probes 0.71% -> 0.62%; `docs/results/refine.md`).
 fn drop_order(
     mut scored: Vec<(f32, usize, u32)>,
     threshold: f32,
@@ -210,95 +213,73 @@ fn prediction_error(
     let [i, j, k] = ijk;
     let at = Vec3::from(grid.position(i, j, k));
     let mut mean = [[0.0f32; NORMALS.len()]; FIELDS];
-    let mut lit = [0.0f32; NORMALS.len()];
-    let mut half_mean = [[0.0f32; NORMALS.len()]; 6];
+    let mut local = [[0.0f32; NORMALS.len()]; LOCAL];
     let mut total = 0.0;
     for (c, w) in tier::fill_corners(grid, ijk, 1, hidden) {
         let Some(r) = response[c].as_ref() else {
             continue;
         };
-        for (m, r) in half_mean.iter_mut().zip(half_response(asset, c, at)) {
-            for (m, r) in m.iter_mut().zip(r) {
-                *m += w * r;
-            }
-        }
         total += w;
-        for (m, r) in mean.iter_mut().zip(r) {
+        let r_local = local_response(asset, c, at);
+        for (m, r) in (mean.iter_mut().zip(r)).chain(local.iter_mut().zip(&r_local)) {
             for (m, r) in m.iter_mut().zip(r) {
                 *m += w * r;
             }
-        }
-        for (l, r) in lit.iter_mut().zip(point_response(asset, c, at)) {
-            *l += w * r;
         }
     }
     if total <= 0.0 {
         return None;
     }
-    let own_lit = point_response(asset, p, at);
-    let own_half = half_response(asset, p, at);
-    let worst = own
-        .iter()
-        .flatten()
-        .chain(&own_lit)
-        .chain(own_half.iter().flatten())
-        .zip(
-            mean.iter()
-                .flatten()
-                .chain(&lit)
-                .chain(half_mean.iter().flatten()),
-        )
+    let own_local = local_response(asset, p, at);
+    let worst = (own.iter().chain(&own_local).flatten())
+        .zip(mean.iter().chain(&local).flatten())
         .map(|(e, m)| (e - m / total).abs())
         .fold(0.0f32, f32::max);
     Some((worst / PI, hidden))
 }
 
-/// Probe `q`'s irradiance at the six axis normals with every surface within a grid spacing of
-/// `light` of radiance 1, and farther ones falling off with the inverse square of the distance.
-fn point_response(asset: &Asset, q: usize, light: Vec3) -> [f32; NORMALS.len()] {
-    let probe = &asset.probes[q];
+/// Probe `q`'s irradiance at the six axis normals under the lightings placed at `at`, its
+/// grid point when `q` is the tested probe ([`LOCAL`]):
+///
+/// - a point light at `at`: every surface within a grid spacing of radiance 1, farther ones
+///   falling off with the inverse square of the distance;
+/// - per axis, the surfaces below `at` along it of radiance 1 (the others 0), then those above
+///   it. Each puts a light's edge through the tested probe, as a door does between a lit room
+///   and a dark one: the stripes, laid from the grid's origin, light both rooms alike, so a
+///   probe in a doorway, which its level-1 corners in either room see through the door, passed
+///   the test and was filled half from the lit room (stop 63: interior_112, a level of the
+///   then-blind set 112-119, 33.3% -> 11.7% open mean; `docs/results/refine.md`).
+fn local_response(asset: &Asset, q: usize, at: Vec3) -> [[f32; NORMALS.len()]; LOCAL] {
     let spacing_sq = asset.header.grid.spacing * asset.header.grid.spacing;
-    let mut sh = [0.0f32; SH_COUNT];
-    let first = probe.first_factor as usize;
-    for f in first..first + probe.factor_count as usize {
-        if asset.factors.brick_and_rays(f).1 == 0 {
-            continue; // a continuation slot (`prt_format::FactorSlot`)
-        }
-        let d_sq = Vec3::from(asset.factor_point(f)).distance_squared(light);
-        let radiance = (spacing_sq / d_sq.max(spacing_sq)).min(1.0);
-        let t = asset.factor_transfer(probe, f);
-        for (s, t) in sh.iter_mut().zip(&t) {
+    let mut sh = [[0.0f32; SH_COUNT]; LOCAL];
+    for (x, t) in factors(asset, q) {
+        let radiance = (spacing_sq / x.distance_squared(at).max(spacing_sq)).min(1.0);
+        for (s, t) in sh[0].iter_mut().zip(&t) {
             *s += radiance * t;
         }
-    }
-    axis_irradiance(sh)
-}
-
-/// Probe `q`'s irradiance at the six axis normals under six lightings, two per axis: the
-/// surfaces below `at` along it of radiance 1 (the others 0), and those above it. Each puts a
-/// light's edge through the tested probe, as a door does between a lit room and a dark one:
-/// the stripes, laid from the grid's origin, light both rooms alike, so a probe in a doorway,
-/// which its level-1 corners in either room see through the door, passed the test and was
-/// filled half from the lit room (stop 63: interior_112, a level of the then-blind set
-/// 112-119, 33.3% -> 11.7% open mean; `docs/results/refine.md`).
-fn half_response(asset: &Asset, q: usize, at: Vec3) -> [[f32; NORMALS.len()]; 6] {
-    let probe = &asset.probes[q];
-    let mut sh = [[0.0f32; SH_COUNT]; 6];
-    let first = probe.first_factor as usize;
-    for f in first..first + probe.factor_count as usize {
-        if asset.factors.brick_and_rays(f).1 == 0 {
-            continue;
-        }
-        let x = Vec3::from(asset.factor_point(f));
-        let t = asset.factor_transfer(probe, f);
         for a in 0..3 {
-            let k = 2 * a + usize::from(x[a] > at[a]);
+            let k = 1 + 2 * a + usize::from(x[a] > at[a]);
             for (s, t) in sh[k].iter_mut().zip(&t) {
                 *s += t;
             }
         }
     }
     sh.map(axis_irradiance)
+}
+
+/// Probe `q`'s factors: each one's mean hit point and SH transfer, continuation slots
+/// (`prt_format::FactorSlot`) left out.
+fn factors(asset: &Asset, q: usize) -> impl Iterator<Item = (Vec3, [f32; SH_COUNT])> + '_ {
+    let probe = &asset.probes[q];
+    let first = probe.first_factor as usize;
+    (first..first + probe.factor_count as usize)
+        .filter(|&f| asset.factors.brick_and_rays(f).1 != 0)
+        .map(move |f| {
+            (
+                Vec3::from(asset.factor_point(f)),
+                asset.factor_transfer(probe, f),
+            )
+        })
 }
 
 /// The irradiance of one channel's SH `c` at the six axis normals.
@@ -331,13 +312,7 @@ fn respond(asset: &Asset, p: usize) -> Response {
     let probe = &asset.probes[p];
     let grid = &asset.header.grid;
     let mut sh = [[0.0f32; SH_COUNT]; FIELDS];
-    let first = probe.first_factor as usize;
-    for f in first..first + probe.factor_count as usize {
-        if asset.factors.brick_and_rays(f).1 == 0 {
-            continue; // a continuation slot (`prt_format::FactorSlot`)
-        }
-        let at = Vec3::from(asset.factor_point(f));
-        let t = asset.factor_transfer(probe, f);
+    for (at, t) in factors(asset, p) {
         for (k, sh) in sh.iter_mut().enumerate() {
             if field(k, at, grid) {
                 for (s, t) in sh.iter_mut().zip(&t) {

@@ -3,9 +3,9 @@
 //! `PrtRuntime` allocates for it).
 //!
 //! Each scene is baked with the default settings at one spacing (sparse placement; with
-//! `--prune-error`, that prune error), timed in
-//! process from the scene file to the finished asset, `--runs` times (the median is kept: one
-//! run swings by 10-20% on a shared machine). A *placed* probe is one with data (traced, or
+//! `--prune-error`, that prune error), timed in process from the scene file to the finished
+//! asset, `--runs` times (the median is kept: one run swings by 10-20% on a shared machine).
+//! A *placed* probe is one with data (traced, or
 //! inside geometry reading a neighbour's: `Summary::probes_with_data`); the grid points the
 //! runtime fills from coarse levels are not, though they are counted beside it. With `--gpu`,
 //! each asset is relit once on the GPU with the rig beside its scene (`NAME_rig.json`, as the
@@ -66,12 +66,7 @@ pub fn run(args: ScalingArgs) -> Result<()> {
         "--spacing {}: give a positive spacing in metres",
         args.spacing
     );
-    if let Some(e) = args.prune_error {
-        anyhow::ensure!(
-            e.is_finite() && e >= 0.0,
-            "--prune-error {e}: give an error of 0 or more (0 keeps every probe)"
-        );
-    }
+    // A bad --prune-error is refused by the bake's own check of its settings.
     let settings = settings(&args);
     let mut scaled = Vec::new();
     for scene in &args.scenes {

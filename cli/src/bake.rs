@@ -80,12 +80,13 @@ pub struct BakeArgs {
     #[arg(long)]
     probe_budget: Option<usize>,
     /// Drop the probes between every other grid point whose light those points predict
-    /// within this error (in units of pi, under test lightings of stripes, sky, a point light and half-spaces) whatever
-    /// the budget; 0 keeps them [default: the --quality preset's: 0.15, high 0; sparse bakes
-    /// only].
+    /// within this error (in units of pi, under test lightings of stripes, sky, a point light
+    /// and half-spaces) whatever the budget; 0 keeps them [default: the --quality preset's:
+    /// 0.15, high 0; sparse bakes only].
     #[arg(long)]
     prune_error: Option<f32>,
-    /// Surfel cell size in metres (bricks are 4x4x4 cells) [default: spacing / --cells-per-spacing]; 0 = no merging.
+    /// Surfel cell size in metres (bricks are 4x4x4 cells) [default: spacing /
+    /// --cells-per-spacing]; 0 = no merging.
     #[arg(long)]
     cell_size: Option<f32>,
     /// Surfel cells per probe spacing, 1 to 256, whatever spacing the bake picks. 6 takes

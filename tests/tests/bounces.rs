@@ -227,7 +227,6 @@ fn amortised_bounces_converge_to_the_full_update() {
         .unwrap()
         .sh;
     let w = worst_of_sh0(&asset, &sh, &expect);
-    // BOUNCE_FLIP (stop 63).
     assert!(w <= BOUNCE_FLIP, "after the move: {w}");
     let idle = step(&device, &queue, &mut amortised, &moved, Some(budget));
     assert!(idle.idle, "settled: nothing left to do");
