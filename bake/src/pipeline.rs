@@ -134,7 +134,8 @@ pub(crate) fn bake_in_pool(
     lap(&mut report, "assemble", Some("refine"));
     refine_stage(&mut asset, settings, &built.bvh, &mut report);
     lap(&mut report, "refine", Some("sky"));
-    asset.surface.sky = crate::sky_terms::sky_terms(&asset, &built.bvh);
+    let geometry = (&built.bvh, &loaded.scene.triangles[..]);
+    asset.surface.sky = crate::sky_terms::sky_terms(&asset, geometry);
     asset.geometry = built.bvh.geometry;
     report.warnings.extend(diagnostics::gap_warning(&asset));
     lap(&mut report, "sky", None);

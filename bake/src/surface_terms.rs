@@ -9,7 +9,9 @@
 //!    part), and per brick the nearest surfel of each of its 4x4x4 cells, its own or a later
 //!    part's.
 //! 2. **Probe visibility**: a ray from the surfel to each of the 27 probes around its nearest
-//!    one (to where the probe's rays started), through the scene's BVH.
+//!    one (to where the probe's rays started), through the scene's BVH. Every ray of this
+//!    stage and of `crate::sky_terms` starts at [`surfel_origin`]: off the surfel along its
+//!    normal, and past its surface where the surfel lies inside a solid.
 //! 3. **Near field**: [`RAYS`] cosine-distributed rays (a Fibonacci spiral about the normal)
 //!    no longer than [`REACH`] spacings. An escaping ray adds its SH9 basis values to the
 //!    surfel's `open`; a ray that hits finds the brick of the surface it hits (its key, facing
@@ -397,7 +399,60 @@ fn near_field(
 /// Where a surfel's rays start, and its normal.
 fn start(input: &Inputs, s: &Surfel) -> (Vec3, Vec3) {
     let (p, n) = (Vec3::from(s.position), Vec3::from(s.normal));
-    (ray_origin(p, n, input.grid.spacing), n)
+    let geometry = (input.bvh, input.triangles);
+    let o = surfel_origin(geometry, p, n, (input.grid.spacing, input.cell_size));
+    (o, n)
+}
+
+/// Rays of [`surfel_origin`]'s enclosure test (one packet).
+const ENCLOSURE_RAYS: u32 = 16;
+
+/// A surfel's ray origin is enclosed when every ray of [`surfel_origin`]'s test hits within
+/// this many surfel cells of it.
+const ENCLOSED: f32 = 0.5;
+
+/// Where the rays of the surfel at `p` with unit normal `n` start, on a grid of `spacing` with
+/// surfel cells of `cell` (0: unmerged, [`ray_origin`] as it is): [`ray_origin`], unless every
+/// one of [`ENCLOSURE_RAYS`] cosine-distributed rays from there hits a surface within
+/// [`ENCLOSED`] cells, when the origin is taken past the first surface along the normal if
+/// that surface faces away from the surfel (`triangles` by `bvh`'s triangle index: its
+/// winding; a double-sided scene's windings are as authored).
+///
+/// Why: a merged surfel sits at the mean of its hits, which on a curved surface lies behind it;
+/// `crate::merge::snap` puts it back on a surface about parallel to it, but across an arch or
+/// a column's bevel the surface ahead may be turned by more than the snap's 45 degrees. From
+/// inside the solid every near-field ray then hits within a few centimetres, on faces no light
+/// reaches, and the lookup turned the points it serves black: Sponza under its sun, baked at
+/// 1.55 m with its grid moved half a step along z (`docs/results/surface_enclosed.md`), had two
+/// open points at 0 whose surfels sat 2 cm inside an arch, rays hitting within 3-41 mm. A gap
+/// between two walls is not enclosed: its rays along the walls run on.
+pub(crate) fn surfel_origin(
+    (bvh, triangles): (&SceneBvh, &[[Vec3; 3]]),
+    p: Vec3,
+    n: Vec3,
+    (spacing, cell): (f32, f32),
+) -> Vec3 {
+    let o = ray_origin(p, n, spacing);
+    if cell <= 0.0 {
+        return o;
+    }
+    let (tx, ty) = n.any_orthonormal_pair();
+    let dirs: [Vec3; ENCLOSURE_RAYS as usize] =
+        std::array::from_fn(|k| cosine_spiral(k as u32, ENCLOSURE_RAYS, tx, ty, n));
+    let reach = ENCLOSED * cell;
+    if bvh.occluded(o, &dirs, reach) != (1 << ENCLOSURE_RAYS) - 1 {
+        return o;
+    }
+    // Past the surface ahead only when it faces away: a face turned towards the surfel is the
+    // far side of a pocket it stands in (a crate 2 cm from a wall), not its own surface.
+    let Some(hit) = bvh.closest_hit(o, n, reach) else {
+        return o;
+    };
+    let [v0, v1, v2] = triangles[hit.triangle as usize];
+    match (v1 - v0).cross(v2 - v0).dot(n) > 0.0 {
+        true => ray_origin(o + n * hit.t, n, spacing),
+        false => o,
+    }
 }
 
 /// Where rays from a surfel at `p` with unit normal `n` start on a grid of `spacing`: [`START`]
@@ -508,5 +563,59 @@ mod tests {
                 want[i]
             );
         }
+    }
+
+    /// The two triangles of the square `[-r, r]^2` at `z` along axis `axis`, facing +axis,
+    /// or -axis with `down`.
+    fn square(axis: usize, z: f32, r: f32, down: bool) -> [[Vec3; 3]; 2] {
+        let v = |x: f32, y: f32| {
+            let mut p = [x, y, z];
+            p.swap(axis, 2);
+            Vec3::from(p)
+        };
+        let (a, b, c, d) = (v(-r, -r), v(r, -r), v(r, r), v(-r, r));
+        // Swapping two axes (x or y with z) mirrors the square, and turns its winding with it.
+        match down != (axis != 2) {
+            false => [[a, b, c], [a, c, d]],
+            true => [[a, c, b], [a, d, c]],
+        }
+    }
+
+    /// A surfel 2 cm inside a closed 10 cm box (the mean of hits on a bevel) starts its rays
+    /// outside the box's face; one on an open floor, and one on a floor 2 cm under a plate
+    /// that faces it (a pocket), start where [`ray_origin`] puts them.
+    #[test]
+    fn an_enclosed_surfel_starts_its_rays_past_its_surface() {
+        let (spacing, cell) = (1.0, 0.2);
+        let up = Vec3::Z;
+        // Faces facing out.
+        let boxed: Vec<[Vec3; 3]> = (0..3)
+            .flat_map(|axis| {
+                [
+                    square(axis, -0.05, 0.05, true),
+                    square(axis, 0.05, 0.05, false),
+                ]
+            })
+            .flatten()
+            .collect();
+        let origin = |triangles: &[[Vec3; 3]], p: Vec3, cell: f32| {
+            let bvh = SceneBvh::build(triangles, 1.0);
+            surfel_origin((&bvh, triangles), p, up, (spacing, cell))
+        };
+        let inside = Vec3::new(0.0, 0.0, 0.03);
+        let o = origin(&boxed, inside, cell);
+        assert!(o.z > 0.05 && o.z < 0.05 + 0.02, "{o}");
+        let unmerged = origin(&boxed, inside, 0.0);
+        assert_eq!(
+            unmerged,
+            ray_origin(inside, up, spacing),
+            "unmerged: as it is"
+        );
+        let on = Vec3::new(0.1, 0.2, 0.0);
+        let floor = square(2, 0.0, 1.0, false);
+        assert_eq!(origin(&floor, on, cell), ray_origin(on, up, spacing));
+        // A floor and a plate 2 cm over it, facing it: every test ray hits within reach.
+        let gap = [square(2, 0.0, 1.0, false), square(2, 0.02, 1.0, true)].concat();
+        assert_eq!(origin(&gap, on, cell), ray_origin(on, up, spacing));
     }
 }

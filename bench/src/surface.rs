@@ -115,6 +115,12 @@ pub struct SurfaceArgs {
     /// Drop probes whose prediction error is below this (`prt bake --prune-error`).
     #[arg(long)]
     prune_error: Option<f32>,
+    /// Move the grid's layers: bake with bounds whose minimum lies X,Y,Z spacings (each in
+    /// [0, 1]) below the scene's, at the scene's default spacing (or `--spacing`). Where the
+    /// layers fall beside walls decides much of a level's error (`docs/limits.md`); this
+    /// measures a case at other phases of the same grid [default: 0,0,0, the scene's bounds].
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_shift)]
+    grid_shift: Option<Shift>,
     /// Keep bricks whole where a wall stands on them (`prt bake --no-split-bricks`).
     #[arg(long)]
     no_split_bricks: bool,
@@ -212,7 +218,7 @@ pub fn run(args: SurfaceArgs) -> Result<()> {
             &refs,
             &lookups.for_set(case.set),
             (
-                args.spacing,
+                (args.spacing, args.grid_shift),
                 !args.uniform,
                 args.probe_budget,
                 args.prune_error,
@@ -235,14 +241,16 @@ fn measure(
     case: &Case,
     refs: &Refs,
     lookups: &[Lookup],
-    (spacing, sparse, probe_budget, prune_error): (Option<f32>, bool, Option<usize>, Option<f32>),
+    (grid, sparse, probe_budget, prune_error): (GridSetting, bool, Option<usize>, Option<f32>),
     (split_bricks, far_ratio, rays, half): (bool, Option<f32>, Option<u32>, bool),
 ) -> Result<Vec<Row>> {
     let lighting = prt_runtime::load_rig(&case.rig)
         .with_context(|| format!("{}: loading the rig {}", case.name, case.rig.display()))?;
+    let (spacing, bounds) = shifted(case, grid)?;
     let base = BakeSettings {
         double_sided: case.double_sided,
         spacing,
+        bounds,
         sparse,
         probe_budget,
         prune_error: prune_error.unwrap_or(BakeSettings::default().prune_error),
@@ -269,6 +277,39 @@ fn measure(
     let baked = bake(case, &half, &lighting, needs)?;
     rows.extend(sample_all(case, &baked, Setting::Half, refs, lookups)?);
     Ok(rows)
+}
+
+/// A grid shift (`--grid-shift`): per axis, spacings in [0, 1].
+type Shift = [f32; 3];
+
+/// The spacing (`None`: the bake's default) and the grid shift a case is baked with.
+type GridSetting = (Option<f32>, Option<Shift>);
+
+fn parse_shift(s: &str) -> std::result::Result<Shift, String> {
+    let v: Vec<f32> = (s.split(','))
+        .map(|x| x.trim().parse::<f32>().map_err(|e| format!("{x:?}: {e}")))
+        .collect::<std::result::Result<_, _>>()?;
+    match <[f32; 3]>::try_from(v) {
+        Ok(shift) if shift.iter().all(|v| (0.0..=1.0).contains(v)) => Ok(shift),
+        _ => Err(format!("{s:?}: three spacings X,Y,Z, each in [0, 1]")),
+    }
+}
+
+/// The spacing and bounds of `case`'s bake: as given, or with a shift the scene's bounds with
+/// their minimum moved down by the shift in spacings, at the given spacing or the scene's
+/// default one, so that the grid keeps its spacing and moves its layers.
+fn shifted(case: &Case, (spacing, shift): GridSetting) -> Result<(Option<f32>, Option<[f32; 6]>)> {
+    let Some(shift) = shift else {
+        return Ok((spacing, None));
+    };
+    let scene = prt_scene::load(&case.scene, &prt_scene::Allowed::default())
+        .with_context(|| format!("{}: loading {}", case.name, case.scene.display()))?;
+    let (min, max) = (scene.bounds())
+        .with_context(|| format!("{}: {} has no triangles", case.name, case.scene.display()))?;
+    let spacing = spacing.unwrap_or_else(|| prt_bake::probes::default_spacing(min, max));
+    let min = min - glam::Vec3::from(shift) * spacing;
+    let bounds = [min.x, min.y, min.z, max.x, max.y, max.z];
+    Ok((Some(spacing), Some(bounds)))
 }
 
 /// A row per lookup, each reported on stderr as it is made.
