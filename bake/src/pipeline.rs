@@ -53,7 +53,8 @@ pub(crate) fn bake_in_pool(
         .spacing
         .unwrap_or_else(|| probes::default_spacing(min, max));
     // The grid first: a spacing far too small for the scene is refused before any other work.
-    let grid = probes::grid(min, max, spacing, settings.max_probes)?;
+    let shifted = (spacing, settings.grid_shift);
+    let grid = probes::grid((min, max), shifted, settings.max_probes)?;
     let built = bvh_stage(&loaded, ploc_memory, &grid, settings, &mut report)?;
     lap(&mut report, "bvh", None);
 
@@ -134,8 +135,7 @@ pub(crate) fn bake_in_pool(
     lap(&mut report, "assemble", Some("refine"));
     refine_stage(&mut asset, settings, &built.bvh, &mut report);
     lap(&mut report, "refine", Some("sky"));
-    let geometry = (&built.bvh, &loaded.scene.triangles[..]);
-    asset.surface.sky = crate::sky_terms::sky_terms(&asset, geometry);
+    asset.surface.sky = crate::sky_terms::sky_terms(&asset, &built.bvh);
     asset.geometry = built.bvh.geometry;
     report.warnings.extend(diagnostics::gap_warning(&asset));
     lap(&mut report, "sky", None);

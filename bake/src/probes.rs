@@ -53,15 +53,21 @@ pub fn default_spacing(min: Vec3, max: Vec3) -> f32 {
 /// layers closer than a quarter spacing would see the same light).
 pub const FLAT_STEPS: f64 = 0.25;
 
-/// The grid for `bounds` and `spacing`, or an error when it would exceed `max_probes`.
-pub fn grid(min: Vec3, max: Vec3, spacing: f32, max_probes: u64) -> Result<Grid, BakeError> {
+/// The grid for `bounds` and `spacing`, its layers moved down by `shift` steps
+/// (`crate::BakeSettings::grid_shift`), or an error when it would exceed `max_probes`.
+pub fn grid(
+    (min, max): (Vec3, Vec3),
+    (spacing, shift): (f32, [f32; 3]),
+    max_probes: u64,
+) -> Result<Grid, BakeError> {
     let extent = (max - min).max(Vec3::ZERO);
-    let counts = extent.to_array().map(|e| {
-        let steps = f64::from(e) / f64::from(spacing);
+    let counts: [u64; 3] = std::array::from_fn(|a| {
+        let steps = f64::from(extent[a]) / f64::from(spacing);
         if steps < FLAT_STEPS {
             1
         } else {
-            ((steps - 1e-4).ceil().max(1.0) as u64).saturating_add(1)
+            let layers = ((steps - 1e-4).ceil().max(1.0) as u64).saturating_add(1);
+            layers.saturating_add(u64::from(shift[a] > 0.0))
         }
     });
     let count = counts
@@ -77,14 +83,19 @@ pub fn grid(min: Vec3, max: Vec3, spacing: f32, max_probes: u64) -> Result<Grid,
         });
     }
     let centre = (min + max) * 0.5;
+    // A shifted axis has one layer more for the same steps.
+    let steps = |a: usize| counts[a] - 1 - u64::from(shift[a] > 0.0);
     let step: [f32; 3] = std::array::from_fn(|a| {
         if counts[a] > 1 {
-            ((f64::from(extent[a]) / (counts[a] - 1) as f64) as f32).min(spacing)
+            ((f64::from(extent[a]) / steps(a) as f64) as f32).min(spacing)
         } else {
             spacing
         }
     });
-    let origin = std::array::from_fn(|a| if counts[a] > 1 { min[a] } else { centre[a] });
+    let origin = std::array::from_fn(|a| match counts[a] > 1 {
+        true => min[a] - shift[a] * step[a],
+        false => centre[a],
+    });
     Ok(Grid {
         origin,
         spacing,
@@ -113,13 +124,8 @@ mod tests {
 
     #[test]
     fn reference_cornell_grid() {
-        let g = grid(
-            Vec3::new(-0.9, 0.1, -0.9),
-            Vec3::new(0.9, 1.9, 0.9),
-            0.6,
-            100,
-        )
-        .unwrap();
+        let bounds = (Vec3::new(-0.9, 0.1, -0.9), Vec3::new(0.9, 1.9, 0.9));
+        let g = grid(bounds, (0.6, [0.0; 3]), 100).unwrap();
         assert_eq!(g.counts, [4, 4, 4]);
         let p = positions(&g);
         assert!((p[0] - Vec3::new(-0.9, 0.1, -0.9)).length() < 1e-6);
@@ -129,7 +135,8 @@ mod tests {
     #[test]
     fn outer_probes_lie_on_the_bounds_faces() {
         // x: extent 1.0 at spacing 0.3 is 4 steps of 0.25; y is flat; z: 0.6 is 2 steps of 0.3.
-        let g = grid(Vec3::ZERO, Vec3::new(1.0, 0.0, 0.6), 0.3, 100).unwrap();
+        let bounds = (Vec3::ZERO, Vec3::new(1.0, 0.0, 0.6));
+        let g = grid(bounds, (0.3, [0.0; 3]), 100).unwrap();
         assert_eq!(g.counts, [5, 1, 3]);
         assert_eq!(g.step, [0.25, 0.3, 0.3]);
         let p = positions(&g);
@@ -146,9 +153,32 @@ mod tests {
         );
     }
 
+    /// A shift moves the layers by its share of a step and adds one past the maximum: the
+    /// same steps, every point of the bounds still between two layers; a flat axis keeps its
+    /// single layer in the middle.
+    #[test]
+    fn a_shifted_grid_keeps_its_steps() {
+        let bounds = (Vec3::ZERO, Vec3::new(1.0, 0.0, 0.6));
+        let g = grid(bounds, (0.3, [0.4, 0.5, 0.0]), 100).unwrap();
+        assert_eq!(g.counts, [6, 1, 3]);
+        assert_eq!(g.step, [0.25, 0.3, 0.3]);
+        let p = positions(&g);
+        assert!(
+            (p[0] - Vec3::new(-0.1, 0.0, 0.0)).length() < 1e-6,
+            "{}",
+            p[0]
+        );
+        assert!(
+            (p[17] - Vec3::new(1.15, 0.0, 0.6)).length() < 1e-6,
+            "{}",
+            p[17]
+        );
+    }
+
     #[test]
     fn too_many_probes_is_an_error() {
-        assert!(grid(Vec3::ZERO, Vec3::splat(100.0), 0.01, 1000).is_err());
+        let bounds = (Vec3::ZERO, Vec3::splat(100.0));
+        assert!(grid(bounds, (0.01, [0.0; 3]), 1000).is_err());
     }
 
     #[test]

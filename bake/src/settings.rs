@@ -41,6 +41,12 @@ pub struct BakeSettings {
     pub sparse: bool,
     /// Bake bounds `[min x, y, z, max x, y, z]`; `None` uses the scene's bounds.
     pub bounds: Option<[f32; 6]>,
+    /// Per axis, moves the grid's layers down by this share of a step ([0, 1); 0: the first
+    /// and last layers on the bounds' faces, as by default), with a layer added past the
+    /// bounds' maximum: the same steps, other phases. Where the layers fall beside walls
+    /// decides much of a level's error (`docs/limits.md`); `prt-bench surface --grid-shift`
+    /// measures it.
+    pub grid_shift: [f32; 3],
     /// Refuse grids with more probes than this.
     pub max_probes: u64,
     /// Surfel cell size in metres (a brick is 4x4x4 cells); `None` is
@@ -136,6 +142,7 @@ impl Default for BakeSettings {
             spacing: None,
             sparse: true,
             bounds: None,
+            grid_shift: [0.0; 3],
             max_probes: 1 << 20,
             cell_size: None,
             cells_per_spacing: 8.0,
@@ -250,6 +257,13 @@ impl BakeSettings {
                 "far_ratio",
                 self.far_ratio.to_string(),
                 "must be finite and at least 0 (0: no coarse bricks)",
+            );
+        }
+        if let Some(v) = (self.grid_shift.iter()).find(|v| !(0.0..1.0).contains(*v)) {
+            return bad(
+                "grid_shift",
+                v.to_string(),
+                "each axis's share of a step must be in [0, 1)",
             );
         }
         if !(self.prune_error.is_finite() && self.prune_error >= 0.0) {

@@ -108,9 +108,8 @@ pub const SHRINK_DARKER: f32 = 0.5;
 /// interpolated.
 pub const NORMAL_BIAS: f32 = 0.2;
 
-/// The asset's sky terms, two halves a word (empty when it has no surface terms), traced
-/// through `geometry`: the scene's BVH and its triangles by the BVH's triangle index.
-pub fn sky_terms(asset: &Asset, geometry: (&SceneBvh, &[[Vec3; 3]])) -> Vec<u32> {
+/// The asset's sky terms, two halves a word (empty when it has no surface terms).
+pub fn sky_terms(asset: &Asset, bvh: &SceneBvh) -> Vec<u32> {
     let st = &asset.surface;
     if st.is_empty() || st.surfels.len() != asset.surfels.len() {
         return Vec::new();
@@ -132,7 +131,7 @@ pub fn sky_terms(asset: &Asset, geometry: (&SceneBvh, &[[Vec3; 3]])) -> Vec<u32>
             }
             let key_centre = centres[asset.surfels[s].brick as usize];
             let t = interpolated_transfer(asset, &transfer, s, key_centre);
-            let (v, variance, cosine) = sky_view(asset, geometry, &order, &t, s);
+            let (v, variance, cosine) = sky_view(asset, bvh, &order, &t, s);
             let probes = probes_sky(asset, &t, s);
             let n = SKY_RAYS as f32;
             let q = v.max(probes).clamp(1.0 / n, 1.0);
@@ -217,7 +216,7 @@ fn interpolated_transfer(
 /// so the packets change the time, not the bits.
 fn sky_view(
     asset: &Asset,
-    geometry: (&SceneBvh, &[[Vec3; 3]]),
+    bvh: &SceneBvh,
     order: &[u32],
     t: &[f32; SH_COUNT],
     s: usize,
@@ -228,7 +227,7 @@ fn sky_view(
         Vec3::from(surfel.normal).normalize_or_zero(),
     );
     let cells = (asset.header.grid.spacing, asset.header.settings.cell_size);
-    let o = surfel_origin(geometry, p, n, cells);
+    let o = surfel_origin(bvh, p, n, cells);
     let (tx, ty) = n.any_orthonormal_pair();
     // Turned about the normal by a golden-ratio step per surfel: the surfels of a group pool
     // different directions, not the same spiral.
@@ -245,7 +244,7 @@ fn sky_view(
         for (r, &k) in ray.iter_mut().zip(packet) {
             *r = dirs[k as usize];
         }
-        let blocked = geometry.0.occluded(o, &ray[..packet.len()], f32::INFINITY);
+        let blocked = bvh.occluded(o, &ray[..packet.len()], f32::INFINITY);
         for (j, &k) in packet.iter().enumerate() {
             escaped[k as usize] = blocked >> j & 1 == 0;
         }

@@ -399,8 +399,7 @@ fn near_field(
 /// Where a surfel's rays start, and its normal.
 fn start(input: &Inputs, s: &Surfel) -> (Vec3, Vec3) {
     let (p, n) = (Vec3::from(s.position), Vec3::from(s.normal));
-    let geometry = (input.bvh, input.triangles);
-    let o = surfel_origin(geometry, p, n, (input.grid.spacing, input.cell_size));
+    let o = surfel_origin(input.bvh, p, n, (input.grid.spacing, input.cell_size));
     (o, n)
 }
 
@@ -411,12 +410,14 @@ const ENCLOSURE_RAYS: u32 = 16;
 /// this many surfel cells of it.
 const ENCLOSED: f32 = 0.5;
 
+// The test is one packet and its hits one mask word.
+const _: () = assert!(ENCLOSURE_RAYS as usize <= PACKET && ENCLOSURE_RAYS < 32);
+
 /// Where the rays of the surfel at `p` with unit normal `n` start, on a grid of `spacing` with
 /// surfel cells of `cell` (0: unmerged, [`ray_origin`] as it is): [`ray_origin`], unless every
 /// one of [`ENCLOSURE_RAYS`] cosine-distributed rays from there hits a surface within
-/// [`ENCLOSED`] cells, when the origin is taken past the first surface along the normal if
-/// that surface faces away from the surfel (`triangles` by `bvh`'s triangle index: its
-/// winding; a double-sided scene's windings are as authored).
+/// [`ENCLOSED`] cells and no surface lies just behind it (the surfel's own, where it stands
+/// on one), when the origin is taken past the first surface along the normal.
 ///
 /// Why: a merged surfel sits at the mean of its hits, which on a curved surface lies behind it;
 /// `crate::merge::snap` puts it back on a surface about parallel to it, but across an arch or
@@ -426,12 +427,7 @@ const ENCLOSED: f32 = 0.5;
 /// 1.55 m with its grid moved half a step along z (`docs/results/surface_enclosed.md`), had two
 /// open points at 0 whose surfels sat 2 cm inside an arch, rays hitting within 3-41 mm. A gap
 /// between two walls is not enclosed: its rays along the walls run on.
-pub(crate) fn surfel_origin(
-    (bvh, triangles): (&SceneBvh, &[[Vec3; 3]]),
-    p: Vec3,
-    n: Vec3,
-    (spacing, cell): (f32, f32),
-) -> Vec3 {
+pub(crate) fn surfel_origin(bvh: &SceneBvh, p: Vec3, n: Vec3, (spacing, cell): (f32, f32)) -> Vec3 {
     let o = ray_origin(p, n, spacing);
     if cell <= 0.0 {
         return o;
@@ -443,22 +439,22 @@ pub(crate) fn surfel_origin(
     if bvh.occluded(o, &dirs, reach) != (1 << ENCLOSURE_RAYS) - 1 {
         return o;
     }
-    // Past the surface ahead only when it faces away: a face turned towards the surfel is the
-    // far side of a pocket it stands in (a crate 2 cm from a wall), not its own surface.
-    let Some(hit) = bvh.closest_hit(o, n, reach) else {
+    let Some(ahead) = bvh.closest_hit(o, n, reach) else {
         return o;
     };
-    let [v0, v1, v2] = triangles[hit.triangle as usize];
-    match (v1 - v0).cross(v2 - v0).dot(n) > 0.0 {
-        true => ray_origin(o + n * hit.t, n, spacing),
-        false => o,
+    // A surface behind the origin within twice its offset is the surfel's own: it stands on
+    // it, in a pocket (a floor under a crate 2 cm above), not inside a solid. Whichever way
+    // the faces are wound: a double-sided bake's windings may be anything.
+    if bvh.closest_hit(o, -n, 2.0 * o.distance(p)).is_some() {
+        return o;
     }
+    ray_origin(o + n * ahead.t, n, spacing)
 }
 
 /// Where rays from a surfel at `p` with unit normal `n` start on a grid of `spacing`: [`START`]
 /// spacings along the normal, or [`START_MAGNITUDE`] of the coordinates' magnitude if more
-/// (the near field's, and the sky terms', `crate::sky_terms`).
-pub(crate) fn ray_origin(p: Vec3, n: Vec3, spacing: f32) -> Vec3 {
+/// ([`surfel_origin`] starts from it).
+fn ray_origin(p: Vec3, n: Vec3, spacing: f32) -> Vec3 {
     p + n * (START * spacing).max(START_MAGNITUDE * p.abs().max_element())
 }
 
@@ -582,8 +578,10 @@ mod tests {
     }
 
     /// A surfel 2 cm inside a closed 10 cm box (the mean of hits on a bevel) starts its rays
-    /// outside the box's face; one on an open floor, and one on a floor 2 cm under a plate
-    /// that faces it (a pocket), start where [`ray_origin`] puts them.
+    /// outside the box's face. These start where [`ray_origin`] puts them: a surfel on an
+    /// open floor; one on a floor 2 cm under a plate, whichever way the plate is wound (a
+    /// pocket: its own surface is behind it); one in the air 2 cm under a 4 cm plate, whose
+    /// widest rays pass the plate (not enclosed); and, unmerged, the one in the box.
     #[test]
     fn an_enclosed_surfel_starts_its_rays_past_its_surface() {
         let (spacing, cell) = (1.0, 0.2);
@@ -600,7 +598,7 @@ mod tests {
             .collect();
         let origin = |triangles: &[[Vec3; 3]], p: Vec3, cell: f32| {
             let bvh = SceneBvh::build(triangles, 1.0);
-            surfel_origin((&bvh, triangles), p, up, (spacing, cell))
+            surfel_origin(&bvh, p, up, (spacing, cell))
         };
         let inside = Vec3::new(0.0, 0.0, 0.03);
         let o = origin(&boxed, inside, cell);
@@ -614,8 +612,13 @@ mod tests {
         let on = Vec3::new(0.1, 0.2, 0.0);
         let floor = square(2, 0.0, 1.0, false);
         assert_eq!(origin(&floor, on, cell), ray_origin(on, up, spacing));
-        // A floor and a plate 2 cm over it, facing it: every test ray hits within reach.
-        let gap = [square(2, 0.0, 1.0, false), square(2, 0.02, 1.0, true)].concat();
-        assert_eq!(origin(&gap, on, cell), ray_origin(on, up, spacing));
+        for down in [true, false] {
+            let gap = [floor, square(2, 0.02, 1.0, down)].concat();
+            let o = origin(&gap, on, cell);
+            assert_eq!(o, ray_origin(on, up, spacing), "plate facing down: {down}");
+        }
+        let plate = square(2, 0.02, 0.02, true);
+        let air = Vec3::ZERO;
+        assert_eq!(origin(&plate, air, cell), ray_origin(air, up, spacing));
     }
 }

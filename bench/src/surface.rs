@@ -115,10 +115,11 @@ pub struct SurfaceArgs {
     /// Drop probes whose prediction error is below this (`prt bake --prune-error`).
     #[arg(long)]
     prune_error: Option<f32>,
-    /// Move the grid's layers: bake with bounds whose minimum lies X,Y,Z spacings (each in
-    /// [0, 1]) below the scene's, at the scene's default spacing (or `--spacing`). Where the
-    /// layers fall beside walls decides much of a level's error (`docs/limits.md`); this
-    /// measures a case at other phases of the same grid [default: 0,0,0, the scene's bounds].
+    /// Move the grid's layers down by X,Y,Z of a step, each in [0, 1)
+    /// (`BakeSettings::grid_shift`: the same steps, one more layer past the bounds): where the
+    /// layers fall beside walls decides much of a level's error (`docs/limits.md`). The
+    /// half-spacing bake takes the same shares of its own steps [default: 0,0,0, the first
+    /// layer on the bounds' minimum].
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_shift)]
     grid_shift: Option<Shift>,
     /// Keep bricks whole where a wall stands on them (`prt bake --no-split-bricks`).
@@ -218,7 +219,7 @@ pub fn run(args: SurfaceArgs) -> Result<()> {
             &refs,
             &lookups.for_set(case.set),
             (
-                (args.spacing, args.grid_shift),
+                (args.spacing, args.grid_shift.unwrap_or_default()),
                 !args.uniform,
                 args.probe_budget,
                 args.prune_error,
@@ -246,11 +247,11 @@ fn measure(
 ) -> Result<Vec<Row>> {
     let lighting = prt_runtime::load_rig(&case.rig)
         .with_context(|| format!("{}: loading the rig {}", case.name, case.rig.display()))?;
-    let (spacing, bounds) = shifted(case, grid)?;
+    let (spacing, grid_shift) = grid;
     let base = BakeSettings {
         double_sided: case.double_sided,
         spacing,
-        bounds,
+        grid_shift,
         sparse,
         probe_budget,
         prune_error: prune_error.unwrap_or(BakeSettings::default().prune_error),
@@ -279,37 +280,23 @@ fn measure(
     Ok(rows)
 }
 
-/// A grid shift (`--grid-shift`): per axis, spacings in [0, 1].
+/// A grid shift (`--grid-shift`): per axis, a share of a step in [0, 1).
 type Shift = [f32; 3];
 
 /// The spacing (`None`: the bake's default) and the grid shift a case is baked with.
-type GridSetting = (Option<f32>, Option<Shift>);
+type GridSetting = (Option<f32>, Shift);
 
+/// `--grid-shift`'s three shares, each in [0, 1).
 fn parse_shift(s: &str) -> std::result::Result<Shift, String> {
     let v: Vec<f32> = (s.split(','))
         .map(|x| x.trim().parse::<f32>().map_err(|e| format!("{x:?}: {e}")))
         .collect::<std::result::Result<_, _>>()?;
     match <[f32; 3]>::try_from(v) {
-        Ok(shift) if shift.iter().all(|v| (0.0..=1.0).contains(v)) => Ok(shift),
-        _ => Err(format!("{s:?}: three spacings X,Y,Z, each in [0, 1]")),
+        Ok(shift) if shift.iter().all(|v| (0.0..1.0).contains(v)) => Ok(shift),
+        _ => Err(format!(
+            "{s:?}: three shares of a step X,Y,Z, each in [0, 1)"
+        )),
     }
-}
-
-/// The spacing and bounds of `case`'s bake: as given, or with a shift the scene's bounds with
-/// their minimum moved down by the shift in spacings, at the given spacing or the scene's
-/// default one, so that the grid keeps its spacing and moves its layers.
-fn shifted(case: &Case, (spacing, shift): GridSetting) -> Result<(Option<f32>, Option<[f32; 6]>)> {
-    let Some(shift) = shift else {
-        return Ok((spacing, None));
-    };
-    let scene = prt_scene::load(&case.scene, &prt_scene::Allowed::default())
-        .with_context(|| format!("{}: loading {}", case.name, case.scene.display()))?;
-    let (min, max) = (scene.bounds())
-        .with_context(|| format!("{}: {} has no triangles", case.name, case.scene.display()))?;
-    let spacing = spacing.unwrap_or_else(|| prt_bake::probes::default_spacing(min, max));
-    let min = min - glam::Vec3::from(shift) * spacing;
-    let bounds = [min.x, min.y, min.z, max.x, max.y, max.z];
-    Ok((Some(spacing), Some(bounds)))
 }
 
 /// A row per lookup, each reported on stderr as it is made.

@@ -431,3 +431,39 @@ fn broken_fills_are_invalid() {
     });
     assert!(e.contains("which is filled itself"), "{e}");
 }
+
+/// A grid shift (`BakeSettings::grid_shift`) bakes the same steps with the layers moved down
+/// by its share of a step and one more layer past the bounds, into a valid asset; a share
+/// outside [0, 1) or NaN is refused, naming the setting.
+#[test]
+fn a_shifted_grid_keeps_its_steps() {
+    let plain = BakeSettings {
+        spacing: Some(0.5),
+        ..rays(64)
+    };
+    let shifted = BakeSettings {
+        grid_shift: [0.5, 0.0, 0.25],
+        ..plain.clone()
+    };
+    let (a, b) = (
+        bake_ok(&fixture("two_rooms.gltf"), &plain).header.grid,
+        bake_ok(&fixture("two_rooms.gltf"), &shifted).header.grid,
+    );
+    assert_eq!(a.step, b.step);
+    assert_eq!(b.counts, [a.counts[0] + 1, a.counts[1], a.counts[2] + 1]);
+    for (axis, share) in [(0, 0.5), (1, 0.0), (2, 0.25)] {
+        let moved = a.origin[axis] - b.origin[axis];
+        assert!(
+            (moved - share * a.step[axis]).abs() < 1e-5,
+            "{axis}: {moved}"
+        );
+    }
+    for bad in [1.0, -0.1, f32::NAN] {
+        let settings = BakeSettings {
+            grid_shift: [0.0, bad, 0.0],
+            ..plain.clone()
+        };
+        let e = prt_tests::bake_err(&fixture("two_rooms.gltf"), &settings).to_string();
+        assert!(e.contains("grid_shift"), "{e}");
+    }
+}
