@@ -3,7 +3,9 @@
 //! Along each axis the bounds' extent is cut into `ceil(extent / spacing)` equal steps (at most
 //! the spacing asked for), giving one more probe than steps, the first and last on the bounds'
 //! faces; a flat axis (under [`FLAT_STEPS`] spacings) gets one probe in the middle. Example: bounds x in [-0.9, 0.9] at spacing
-//! 0.5 gives 4 steps of 0.45: x = -0.9, -0.45, 0, 0.45, 0.9.
+//! 0.5 gives 4 steps of 0.45: x = -0.9, -0.45, 0, 0.45, 0.9. `BakeSettings::grid_shift` moves
+//! the layers down by a share of a step and adds one past the bounds (a flat axis keeps its
+//! one): the same steps at another phase, for measuring what the phase does.
 //!
 //! Why on the faces: the bounds' faces are usually where a level's outer walls, floor and ceiling
 //! are, and those surfaces are much of what a renderer shades. A layer of probes on a wall is

@@ -43,7 +43,7 @@ pub struct BakeSettings {
     pub bounds: Option<[f32; 6]>,
     /// Per axis, moves the grid's layers down by this share of a step ([0, 1); 0: the first
     /// and last layers on the bounds' faces, as by default), with a layer added past the
-    /// bounds' maximum: the same steps, other phases. Where the layers fall beside walls
+    /// bounds' maximum: the same steps, other phases (a flat axis keeps its one layer). Where the layers fall beside walls
     /// decides much of a level's error (`docs/limits.md`); `prt-bench surface --grid-shift`
     /// measures it.
     pub grid_shift: [f32; 3],

@@ -424,7 +424,7 @@ const _: () = assert!(ENCLOSURE_RAYS as usize <= PACKET && ENCLOSURE_RAYS < 32);
 /// a column's bevel the surface ahead may be turned by more than the snap's 45 degrees. From
 /// inside the solid every near-field ray then hits within a few centimetres, on faces no light
 /// reaches, and the lookup turned the points it serves black: Sponza under its sun, baked at
-/// 1.55 m with its grid moved half a step along z (`docs/results/surface_enclosed.md`), had two
+/// 1.55 m with its bounds' minimum 0.78 m lower along z (`docs/results/surface_enclosed.md`), had two
 /// open points at 0 whose surfels sat 2 cm inside an arch, rays hitting within 3-41 mm. A gap
 /// between two walls is not enclosed: its rays along the walls run on.
 pub(crate) fn surfel_origin(bvh: &SceneBvh, p: Vec3, n: Vec3, (spacing, cell): (f32, f32)) -> Vec3 {

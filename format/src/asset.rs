@@ -146,7 +146,8 @@ fn string_from_input<'de, D: serde::Deserializer<'de>>(d: D) -> Result<String, D
 /// `spacing` is the spacing the bake was asked for: the scene's length unit for everything
 /// relative (surface offsets, the normal bias, visibility distances, ray offsets). `step` is the
 /// lattice step along each axis, at most `spacing`: the bake fits a whole number of steps between
-/// the bounds' faces so that its outer probes lie on them (`prt_bake::probes`).
+/// the bounds' faces so that its outer probes lie on them (`prt_bake::probes`), unless a grid
+/// shift moved its layers (`prt_bake::BakeSettings::grid_shift`, not recorded: the grid is).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Grid {
     pub origin: [f32; 3],
