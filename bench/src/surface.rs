@@ -232,8 +232,12 @@ pub fn run(args: SurfaceArgs) -> Result<()> {
             ),
         )?);
     }
-    args.out
-        .report("surface", &report::markdown(&rows, &oracle)?)
+    let mut md = report::markdown(&rows, &oracle)?;
+    if let Some([x, y, z]) = args.grid_shift.filter(|s| *s != [0.0; 3]) {
+        // A shifted run's table would otherwise read as the default grid's.
+        md = format!("Every bake's grid layers moved down by {x}, {y}, {z} of a step along x, y, z (`--grid-shift`).\n\n{md}");
+    }
+    args.out.report("surface", &md)
 }
 
 /// Bakes and relights `case` at its default spacing (or `spacing`) and, with `half`, at half of
