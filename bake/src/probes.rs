@@ -63,13 +63,15 @@ pub fn grid(
     max_probes: u64,
 ) -> Result<Grid, BakeError> {
     let extent = (max - min).max(Vec3::ZERO);
+    // A shifted axis has one layer more for the same steps.
+    let extra = shift.map(|s| u64::from(s > 0.0));
     let counts: [u64; 3] = std::array::from_fn(|a| {
         let steps = f64::from(extent[a]) / f64::from(spacing);
         if steps < FLAT_STEPS {
             1
         } else {
             let layers = ((steps - 1e-4).ceil().max(1.0) as u64).saturating_add(1);
-            layers.saturating_add(u64::from(shift[a] > 0.0))
+            layers.saturating_add(extra[a])
         }
     });
     let count = counts
@@ -85,11 +87,10 @@ pub fn grid(
         });
     }
     let centre = (min + max) * 0.5;
-    // A shifted axis has one layer more for the same steps.
-    let steps = |a: usize| counts[a] - 1 - u64::from(shift[a] > 0.0);
     let step: [f32; 3] = std::array::from_fn(|a| {
         if counts[a] > 1 {
-            ((f64::from(extent[a]) / steps(a) as f64) as f32).min(spacing)
+            let steps = counts[a] - 1 - extra[a];
+            ((f64::from(extent[a]) / steps as f64) as f32).min(spacing)
         } else {
             spacing
         }

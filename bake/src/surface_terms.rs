@@ -112,7 +112,7 @@ pub fn surface_terms(input: &Inputs, surfels: &mut [Surfel]) -> SurfaceTerms {
     let surfels = &*surfels;
     let traced: Vec<(SurfelTerms, Vec<NearHit>)> = (0..surfels.len())
         .into_par_iter()
-        .map(|i| near_field(input, &surfels[i], grouped.masks[i], grouped.group[i]))
+        .map(|i| near_field(input, &surfels[i], grouped.traced[i], grouped.group[i]))
         .collect();
     let fields: Vec<Vec<u32>> = terms
         .group_surfels
@@ -134,12 +134,16 @@ pub fn surface_terms(input: &Inputs, surfels: &mut [Surfel]) -> SurfaceTerms {
 /// A near hit: where, and the dominant axis of the side of the surface that faces the ray.
 type NearHit = (Vec3, u32);
 
-/// Per surfel (in their new order), its probe mask and its group: counted from its key's
-/// first brick's groups (within its brick until [`from_first_parts`]), and absolute.
+/// Per surfel (in their new order), its probe mask and ray origin ([`origin`]; a back-face
+/// surfel's mask is 0 and its origin unused), and its group: counted from its key's first
+/// brick's groups (within its brick until [`from_first_parts`]), and absolute.
 struct Grouped {
-    masks: Vec<u32>,
+    traced: Vec<Traced>,
     group: Vec<(u8, u32)>,
 }
+
+/// A surfel's probe mask and ray origin.
+type Traced = (u32, Vec3);
 
 /// Traces each surfel's probe mask, groups each brick's surfels by mask and reorders them
 /// group by group. Surfels that see the same probes are on the same side of whatever stands
@@ -148,26 +152,30 @@ struct Grouped {
 /// 9.0% against 6.3% per surfel). Groups in order of first appearance, at most 256 per brick
 /// (further masks join the last). Fills `groups` and `group_surfels`.
 fn group_surfels(terms: &mut SurfaceTerms, input: &Inputs, surfels: &mut [Surfel]) -> Grouped {
-    // Per brick: masks and group (within the brick) of its surfels, in their old order.
+    // Per brick: masks, origins and group (within the brick) of its surfels, in their old
+    // order.
     let view = &*terms;
-    let per_brick: Vec<(Vec<u32>, Vec<u8>)> = input
+    let per_brick: Vec<(Vec<Traced>, Vec<u8>)> = input
         .bricks
         .par_iter()
         .map(|b| {
             let range = b.first_surfel as usize..(b.first_surfel + b.surfel_count) as usize;
             if b.flags & BRICK_BACKFACE != 0 {
-                return (vec![0; range.len()], vec![0; range.len()]);
+                return (vec![(0, Vec3::ZERO); range.len()], vec![0; range.len()]);
             }
             let key_centre = view.brick_centre(input.grid, b);
-            let masks: Vec<u32> = surfels[range]
+            let traced: Vec<Traced> = surfels[range]
                 .iter()
-                .map(|s| probe_mask(input, s, key_centre))
+                .map(|s| {
+                    let o = origin(input, s);
+                    (probe_mask(input, s, o, key_centre), o)
+                })
                 .collect();
             // Grouped by the bits alone, whatever probe they are about (as in format 15).
             let mut distinct: Vec<u32> = Vec::new();
-            let group = masks
+            let group = traced
                 .iter()
-                .map(|m| m & PROBE_BITS)
+                .map(|(m, _)| m & PROBE_BITS)
                 .map(|m| match distinct.iter().position(|&d| d == m) {
                     Some(g) => g as u8,
                     None if distinct.len() < 256 => {
@@ -177,16 +185,16 @@ fn group_surfels(terms: &mut SurfaceTerms, input: &Inputs, surfels: &mut [Surfel
                     None => 255,
                 })
                 .collect();
-            (masks, group)
+            (traced, group)
         })
         .collect();
     let mut out = Grouped {
-        masks: Vec::with_capacity(surfels.len()),
+        traced: Vec::with_capacity(surfels.len()),
         group: Vec::with_capacity(surfels.len()),
     };
-    for (b, (masks, group)) in input.bricks.iter().zip(per_brick) {
+    for (b, (traced, group)) in input.bricks.iter().zip(per_brick) {
         let first = b.first_surfel as usize;
-        let mut order: Vec<usize> = (0..masks.len()).collect();
+        let mut order: Vec<usize> = (0..traced.len()).collect();
         order.sort_by_key(|&i| group[i]);
         let moved: Vec<Surfel> = order.iter().map(|&i| surfels[first + i]).collect();
         surfels[first..first + moved.len()].copy_from_slice(&moved);
@@ -198,7 +206,7 @@ fn group_surfels(terms: &mut SurfaceTerms, input: &Inputs, surfels: &mut [Surfel
                 terms.group_surfels.push([(first + k) as u32, 0]);
             }
             terms.group_surfels.last_mut().expect("pushed")[1] += 1;
-            out.masks.push(masks[i]);
+            out.traced.push(traced[i]);
             out.group.push((g, terms.group_surfels.len() as u32 - 1));
         }
         debug_assert!(first_group < terms.group_surfels.len() as u32);
@@ -355,11 +363,12 @@ fn cells(
     words
 }
 
-/// A surfel's terms (with `mask` and its `group`, [`Grouped`]) and its near hits.
+/// A surfel's terms (with its `mask` and ray origin `o`, and its `group`, [`Grouped`]) and its
+/// near hits.
 fn near_field(
     input: &Inputs,
     s: &Surfel,
-    mask: u32,
+    (mask, o): Traced,
     group: (u8, u32),
 ) -> (SurfelTerms, Vec<NearHit>) {
     if mask >> CENTRE_SHIFT == 0 {
@@ -370,7 +379,7 @@ fn near_field(
         };
         return (untraced, Vec::new());
     }
-    let (o, n) = start(input, s);
+    let n = Vec3::from(s.normal);
     let reach = REACH * input.grid.spacing;
     let (tx, ty) = n.any_orthonormal_pair();
     let dirs: [Vec3; RAYS as usize] =
@@ -396,11 +405,11 @@ fn near_field(
     (t, hits)
 }
 
-/// Where a surfel's rays start, and its normal.
-fn start(input: &Inputs, s: &Surfel) -> (Vec3, Vec3) {
+/// Where a surfel's rays start ([`surfel_origin`]), traced once for its probe mask and its
+/// near field.
+fn origin(input: &Inputs, s: &Surfel) -> Vec3 {
     let (p, n) = (Vec3::from(s.position), Vec3::from(s.normal));
-    let o = surfel_origin(input.bvh, p, n, (input.grid.spacing, input.cell_size));
-    (o, n)
+    surfel_origin(input.bvh, p, n, (input.grid.spacing, input.cell_size))
 }
 
 /// Rays of [`surfel_origin`]'s enclosure test (one packet).
@@ -459,15 +468,15 @@ fn ray_origin(p: Vec3, n: Vec3, spacing: f32) -> Vec3 {
 }
 
 /// A front-face surfel's [`SurfelTerms::mask`]: the probes around its nearest probe that it
-/// sees, and that probe's code from `key_centre`, its brick key's
+/// sees from its ray origin `o`, and that probe's code from `key_centre`, its brick key's
 /// (`SurfaceTerms::brick_centre`; where the probe grid is too fine for its bricks for the code
 /// to reach the surfel's nearest probe, the nearest probe the code names).
-fn probe_mask(input: &Inputs, s: &Surfel, key_centre: [i32; 3]) -> u32 {
+fn probe_mask(input: &Inputs, s: &Surfel, o: Vec3, key_centre: [i32; 3]) -> u32 {
     let g = input.grid;
     let nearest = centre_probe(g.origin, g.step, g.counts, s.position);
     let offset: [i32; 3] = std::array::from_fn(|a| (nearest[a] - key_centre[a]).clamp(-1, 1));
     let centre = std::array::from_fn(|a| key_centre[a] + offset[a]);
-    centre_code(offset) | visible_probes(input, start(input, s).0, centre)
+    centre_code(offset) | visible_probes(input, o, centre)
 }
 
 /// Mask bits of the 27 probes around grid position `centre` that a ray from `o` reaches
