@@ -19,7 +19,8 @@
 //!   it); `clamp(open . T, 0, A(n) . T)` is what the lookup's escaping near-field rays bring of
 //!   that sky (the same clamp);
 //! - `v`: the share of the surfel's cosine-weighted hemisphere that leaves the scene, from
-//!   [`SKY_RAYS`] rays (the near field's spiral, turned per surfel) with the probes' sky as a
+//!   [`SKY_RAYS`] rays (the near field's spiral, turned per surfel; [`MORE_SKY_RAYS`] more
+//!   where the term is uncertain, below) with the probes' sky as a
 //!   control variate: `A(n) . T + mean over the rays of (V(w) - T . Y(w))`, `V` 1 for a ray
 //!   that escapes. `T . Y` is the probes' visibility of the sky in SH; its cosine integral is
 //!   `A(n) . T` exactly, so the estimate stays unbiased, and where the surfel sees the sky as
@@ -28,6 +29,9 @@
 //!   `clamp(...)`, the control variate's `A(n) . T`, or none: the one that leaves the group most
 //!   uniform, [`pooled`]), averaged over the near group (the surfels of its brick that see the
 //!   same probes), weighted by the surfels' hits, each surfel adding its own baseline back;
+//! - **traced again where uncertain**: the surfels of a group whose pooled term the shrink
+//!   would cut by a tenth or more of its sky ([`UNCERTAIN`]) get [`MORE_SKY_RAYS`] more rays
+//!   (another spiral), their `v` the mean over both passes, and the groups are pooled anew;
 //! - **shrunk** toward 0 by [`SHRINK`] standard deviations of its noise (soft threshold), a
 //!   darkening one by [`SHRINK_DARKER`]: a correction smaller than its noise is dropped. The
 //!   variance is the rays' sample variance, and at least the binomial one of the larger of the
@@ -42,6 +46,17 @@
 //! of the median / worst level, default spacing and half; without sky terms 6.36 / 8.60% and
 //! 3.63 / 4.81%, docs/results/surface_sky.md):
 //!
+//! - the uncertain groups traced again with 384 more rays (stop 65, the default:
+//!   [`MORE_SKY_RAYS`], [`UNCERTAIN`]): 5.55 / 7.42% and 3.10 / 4.19% (cave_7 7.74% -> 6.71%,
+//!   half 5.46% -> 4.19%; no tuning level worse by more than 0.02 point); on the sets not tuned
+//!   on, median / worst level 5.12 / 7.31%, 4.73 / 6.52%, 5.27 / 12.18% (fresh interior_32 from
+//!   12.90%), the blind sets of stops 64 and 65 4.32 / 12.99% and 5.54 / 15.64% (cave_139 from
+//!   18.30%: a dark point that kept 55% of its probes' sky); Sponza under the sun 14.81% ->
+//!   14.55%. 768 more rays measure alike on the tuning seeds at more time; tracing again the
+//!   groups whose term is 1-4 times its shrinkage (768 more), 5.51 / 7.33% and 3.06 / 4.36%, traces a
+//!   quarter to a half of every level's surfels; a darkening term shrunk by a quarter or no
+//!   deviation instead, 8.25% and 8.99% on cave_7. It costs Sponza's bake 33% (a third of its
+//!   surfels), the family's 5-30% (docs/results/surface_sky_uncertain.md);
 //! - a darkening term (`d < 0`) shrunk by half a standard deviation, a brightening one by one
 //!   (stop 59, the default: [`SHRINK_DARKER`]): 5.55 / 7.74% and 3.10 / 5.46%, every tuning
 //!   level better but cave_7 (7.08% -> 7.74%, half 4.66% -> 5.46%: a cave floor under a small
@@ -76,8 +91,10 @@
 //! - 1,024 rays per surfel, unpooled: cave_3 6.60% (the 4,096-ray reference 6.17%), at 6.6x
 //!   that level's bake time.
 //!
-//! Deterministic: each surfel's term depends only on the asset and fixed ray sets, and groups
-//! are summed in surfel order.
+//! Deterministic: each surfel's term depends only on the asset and fixed ray sets, which
+//! surfels are traced again only on the first pass's terms, and groups are summed in surfel
+//! order (`tests/tests/repeat.rs` bakes Cornell, where a few percent of the surfels are traced
+//! again, with one thread and with two).
 
 use glam::Vec3;
 use prt_format::sh::SH_COUNT;
@@ -89,8 +106,29 @@ use crate::accel::bvh::SceneBvh;
 use crate::accel::bvh8::PACKET;
 use crate::surface_terms::{cosine_spiral, surfel_origin};
 
-/// Sky rays per surfel.
+mod pool;
+use pool::{pooled, shrunk, uncertain_surfels, Traced};
+
+/// Sky rays per surfel in the first pass.
 pub const SKY_RAYS: u32 = 256;
+
+/// Rays a surfel gets on top of [`SKY_RAYS`] where its group's first-pass term is uncertain
+/// ([`UNCERTAIN`]): its view is then the mean over both passes' 640 rays. Module docs: what
+/// chose it.
+pub const MORE_SKY_RAYS: u32 = 384;
+
+/// The most rays one pass traces at a surfel: its directions sit in a fixed array.
+const MAX_RAYS: usize = if SKY_RAYS > MORE_SKY_RAYS {
+    SKY_RAYS
+} else {
+    MORE_SKY_RAYS
+} as usize;
+
+/// A pooled term is uncertain where the shrink takes off at least this share of the sky its
+/// surfel sees or its probes bring it (the larger), and leaves some of the term: the sky it
+/// puts on the point could be a tenth or more wrong either way. A term the shrink takes off
+/// whole is left as noise, and one it takes off a sliver of is already sure.
+pub const UNCERTAIN: f32 = 0.1;
 
 /// Standard deviations of its noise a sky term that brightens its surfel is shrunk by toward 0.
 pub const SHRINK: f32 = 1.0;
@@ -108,53 +146,38 @@ pub const SHRINK_DARKER: f32 = 0.5;
 /// interpolated.
 pub const NORMAL_BIAS: f32 = 0.2;
 
-/// The asset's sky terms, two halves a word (empty when it has no surface terms).
+/// The asset's sky terms, two halves a word (empty when it has no surface terms): every traced
+/// surfel's view over [`SKY_RAYS`] rays, pooled; the surfels of groups whose term is then
+/// uncertain traced again with [`MORE_SKY_RAYS`] more and pooled anew; shrunk.
 pub fn sky_terms(asset: &Asset, bvh: &SceneBvh) -> Vec<u32> {
     let st = &asset.surface;
     if st.is_empty() || st.surfels.len() != asset.surfels.len() {
         return Vec::new();
     }
-    let transfer = grid_transfer(asset);
-    let order = spiral_order(SKY_RAYS);
-    // Per brick, its key's centre probe, which its surfels' centres are stored from.
-    let grid = &asset.header.grid;
-    let centres: Vec<[i32; 3]> = (asset.bricks.iter())
-        .map(|b| st.brick_centre(grid, b))
-        .collect();
-    // Per surfel, its view of the sky, the baselines it may be pooled against, and the view's
-    // variance.
-    let traced: Vec<Traced> = (0..st.surfels.len())
+    let sampler = Sampler::new(asset, bvh);
+    let first = spiral_order(SKY_RAYS);
+    let mut views: Vec<Option<View>> = (0..st.surfels.len())
         .into_par_iter()
-        .map(|s| {
-            if !st.surfels[s].is_traced() {
-                return Traced::default();
-            }
-            let key_centre = centres[asset.surfels[s].brick as usize];
-            let t = interpolated_transfer(asset, &transfer, s, key_centre);
-            let (v, variance, cosine) = sky_view(asset, bvh, &order, &t, s);
-            let probes = probes_sky(asset, &t, s);
-            let n = SKY_RAYS as f32;
-            let q = v.max(probes).clamp(1.0 / n, 1.0);
-            Traced {
-                view: v,
-                baselines: [probes, cosine, 0.0],
-                variance: variance.max(q * (1.0 - q) / n),
-                weight: asset.surfels[s].weight,
-            }
+        .map(|s| sampler.view(s, &first))
+        .collect();
+    let mut terms = pooled(&st.group_surfels, &sampler.traced(&views));
+    let shares: Vec<Option<f32>> = views.iter().map(|w| w.map(|w| w.share())).collect();
+    let again = uncertain_surfels(&st.group_surfels, &shares, &terms);
+    if !again.is_empty() {
+        let more = spiral_order(MORE_SKY_RAYS);
+        let second: Vec<Option<View>> = again.par_iter().map(|&s| sampler.view(s, &more)).collect();
+        for (&s, b) in again.iter().zip(second) {
+            views[s] = views[s].zip(b).map(|(a, b)| a.merged(&b));
+        }
+        terms = pooled(&st.group_surfels, &sampler.traced(&views));
+    }
+    let sky: Vec<f32> = (terms.iter().zip(&views))
+        .map(|(&(d, variance), view)| match view {
+            Some(_) => shrunk(d, variance),
+            None => 0.0,
         })
         .collect();
-    let pooled = pooled(&st.group_surfels, &traced);
-    let terms: Vec<f32> = (pooled.iter().zip(&st.surfels))
-        .map(|(&(d, variance), t)| {
-            if t.is_traced() {
-                shrunk(d, variance)
-            } else {
-                0.0
-            }
-        })
-        .collect();
-    terms
-        .chunks(2)
+    sky.chunks(2)
         .map(|p| {
             let h = |v: Option<&f32>| u32::from(f32_to_f16(v.copied().unwrap_or(0.0)));
             h(p.first()) | h(p.get(1)) << 16
@@ -162,11 +185,101 @@ pub fn sky_terms(asset: &Asset, bvh: &SceneBvh) -> Vec<u32> {
         .collect()
 }
 
-/// Pooled term `d` of noise `variance` shrunk toward 0 (soft threshold) by [`SHRINK`] standard
-/// deviations, by [`SHRINK_DARKER`] where it darkens its surfel.
-fn shrunk(d: f32, variance: f32) -> f32 {
-    let k = if d < 0.0 { SHRINK_DARKER } else { SHRINK };
-    d.signum() * (d.abs() - k * variance.sqrt()).max(0.0)
+/// What a surfel's sky is traced against: the asset, its BVH, each grid point's sky transfer
+/// ([`grid_transfer`]) and per brick its key's centre probe (which its surfels' masks are
+/// stored from).
+struct Sampler<'a> {
+    asset: &'a Asset,
+    bvh: &'a SceneBvh,
+    transfer: Vec<[f32; SH_COUNT]>,
+    centres: Vec<[i32; 3]>,
+}
+
+impl<'a> Sampler<'a> {
+    fn new(asset: &'a Asset, bvh: &'a SceneBvh) -> Self {
+        let grid = &asset.header.grid;
+        let centres = (asset.bricks.iter())
+            .map(|b| asset.surface.brick_centre(grid, b))
+            .collect();
+        Sampler {
+            asset,
+            bvh,
+            transfer: grid_transfer(asset),
+            centres,
+        }
+    }
+
+    /// Surfel `s`'s view of the sky over the rays of `order` ([`spiral_order`]); `None` for a
+    /// surfel without traced terms.
+    fn view(&self, s: usize, order: &[u32]) -> Option<View> {
+        let asset = self.asset;
+        if !asset.surface.surfels[s].is_traced() {
+            return None;
+        }
+        let key_centre = self.centres[asset.surfels[s].brick as usize];
+        let t = interpolated_transfer(asset, &self.transfer, s, key_centre);
+        let (v, variance, cosine) = sky_view(asset, self.bvh, order, &t, s);
+        Some(View {
+            v,
+            variance,
+            rays: order.len() as f32,
+            cosine,
+            probes: probes_sky(asset, &t, s),
+        })
+    }
+
+    /// Per surfel, what [`pooled`] takes of its view (a default for a surfel without one).
+    fn traced(&self, views: &[Option<View>]) -> Vec<Traced> {
+        (views.iter().zip(&self.asset.surfels))
+            .map(|(view, surfel)| view.map_or(Traced::default(), |w| w.traced(surfel.weight)))
+            .collect()
+    }
+}
+
+/// A surfel's traced view of the sky: `v` ([`sky_view`], not clamped) over `rays` rays and
+/// the variance of that mean; the control variate's integral `A(n) . T` and the probes' sky
+/// through its near field ([`probes_sky`]), its baselines.
+#[derive(Clone, Copy, Debug)]
+struct View {
+    v: f32,
+    variance: f32,
+    rays: f32,
+    cosine: f32,
+    probes: f32,
+}
+
+impl View {
+    /// Two independent views of one surfel as one: each mean weighted by its rays.
+    fn merged(&self, other: &View) -> View {
+        let rays = self.rays + other.rays;
+        let (a, b) = (self.rays / rays, other.rays / rays);
+        View {
+            v: a * self.v + b * other.v,
+            variance: a * a * self.variance + b * b * other.variance,
+            rays,
+            ..*self
+        }
+    }
+
+    /// The larger of the sky the surfel sees (its view clamped to [0, 1]) and the sky its
+    /// probes bring it.
+    fn share(&self) -> f32 {
+        self.v.clamp(0.0, 1.0).max(self.probes)
+    }
+
+    /// What [`pooled`] takes of it, for a surfel of `weight` hits: its view clamped to [0, 1],
+    /// and a variance at least the binomial one of its [`View::share`] and of one ray (a sky
+    /// seen through a crack is missed by every ray as often as not, and the sample variance of
+    /// no hits is zero).
+    fn traced(&self, weight: f32) -> Traced {
+        let q = self.share().clamp(1.0 / self.rays, 1.0);
+        Traced {
+            view: self.v.clamp(0.0, 1.0),
+            baselines: [self.probes, self.cosine, 0.0],
+            variance: self.variance.max(q * (1.0 - q) / self.rays),
+            weight,
+        }
+    }
 }
 
 /// The probes' sky transfer interpolated at surfel `s` with the lookup's weights: trilinear at
@@ -209,9 +322,10 @@ fn interpolated_transfer(
     }
 }
 
-/// `v` of surfel `s` (module docs: the share of its cosine-weighted hemisphere that sees the
-/// sky, with the probes' sky `t` as control variate), clamped to [0, 1], the variance of its
-/// mean over the rays, and the control variate's integral `A(n) . t`. The rays are traced in
+/// `v` of surfel `s` over the rays of `order` (module docs: the share of its cosine-weighted
+/// hemisphere that sees the sky, with the probes' sky `t` as control variate), not yet clamped
+/// to [0, 1] (two passes are averaged first), the variance of its mean over the rays, and the
+/// control variate's integral `A(n) . t`. The rays are traced in
 /// packets of neighbouring directions (`order`, [`spiral_order`]) and summed in spiral order,
 /// so the packets change the time, not the bits.
 fn sky_view(
@@ -235,10 +349,14 @@ fn sky_view(
     let turn = (s as f64 * 0.618_033_988_749_895).fract() as f32 * std::f32::consts::TAU;
     let (sin, cos) = turn.sin_cos();
     let (tx, ty) = (tx * cos + ty * sin, ty * cos - tx * sin);
-    let dirs: [Vec3; SKY_RAYS as usize] =
-        std::array::from_fn(|k| cosine_spiral(k as u32, SKY_RAYS, tx, ty, n));
-    debug_assert_eq!(order.len(), SKY_RAYS as usize, "a permutation of the rays");
-    let mut escaped = [false; SKY_RAYS as usize];
+    assert!(order.len() <= MAX_RAYS, "{} sky rays", order.len());
+    let count = order.len() as u32;
+    let mut dirs = [Vec3::ZERO; MAX_RAYS];
+    for (k, d) in (0..count).zip(&mut dirs) {
+        *d = cosine_spiral(k, count, tx, ty, n);
+    }
+    let dirs = &dirs[..order.len()];
+    let mut escaped = [false; MAX_RAYS];
     for packet in order.chunks(PACKET) {
         let mut ray = [Vec3::ZERO; PACKET];
         for (r, &k) in ray.iter_mut().zip(packet) {
@@ -257,12 +375,12 @@ fn sky_view(
         sum += x;
         square += x * x;
     }
-    let rays = SKY_RAYS as f32;
+    let rays = count as f32;
     let mean = sum / rays;
     let all = cosine_transfer(n.to_array());
     let integral: f32 = (0..SH_COUNT).map(|k| all[k] * t[k]).sum();
     let variance = (square / rays - mean * mean).max(0.0) / rays;
-    ((integral + mean).clamp(0.0, 1.0), variance, integral)
+    (integral + mean, variance, integral)
 }
 
 /// The indices `0..count` of `cosine_spiral`'s directions in an order where consecutive ones
@@ -284,77 +402,6 @@ fn probes_sky(asset: &Asset, t: &[f32; SH_COUNT], s: usize) -> f32 {
     let (open, all) = terms.open_and_cosine(asset.surface.header.rays);
     let dot = |a: &[f32; SH_COUNT]| (0..SH_COUNT).map(|k| a[k] * t[k]).sum::<f32>();
     dot(&open).max(0.0).min(dot(&all).max(0.0))
-}
-
-/// What [`sky_terms`] traced at a surfel: its view of the sky `v`, the baselines its group
-/// may be pooled against ([`pooled`]: the probes' sky through its near field, the control
-/// variate's integral `A(n) . T`, and none), the variance of `v` (floored), and its weight in
-/// the group (its hits; 0 for a surfel not traced).
-#[derive(Clone, Copy, Debug, Default)]
-struct Traced {
-    view: f32,
-    baselines: [f32; 3],
-    variance: f32,
-    weight: f32,
-}
-
-/// Per surfel, its term before shrinking (`v - probes`, `v` pooled over the traced surfels of
-/// its near group, weighted by their hits) and the variance of the pooled mean.
-///
-/// What is pooled is `v` less a baseline known exactly at each surfel, the one that leaves the
-/// group most uniform: `v - baseline` is averaged and each surfel adds its own baseline back.
-/// The rays' noise is the same whichever baseline is taken off, so the one whose differences
-/// spread least across the group is the one the sky varies least against. Where the probes'
-/// sky falls off across a gallery wall that sees none (atrium_13: 0.2% to 2.5% within one
-/// group of 16), `v` itself is uniform and the difference to the probes is not: pooling the
-/// difference gave each surfel the group's mean correction, about half its own, and left 3 of
-/// its 4 leaking points (1 at 64 rays with the baseline chosen, 8.31% -> 7.99%,
-/// docs/results/surface_sky_pool.md). Where a skylight's edge crosses the group the probes
-/// follow it and the difference is the uniform one (cave_7, module docs). The choice is made
-/// on the same noisy `v` it pools, clamped to [0, 1]: in a group that sees no sky, or all of
-/// it, the clamp makes `v` look uniform and "none" tends to win, which is the right baseline
-/// there.
-fn pooled(groups: &[[u32; 2]], traced: &[Traced]) -> Vec<(f32, f32)> {
-    let mut out: Vec<(f32, f32)> = traced
-        .iter()
-        .map(|t| (t.view - t.baselines[0], t.variance))
-        .collect();
-    for &[first, count] in groups {
-        let range = first as usize..(first + count) as usize;
-        let members: Vec<(usize, f64)> = (range.clone())
-            .map(|s| (s, f64::from(traced[s].weight)))
-            .filter(|m| m.1 > 0.0)
-            .collect();
-        let weight: f64 = members.iter().map(|m| m.1).sum();
-        if weight <= 0.0 {
-            continue;
-        }
-        let x = |s: usize, b: usize| f64::from(traced[s].view - traced[s].baselines[b]);
-        let means =
-            [0, 1, 2].map(|b| members.iter().map(|&(s, w)| w * x(s, b)).sum::<f64>() / weight);
-        let spreads = [0, 1, 2].map(|b| {
-            (members.iter())
-                .map(|&(s, w)| w * (x(s, b) - means[b]).powi(2))
-                .sum::<f64>()
-        });
-        // The first of the least spread: the probes' baseline where they tie.
-        let best = (1..3).fold(
-            0,
-            |best, b| if spreads[b] < spreads[best] { b } else { best },
-        );
-        let m = means[best];
-        let variance = members
-            .iter()
-            .map(|&(s, w)| w * w * f64::from(traced[s].variance))
-            .sum::<f64>()
-            / (weight * weight);
-        for s in range {
-            let t = &traced[s];
-            let own = f64::from(t.baselines[best]) + m - f64::from(t.baselines[0]);
-            out[s] = (own as f32, variance as f32);
-        }
-    }
-    out
 }
 
 /// Per grid point, the sky transfer the runtime's relight gives it under a sky of radiance 1:
@@ -415,110 +462,45 @@ mod tests {
         );
     }
 
-    /// A term that darkens its surfel loses half a standard deviation, one that brightens a
-    /// whole one, and either is dropped under that.
+    /// Two passes' views are one mean over all their rays: weighted by rays, and the
+    /// variance of that mean; the first pass's baselines are kept (both passes' are the
+    /// surfel's own, the same up to rounding).
     #[test]
-    fn a_darkening_term_is_shrunk_less() {
-        let variance = 0.01f32 * 0.01;
-        let cases = [
-            (-0.03, -0.025),
-            (0.03, 0.02),
-            (-0.004, 0.0),
-            (0.008, 0.0),
-            (0.0, 0.0),
-        ];
-        for (d, want) in cases {
-            assert!(
-                (shrunk(d, variance) - want).abs() < 1e-7,
-                "{d}: {}",
-                shrunk(d, variance)
-            );
-        }
-    }
-
-    /// A traced surfel of weight 1 that sees `view` of the sky, its probes `probes`, its
-    /// control variate's integral `cosine`, and no noise.
-    fn surfel(view: f32, probes: f32, cosine: f32) -> Traced {
-        Traced {
-            view,
-            baselines: [probes, cosine, 0.0],
-            variance: 0.0,
-            weight: 1.0,
-        }
-    }
-
-    #[test]
-    fn a_group_that_sees_no_sky_takes_off_each_surfels_own_probes() {
-        // A gallery wall under probes whose sky falls off across it: the difference to the
-        // probes varies, the view does not. Each surfel's term is minus its own probes' sky,
-        // not the group's mean difference.
-        let traced: Vec<Traced> = [0.025, 0.017, 0.009, 0.002]
-            .iter()
-            .map(|&p| surfel(0.0, p, p))
-            .collect();
-        let terms = pooled(&[[0, 4]], &traced);
-        for (t, s) in terms.iter().zip(&traced) {
-            assert!((t.0 + s.baselines[0]).abs() < 1e-7, "{t:?} for {s:?}");
-        }
-    }
-
-    #[test]
-    fn a_view_that_follows_the_probes_pools_the_difference() {
-        // A skylight's edge across the group: the view falls off as the probes' sky does,
-        // 0.1 under it. Every surfel gets the group's difference, and the untraced one
-        // (weight 0) takes no part.
-        let mut traced: Vec<Traced> = [0.5, 0.3, 0.2, 0.1]
-            .iter()
-            .map(|&p| surfel(p - 0.1, p, 0.4))
-            .collect();
-        traced.push(Traced {
-            view: 1.0,
-            ..Traced::default()
-        });
-        let terms = pooled(&[[0, 5]], &traced);
-        for t in &terms[..4] {
-            assert!((t.0 + 0.1).abs() < 1e-6, "{t:?}");
-        }
-    }
-
-    #[test]
-    fn a_view_that_follows_the_cosine_integral_pools_against_it() {
-        // The view tracks the control variate's integral while the probes' sky (through the
-        // near field) does not: each surfel keeps its own integral less a common 0.05.
-        let traced: Vec<Traced> = [(0.4, 0.1), (0.3, 0.3), (0.2, 0.0), (0.1, 0.2)]
-            .iter()
-            .map(|&(cosine, probes)| surfel(cosine - 0.05, probes, cosine))
-            .collect();
-        let terms = pooled(&[[0, 4]], &traced);
-        for (t, s) in terms.iter().zip(&traced) {
-            let want = s.view - s.baselines[0];
-            assert!((t.0 - want).abs() < 1e-6, "{t:?} for {s:?}");
-        }
-    }
-
-    #[test]
-    fn an_untraced_surfel_takes_no_part_and_a_group_of_none_stays_zero() {
-        let mut traced = vec![surfel(0.0, 0.1, 0.1), surfel(0.2, 0.1, 0.1)];
-        // Untraced (weight 0) with a view that would pull the mean.
-        traced.push(Traced {
-            view: 1.0,
-            ..Traced::default()
-        });
-        let terms = pooled(&[[0, 3]], &traced);
-        assert!((terms[0].0 - 0.0).abs() < 1e-6, "{:?}", terms[0]);
-        let none = pooled(&[[0, 2]], &[Traced::default(); 2]);
-        assert_eq!(none, vec![(0.0, 0.0); 2]);
-    }
-
-    #[test]
-    fn the_pooled_variance_is_that_of_the_weighted_mean() {
-        let mut traced = vec![surfel(0.0, 0.1, 0.1), surfel(0.0, 0.1, 0.1)];
-        traced[0].variance = 4e-4;
-        traced[1].variance = 4e-4;
-        traced[1].weight = 3.0;
-        let terms = pooled(&[[0, 2]], &traced);
-        // (1 * 4e-4 + 9 * 4e-4) / 16
-        assert!((terms[0].1 - 2.5e-4).abs() < 1e-9, "{:?}", terms[0]);
-        assert_eq!(terms[0].1, terms[1].1);
+    fn merged_views_weigh_each_pass_by_its_rays() {
+        let view = |v, variance, rays| View {
+            v,
+            variance,
+            rays,
+            cosine: 0.3,
+            probes: 0.2,
+        };
+        let merged = view(0.1, 4e-4, 256.0).merged(&view(0.2, 1e-4, 768.0));
+        assert!((merged.v - 0.175).abs() < 1e-7, "{merged:?}");
+        assert!((merged.variance - 8.125e-5).abs() < 1e-10, "{merged:?}");
+        assert_eq!(merged.rays, 1024.0);
+        assert_eq!((merged.cosine, merged.probes), (0.3, 0.2));
+        // The floor of one ray falls with the rays: a view of no sky whose probes bring none.
+        let dark = View {
+            probes: 0.0,
+            ..view(0.0, 0.0, 256.0)
+        };
+        let floor = |w: View| w.traced(1.0).variance;
+        let close = |a: f32, b: f32| (a - b).abs() <= 1e-6 * b;
+        assert!(
+            close(floor(dark), 255.0 / 256f32.powi(3)),
+            "{}",
+            floor(dark)
+        );
+        let both = dark.merged(&view(0.0, 0.0, 768.0));
+        assert_eq!(both.probes, 0.0, "the first pass's baselines");
+        assert!(
+            close(floor(both), 1023.0 / 1024f32.powi(3)),
+            "{}",
+            floor(both)
+        );
+        // A dark surfel's two passes are averaged before the clamp: a first pass below 0
+        // pulls a second above it down.
+        let merged = view(-0.004, 0.0, 256.0).merged(&view(0.002, 0.0, 768.0));
+        assert!(close(merged.traced(1.0).view, 0.0005), "{merged:?}");
     }
 }
