@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use prt_runtime::gpu::{PrtRuntime, RuntimeSettings};
-use prt_runtime::surface::SurfaceSampler;
+use prt_runtime::surface::{Explanation, SurfaceSampler};
 use prt_runtime::{LookupSettings, Sample};
 use serde_json::{json, Value};
 
@@ -43,6 +43,11 @@ pub struct SampleArgs {
     /// terms).
     #[arg(long)]
     no_sky_terms: bool,
+    /// Add to each sample how the lookup read it (CPU backend): the surfel whose terms stood for
+    /// the point, the probes it weighted (which the surfel sees, their own irradiance), the
+    /// near field's share of the probes' light, the sky term. Where to start on a leak.
+    #[arg(long)]
+    explain: bool,
 }
 
 /// A surface point: position and unit normal.
@@ -59,21 +64,42 @@ pub fn run(args: SampleArgs) -> Result<()> {
         },
         ..RuntimeSettings::default()
     };
+    if args.explain && matches!(args.backend, Backend::Gpu) {
+        bail!("--explain reads the CPU twin of the lookup: use it with --backend cpu");
+    }
     ensure_not_input(&args.json, &[&args.asset, &args.lights, &args.points])?;
     let points = read_points(&args.points)?;
     let asset = prt_format::read_asset(&args.asset)
         .with_context(|| format!("loading {}", args.asset.display()))?;
     let lighting = lighting_of(Some(&args.lights), &asset)?;
     let start = std::time::Instant::now();
-    let (samples, name) = match args.backend {
+    let (samples, explained, name) = match args.backend {
         Backend::Cpu => {
             let relit = prt_runtime::CpuRelighter::new(&asset)?.relight(&lighting, 1)?;
-            (sample_cpu(&asset, &relit, &settings, &points), "cpu")
+            let sampler = SurfaceSampler::for_relit(&asset, &relit, &settings.lookup);
+            let samples = points.iter().map(|(p, n)| sampler.sample(*p, *n)).collect();
+            let explained: Vec<Value> = match args.explain {
+                true => points
+                    .iter()
+                    .map(|(p, n)| explanation_json(&sampler.explain(*p, *n)))
+                    .collect(),
+                false => Vec::new(),
+            };
+            (samples, explained, "cpu")
         }
-        Backend::Gpu => (sample_gpu(&asset, &lighting, settings, &points)?, "gpu"),
+        Backend::Gpu => (
+            sample_gpu(&asset, &lighting, settings, &points)?,
+            Vec::new(),
+            "gpu",
+        ),
     };
     let seconds = start.elapsed().as_secs_f64();
-    let doc = samples_json(&points, &samples, name, normal_bias, &asset);
+    let mut doc = samples_json(&points, &samples, name, normal_bias, &asset);
+    if let Some(list) = doc["samples"].as_array_mut() {
+        for (sample, e) in list.iter_mut().zip(explained) {
+            sample["explain"] = e;
+        }
+    }
     let text = serde_json::to_vec(&doc)?;
     prt_format::io::write_bytes_atomic(&args.json, &text)
         .with_context(|| format!("writing {}", args.json.display()))?;
@@ -85,15 +111,41 @@ pub fn run(args: SampleArgs) -> Result<()> {
     Ok(())
 }
 
-/// The CPU twin of the snippet over the CPU relight.
-fn sample_cpu(
-    asset: &prt_format::Asset,
-    relit: &prt_runtime::Relit,
-    settings: &RuntimeSettings,
-    points: &[Point],
-) -> Vec<Sample> {
-    let sampler = SurfaceSampler::for_relit(asset, relit, &settings.lookup);
-    points.iter().map(|(p, n)| sampler.sample(*p, *n)).collect()
+/// An [`Explanation`] as JSON (`--explain`): the fields of `prt_runtime::surface`'s
+/// `Explanation`, `SurfelStep` and `ProbeStep`.
+fn explanation_json(e: &Explanation) -> Value {
+    let surfel = e.surfel.map(|s| {
+        json!({
+            "index": s.index,
+            "brick": s.brick,
+            "position": s.position,
+            "normal": s.normal,
+            "agreement": s.agreement,
+            "sees_a_probe": s.sees_a_probe,
+            "near_hits": s.near_hits,
+            "near_rays": s.near_rays,
+            "escaping": s.escaping,
+            "hemisphere": s.hemisphere,
+            "near": s.near,
+            "near_field_irradiance": s.near_field_irradiance,
+            "sky_term": s.sky_term,
+        })
+    });
+    let probes: Vec<Value> = (e.probes.iter())
+        .map(|p| {
+            json!({
+                "index": p.index,
+                "position": p.position,
+                "seen": p.seen,
+                "irradiance": p.irradiance,
+            })
+        })
+        .collect();
+    json!({
+        "surfel": surfel,
+        "probes": probes,
+        "probes_irradiance": e.probes_irradiance,
+    })
 }
 
 /// One full GPU update, then the real snippet at every point.

@@ -453,6 +453,51 @@ fn sample_is_the_same_on_cpu_and_gpu() {
     }
 }
 
+/// `prt sample --explain` adds to each sample how the lookup read it: a point on the floor has
+/// a surfel (with its normal, near field and sky term) and the probes it weighed; one in the air
+/// has none. With `--backend gpu` it is refused (the explanation is the CPU twin's) and
+/// nothing is written.
+#[test]
+fn sample_explains_each_point() {
+    let dir = Scratch::new("sample_explain");
+    let asset = bake_cornell(&dir);
+    let input = dir.0.join("points.json");
+    let points = r#"{"points": [{"position": [0.1, 0.0, 0.2], "normal": [0, 1, 0]},
+        {"position": [0.0, 1.0, 0.0], "normal": [0, 1, 0]}]}"#;
+    std::fs::write(&input, points).unwrap();
+    let json = dir.0.join("explained.json");
+    let out = sample(&asset, &input, &json, &["--explain"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let doc: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    let samples = doc["samples"].as_array().unwrap();
+    let (floor, air) = (&samples[0]["explain"], &samples[1]["explain"]);
+    for key in [
+        "normal",
+        "agreement",
+        "near_hits",
+        "escaping",
+        "near",
+        "sky_term",
+    ] {
+        assert!(!floor["surfel"][key].is_null(), "{key}: {floor}");
+    }
+    assert!(air["surfel"].is_null(), "{air}");
+    for e in [floor, air] {
+        let probes = e["probes"].as_array().unwrap();
+        assert!(!probes.is_empty() && probes.len() <= 8, "{e}");
+        assert_eq!(e["probes_irradiance"].as_array().unwrap().len(), 3);
+    }
+    let refused = dir.0.join("refused.json");
+    let out = sample(&asset, &input, &refused, &["--explain", "--backend", "gpu"]);
+    assert!(!out.status.success());
+    assert!(
+        text(&out.stderr).contains("--backend cpu"),
+        "{}",
+        text(&out.stderr)
+    );
+    assert!(!refused.exists());
+}
+
 /// Bad `prt sample` input exits non-zero with one stderr line naming the file, the point and the
 /// value, and writes nothing.
 #[test]

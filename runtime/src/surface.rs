@@ -106,9 +106,68 @@ pub fn scale_by_near_field(
     }
 }
 
+/// How the surface lookup read one point ([`SurfaceSampler::explain`], `prt sample --explain`):
+/// the surfel whose terms stood for it, the probes it weighted, and what the near field and the
+/// sky term did to their irradiance. A point lit wrong (a leak, a dark patch) is diagnosed
+/// from it: a probe it should not see, a near field that blocks too much, a sky term too small.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Explanation {
+    /// The surfel, or `None`: the probe volume's lookup (depth moments) alone.
+    pub surfel: Option<SurfelStep>,
+    /// The probes around the point with a positive trilinear and probe weight.
+    pub probes: Vec<ProbeStep>,
+    /// The probes' weighted irradiance on the point's normal, before the near field and sky.
+    pub probes_irradiance: [f32; 3],
+    /// What [`SurfaceSampler::sample`] returns.
+    pub sample: Sample,
+}
+
+/// The surfel step of an [`Explanation`]; irradiance-like values per colour channel.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SurfelStep {
+    /// Asset index of the surfel and of its brick.
+    pub index: usize,
+    pub brick: usize,
+    pub position: [f32; 3],
+    /// Its normal as its terms store it, and the cosine between it and the point's normal: a
+    /// point whose normal is far from it is read with a near field traced for another surface.
+    pub normal: [f32; 3],
+    pub agreement: f32,
+    /// False where it sees none of the probes: the probes are then weighted by their depth
+    /// moments instead.
+    pub sees_a_probe: bool,
+    /// Near-field rays that hit a surface within reach, of all its near-field rays.
+    pub near_hits: u32,
+    pub near_rays: u32,
+    /// `open . L` and `A(n) . L` ([`scale_by_near_field`]): the probes' light through the
+    /// escaping rays and through the whole hemisphere.
+    pub escaping: [f32; 3],
+    pub hemisphere: [f32; 3],
+    /// What the near field's hits bring (hits / rays times its group's radiance per hit).
+    pub near: [f32; 3],
+    /// The irradiance after the near field, before the sky term.
+    pub near_field_irradiance: [f32; 3],
+    /// Its sky term (`prt_format::surface::sky_term`); the lookup adds `pi * sky_term *` the
+    /// sky's mean radiance where the sky terms are on.
+    pub sky_term: f32,
+}
+
+/// A probe of an [`Explanation`].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ProbeStep {
+    /// Grid index and where its rays started.
+    pub index: usize,
+    pub position: [f32; 3],
+    /// Whether the surfel sees it (`None`: no surfel, the volume lookup).
+    pub seen: Option<bool>,
+    /// Its own irradiance on the point's normal.
+    pub irradiance: [f32; 3],
+}
+
 /// The surface lookup of an asset relit to probe SH `sh` and brick radiance `bricks`.
 pub struct SurfaceSampler<'a> {
     asset: &'a Asset,
+    sh: &'a [ShRgb],
     trilinear: VolumeSampler<'a>,
     fallback: VolumeSampler<'a>,
     near: Vec<[f32; 3]>,
@@ -136,6 +195,7 @@ impl<'a> SurfaceSampler<'a> {
         };
         SurfaceSampler {
             asset,
+            sh,
             trilinear: VolumeSampler::for_asset(asset, sh, &trilinear),
             fallback: VolumeSampler::for_asset(asset, sh, lookup),
             near: near_radiance(&asset.surface, &group_radiance(asset, radiance)),
@@ -155,8 +215,41 @@ impl<'a> SurfaceSampler<'a> {
 
     /// The sample at `position` for a surface with unit normal `normal`.
     pub fn sample(&self, position: [f32; 3], normal: [f32; 3]) -> Sample {
+        self.lookup(position, normal).0
+    }
+
+    /// [`Self::sample`] and how it was made: both come from one [`Self::lookup`], so they
+    /// cannot differ.
+    pub fn explain(&self, position: [f32; 3], normal: [f32; 3]) -> Explanation {
+        let (sample, surfel, probes_irradiance) = self.lookup(position, normal);
+        let probes = match surfel {
+            Some(step) => {
+                let st = &self.asset.surface;
+                let grid = &self.asset.header.grid;
+                let centre = st.brick_centre(grid, &self.asset.bricks[step.brick]);
+                let terms = &st.surfels[step.index];
+                self.corners(position, normal, |i| Some(terms.sees(centre, grid, i)))
+            }
+            None => self.corners(position, normal, |_| None),
+        };
+        Explanation {
+            surfel,
+            probes,
+            probes_irradiance,
+            sample,
+        }
+    }
+
+    /// The sample, the surfel step (if a surfel stood for the point) and the probes' weighted
+    /// irradiance before the near field and the sky term.
+    fn lookup(
+        &self,
+        position: [f32; 3],
+        normal: [f32; 3],
+    ) -> (Sample, Option<SurfelStep>, [f32; 3]) {
         let Some((brick, surfel)) = self.surfel_of(position, normal) else {
-            return self.fallback.sample(position, normal);
+            let sample = self.fallback.sample(position, normal);
+            return (sample, None, sample.irradiance);
         };
         let st = &self.asset.surface;
         let terms = &st.surfels[surfel];
@@ -175,18 +268,59 @@ impl<'a> SurfaceSampler<'a> {
         if !seen.get() {
             out = self.fallback.sample(position, normal);
         }
+        let probes_irradiance = out.irradiance;
         let (open, all) = terms.open_and_cosine(st.header.rays);
         let share = terms.hits() as f32 / st.header.rays as f32;
         let group = st.groups[brick] + terms.group();
         let near = self.near[group as usize].map(|l| share * l);
         scale_by_near_field(&mut out, &open, &all, near);
+        let near_field_irradiance = out.irradiance;
+        let sky = sky_term(&self.asset.surface.sky, surfel);
         if self.sky != [0.0; 3] {
-            let sky = sky_term(&self.asset.surface.sky, surfel);
             for (e, l) in out.irradiance.iter_mut().zip(self.sky) {
                 *e = (*e + sky * l).max(0.0);
             }
         }
-        out
+        let dot = |t: &[f32; SH_COUNT]| -> [f32; 3] {
+            std::array::from_fn(|ch| (0..SH_COUNT).map(|k| out.sh[k][ch] * t[k]).sum())
+        };
+        let step = SurfelStep {
+            index: surfel,
+            brick,
+            position: self.asset.surfels[surfel].position,
+            normal: terms.normal(),
+            agreement: (0..3).map(|a| terms.normal()[a] * normal[a]).sum(),
+            sees_a_probe: seen.get(),
+            near_hits: terms.hits(),
+            near_rays: st.header.rays,
+            escaping: dot(&open),
+            hemisphere: dot(&all),
+            near,
+            near_field_irradiance,
+            sky_term: sky,
+        };
+        (out, Some(step), probes_irradiance)
+    }
+
+    /// The probes the trilinear lookup weights at the point (a positive trilinear and probe
+    /// weight), each with `seen(index)` and its own irradiance on `normal`.
+    fn corners(
+        &self,
+        position: [f32; 3],
+        normal: [f32; 3],
+        seen: impl Fn(usize) -> Option<bool>,
+    ) -> Vec<ProbeStep> {
+        let list = std::cell::RefCell::new(Vec::new());
+        self.trilinear.sample_weighted(position, normal, |i, at| {
+            list.borrow_mut().push(ProbeStep {
+                index: i,
+                position: at.to_array(),
+                seen: seen(i),
+                irradiance: prt_format::sh::irradiance(&self.sh[i], normal),
+            });
+            1.0
+        });
+        list.into_inner()
     }
 
     /// The surfel (asset index) whose terms stand for the point, if any: where it is `None`,

@@ -3,7 +3,8 @@
 //! normal, the lookup keeps the dark room of `fixtures/two_rooms.gltf` dark at both grid
 //! phases (the shared wall and the floor that runs under it) and a sunlit atrium's galleries
 //! dark, no line where two of its surfaces meet is over-lit, a pocket stays dark, a surface
-//! under a sky gets its own share of it rather than its probes', a bake
+//! under a sky gets its own share of it rather than its probes', the lookup's explanation adds
+//! up to its sample, a bake
 //! without terms (unmerged, or told to skip them) samples as the volume lookup, and damaged
 //! terms are refused by name.
 
@@ -105,6 +106,63 @@ fn the_surface_lookup_keeps_the_dark_room_dark() {
             );
         }
     }
+}
+
+/// `SurfaceSampler::explain` (what `prt sample --explain` writes) adds up to the sample: its
+/// sample is the lookup's, bit for bit; the probes' irradiance scaled by the near field it
+/// reports, plus the sky term, is the irradiance; a point with a surfel lists the probes it
+/// weighed and which it sees, a point without one (in the air, off every surface) none seen.
+#[test]
+fn the_explanation_adds_up_to_the_sample() {
+    let asset = bake_ok(&fixture("two_rooms.gltf"), &BakeSettings::default());
+    let relit = relit(&asset);
+    let s = SurfaceSampler::for_relit(&asset, &relit, &LookupSettings::default());
+    let sky = relit.sky.map(|l| std::f32::consts::PI * l);
+    let mut points = wall_points(-1.0);
+    points.extend(wall_points(1.0));
+    points.extend(floor_points(-1.0));
+    let air = ([0.3, 1.4, 0.2], [0.0, 1.0, 0.0]);
+    points.push(air);
+    let mut with_surfel = 0;
+    for &(p, n) in &points {
+        let e = s.explain(p, n);
+        assert_eq!(e.sample, s.sample(p, n), "{p:?}");
+        assert!(
+            !e.probes.is_empty() && e.probes.len() <= 8,
+            "{p:?}: {:?}",
+            e.probes
+        );
+        let Some(step) = e.surfel else {
+            assert!(e.probes.iter().all(|q| q.seen.is_none()), "{p:?}");
+            assert_eq!(e.probes_irradiance, e.sample.irradiance, "{p:?}");
+            continue;
+        };
+        with_surfel += 1;
+        assert!(e.probes.iter().all(|q| q.seen.is_some()), "{p:?}");
+        assert_eq!(
+            step.sees_a_probe,
+            e.probes.iter().any(|q| q.seen == Some(true)),
+            "{p:?}"
+        );
+        assert!(step.agreement > 0.99, "{p:?}: {step:?}");
+        for (ch, l) in sky.iter().enumerate() {
+            let (open, all) = (step.escaping[ch], step.hemisphere[ch]);
+            let scale = match all > 0.0 {
+                true => ((open.max(0.0).min(all) + step.near[ch]) / all).max(0.0),
+                false => 1.0,
+            };
+            let near_field = e.probes_irradiance[ch] * scale;
+            assert_eq!(step.near_field_irradiance[ch], near_field, "{p:?} ch {ch}");
+            let want = (near_field + step.sky_term * l).max(0.0);
+            assert_eq!(e.sample.irradiance[ch], want, "{p:?} ch {ch}");
+        }
+    }
+    assert!(s.explain(air.0, air.1).surfel.is_none());
+    assert!(
+        with_surfel * 2 > points.len(),
+        "{with_surfel} of {}",
+        points.len()
+    );
 }
 
 /// Points on the shared wall, side `side` (+1: the dark room), as (position, normal).
