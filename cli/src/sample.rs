@@ -78,10 +78,10 @@ pub fn run(args: SampleArgs) -> Result<()> {
             let relit = prt_runtime::CpuRelighter::new(&asset)?.relight(&lighting, 1)?;
             let sampler = SurfaceSampler::for_relit(&asset, &relit, &settings.lookup);
             let samples = points.iter().map(|(p, n)| sampler.sample(*p, *n)).collect();
-            let explained: Vec<Value> = match args.explain {
+            let explained: Vec<Explanation> = match args.explain {
                 true => points
                     .iter()
-                    .map(|(p, n)| explanation_json(&sampler.explain(*p, *n)))
+                    .map(|(p, n)| sampler.explain(*p, *n))
                     .collect(),
                 false => Vec::new(),
             };
@@ -96,8 +96,8 @@ pub fn run(args: SampleArgs) -> Result<()> {
     let seconds = start.elapsed().as_secs_f64();
     let mut doc = samples_json(&points, &samples, name, normal_bias, &asset);
     if let Some(list) = doc["samples"].as_array_mut() {
-        for (sample, e) in list.iter_mut().zip(explained) {
-            sample["explain"] = e;
+        for (sample, e) in list.iter_mut().zip(&explained) {
+            sample["explain"] = explanation_json(e);
         }
     }
     let text = serde_json::to_vec(&doc)?;
@@ -107,8 +107,57 @@ pub fn run(args: SampleArgs) -> Result<()> {
         "sampled {} points ({name}, normal bias {normal_bias} spacings) in {seconds:.3} s",
         samples.len()
     );
+    for (i, e) in explained.iter().enumerate().take(EXPLAINED_LINES) {
+        println!("point {i}: {}", explanation_line(e));
+    }
+    if explained.len() > EXPLAINED_LINES {
+        println!(
+            "({} more points explained in the JSON)",
+            explained.len() - EXPLAINED_LINES
+        );
+    }
     println!("wrote {}", args.json.display());
     Ok(())
+}
+
+/// Points `--explain` summarises on the terminal, one line each (the JSON has them all).
+const EXPLAINED_LINES: usize = 20;
+
+/// One line of what the lookup did at a point: what it read (mean of RGB), the surfel's
+/// agreement, near field and sky term, and how many of the probes the surfel sees.
+fn explanation_line(e: &Explanation) -> String {
+    let mean = |v: [f32; 3]| (v[0] + v[1] + v[2]) / 3.0;
+    let e_out = mean(e.sample.irradiance);
+    let probes = mean(e.probes_irradiance);
+    match e.surfel {
+        None => format!(
+            "E {e_out:.4e}: no surfel, the probe volume's lookup over {} probe(s)",
+            e.probes.len()
+        ),
+        Some(s) => {
+            let seen = e.probes.iter().filter(|p| p.seen == Some(true)).count();
+            let kept = match probes > 0.0 {
+                true => mean(s.near_field_irradiance) / probes,
+                false => 1.0,
+            };
+            format!(
+                "E {e_out:.4e}: surfel {} (normal agreement {:.2}), sees {seen} of {} probes \
+                 (their E {probes:.4e}{}), near field {}/{} hits keeps {:.0}%, sky term {:+.4}",
+                s.index,
+                s.agreement,
+                e.probes.len(),
+                if s.sees_a_probe {
+                    ""
+                } else {
+                    ", by depth moments"
+                },
+                s.near_hits,
+                s.near_rays,
+                100.0 * kept,
+                s.sky_term
+            )
+        }
+    }
 }
 
 /// An [`Explanation`] as JSON (`--explain`): the fields of `prt_runtime::surface`'s

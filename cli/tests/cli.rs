@@ -453,9 +453,9 @@ fn sample_is_the_same_on_cpu_and_gpu() {
     }
 }
 
-/// `prt sample --explain` adds to each sample how the lookup read it: a point on the floor has
-/// a surfel (with its normal, near field and sky term) and the probes it weighed; one in the air
-/// has none. With `--backend gpu` it is refused (the explanation is the CPU twin's) and
+/// `prt sample --explain` adds to each sample how the lookup read it, and prints a line per
+/// point: a point on the floor has a surfel (with its normal, near field and sky term) and the
+/// probes it weighed; one in the air has none. With `--backend gpu` it is refused (the explanation is the CPU twin's) and
 /// nothing is written.
 #[test]
 fn sample_explains_each_point() {
@@ -468,6 +468,15 @@ fn sample_explains_each_point() {
     let json = dir.0.join("explained.json");
     let out = sample(&asset, &input, &json, &["--explain"]);
     assert!(out.status.success(), "{}", text(&out.stderr));
+    let said = text(&out.stdout);
+    assert!(
+        said.contains("point 0: E ") && said.contains("normal agreement"),
+        "{said}"
+    );
+    assert!(
+        said.contains("point 1: E ") && said.contains("no surfel"),
+        "{said}"
+    );
     let doc: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
     let samples = doc["samples"].as_array().unwrap();
     let (floor, air) = (&samples[0]["explain"], &samples[1]["explain"]);
