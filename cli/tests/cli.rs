@@ -496,6 +496,10 @@ fn sample_explains_each_point() {
         assert!(!probes.is_empty() && probes.len() <= 8, "{e}");
         assert_eq!(e["probes_irradiance"].as_array().unwrap().len(), 3);
     }
+    let plain = dir.0.join("plain.json");
+    assert!(sample(&asset, &input, &plain, &[]).status.success());
+    let doc: serde_json::Value = serde_json::from_slice(&std::fs::read(&plain).unwrap()).unwrap();
+    assert!(doc["samples"][0].get("explain").is_none(), "{doc}");
     let refused = dir.0.join("refused.json");
     let out = sample(&asset, &input, &refused, &["--explain", "--backend", "gpu"]);
     assert!(!out.status.success());

@@ -125,23 +125,29 @@ pub struct Explanation {
 /// The surfel step of an [`Explanation`]; irradiance-like values per colour channel.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct SurfelStep {
-    /// Asset index of the surfel and of its brick.
+    /// Asset index of the surfel.
     pub index: usize,
+    /// Asset index of its brick (a split brick's first part: the one the table names).
     pub brick: usize,
+    /// Where it lies.
     pub position: [f32; 3],
-    /// Its normal as its terms store it, and the cosine between it and the point's normal: a
-    /// point whose normal is far from it is read with a near field traced for another surface.
+    /// Its normal as its terms store it.
     pub normal: [f32; 3],
+    /// The cosine between [`Self::normal`] and the point's normal: a point whose normal is far
+    /// from it is read with a near field traced for another surface.
     pub agreement: f32,
     /// False where it sees none of the probes: the probes are then weighted by their depth
     /// moments instead.
     pub sees_a_probe: bool,
-    /// Near-field rays that hit a surface within reach, of all its near-field rays.
+    /// Its near-field rays that hit a surface within reach.
     pub near_hits: u32,
+    /// All its near-field rays.
     pub near_rays: u32,
-    /// `open . L` and `A(n) . L` ([`scale_by_near_field`]): the probes' light through the
-    /// escaping rays and through the whole hemisphere.
+    /// `open . L` ([`scale_by_near_field`]): the probes' light through its escaping rays, as
+    /// the SH gives it; the lookup clamps it to `[0, hemisphere]` (L2 ringing can put it
+    /// outside).
     pub escaping: [f32; 3],
+    /// `A(n) . L`: the probes' light through its whole hemisphere.
     pub hemisphere: [f32; 3],
     /// What the near field's hits bring (hits / rays times its group's radiance per hit).
     pub near: [f32; 3],
@@ -155,8 +161,9 @@ pub struct SurfelStep {
 /// A probe of an [`Explanation`].
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct ProbeStep {
-    /// Grid index and where its rays started.
+    /// Grid index.
     pub index: usize,
+    /// Where its rays started.
     pub position: [f32; 3],
     /// Whether the surfel sees it (`None`: no surfel, the volume lookup).
     pub seen: Option<bool>,
@@ -215,13 +222,13 @@ impl<'a> SurfaceSampler<'a> {
 
     /// The sample at `position` for a surface with unit normal `normal`.
     pub fn sample(&self, position: [f32; 3], normal: [f32; 3]) -> Sample {
-        self.lookup(position, normal).0
+        self.lookup::<false>(position, normal).0
     }
 
     /// [`Self::sample`] and how it was made: both come from one [`Self::lookup`], so they
     /// cannot differ.
     pub fn explain(&self, position: [f32; 3], normal: [f32; 3]) -> Explanation {
-        let (sample, surfel, probes_irradiance) = self.lookup(position, normal);
+        let (sample, surfel, probes_irradiance) = self.lookup::<true>(position, normal);
         let probes = match surfel {
             Some(step) => {
                 let st = &self.asset.surface;
@@ -240,9 +247,11 @@ impl<'a> SurfaceSampler<'a> {
         }
     }
 
-    /// The sample, the surfel step (if a surfel stood for the point) and the probes' weighted
-    /// irradiance before the near field and the sky term.
-    fn lookup(
+    /// The sample, the surfel step (with `EXPLAIN`, if a surfel stood for the point) and the
+    /// probes' weighted irradiance before the near field and the sky term. Without `EXPLAIN`
+    /// nothing is computed that the sample does not need: the relight's bounces sample every
+    /// surfel.
+    fn lookup<const EXPLAIN: bool>(
         &self,
         position: [f32; 3],
         normal: [f32; 3],
@@ -275,21 +284,25 @@ impl<'a> SurfaceSampler<'a> {
         let near = self.near[group as usize].map(|l| share * l);
         scale_by_near_field(&mut out, &open, &all, near);
         let near_field_irradiance = out.irradiance;
-        let sky = sky_term(&self.asset.surface.sky, surfel);
         if self.sky != [0.0; 3] {
+            let sky = sky_term(&self.asset.surface.sky, surfel);
             for (e, l) in out.irradiance.iter_mut().zip(self.sky) {
                 *e = (*e + sky * l).max(0.0);
             }
         }
+        if !EXPLAIN {
+            return (out, None, probes_irradiance);
+        }
         let dot = |t: &[f32; SH_COUNT]| -> [f32; 3] {
             std::array::from_fn(|ch| (0..SH_COUNT).map(|k| out.sh[k][ch] * t[k]).sum())
         };
+        let stored = terms.normal();
         let step = SurfelStep {
             index: surfel,
             brick,
             position: self.asset.surfels[surfel].position,
-            normal: terms.normal(),
-            agreement: (0..3).map(|a| terms.normal()[a] * normal[a]).sum(),
+            normal: stored,
+            agreement: (0..3).map(|a| stored[a] * normal[a]).sum(),
             sees_a_probe: seen.get(),
             near_hits: terms.hits(),
             near_rays: st.header.rays,
@@ -297,7 +310,7 @@ impl<'a> SurfaceSampler<'a> {
             hemisphere: dot(&all),
             near,
             near_field_irradiance,
-            sky_term: sky,
+            sky_term: sky_term(&self.asset.surface.sky, surfel),
         };
         (out, Some(step), probes_irradiance)
     }

@@ -4,8 +4,7 @@
 //! phases (the shared wall and the floor that runs under it) and a sunlit atrium's galleries
 //! dark, no line where two of its surfaces meet is over-lit, a pocket stays dark, a surface
 //! under a sky gets its own share of it rather than its probes', the lookup's explanation adds
-//! up to its sample, a bake
-//! without terms (unmerged, or told to skip them) samples as the volume lookup, and damaged
+//! up to its sample, a bake without terms (unmerged, or told to skip them) samples as the volume lookup, and damaged
 //! terms are refused by name.
 
 use prt_bake::BakeSettings;
@@ -109,35 +108,72 @@ fn the_surface_lookup_keeps_the_dark_room_dark() {
 }
 
 /// `SurfaceSampler::explain` (what `prt sample --explain` writes) adds up to the sample: its
-/// sample is the lookup's, bit for bit; the probes' irradiance scaled by the near field it
-/// reports, plus the sky term, is the irradiance; a point with a surfel lists the probes it
-/// weighed and which it sees, a point without one (in the air, off every surface) none seen.
+/// sample is the lookup's; the probes' irradiance scaled by the near field it reports, plus the
+/// sky term, is the irradiance; a point with a surfel lists the probes it weighed and which it
+/// sees, a point without one (in the air, off every surface) none seen. On the two rooms under
+/// their rig (no sky) and on a street under a sky, where the sky terms add light.
 #[test]
 fn the_explanation_adds_up_to_the_sample() {
     let asset = bake_ok(&fixture("two_rooms.gltf"), &BakeSettings::default());
-    let relit = relit(&asset);
-    let s = SurfaceSampler::for_relit(&asset, &relit, &LookupSettings::default());
-    let sky = relit.sky.map(|l| std::f32::consts::PI * l);
     let mut points = wall_points(-1.0);
     points.extend(wall_points(1.0));
     points.extend(floor_points(-1.0));
     let air = ([0.3, 1.4, 0.2], [0.0, 1.0, 0.0]);
     points.push(air);
-    let mut with_surfel = 0;
-    for &(p, n) in &points {
+    let rooms = relit(&asset);
+    let s = SurfaceSampler::for_relit(&asset, &rooms, &LookupSettings::default());
+    assert!(s.explain(air.0, air.1).surfel.is_none());
+    let (with_surfel, _) = explanations_add_up(&asset, &rooms, &points);
+    assert!(
+        with_surfel * 2 > points.len(),
+        "{with_surfel} of {}",
+        points.len()
+    );
+
+    let street = bake_ok(&fixture("levels/street_2.gltf"), &BakeSettings::default());
+    let lighting = load_rig(&fixture("levels/street_2_rig.json")).unwrap();
+    let lit = CpuRelighter::new(&street)
+        .unwrap()
+        .relight(&lighting, 1)
+        .unwrap();
+    assert!(lit.sky.iter().all(|&l| l > 0.0), "{:?}", lit.sky);
+    let on_surfels: Vec<_> = (street.surfels.iter().step_by(97))
+        .map(|s| (s.position, s.normal))
+        .collect();
+    let (with_surfel, with_sky) = explanations_add_up(&street, &lit, &on_surfels);
+    assert!(
+        with_surfel * 2 > on_surfels.len(),
+        "{with_surfel} of {}",
+        on_surfels.len()
+    );
+    assert!(
+        with_sky * 10 > with_surfel,
+        "{with_sky} of {with_surfel} with a sky term"
+    );
+}
+
+/// Checks [`the_explanation_adds_up_to_the_sample`]'s sums at `points` of `asset` relit as
+/// `relit`; returns how many had a surfel, and how many of those a sky term that changed them.
+fn explanations_add_up(
+    asset: &Asset,
+    relit: &Relit,
+    points: &[([f32; 3], [f32; 3])],
+) -> (usize, usize) {
+    let s = SurfaceSampler::for_relit(asset, relit, &LookupSettings::default());
+    let sky = relit.sky.map(|l| std::f32::consts::PI * l);
+    let (mut with_surfel, mut with_sky) = (0, 0);
+    for &(p, n) in points {
         let e = s.explain(p, n);
         assert_eq!(e.sample, s.sample(p, n), "{p:?}");
-        assert!(
-            !e.probes.is_empty() && e.probes.len() <= 8,
-            "{p:?}: {:?}",
-            e.probes
-        );
+        assert!(e.probes.len() <= 8, "{p:?}: {:?}", e.probes);
         let Some(step) = e.surfel else {
             assert!(e.probes.iter().all(|q| q.seen.is_none()), "{p:?}");
             assert_eq!(e.probes_irradiance, e.sample.irradiance, "{p:?}");
             continue;
         };
         with_surfel += 1;
+        with_sky += usize::from(step.sky_term != 0.0 && sky != [0.0; 3]);
+        assert!(!e.probes.is_empty(), "{p:?}");
         assert!(e.probes.iter().all(|q| q.seen.is_some()), "{p:?}");
         assert_eq!(
             step.sees_a_probe,
@@ -153,16 +189,14 @@ fn the_explanation_adds_up_to_the_sample() {
             };
             let near_field = e.probes_irradiance[ch] * scale;
             assert_eq!(step.near_field_irradiance[ch], near_field, "{p:?} ch {ch}");
-            let want = (near_field + step.sky_term * l).max(0.0);
+            let want = match sky == [0.0; 3] {
+                true => near_field,
+                false => (near_field + step.sky_term * l).max(0.0),
+            };
             assert_eq!(e.sample.irradiance[ch], want, "{p:?} ch {ch}");
         }
     }
-    assert!(s.explain(air.0, air.1).surfel.is_none());
-    assert!(
-        with_surfel * 2 > points.len(),
-        "{with_surfel} of {}",
-        points.len()
-    );
+    (with_surfel, with_sky)
 }
 
 /// Points on the shared wall, side `side` (+1: the dark room), as (position, normal).
