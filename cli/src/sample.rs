@@ -73,30 +73,27 @@ pub fn run(args: SampleArgs) -> Result<()> {
         .with_context(|| format!("loading {}", args.asset.display()))?;
     let lighting = lighting_of(Some(&args.lights), &asset)?;
     let start = std::time::Instant::now();
-    let (samples, relit, name) = match args.backend {
+    // With --explain the points are explained after the timing, by the same sampler: the
+    // seconds are the sampling's.
+    let (samples, seconds, explained, name) = match args.backend {
         Backend::Cpu => {
             let relit = prt_runtime::CpuRelighter::new(&asset)?.relight(&lighting, 1)?;
             let sampler = SurfaceSampler::for_relit(&asset, &relit, &settings.lookup);
-            let samples = points.iter().map(|(p, n)| sampler.sample(*p, *n)).collect();
-            (samples, Some(relit), "cpu")
+            let samples: Vec<Sample> = points.iter().map(|(p, n)| sampler.sample(*p, *n)).collect();
+            let seconds = start.elapsed().as_secs_f64();
+            let explained: Vec<Explanation> = match args.explain {
+                true => points
+                    .iter()
+                    .map(|(p, n)| sampler.explain(*p, *n))
+                    .collect(),
+                false => Vec::new(),
+            };
+            (samples, seconds, explained, "cpu")
         }
-        Backend::Gpu => (
-            sample_gpu(&asset, &lighting, settings, &points)?,
-            None,
-            "gpu",
-        ),
-    };
-    let seconds = start.elapsed().as_secs_f64();
-    // Explained after the timing, from the same relight: `sample` is what was timed.
-    let explained: Vec<Explanation> = match (args.explain, &relit) {
-        (true, Some(relit)) => {
-            let sampler = SurfaceSampler::for_relit(&asset, relit, &settings.lookup);
-            points
-                .iter()
-                .map(|(p, n)| sampler.explain(*p, *n))
-                .collect()
+        Backend::Gpu => {
+            let samples = sample_gpu(&asset, &lighting, settings, &points)?;
+            (samples, start.elapsed().as_secs_f64(), Vec::new(), "gpu")
         }
-        _ => Vec::new(),
     };
     let mut doc = samples_json(&points, &samples, name, normal_bias, &asset);
     if let Some(list) = doc["samples"].as_array_mut() {

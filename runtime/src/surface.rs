@@ -96,14 +96,19 @@ pub fn scale_by_near_field(
     all: &[f32; SH_COUNT],
     near: [f32; 3],
 ) {
+    let (open, all) = (light(&sample.sh, open), light(&sample.sh, all));
     for (ch, e) in sample.irradiance.iter_mut().enumerate() {
-        let dot = |t: &[f32; SH_COUNT]| (0..SH_COUNT).map(|k| sample.sh[k][ch] * t[k]).sum::<f32>();
-        let total = dot(all);
+        let total = all[ch];
         if total > 0.0 {
-            let escaping = dot(open).max(0.0).min(total);
+            let escaping = open[ch].max(0.0).min(total);
             *e *= ((escaping + near[ch]) / total).max(0.0);
         }
     }
+}
+
+/// `t . L` per colour channel: the light SH radiance `sh` brings through SH transfer `t`.
+fn light(sh: &ShRgb, t: &[f32; SH_COUNT]) -> [f32; 3] {
+    std::array::from_fn(|ch| (0..SH_COUNT).map(|k| sh[k][ch] * t[k]).sum::<f32>())
 }
 
 /// How the surface lookup read one point ([`SurfaceSampler::explain`], `prt sample --explain`):
@@ -222,51 +227,51 @@ impl<'a> SurfaceSampler<'a> {
 
     /// The sample at `position` for a surface with unit normal `normal`.
     pub fn sample(&self, position: [f32; 3], normal: [f32; 3]) -> Sample {
-        self.lookup::<false>(position, normal).0
+        self.lookup::<false>(position, normal).sample
     }
 
     /// [`Self::sample`] and how it was made: both come from one [`Self::lookup`], so they
     /// cannot differ.
     pub fn explain(&self, position: [f32; 3], normal: [f32; 3]) -> Explanation {
-        let (sample, surfel, probes_irradiance) = self.lookup::<true>(position, normal);
-        let probes = match surfel {
-            Some(step) => {
-                let st = &self.asset.surface;
-                let grid = &self.asset.header.grid;
-                let centre = st.brick_centre(grid, &self.asset.bricks[step.brick]);
-                let terms = &st.surfels[step.index];
-                self.corners(position, normal, |i| Some(terms.sees(centre, grid, i)))
-            }
-            None => self.corners(position, normal, |_| None),
-        };
-        Explanation {
-            surfel,
-            probes,
-            probes_irradiance,
-            sample,
-        }
+        self.lookup::<true>(position, normal)
     }
 
-    /// The sample, the surfel step (with `EXPLAIN`, if a surfel stood for the point) and the
-    /// probes' weighted irradiance before the near field and the sky term. Without `EXPLAIN`
-    /// nothing is computed that the sample does not need: the relight's bounces sample every
-    /// surfel.
-    fn lookup<const EXPLAIN: bool>(
-        &self,
-        position: [f32; 3],
-        normal: [f32; 3],
-    ) -> (Sample, Option<SurfelStep>, [f32; 3]) {
+    /// The sample and, with `EXPLAIN`, how it was made (the probes as the lookup weighs them,
+    /// in the same pass, and the surfel step). Without `EXPLAIN` only the sample and
+    /// `probes_irradiance` are filled and nothing else is computed: the relight's bounces
+    /// sample every surfel.
+    fn lookup<const EXPLAIN: bool>(&self, position: [f32; 3], normal: [f32; 3]) -> Explanation {
+        let probes = std::cell::RefCell::new(Vec::new());
+        let record = |i: usize, at: glam::Vec3, seen: Option<bool>| {
+            if EXPLAIN {
+                probes.borrow_mut().push(ProbeStep {
+                    index: i,
+                    position: at.to_array(),
+                    seen,
+                    irradiance: prt_format::sh::irradiance(&self.sh[i], normal),
+                });
+            }
+        };
         let Some((brick, surfel)) = self.surfel_of(position, normal) else {
-            let sample = self.fallback.sample(position, normal);
-            return (sample, None, sample.irradiance);
+            let sample = self.fallback.sample_weighted(position, normal, |i, at| {
+                record(i, at, None);
+                1.0
+            });
+            return Explanation {
+                surfel: None,
+                probes: probes.into_inner(),
+                probes_irradiance: sample.irradiance,
+                sample,
+            };
         };
         let st = &self.asset.surface;
         let terms = &st.surfels[surfel];
         let grid = &self.asset.header.grid;
         let centre = st.brick_centre(grid, &self.asset.bricks[brick]);
         let seen = std::cell::Cell::new(false);
-        let mut out = self.trilinear.sample_weighted(position, normal, |i, _| {
+        let mut out = self.trilinear.sample_weighted(position, normal, |i, at| {
             let visible = terms.sees(centre, grid, i);
+            record(i, at, Some(visible));
             seen.set(seen.get() || visible);
             if visible {
                 1.0
@@ -290,50 +295,30 @@ impl<'a> SurfaceSampler<'a> {
                 *e = (*e + sky * l).max(0.0);
             }
         }
-        if !EXPLAIN {
-            return (out, None, probes_irradiance);
-        }
-        let dot = |t: &[f32; SH_COUNT]| -> [f32; 3] {
-            std::array::from_fn(|ch| (0..SH_COUNT).map(|k| out.sh[k][ch] * t[k]).sum())
-        };
-        let stored = terms.normal();
-        let step = SurfelStep {
-            index: surfel,
-            brick,
-            position: self.asset.surfels[surfel].position,
-            normal: stored,
-            agreement: (0..3).map(|a| stored[a] * normal[a]).sum(),
-            sees_a_probe: seen.get(),
-            near_hits: terms.hits(),
-            near_rays: st.header.rays,
-            escaping: dot(&open),
-            hemisphere: dot(&all),
-            near,
-            near_field_irradiance,
-            sky_term: sky_term(&self.asset.surface.sky, surfel),
-        };
-        (out, Some(step), probes_irradiance)
-    }
-
-    /// The probes the trilinear lookup weights at the point (a positive trilinear and probe
-    /// weight), each with `seen(index)` and its own irradiance on `normal`.
-    fn corners(
-        &self,
-        position: [f32; 3],
-        normal: [f32; 3],
-        seen: impl Fn(usize) -> Option<bool>,
-    ) -> Vec<ProbeStep> {
-        let list = std::cell::RefCell::new(Vec::new());
-        self.trilinear.sample_weighted(position, normal, |i, at| {
-            list.borrow_mut().push(ProbeStep {
-                index: i,
-                position: at.to_array(),
-                seen: seen(i),
-                irradiance: prt_format::sh::irradiance(&self.sh[i], normal),
-            });
-            1.0
+        let step = EXPLAIN.then(|| {
+            let stored = terms.normal();
+            SurfelStep {
+                index: surfel,
+                brick,
+                position: self.asset.surfels[surfel].position,
+                normal: stored,
+                agreement: (0..3).map(|a| stored[a] * normal[a]).sum(),
+                sees_a_probe: seen.get(),
+                near_hits: terms.hits(),
+                near_rays: st.header.rays,
+                escaping: light(&out.sh, &open),
+                hemisphere: light(&out.sh, &all),
+                near,
+                near_field_irradiance,
+                sky_term: sky_term(&self.asset.surface.sky, surfel),
+            }
         });
-        list.into_inner()
+        Explanation {
+            surfel: step,
+            probes: probes.into_inner(),
+            probes_irradiance,
+            sample: out,
+        }
     }
 
     /// The surfel (asset index) whose terms stand for the point, if any: where it is `None`,

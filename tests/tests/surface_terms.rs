@@ -14,11 +14,16 @@ use prt_runtime::surface::SurfaceSampler;
 use prt_runtime::{load_rig, CpuRelighter, LookupSettings, Relit, VolumeSampler};
 use prt_tests::{bake_ok, fixture};
 
+/// `asset` relit on the CPU (one bounce) under the two rooms' rig.
 fn relit(asset: &Asset) -> Relit {
-    let lighting = load_rig(&fixture("rigs/two_rooms.json")).unwrap();
+    relit_by(asset, &load_rig(&fixture("rigs/two_rooms.json")).unwrap())
+}
+
+/// `asset` relit on the CPU (one bounce) with `lighting`.
+fn relit_by(asset: &Asset, lighting: &prt_runtime::Lighting) -> Relit {
     CpuRelighter::new(asset)
         .unwrap()
-        .relight(&lighting, 1)
+        .relight(lighting, 1)
         .unwrap()
 }
 
@@ -132,10 +137,7 @@ fn the_explanation_adds_up_to_the_sample() {
 
     let street = bake_ok(&fixture("levels/street_2.gltf"), &BakeSettings::default());
     let lighting = load_rig(&fixture("levels/street_2_rig.json")).unwrap();
-    let lit = CpuRelighter::new(&street)
-        .unwrap()
-        .relight(&lighting, 1)
-        .unwrap();
+    let lit = relit_by(&street, &lighting);
     assert!(lit.sky.iter().all(|&l| l > 0.0), "{:?}", lit.sky);
     let on_surfels: Vec<_> = (street.surfels.iter().step_by(97))
         .map(|s| (s.position, s.normal))
@@ -345,10 +347,7 @@ fn a_sunlit_atrium_keeps_its_galleries_dark() {
     let dir = fixture("levels");
     let asset = bake_ok(&dir.join("atrium_1.gltf"), &BakeSettings::default());
     let lighting = load_rig(&dir.join("atrium_1_rig.json")).unwrap();
-    let relit = CpuRelighter::new(&asset)
-        .unwrap()
-        .relight(&lighting, 1)
-        .unwrap();
+    let relit = relit_by(&asset, &lighting);
     let points: Vec<_> = reference(&dir.join("refs/atrium_1_surface.json"))
         .into_iter()
         .filter(|p| !p.pocket)
@@ -408,10 +407,7 @@ fn the_sky_term_gives_a_surface_its_own_sky() {
         rig: prt_format::LightRig::default(),
         sky: prt_runtime::SkyModel::Constant([1.0; 3]),
     };
-    let relit = CpuRelighter::new(&asset)
-        .unwrap()
-        .relight(&lighting, 1)
-        .unwrap();
+    let relit = relit_by(&asset, &lighting);
     assert_eq!(relit.sky, [1.0; 3]);
     let lookup = LookupSettings::default();
     let with = SurfaceSampler::for_relit(&asset, &relit, &lookup);
@@ -578,10 +574,7 @@ fn a_pocket_stays_dark() {
     let median = median_hemi(&points);
     let asset = bake_ok(&fixture("pocket.gltf"), &BakeSettings::default());
     let lighting = load_rig(&fixture("rigs/pocket.json")).unwrap();
-    let relit = CpuRelighter::new(&asset)
-        .unwrap()
-        .relight(&lighting, 1)
-        .unwrap();
+    let relit = relit_by(&asset, &lighting);
     let (pockets, open): (Vec<&RefPoint>, Vec<&RefPoint>) = points.iter().partition(|p| p.pocket);
     assert!(pockets.len() >= 40, "{} pocket points", pockets.len());
     let open_truth = open.iter().map(|p| p.hemi).sum::<f32>() / open.len() as f32;
