@@ -53,7 +53,9 @@ struct PrtVolumeInfo {
     near_rays: f32,
     // Where in prt_surface the sky terms start (two halves a word, one per surfel).
     sky_at: u32,
-    _pad0: u32,
+    // Where in prt_surface the sides start: their count, then four words each (surfel,
+    // partner, the wall's octahedral snorm16 normal, its offset from the key's corner).
+    sides_at: u32,
     // Pi times the sky's mean radiance: the irradiance a surfel's sky term of 1 adds.
     sky_irradiance: vec3<f32>,
     _pad1: f32,
@@ -305,6 +307,36 @@ fn prt_slot_hash(key: vec3<i32>, axis: u32) -> u32 {
     return h ^ (h >> 15u);
 }
 
+// The surfel whose terms stand for a point `from_corner` past its brick key's corner where the
+// cell table named `named`: its partner when a wall crosses its cell and the point lies beyond
+// it (prt_format::surface::SurfaceTerms::side_of; the sides sorted by surfel, searched by
+// halves).
+fn prt_side_of(named: u32, from_corner: vec3<f32>) -> u32 {
+    if (prt_surface[prt_volume.terms_at + PRT_TERMS_WORDS * named + 3u] & PRT_SIDE_BIT) == 0u {
+        return named;
+    }
+    var lo = 0u;
+    var hi = prt_surface[prt_volume.sides_at];
+    while lo < hi {
+        let mid = (lo + hi) / 2u;
+        let at = prt_volume.sides_at + 1u + 4u * mid;
+        let s = prt_surface[at];
+        if s == named {
+            let n = prt_decode_normal(prt_surface[at + 2u]);
+            if dot(n, from_corner) > bitcast<f32>(prt_surface[at + 3u]) {
+                return prt_surface[at + 1u];
+            }
+            return named;
+        }
+        if s < named {
+            lo = mid + 1u;
+        } else {
+            hi = mid;
+        }
+    }
+    return named;
+}
+
 // The point's surfel (x) and its brick (y), or PRT_NONE in x.
 fn prt_find_surfel(p: vec3<f32>, n: vec3<f32>) -> vec2<u32> {
     let key = vec3<i32>(floor((p - prt_volume.surface_anchor) / prt_volume.brick_size));
@@ -333,7 +365,8 @@ fn prt_find_surfel(p: vec3<f32>, n: vec3<f32>) -> vec2<u32> {
     if within == PRT_NO_SURFEL {
         return vec2<u32>(PRT_NONE, 0u);
     }
-    let surfel = prt_surface[prt_volume.bricks_at + PRT_BRICK_WORDS * brick] + within;
+    let named = prt_surface[prt_volume.bricks_at + PRT_BRICK_WORDS * brick] + within;
+    let surfel = prt_side_of(named, p - origin);
     if (prt_surface[prt_volume.terms_at + PRT_TERMS_WORDS * surfel] >> PRT_TERMS_CENTRE_SHIFT) == 0u {
         return vec2<u32>(PRT_NONE, 0u);
     }
@@ -346,8 +379,9 @@ fn prt_probe_ijk(index: u32) -> vec3<i32> {
     return vec3<i32>(vec3<u32>(index % c.x, (index / c.x) % c.y, index / (c.x * c.y)));
 }
 
-// prt_oct_unfold (prt_format::surfel_terms::oct_unfold) follows the snippet, from
-// oct_normal.wgsl, which the runtime's surfel stages share.
+// prt_oct_unfold (prt_format::surfel_terms::oct_unfold) and prt_decode_normal (the sides' wall
+// normals, prt_format::surface::decode_normal) follow the snippet, from oct_normal.wgsl, which
+// the runtime's surfel stages share.
 
 // The signed field of `bits` bits at `at` of `word` in units of its levels
 // (prt_format::surfel_terms::unit_field).

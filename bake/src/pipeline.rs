@@ -19,7 +19,7 @@ use assemble::Assembled;
 use bricks::Bricks;
 
 use crate::accel::bvh;
-use crate::merge::{coarse, fold};
+use crate::merge::{coarse, fold, sides};
 use crate::surface_terms;
 use crate::tables::encode;
 use crate::{
@@ -99,7 +99,10 @@ pub(crate) fn bake_in_pool(
 
     let probes = (&grid, &probe_positions[..]);
     let geometry = (&built.bvh, &loaded.scene.triangles[..]);
-    let cells = settings.surface_terms.then_some(cell_size);
+    let cells = (
+        settings.surface_terms.then_some(cell_size),
+        settings.merge_normal_cos,
+    );
     let surface = surface_stage(probes, geometry, cells, &mut bricked, &mut report);
     lap(&mut report, "surface", Some("assemble"));
 
@@ -178,12 +181,13 @@ fn refine_stage(
 
 /// The surface stage: the surface terms of the `bricked` surfels (written into them) against
 /// the probes of `grid` at `positions`, traced through `bvh` over `triangles`, with surfel
-/// cells of `cell_size` (`None`: no terms, [`surface_terms::surface_terms`]); warns when the
+/// cells of `cell_size` (`None`: no terms, [`surface_terms::surface_terms`]) merged to the
+/// normal agreement `merge_normal_cos`; warns when the
 /// lookup's tables cannot hold them or when most surfels see none of their probes.
 fn surface_stage(
     (grid, positions): (&prt_format::Grid, &[Vec3]),
     (bvh, triangles): (&bvh::SceneBvh, &[[Vec3; 3]]),
-    cell_size: Option<f32>,
+    (cell_size, merge_normal_cos): (Option<f32>, f32),
     bricked: &mut fold::Bricked,
     report: &mut BakeReport,
 ) -> SurfaceTerms {
@@ -194,6 +198,7 @@ fn surface_stage(
         bvh,
         triangles,
         cell_size: cell_size.unwrap_or(0.0),
+        merge_normal_cos,
     };
     let surface = surface_terms::surface_terms(&inputs, &mut bricked.surfels);
     if cell_size.is_some_and(|c| c > 0.0) && surface.is_empty() && !bricked.bricks.is_empty() {
@@ -330,14 +335,26 @@ struct ProbeTrace<'a> {
     /// The grid's bounds, whose centre the outer probes move towards off a surface.
     bounds: (Vec3, Vec3),
     spacing: f32,
+    /// The surfel cells' lattice (corner, edge), whose walls [`sides::mark_across`] looks
+    /// for; edge 0: none (unmerged, or no surface terms).
+    cells: (Vec3, f32),
 }
 
 impl ProbeTrace<'_> {
     /// Probe `index`: moved off a surface its grid point lies on ([`offset::surface_offset`],
     /// towards the grid's inside), traced, and moved out of geometry it turns out to be inside
-    /// ([`offset::virtual_offset`]), as the settings ask; its position, rays, and whether it
-    /// left its grid point.
+    /// ([`offset::virtual_offset`]), as the settings ask; its position, rays (hits marked
+    /// across a wall in their cell, [`sides`]), and whether it left its grid point.
     fn trace(&self, index: usize) -> (Vec3, trace::ProbeRays, bool) {
+        let (p, mut r, moved) = self.trace_offset(index);
+        let (anchor, cell) = self.cells;
+        sides::mark_across(&mut r.hits, self.tracer.bvh, anchor, cell);
+        (p, r, moved)
+    }
+
+    /// [`Self::trace`] before its hits are marked: the probe moved off surfaces and out of
+    /// geometry, and traced.
+    fn trace_offset(&self, index: usize) -> (Vec3, trace::ProbeRays, bool) {
         let settings = self.settings;
         let grid_p = self.positions[index];
         if !self.placed[index] {
@@ -393,13 +410,19 @@ fn trace_stage(
         counts: grid.counts,
         bounds: loaded.bounds,
         spacing: grid.spacing,
+        // Half a cell off the origin: see `fold::BrickFolder::new`. Walls in cells matter to
+        // the surface lookup only: without its terms no hit is tested.
+        cells: (
+            Vec3::splat(-0.5 * cell_size),
+            if settings.surface_terms {
+                cell_size
+            } else {
+                0.0
+            },
+        ),
     };
-    // Half a cell off the origin: see `fold::BrickFolder::new`.
-    let folder = fold::BrickFolder::new(
-        cell_size,
-        settings.merge_normal_cos,
-        Vec3::splat(-0.5 * cell_size),
-    );
+    let anchor = probe_trace.cells.0;
+    let folder = fold::BrickFolder::new(cell_size, settings.merge_normal_cos, anchor);
     let far = coarse::FarField::of(settings.far_ratio, folder.lattice());
     stream::trace_and_fold(
         probe_trace.positions.len(),

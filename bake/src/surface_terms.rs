@@ -8,6 +8,9 @@
 //!    dominant axis) in an open-addressed hash table (of a brick split at a wall, the first
 //!    part), and per brick the nearest surfel of each of its 4x4x4 cells, its own or a later
 //!    part's.
+//!    Where a wall crosses a cell (its hits were kept apart by side, `crate::merge::sides`),
+//!    the cell's named surfel lists the wall's plane and the surfel beyond it
+//!    ([`sides::sides_of`]).
 //! 2. **Probe visibility**: a ray from the surfel to each of the 27 probes around its nearest
 //!    one (to where the probe's rays started), through the scene's BVH. Every ray of this
 //!    stage and of `crate::sky_terms` starts at [`surfel_origin`]: off the surfel along its
@@ -32,9 +35,9 @@ use std::collections::BTreeMap;
 use glam::Vec3;
 use prt_format::sh::SH_COUNT;
 use prt_format::surface::{
-    centre_probe, mask_bit, slot_hash, SurfaceSlot, SurfaceTerms, SurfelTerms, SurfelTermsHeader,
-    CELL_WORDS, MAX_GROUPS, MAX_TABLE_BRICKS, NEAR_WEIGHT_BITS, NO_SURFEL, PROBE_BITS,
-    SLOT_AXIS_SHIFT,
+    centre_probe, mask_bit, slot_hash, SurfaceSide, SurfaceSlot, SurfaceTerms, SurfelTerms,
+    SurfelTermsHeader, CELL_WORDS, MAX_GROUPS, MAX_TABLE_BRICKS, NEAR_WEIGHT_BITS, NO_SURFEL,
+    PROBE_BITS, SIDE_BIT, SLOT_AXIS_SHIFT,
 };
 use prt_format::surfel_terms::{centre_code, CENTRE_SHIFT};
 use prt_format::{Brick, Grid, Surfel, BRICK_AXIS_MASK, BRICK_BACKFACE};
@@ -43,6 +46,7 @@ use rayon::prelude::*;
 use crate::accel::bvh::SceneBvh;
 use crate::accel::bvh8::PACKET;
 use crate::merge::key::dominant_axis;
+use crate::merge::sides;
 
 /// Near-field rays per surfel.
 pub const RAYS: u32 = 64;
@@ -73,6 +77,9 @@ pub struct Inputs<'a> {
     pub triangles: &'a [[Vec3; 3]],
     /// Edge of a surfel cell (the bake's merge distance); 0: merging off, no terms.
     pub cell_size: f32,
+    /// The fold's normal agreement (`BakeSettings::merge_normal_cos`): which surfels of a cell
+    /// a wall parted ([`sides::Pairing`]).
+    pub merge_normal_cos: f32,
 }
 
 /// The surface terms of `input`'s bricks and `surfels` (empty when merging is off or the
@@ -102,13 +109,36 @@ pub fn surface_terms(input: &Inputs, surfels: &mut [Surfel]) -> SurfaceTerms {
     }
     let runs = prt_format::surface_key_runs(&terms, input.bricks);
     let nameable = from_first_parts(&terms, input.bricks, &runs, &mut grouped);
-    terms.cells = (input.bricks.par_iter().zip(&runs))
-        .flat_map_iter(|(b, &(_, end))| {
-            let last = &input.bricks[end as usize - 1];
-            let end = (last.first_surfel + last.surfel_count) as usize;
-            cells(&terms, b, &surfels[..end], &nameable)
-        })
+    // A side names a partner whose terms the lookup can read and whose group it can count.
+    let eligible: Vec<bool> = (nameable.iter().zip(&grouped.traced))
+        .map(|(&n, &(mask, _))| n && mask >> CENTRE_SHIFT != 0)
         .collect();
+    let (cells, sides): (Vec<[u32; CELL_WORDS]>, Vec<Vec<SurfaceSide>>) =
+        (input.bricks.par_iter().zip(&runs).enumerate())
+            .map(|(i, (b, &(first, end)))| {
+                let last = &input.bricks[end as usize - 1];
+                let end = (last.first_surfel + last.surfel_count) as usize;
+                let table = cells(&terms, b, &surfels[..end], &nameable);
+                // Only the first brick of a key's run is looked up.
+                let pairing = sides::Pairing {
+                    bvh: input.bvh,
+                    triangles: input.triangles,
+                    surfels: &surfels[..end],
+                    eligible: &eligible,
+                    merge_normal_cos: input.merge_normal_cos,
+                };
+                let sides = match first as usize == i {
+                    true => sides::sides_of(&terms, &pairing, b, &table),
+                    false => Vec::new(),
+                };
+                (table, sides)
+            })
+            .unzip();
+    terms.cells = cells.into_iter().flatten().collect();
+    terms.sides = sides.into_iter().flatten().collect();
+    // A surfel lies in one cell: one side at most, so the order is strict.
+    terms.sides.sort_by_key(|s| s.surfel);
+    debug_assert!(terms.sides.windows(2).all(|w| w[0].surfel < w[1].surfel));
     let surfels = &*surfels;
     let traced: Vec<(SurfelTerms, Vec<NearHit>)> = (0..surfels.len())
         .into_par_iter()
@@ -123,6 +153,9 @@ pub fn surface_terms(input: &Inputs, surfels: &mut [Surfel]) -> SurfaceTerms {
         })
         .collect();
     terms.surfels = traced.into_iter().map(|(t, _)| t).collect();
+    for side in &terms.sides {
+        terms.surfels[side.surfel as usize].open_l2 |= SIDE_BIT;
+    }
     for field in fields {
         let first = terms.near.len() as u32;
         terms.near_ranges.push([first, field.len() as u32]);
@@ -259,9 +292,10 @@ fn field<'a>(
         let b = &bricks[j as usize];
         let key = terms.key_of(b.centroid);
         if let Some(within) = terms.surfel_in(j, key, h.to_array()) {
-            *counts
-                .entry(group[(b.first_surfel + within) as usize].1)
-                .or_default() += 1;
+            // The surfel of the hit's side of a wall in its cell, as the lookup finds it.
+            let named = b.first_surfel + within;
+            let s = terms.side_beyond(named, key, h.to_array()).unwrap_or(named);
+            *counts.entry(group[s as usize].1).or_default() += 1;
         }
     }
     let unit = ((1u32 << NEAR_WEIGHT_BITS) - 1) as f64;

@@ -24,6 +24,9 @@ pub struct Hit {
     /// The ray hit the back side of the triangle's winding, whatever the material's sidedness
     /// (inside a closed, outward-wound solid every hit is one, double-sided or not).
     pub facing_away: bool,
+    /// A wall stands in the hit's surfel cell between it and the cell's centre
+    /// ([`crate::merge::sides`]): the fold keeps such hits apart from the others of the cell.
+    pub across: bool,
 }
 
 #[cfg(test)]
@@ -39,6 +42,7 @@ impl Hit {
             emission: [0.0; 3],
             backface: false,
             facing_away: false,
+            across: false,
         }
     }
 }
@@ -186,6 +190,7 @@ impl Tracer<'_> {
                 emission: [0.0; 3],
                 backface: true,
                 facing_away: true,
+                across: false,
             };
         }
         let (albedo, emission) = self.material_at(material, tri, || {
@@ -199,6 +204,7 @@ impl Tracer<'_> {
             emission,
             backface: false,
             facing_away: !front,
+            across: false,
         }
     }
 

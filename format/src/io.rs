@@ -25,7 +25,7 @@ use crate::sections::{payload_size, write_payload, EncodeTo, Sections};
 /// The first eight bytes of every prt asset.
 pub const MAGIC: [u8; 8] = *b"PRTGI\0\r\n";
 /// Version of the layout this build writes and reads. Bump on any change of the payload types.
-pub const FORMAT_VERSION: u32 = 17;
+pub const FORMAT_VERSION: u32 = 18;
 
 const PREFIX: usize = 20;
 const SUFFIX: usize = 8;

@@ -89,7 +89,8 @@ pub(crate) fn write_payload<W: Write>(asset: &Asset, out: &mut W) -> Result<(), 
     pod(out, &t.group_surfels)?;
     pod(out, &t.near_ranges)?;
     pod(out, &t.near)?;
-    pod(out, &t.sky)
+    pod(out, &t.sky)?;
+    pod(out, &t.sides)
 }
 
 /// Bytes of the payload of `asset` (a pass that copies nothing).
@@ -204,6 +205,7 @@ impl Sections<'_> {
                 near_ranges: self.pod("surface")?,
                 near: self.pod("surface")?,
                 sky: self.pod("surface")?,
+                sides: self.pod("surface")?,
             },
         })
     }
@@ -380,6 +382,12 @@ mod tests {
                 near_ranges: vec![[0, 1]],
                 near: vec![0x1ff],
                 sky: vec![0x3c00],
+                sides: vec![crate::surface::SurfaceSide {
+                    surfel: 0,
+                    partner: 0,
+                    normal: 0x7fff,
+                    offset: 0.25,
+                }],
             },
         }
     }

@@ -39,6 +39,9 @@ pub struct Summary {
     /// Of those, the surfels that see none of the 27 probes around them: their points are
     /// sampled with the probe volume's weights (`SurfaceTerms::traced_and_blind`).
     pub surfels_seeing_no_probe: usize,
+    /// Sides: surfels a cell table names whose cell a wall crosses, each with the surfel of
+    /// the cell's other side (`crate::surface::SurfaceSide`; format 18).
+    pub surfels_with_sides: usize,
     pub brick_count: usize,
     /// Coarse bricks over the bricks, for far hits (`crate::coarse`).
     pub coarse_brick_count: usize,
@@ -146,6 +149,7 @@ impl Summary {
             surfels_unmerged: asset.header.stats.surfels_unmerged,
             surfels_with_terms: traced,
             surfels_seeing_no_probe: blind,
+            surfels_with_sides: asset.surface.sides.len(),
             brick_count: asset.bricks.len(),
             coarse_brick_count: asset.coarse.bricks.len(),
             factor_count,
@@ -197,6 +201,7 @@ fn surface_bytes(t: &crate::surface::SurfaceTerms) -> u64 {
         + bytes(&t.near_ranges)
         + bytes(&t.near)
         + bytes(&t.sky)
+        + bytes(&t.sides)
 }
 
 /// Factors by the level of what they read, and those of one ray ([`Summary::factors_by_level`]).
@@ -266,8 +271,8 @@ impl std::fmt::Display for Summary {
         )?;
         writeln!(
             f,
-            "surface terms    {} surfels, {} of them see none of their probes (sampled from the volume)",
-            self.surfels_with_terms, self.surfels_seeing_no_probe
+            "surface terms    {} surfels, {} of them see none of their probes (sampled from the volume); {} sides (a surfel whose cell a wall crosses, and the surfel beyond it)",
+            self.surfels_with_terms, self.surfels_seeing_no_probe, self.surfels_with_sides
         )?;
         writeln!(
             f,

@@ -24,6 +24,11 @@
 //!   the normal's dominant axis) to brick ([`SurfaceSlot`], [`slot_hash`]), then a table of 64
 //!   bytes per brick giving each of its 4x4x4 cells its nearest surfel ([`SurfaceTerms::cells`]).
 //!
+//! - **which side of a wall in its cell a point is on** ([`SurfaceTerms::sides`], format 18):
+//!   where a zero-thickness wall crosses a surfel cell, the bake keeps the hits of each side
+//!   apart (`prt_bake::merge::sides`), and the cell's named surfel lists the plane of the wall
+//!   and the surfel beyond it ([`SurfaceTerms::side_of`]).
+//!
 //! - **its sky** ([`SurfaceTerms::sky`], format 14): probes a spacing off the surface see more
 //!   or less of the sky than the surface does (a wall under an overhang, a cave's skylight, a
 //!   gallery's ceiling beside an open court), and the near field, one spacing long, does not
@@ -40,6 +45,27 @@
 
 use bytemuck::{Pod, Zeroable};
 use serde::{Deserialize, Serialize};
+
+/// [`SurfelTerms::open_l2`]'s bit (above its codes) of a surfel listed in
+/// [`SurfaceTerms::sides`]: a wall crosses its cell (format 18).
+pub const SIDE_BIT: u32 = 1 << 31;
+
+/// A surfel whose cell a wall crosses, and the surfel of the same cell on the wall's other
+/// side (format 18): a point `p` of the brick key `key` with
+/// `normal . (p - key corner) > offset` lies beyond the wall and reads `partner`'s terms
+/// ([`SurfaceTerms::side_of`]). The plane is kept from the key's corner (the brick lattice's,
+/// [`SurfaceTerms::key_corner`]), not the origin, so that the normal's rounding moves it by
+/// at most a brick's width times its step, wherever the level lies.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable, Serialize, Deserialize)]
+#[repr(C)]
+pub struct SurfaceSide {
+    pub surfel: u32,
+    pub partner: u32,
+    /// The wall's normal in the surfel's plane, towards `partner` ([`encode_normal`]).
+    pub normal: u32,
+    pub offset: f32,
+}
+const _: () = assert!(std::mem::size_of::<SurfaceSide>() == 16);
 
 /// Weight a probe keeps when the surfel cannot see it: small enough that the visible probes
 /// decide. (A surfel that sees none of the point's probes leaves their weights to the default
@@ -138,6 +164,8 @@ pub struct SurfaceTerms {
     /// Per surfel, its sky term ([`sky_term`]) as an IEEE half, two a word (surfel `2w` in
     /// the low half of word `w`); format 14.
     pub sky: Vec<u32>,
+    /// The surfels whose cell a wall crosses ([`SIDE_BIT`]), sorted by surfel; format 18.
+    pub sides: Vec<SurfaceSide>,
 }
 
 /// Surfel `surfel`'s sky term: the share of its cosine-weighted hemisphere that sees the sky
@@ -213,14 +241,41 @@ impl SurfaceTerms {
         None
     }
 
+    /// The corner of brick key `key`'s lattice cell.
+    pub fn key_corner(&self, key: [i32; 3]) -> [f32; 3] {
+        let h = &self.header;
+        std::array::from_fn(|a| h.anchor[a] + key[a] as f32 * h.brick_size)
+    }
+
+    /// The surfel (asset index) whose terms stand for point `p` of brick key `key` where the
+    /// cell table named `surfel`: its partner when a wall crosses its cell and `p` lies beyond
+    /// it ([`SurfaceSide`]), else `surfel`.
+    pub fn side_of(&self, surfel: u32, key: [i32; 3], p: [f32; 3]) -> u32 {
+        if self.surfels[surfel as usize].open_l2 & SIDE_BIT == 0 {
+            return surfel;
+        }
+        self.side_beyond(surfel, key, p).unwrap_or(surfel)
+    }
+
+    /// [`Self::side_of`] by the sides alone (the bake's near fields read it before the terms'
+    /// [`SIDE_BIT`]s are set): the partner of `surfel` when `p` lies beyond its wall.
+    pub fn side_beyond(&self, surfel: u32, key: [i32; 3], p: [f32; 3]) -> Option<u32> {
+        let i = self
+            .sides
+            .binary_search_by_key(&surfel, |s| s.surfel)
+            .ok()?;
+        let side = &self.sides[i];
+        let (n, o) = (decode_normal(side.normal), self.key_corner(key));
+        let d: f32 = (0..3).map(|a| n[a] * (p[a] - o[a])).sum();
+        (d > side.offset).then_some(side.partner)
+    }
+
     /// Index in the brick of the surfel of `p`'s cell in brick `brick` of key `key`, if any.
     pub fn surfel_in(&self, brick: u32, key: [i32; 3], p: [f32; 3]) -> Option<u32> {
-        let h = &self.header;
-        let cell = h.brick_size / 4.0;
-        let c: [u32; 3] = std::array::from_fn(|a| {
-            let origin = h.anchor[a] + key[a] as f32 * h.brick_size;
-            (((p[a] - origin) / cell).floor()).clamp(0.0, 3.0) as u32
-        });
+        let cell = self.header.brick_size / 4.0;
+        let origin = self.key_corner(key);
+        let c: [u32; 3] =
+            std::array::from_fn(|a| (((p[a] - origin[a]) / cell).floor()).clamp(0.0, 3.0) as u32);
         let byte = (c[0] + 4 * (c[1] + 4 * c[2])) as usize;
         let word = self.cells.get(brick as usize * CELL_WORDS + byte / 4)?;
         let s = (word >> (8 * (byte % 4))) as u8;

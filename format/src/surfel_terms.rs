@@ -12,7 +12,7 @@
 //! | `mask` | 0..27 the probes it sees, 27..32 its centre's code ([`CENTRE_SHIFT`]) |
 //! | `normal_hits` | 0..12 and 12..24 the octahedral normal as two snorm12, 24..32 `hits` |
 //! | `group_open` | 0..8 `group`, then `open` k = 1..3 as signed 8-bit codes at 8, 16, 24 |
-//! | `open_l2` | `open` k = 4..8 as signed 6-bit codes at 0, 6, 12, 18, 24 |
+//! | `open_l2` | `open` k = 4..8 as signed 6-bit codes at 0, 6, 12, 18, 24; bit 30 spare; bit 31 `SIDE_BIT` (format 18, `crate::surface::SIDE_BIT`) |
 //!
 //! - **The centre probe** (the surfel's nearest, that the mask's 27 bits are about) is stored
 //!   as its offset, -1..=1 along each axis, from its brick key's centre probe

@@ -11,7 +11,7 @@
 
 use bytemuck::{Pod, Zeroable};
 use prt_format::depth::{DEVIATION_STEP, MEAN_STEP, TOP};
-use prt_format::surface::{BLOCKED_WEIGHT, NO_SURFEL, SLOT_AXIS_SHIFT};
+use prt_format::surface::{BLOCKED_WEIGHT, NO_SURFEL, SIDE_BIT, SLOT_AXIS_SHIFT};
 use prt_format::surfel_terms::{
     CENTRE_SHIFT, HITS_AT, NORMAL_BITS, OPEN_AT, OPEN_BITS, OPEN_RANGE,
 };
@@ -264,7 +264,9 @@ pub struct VolumeInfo {
     pub near_rays: f32,
     /// Word offset of the sky terms in `prt_surface` ([`SurfaceLayout`]).
     pub sky_at: u32,
-    pub _pad0: u32,
+    /// Word offset of the sides in `prt_surface` ([`SurfaceLayout`]): their count, then four
+    /// words each (`prt_format::surface::SurfaceSide`).
+    pub sides_at: u32,
     /// Pi times the sky's mean radiance (`crate::SkyModel::mean_radiance`): the irradiance a
     /// surfel's sky term of 1 adds (`prt_format::surface::sky_term`); set by every update
     /// whose sky changed.
@@ -289,14 +291,16 @@ pub const BRICK_WORDS: u32 = 3;
 /// (`prt_surface`): the brick table's slots (4 words each), the cells (16 words a brick), the
 /// surfel terms (4 words each, `prt_format::surfel_terms`), per brick its first surfel, first
 /// near group and the grid index of its key's centre probe (`SurfaceTerms::brick_centre`,
-/// computed here once so that the GPU reads what the CPU twin computes), then the sky terms
-/// (two halves a word, `prt_format::surface::SurfaceTerms::sky`).
+/// computed here once so that the GPU reads what the CPU twin computes), the sky terms
+/// (two halves a word, `prt_format::surface::SurfaceTerms::sky`), then the sides' count and
+/// the sides (four words each, `prt_format::surface::SurfaceSide`; format 18).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct SurfaceLayout {
     pub cells_at: u32,
     pub terms_at: u32,
     pub bricks_at: u32,
     pub sky_at: u32,
+    pub sides_at: u32,
 }
 
 impl SurfaceLayout {
@@ -312,6 +316,7 @@ impl SurfaceLayout {
             terms_at: (slots + cells) as u32,
             bricks_at: (slots + cells + terms) as u32,
             sky_at: (slots + cells + terms + bricks) as u32,
+            sides_at: (slots + cells + terms + bricks + t.sky.len() as u64) as u32,
         }
     }
 
@@ -329,6 +334,8 @@ impl SurfaceLayout {
             w.extend([b.first_surfel, *g, grid.index(i, j, k) as u32]);
         }
         w.extend_from_slice(&t.sky);
+        w.push(t.sides.len() as u32);
+        w.extend_from_slice(bytemuck::cast_slice(&t.sides));
         w
     }
 }
@@ -351,7 +358,7 @@ impl From<&prt_format::Grid> for VolumeInfo {
             bricks_at: 0,
             near_rays: 1.0,
             sky_at: 0,
-            _pad0: 0,
+            sides_at: 0,
             sky_irradiance: [0.0; 3],
             _pad1: 0.0,
         }
@@ -562,6 +569,7 @@ pub fn snippet_constants() -> Vec<(&'static str, String)> {
         ("PRT_SLOT_AXIS_SHIFT", format!("{SLOT_AXIS_SHIFT}u")),
         ("PRT_TERMS_CENTRE_SHIFT", format!("{CENTRE_SHIFT}u")),
         ("PRT_NO_SURFEL", format!("{NO_SURFEL}u")),
+        ("PRT_SIDE_BIT", format!("{SIDE_BIT}u")),
         ("PRT_TERMS_WORDS", format!("{TERMS_WORDS}u")),
         ("PRT_BRICK_WORDS", format!("{BRICK_WORDS}u")),
         ("PRT_TERMS_NORMAL_BITS", format!("{NORMAL_BITS}u")),

@@ -7,7 +7,8 @@
 //! the bake traced at the point's surfel (`prt_format::surface`):
 //!
 //! 1. **Find the surfel**: the point's brick by key (brick lattice cell, the normal's dominant
-//!    axis) in the hash table, then the surfel named for the point's cell of that brick. No
+//!    axis) in the hash table, then the surfel named for the point's cell of that brick, or the
+//!    surfel on the point's side of a wall that crosses that surfel's cell (format 18). No
 //!    entry (a surface the probes never saw, an asset baked without merging, a normal at 45
 //!    degrees whose axis differs from the surfel's): the default lookup.
 //! 2. **Weight the probes** trilinearly, a probe the surfel cannot see by
@@ -328,8 +329,10 @@ impl<'a> SurfaceSampler<'a> {
     }
 
     /// The brick the table found (a split brick's first part) and the surfel (asset indices)
-    /// whose terms stand for the point, if any. The surfel's near group is the brick's
-    /// `groups` entry plus its `group` (format 13: counted from the first part's groups).
+    /// whose terms stand for the point, if any: the one the cell table names, or its partner
+    /// beyond a wall in its cell (`SurfaceTerms::side_of`, format 18). The surfel's near group
+    /// is the brick's `groups` entry plus its `group` (format 13: counted from the first
+    /// part's groups).
     pub fn surfel_of(&self, position: [f32; 3], normal: [f32; 3]) -> Option<(usize, usize)> {
         let t = &self.asset.surface;
         if !self.enabled || t.is_empty() {
@@ -338,7 +341,8 @@ impl<'a> SurfaceSampler<'a> {
         let key = t.key_of(position);
         let brick = t.find(key, dominant_axis(normal))?;
         let within = t.surfel_in(brick, key, position)?;
-        let surfel = (self.asset.bricks[brick as usize].first_surfel + within) as usize;
+        let named = self.asset.bricks[brick as usize].first_surfel + within;
+        let surfel = t.side_of(named, key, position) as usize;
         t.surfels[surfel]
             .is_traced()
             .then_some((brick as usize, surfel))

@@ -794,8 +794,10 @@ fn sample_points_matches_the_cpu_sampler() {
         ..RuntimeSettings::default()
     };
     compare_samplers(&device, &queue, &asset, &lighting, settings);
-    // Two rooms sharing a thin wall: the depth moments decide most of the weights there.
+    // Two rooms sharing a thin wall: the depth moments decide most of the weights there, and
+    // the wall runs through surfel cells (format 18's sides).
     let rooms = bake(&fixture("two_rooms.gltf"), &BakeSettings::default());
+    assert!(!rooms.surface.sides.is_empty(), "no sides");
     let lighting = load_rig(&fixture("rigs/two_rooms.json")).unwrap();
     compare_samplers(
         &device,
@@ -883,10 +885,30 @@ fn compare_samplers(
             .step_by(step)
             .map(|s| (s.position, s.normal)),
     );
+    // Both sides of walls through surfel cells (format 18): where the table names a side's
+    // surfel, points at its partner read the partner.
+    let sides = &asset.surface.sides;
+    let side_step = (sides.len() / 50).max(1);
+    points.extend(sides.iter().step_by(side_step).flat_map(|side| {
+        [side.surfel, side.partner].map(|i| {
+            let s = &asset.surfels[i as usize];
+            (s.position, s.normal)
+        })
+    }));
     let on_surfels = points
         .iter()
         .filter(|(p, n)| cpu.surfel(*p, *n).is_some())
         .count();
+    let across = points
+        .iter()
+        .filter(|(p, n)| beyond_a_wall(asset, *p, *n))
+        .count();
+    if settings.lookup.surface_terms {
+        assert!(
+            sides.is_empty() || across > 0,
+            "no point reads a side's partner"
+        );
+    }
     if settings.lookup.surface_terms {
         assert!(
             on_surfels > 150,
@@ -932,11 +954,26 @@ fn compare_samplers(
         }
     }
     eprintln!(
-        "depth moments {}: {} points ({mixed} beside probes inside geometry, {on_surfels} on surfels): worst |dSH|/SH0 {worst_sh:.2e}, |dE|/E0 {worst_e:.2e}, |dvalidity| {worst_v:.2e}",
+        "depth moments {}: {} points ({mixed} beside probes inside geometry, {on_surfels} on surfels, {across} beyond a wall in their cell): worst |dSH|/SH0 {worst_sh:.2e}, |dE|/E0 {worst_e:.2e}, |dvalidity| {worst_v:.2e}",
         settings.lookup.depth_moments,
         points.len()
     );
     mixed
+}
+
+/// Whether the surface lookup at `p` (normal `n`) reads a side's partner (format 18): the
+/// surfel its cell names has a side, and `p` lies beyond its wall.
+fn beyond_a_wall(asset: &Asset, p: [f32; 3], n: [f32; 3]) -> bool {
+    let t = &asset.surface;
+    let key = t.key_of(p);
+    let Some(brick) = t.find(key, prt_format::surface::dominant_axis(n)) else {
+        return false;
+    };
+    let Some(within) = t.surfel_in(brick, key, p) else {
+        return false;
+    };
+    let named = asset.bricks[brick as usize].first_surfel + within;
+    t.side_of(named, key, p) != named
 }
 
 /// Tolerances of `sample_points_matches_the_cpu_sampler`, relative to the sample's SH0 (for E: to

@@ -1,14 +1,15 @@
 //! The bake's surface terms and the surface lookup (`prt_format::surface`,
 //! `prt_runtime::surface`): every front-face surfel is found again by its own position and
 //! normal, the lookup keeps the dark room of `fixtures/two_rooms.gltf` dark at both grid
-//! phases (the shared wall and the floor that runs under it) and a sunlit atrium's galleries
+//! phases (the shared wall and the floor that runs under it), and each side of the wall in the
+//! surfel cells it runs through (format 18), and a sunlit atrium's galleries
 //! dark, no line where two of its surfaces meet is over-lit, a pocket stays dark, a surface
 //! under a sky gets its own share of it rather than its probes', the lookup's explanation adds
 //! up to its sample, a bake without terms (unmerged, or told to skip them) samples as the volume lookup, and damaged
 //! terms are refused by name.
 
 use prt_bake::BakeSettings;
-use prt_format::surface::dominant_axis;
+use prt_format::surface::{dominant_axis, SurfaceSide, SIDE_BIT};
 use prt_format::{decode, encode, Asset, FormatError, BRICK_AXIS_MASK, BRICK_BACKFACE};
 use prt_runtime::surface::SurfaceSampler;
 use prt_runtime::{load_rig, CpuRelighter, LookupSettings, Relit, VolumeSampler};
@@ -255,7 +256,8 @@ fn without_terms_the_lookup_is_the_volume_lookup() {
 /// A slot naming a brick that does not exist, a near entry naming a group that does not, a
 /// cell naming a surfel its brick does not have, groups out of order, a centre code past the
 /// 27 offsets, more hits than rays, a spare bit set, a brick moved off its slot's key, a search bound longer than the table needs, a surfel naming another brick's group,
-/// a sky term that is not a number, a sky term missing: each refused, naming the surface
+/// a sky term that is not a number, a sky term missing, sides out of order, a side naming a
+/// surfel that does not exist, a side flagged but not listed: each refused, naming the surface
 /// section.
 #[test]
 fn damaged_terms_are_refused() {
@@ -266,7 +268,7 @@ fn damaged_terms_are_refused() {
     };
     let asset = bake_ok(&fixture("two_rooms.gltf"), &settings);
     decode(&encode(&asset).unwrap()).expect("the undamaged asset loads");
-    let damages: [fn(&mut Asset); 12] = [
+    let damages: [fn(&mut Asset); 14] = [
         |a| {
             let s = a.surface.slots.iter_mut().find(|s| s.value != 0).unwrap();
             s.value = (s.value & !0x1fff_ffff) | (a.bricks.len() as u32 + 1);
@@ -285,7 +287,37 @@ fn damaged_terms_are_refused() {
         // More near-field hits than rays (format 16: the hits sit in the normal's word).
         |a| a.surface.surfels[0].normal_hits |= 0xff << 24,
         // A spare bit of the band-2 codes set.
-        |a| a.surface.surfels[0].open_l2 |= 1 << 31,
+        |a| a.surface.surfels[0].open_l2 |= 1 << 30,
+        // Two sides out of order (format 18): the lookup's binary search would miss one.
+        |a| {
+            let n = a.surface.surfels.len() as u32;
+            for s in [n - 2, n - 1] {
+                a.surface.surfels[s as usize].open_l2 |= SIDE_BIT;
+            }
+            a.surface.sides.retain(|s| s.surfel < n - 2);
+            let side = |surfel: u32, partner: u32| SurfaceSide {
+                surfel,
+                partner,
+                ..SurfaceSide::default()
+            };
+            a.surface
+                .sides
+                .extend([side(n - 1, n - 2), side(n - 2, n - 1)]);
+        },
+        // A side naming a partner that does not exist (format 18): the lookup reads its terms.
+        |a| {
+            let n = a.surface.surfels.len() as u32;
+            a.surface.surfels[0].open_l2 |= SIDE_BIT;
+            a.surface.sides.retain(|s| s.surfel != 0);
+            a.surface.sides.insert(
+                0,
+                SurfaceSide {
+                    surfel: 0,
+                    partner: n,
+                    ..SurfaceSide::default()
+                },
+            );
+        },
         // A brick whose centroid moved to another key than its slot's (the centre probe the
         // lookup reads is its key's).
         |a| {
@@ -308,6 +340,58 @@ fn damaged_terms_are_refused() {
     match decode(&encode(&short).unwrap()) {
         Err(FormatError::Count { section, .. }) => assert_eq!(section, "surface"),
         other => panic!("a sky term missing: {other:?}"),
+    }
+    // A surfel flagged as having a side that is not listed.
+    let mut unlisted = asset.clone();
+    let free = (0..unlisted.surface.surfels.len())
+        .find(|&s| unlisted.surface.surfels[s].open_l2 & SIDE_BIT == 0)
+        .unwrap();
+    unlisted.surface.surfels[free].open_l2 |= SIDE_BIT;
+    match decode(&encode(&unlisted).unwrap()) {
+        Err(FormatError::Count { section, .. }) => assert_eq!(section, "surface"),
+        other => panic!("a side not listed: {other:?}"),
+    }
+}
+
+/// A wall through surfel cells (format 18, `prt_bake::merge::sides`): the two rooms' shared
+/// wall stands in the middle of the floor's and ceiling's cells beside it (the cell lattice
+/// puts walls at round coordinates there), so those cells' hits come from both rooms. Points
+/// on the floor and the ceiling within half a cell of the wall, on either side, read their own
+/// room at both grid phases: the lit side at least half of what the lit floor 6 to 30 cm out
+/// reads, the dark side under 1% of it. Before the sides (stop 66), one surfel of both rooms'
+/// hits took the dark room's probes, and the lit side's line read 0.3-1% of its room.
+#[test]
+fn a_wall_through_a_surfel_cell_parts_its_points() {
+    for (name, settings) in both_phases() {
+        let asset = bake_ok(&fixture("two_rooms.gltf"), &settings);
+        assert!(!asset.surface.sides.is_empty(), "{name}: no sides");
+        let relit = relit(&asset);
+        let s = SurfaceSampler::for_relit(&asset, &relit, &LookupSettings::default());
+        let average = |pts: Vec<([f32; 3], [f32; 3])>| {
+            let sum: f32 = pts
+                .iter()
+                .map(|(p, n)| mean(s.sample(*p, *n).irradiance))
+                .sum();
+            sum / pts.len() as f32
+        };
+        let cell = asset.surface.header.brick_size / 4.0;
+        let line = |side: f32| {
+            average(grid(|a, b| {
+                let x = side * cell * (0.05 + 0.4 * a);
+                match b < 0.5 {
+                    true => ([x, 0.0, -1.8 + 3.0 * b], [0.0, 1.0, 0.0]),
+                    false => ([x, 3.0, -1.8 + 3.0 * (b - 0.5)], [0.0, -1.0, 0.0]),
+                }
+            }))
+        };
+        let open = average(floor_points(-1.0));
+        let (lit, dark) = (line(-1.0), line(1.0));
+        eprintln!("{name}: lit floor {open}, by the wall: lit {lit}, dark {dark}");
+        assert!(lit > 0.5 * open, "{name}: lit side {lit} against {open}");
+        assert!(
+            dark < 0.01 * open,
+            "{name}: dark side {dark} against {open}"
+        );
     }
 }
 
@@ -547,11 +631,12 @@ fn no_over_lit_lines_where_walls_floors_and_ceilings_meet() {
             volume_bad.len()
         );
         assert!(bad.is_empty(), "{name}: over-lit:\n{}", bad.join("\n"));
-        // Not dark either (the dark room's points weigh most; measured 9.0% and 37.2% with
-        // the default sparse placement, 10.9% and 31.7% on the uniform grid: its fewer probes'
-        // hits give the dark room's bricks other radiance models), and at midway the volume
+        // Not dark either (the dark room's points weigh most; measured 6.4% and 6.0% with
+        // the default sparse placement since format 18's sides, 9.0% and 37.2% before, 10.9%
+        // and 31.7% on the uniform grid then: its fewer probes' hits give the dark room's
+        // bricks other radiance models; bound 40% until the sides), and at midway the volume
         // alone does over-light these lines: the check can tell.
-        assert!(err < 0.4, "{name}: mean error {err}");
+        assert!(err < 0.15, "{name}: mean error {err}");
         if name == "midway" {
             assert!(
                 !volume_bad.is_empty(),

@@ -6,7 +6,8 @@
 //! surfaces are black and get bricks of their own.
 //!
 //! Inside a brick, ray hits in the same surfel cell whose normals agree (cosine above
-//! `merge_normal_cos`) become one surfel whose position, normal, albedo and emission are the
+//! `merge_normal_cos`) and that lie on the same side of any wall in the cell ([`Hit::across`],
+//! `crate::merge::sides`) become one surfel whose position, normal, albedo and emission are the
 //! means of its hits and whose weight is their count. Relighting then computes one irradiance per
 //! surfel and one radiance per brick (the weighted mean), shared by every probe that sees it.
 //!
@@ -23,7 +24,7 @@ use rayon::prelude::*;
 use crate::memory::chunked::Chunked;
 use crate::memory::{prefetch, split_runs};
 use crate::merge::index::{BrickIndex, MAX_BRICKS};
-use crate::merge::key::{brick_key, flags_of, floor_i32, Key};
+use crate::merge::key::{brick_key, cell_in_brick, flags_of, Key};
 use crate::trace::Hit;
 use crate::BakeError;
 
@@ -50,7 +51,8 @@ pub struct BrickFit {
 /// (the working set is one block of probes; what grows is the bricks and surfels the asset
 /// carries). Hits must come in the bake's order (probe by probe, each probe's in the order its rays
 /// were traced): a surfel is the running mean of the hits that joined it, and a hit joins the first
-/// surfel of its cell, in creation order, whose first normal agrees with its own.
+/// surfel of its cell, in creation order, whose first normal agrees with its own and whose hits
+/// lie on its side of the cell ([`Hit::across`]).
 /// [`BrickFolder::finish_placed`] numbers the bricks by key, so the result depends only on the hits
 /// and their order, never on how they were blocked or on the thread count
 /// (`tests::blocking_does_not_change_the_result`).
@@ -185,9 +187,7 @@ impl BrickFolder {
             let origin =
                 self.anchor + Vec3::new(key.0 as f32, key.1 as f32, key.2 as f32) * brick_size;
             for i in start..start + run.len() as u32 {
-                let cell = ((hits[i as usize].position - origin) / self.cell_size)
-                    .to_array()
-                    .map(|c| floor_i32(c).clamp(0, 3) as u32);
+                let cell = cell_in_brick(hits[i as usize].position, origin, self.cell_size);
                 let cell = cell[0] + 4 * (cell[1] + 4 * cell[2]);
                 slots.push((b, cell as u8, i));
                 brick_of_hit[first + i as usize] = b;
@@ -231,8 +231,8 @@ impl BrickFolder {
         b
     }
 
-    /// Merges `h` into the first surfel of its cell in brick `b` whose normal agrees, or starts
-    /// a new one.
+    /// Merges `h` into the first surfel of its cell in brick `b` whose normal agrees and whose
+    /// hits lie on its side, or starts a new one.
     fn merge(&mut self, b: u32, cell: usize, h: &Hit) {
         let new = self.clusters.len() as u32;
         let head = &mut self.heads[b as usize][cell];
@@ -242,7 +242,7 @@ impl BrickFolder {
             let mut at = *head;
             loop {
                 let cl = &mut self.clusters[at as usize];
-                if cl.direction.dot(h.normal) >= self.merge_normal_cos {
+                if cl.direction.dot(h.normal) >= self.merge_normal_cos && cl.across() == h.across {
                     cl.add(h);
                     return;
                 }
@@ -436,7 +436,8 @@ pub fn regularised(moment: DMat3) -> DMat3 {
 /// cluster takes 72 bytes and most straddle two lines.
 #[repr(C, align(64))]
 struct Cluster {
-    count: f32,
+    /// Hits merged, and [`ACROSS`] when they are across a wall from the cell's centre.
+    count: u32,
     position: Vec3,
     normal: Vec3,
     /// Normal of the cluster's first hit: later hits join when they agree with it.
@@ -446,10 +447,13 @@ struct Cluster {
 }
 const _: () = assert!(std::mem::size_of::<Cluster>() == 64);
 
+/// [`Cluster::count`]'s bit for hits across a wall ([`Hit::across`]).
+const ACROSS: u32 = 1 << 31;
+
 impl Cluster {
     fn of(h: &Hit) -> Cluster {
         Cluster {
-            count: 1.0,
+            count: 1 | if h.across { ACROSS } else { 0 },
             position: h.position,
             normal: h.normal,
             direction: h.normal,
@@ -458,8 +462,21 @@ impl Cluster {
         }
     }
 
+    fn across(&self) -> bool {
+        self.count & ACROSS != 0
+    }
+
+    /// How many hits were merged.
+    fn hits(&self) -> f32 {
+        (self.count & !ACROSS) as f32
+    }
+
     fn add(&mut self, h: &Hit) {
-        self.count += 1.0;
+        debug_assert!(
+            self.count & !ACROSS < !ACROSS,
+            "hit count into the across bit"
+        );
+        self.count += 1;
         self.position += h.position;
         self.normal += h.normal;
         self.albedo += Vec3::from(h.albedo);
@@ -475,16 +492,17 @@ impl Cluster {
         } else {
             self.normal
         };
+        let count = self.hits();
         Surfel {
-            position: (self.position / self.count).to_array(),
+            position: (self.position / count).to_array(),
             brick: 0,
             normal: n.to_array(),
             // A half's value, as packed surfels keep it (exact to 2048 hits), so that the
             // brick fits use the weight the runtime reads.
-            weight: prt_format::surfel::half_weight(self.count),
-            albedo: (self.albedo / self.count).to_array(),
+            weight: prt_format::surfel::half_weight(count),
+            albedo: (self.albedo / count).to_array(),
             flags: if backface { BRICK_BACKFACE } else { 0 },
-            emission: (self.emission / self.count).to_array(),
+            emission: (self.emission / count).to_array(),
             ..Surfel::default()
         }
     }
@@ -526,6 +544,28 @@ mod tests {
         assert_eq!(total, 4.0);
         assert_eq!(hit_brick[0], hit_brick[1]);
         assert_ne!(hit_brick[0], hit_brick[2]);
+    }
+
+    /// Hits of one cell whose normals agree but that a wall parts ([`Hit::across`]) make two
+    /// surfels, each weighing its own hits.
+    #[test]
+    fn hits_across_a_wall_stay_apart() {
+        let near = |x: f32, across: bool| Hit {
+            across,
+            ..hit([x, 0.0, 0.01], [0.0, 1.0, 0.0])
+        };
+        let hits = [
+            near(0.01, false),
+            near(0.08, true),
+            near(0.02, false),
+            near(0.09, true),
+            near(0.07, true),
+        ];
+        let (b, _) = build(&hits, 0.1, 0.9, Vec3::ZERO);
+        assert_eq!(b.surfels.len(), 2);
+        let mut weights: Vec<f32> = b.surfels.iter().map(|s| s.weight).collect();
+        weights.sort_by(f32::total_cmp);
+        assert_eq!(weights, [2.0, 3.0]);
     }
 
     #[test]

@@ -31,6 +31,28 @@ pub(crate) fn brick_key(hit: &Hit, anchor: Vec3, brick_size: f32) -> Key {
     (c[0], c[1], c[2], flags_of(hit))
 }
 
+/// The centre of the surfel cell of `p` (cells of `cell_size` from `anchor`, four to a brick),
+/// found as the fold finds a hit's cell ([`crate::merge::fold::BrickFolder::fold`]): its
+/// brick's corner, then the cell within it, so that a point on a cell boundary lies in the same
+/// cell for both.
+#[inline]
+pub(crate) fn cell_centre(p: Vec3, anchor: Vec3, cell_size: f32) -> Vec3 {
+    let brick_size = 4.0 * cell_size;
+    let key = ((p - anchor) / brick_size).to_array().map(floor_i32);
+    let origin = anchor + Vec3::new(key[0] as f32, key[1] as f32, key[2] as f32) * brick_size;
+    let cell = cell_in_brick(p, origin, cell_size).map(|c| c as f32);
+    origin + (Vec3::from(cell) + 0.5) * cell_size
+}
+
+/// The cell (0..4 along each axis) of `p` in the brick whose corner is `origin`, cells of
+/// `cell_size`: the fold's and [`cell_centre`]'s.
+#[inline]
+pub(crate) fn cell_in_brick(p: Vec3, origin: Vec3, cell_size: f32) -> [u32; 3] {
+    ((p - origin) / cell_size)
+        .to_array()
+        .map(|c| floor_i32(c).clamp(0, 3) as u32)
+}
+
 /// `v.floor() as i32` (saturating, NaN to 0) by truncation: the baseline x86-64 target has no
 /// SSE4.1 `roundps`, so `floor` is a call to a software routine, and the fold takes six a hit.
 #[inline]

@@ -4,7 +4,9 @@
 
 use crate::asset::Asset;
 use crate::error::FormatError;
-use crate::surface::{near_entry, slot_hash, SurfaceTerms, CELL_WORDS, NO_SURFEL, SLOT_AXIS_SHIFT};
+use crate::surface::{
+    near_entry, slot_hash, SurfaceTerms, CELL_WORDS, NO_SURFEL, SIDE_BIT, SLOT_AXIS_SHIFT,
+};
 use crate::surfel_terms::{CENTRE_SHIFT, MAX_CENTRE_CODE};
 
 fn bad(index: usize, what: String) -> Result<(), FormatError> {
@@ -28,8 +30,10 @@ fn count(found: usize, expected: usize) -> Result<(), FormatError> {
 /// surfels or those of the parts after it under its key (`surface_key_runs`, format 13);
 /// per brick, near groups that tile its surfels in order; per surfel, terms whose centre code,
 /// hit count and group (counted from its key's first brick) are in range and whose spare bits
-/// are zero (format 16: every code decodes to a finite value); near fields in range naming
-/// groups that exist; a sky term per surfel in [-2, 2]. A slot's key is its brick's.
+/// are zero (format 16: every code decodes to a finite value) but [`SIDE_BIT`]; near fields in
+/// range naming groups that exist; a sky term per surfel in [-2, 2]; sides (format 18) sorted
+/// by surfel, one per surfel with [`SIDE_BIT`], naming a traced partner of the same key's run
+/// with a finite plane. A slot's key is its brick's.
 pub(super) fn surface_terms(asset: &Asset) -> Result<(), FormatError> {
     let st = &asset.surface;
     let empty = st.slots.is_empty()
@@ -39,7 +43,8 @@ pub(super) fn surface_terms(asset: &Asset) -> Result<(), FormatError> {
         && st.group_surfels.is_empty()
         && st.near_ranges.is_empty()
         && st.near.is_empty()
-        && st.sky.is_empty();
+        && st.sky.is_empty()
+        && st.sides.is_empty();
     if st.header.brick_size == 0.0 && empty {
         return Ok(());
     }
@@ -67,7 +72,43 @@ pub(super) fn surface_terms(asset: &Asset) -> Result<(), FormatError> {
     groups(asset)?;
     surfels(asset, &runs)?;
     near(st)?;
-    sky(st)
+    sky(st)?;
+    sides(asset, &runs)
+}
+
+/// Sides ([`crate::surface::SurfaceSide`]): sorted by surfel without repeats, exactly the
+/// surfels with [`SIDE_BIT`]; the partner another traced surfel of the same key's run (whose
+/// group the lookup counts from the same first brick); the plane's offset finite.
+fn sides(asset: &Asset, runs: &[(u32, u32)]) -> Result<(), FormatError> {
+    let st = &asset.surface;
+    let flagged = st
+        .surfels
+        .iter()
+        .filter(|t| t.open_l2 & SIDE_BIT != 0)
+        .count();
+    count(st.sides.len(), flagged)?;
+    let n = st.surfels.len();
+    for (i, side) in st.sides.iter().enumerate() {
+        let (s, p) = (side.surfel as usize, side.partner as usize);
+        let why = if i > 0 && st.sides[i - 1].surfel >= side.surfel {
+            "not after the side before it (sorted by surfel, one each)"
+        } else if s >= n || p >= n || s == p {
+            "a surfel or partner that does not exist, or the surfel itself"
+        } else if st.surfels[s].open_l2 & SIDE_BIT == 0 {
+            "a surfel without the side bit"
+        } else if !st.surfels[p].is_traced() {
+            "a partner whose terms were not traced"
+        } else if runs[asset.surfels[s].brick as usize].0 != runs[asset.surfels[p].brick as usize].0
+        {
+            "a partner of another key's run (its group would count from another brick)"
+        } else if !side.offset.is_finite() {
+            "a plane offset that is not a number"
+        } else {
+            continue;
+        };
+        return bad(i, format!("side {side:?} of {n} surfels: {why}"));
+    }
+    Ok(())
 }
 
 /// Two halves a word, one per surfel, each in [-2, 2] (a share of the hemisphere less what the
@@ -185,7 +226,7 @@ fn surfels(asset: &Asset, runs: &[(u32, u32)]) -> Result<(), FormatError> {
             // Every code decodes to a finite value; the spare bits stay zero.
             let ok = t.hits() <= h.rays
                 && (t.group() as usize) < next - first
-                && t.open_l2 >> 30 == 0
+                && t.open_l2 >> 30 & 1 == 0
                 && t.mask >> CENTRE_SHIFT <= MAX_CENTRE_CODE;
             if !ok {
                 return bad(
@@ -197,7 +238,7 @@ fn surfels(asset: &Asset, runs: &[(u32, u32)]) -> Result<(), FormatError> {
                         h.rays,
                         t.group(),
                         next - first,
-                        t.open_l2 >> 30
+                        t.open_l2 >> 30 & 1
                     ),
                 );
             }

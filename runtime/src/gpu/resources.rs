@@ -438,6 +438,7 @@ pub fn volume_info(asset: &Asset, settings: &RuntimeSettings) -> VolumeInfo {
         terms_at: layout.terms_at,
         bricks_at: layout.bricks_at,
         sky_at: layout.sky_at,
+        sides_at: layout.sides_at,
         near_rays: t.header.rays.max(1) as f32,
         ..VolumeInfo::from(grid)
     }

@@ -364,6 +364,7 @@ pub(crate) mod tests {
                     ("bricks_at", offset_of!(contract::VolumeInfo, bricks_at)),
                     ("near_rays", offset_of!(contract::VolumeInfo, near_rays)),
                     ("sky_at", offset_of!(contract::VolumeInfo, sky_at)),
+                    ("sides_at", offset_of!(contract::VolumeInfo, sides_at)),
                     (
                         "sky_irradiance",
                         offset_of!(contract::VolumeInfo, sky_irradiance),
