@@ -99,11 +99,11 @@ pub(crate) fn bake_in_pool(
 
     let probes = (&grid, &probe_positions[..]);
     let geometry = (&built.bvh, &loaded.scene.triangles[..]);
-    let cells = (
+    let merging = (
         settings.surface_terms.then_some(cell_size),
         settings.merge_normal_cos,
     );
-    let surface = surface_stage(probes, geometry, cells, &mut bricked, &mut report);
+    let surface = surface_stage(probes, geometry, merging, &mut bricked, &mut report);
     lap(&mut report, "surface", Some("assemble"));
 
     let Assembled {

@@ -270,13 +270,19 @@ impl SurfaceTerms {
         (d > side.offset).then_some(side.partner)
     }
 
-    /// Index in the brick of the surfel of `p`'s cell in brick `brick` of key `key`, if any.
-    pub fn surfel_in(&self, brick: u32, key: [i32; 3], p: [f32; 3]) -> Option<u32> {
+    /// The cell (`x + 4 (y + 4 z)`, 0..64) of `p` in brick key `key`, as the lookup finds it:
+    /// every point of the key in exactly one.
+    pub fn cell_of(&self, key: [i32; 3], p: [f32; 3]) -> usize {
         let cell = self.header.brick_size / 4.0;
         let origin = self.key_corner(key);
         let c: [u32; 3] =
             std::array::from_fn(|a| (((p[a] - origin[a]) / cell).floor()).clamp(0.0, 3.0) as u32);
-        let byte = (c[0] + 4 * (c[1] + 4 * c[2])) as usize;
+        (c[0] + 4 * (c[1] + 4 * c[2])) as usize
+    }
+
+    /// Index in the brick of the surfel of `p`'s cell in brick `brick` of key `key`, if any.
+    pub fn surfel_in(&self, brick: u32, key: [i32; 3], p: [f32; 3]) -> Option<u32> {
+        let byte = self.cell_of(key, p);
         let word = self.cells.get(brick as usize * CELL_WORDS + byte / 4)?;
         let s = (word >> (8 * (byte % 4))) as u8;
         (s != NO_SURFEL).then_some(u32::from(s))

@@ -1,8 +1,8 @@
 //! The bake's surface terms and the surface lookup (`prt_format::surface`,
 //! `prt_runtime::surface`): every front-face surfel is found again by its own position and
 //! normal, the lookup keeps the dark room of `fixtures/two_rooms.gltf` dark at both grid
-//! phases (the shared wall and the floor that runs under it), and each side of the wall in the
-//! surfel cells it runs through (format 18), and a sunlit atrium's galleries
+//! phases (the shared wall and the floor that runs under it) and keeps each side of the wall
+//! through its surfel cells in its own room's light (format 18), keeps a sunlit atrium's galleries
 //! dark, no line where two of its surfaces meet is over-lit, a pocket stays dark, a surface
 //! under a sky gets its own share of it rather than its probes', the lookup's explanation adds
 //! up to its sample, a bake without terms (unmerged, or told to skip them) samples as the volume lookup, and damaged
@@ -268,7 +268,7 @@ fn damaged_terms_are_refused() {
     };
     let asset = bake_ok(&fixture("two_rooms.gltf"), &settings);
     decode(&encode(&asset).unwrap()).expect("the undamaged asset loads");
-    let damages: [fn(&mut Asset); 14] = [
+    let damages: [fn(&mut Asset); 13] = [
         |a| {
             let s = a.surface.slots.iter_mut().find(|s| s.value != 0).unwrap();
             s.value = (s.value & !0x1fff_ffff) | (a.bricks.len() as u32 + 1);
@@ -288,22 +288,6 @@ fn damaged_terms_are_refused() {
         |a| a.surface.surfels[0].normal_hits |= 0xff << 24,
         // A spare bit of the band-2 codes set.
         |a| a.surface.surfels[0].open_l2 |= 1 << 30,
-        // Two sides out of order (format 18): the lookup's binary search would miss one.
-        |a| {
-            let n = a.surface.surfels.len() as u32;
-            for s in [n - 2, n - 1] {
-                a.surface.surfels[s as usize].open_l2 |= SIDE_BIT;
-            }
-            a.surface.sides.retain(|s| s.surfel < n - 2);
-            let side = |surfel: u32, partner: u32| SurfaceSide {
-                surfel,
-                partner,
-                ..SurfaceSide::default()
-            };
-            a.surface
-                .sides
-                .extend([side(n - 1, n - 2), side(n - 2, n - 1)]);
-        },
         // A side naming a partner that does not exist (format 18): the lookup reads its terms.
         |a| {
             let n = a.surface.surfels.len() as u32;
@@ -340,6 +324,36 @@ fn damaged_terms_are_refused() {
     match decode(&encode(&short).unwrap()) {
         Err(FormatError::Count { section, .. }) => assert_eq!(section, "surface"),
         other => panic!("a sky term missing: {other:?}"),
+    }
+    // Two sides out of order (format 18): the lookup's binary search would miss one. Two
+    // traced surfels of one front-face brick, each the other's partner, listed backwards.
+    let mut unordered = asset.clone();
+    let b = unordered
+        .surface
+        .slots
+        .iter()
+        .find_map(|s| s.brick())
+        .unwrap() as usize;
+    let first = unordered.bricks[b].first_surfel;
+    assert!(unordered.bricks[b].surfel_count >= 2);
+    let t = &mut unordered.surface;
+    t.surfels.iter_mut().for_each(|s| s.open_l2 &= !SIDE_BIT);
+    t.surfels[first as usize].open_l2 |= SIDE_BIT;
+    t.surfels[first as usize + 1].open_l2 |= SIDE_BIT;
+    let side = |surfel: u32, partner: u32| SurfaceSide {
+        surfel,
+        partner,
+        ..SurfaceSide::default()
+    };
+    t.sides = vec![side(first + 1, first), side(first, first + 1)];
+    match decode(&encode(&unordered).unwrap()) {
+        Err(e @ FormatError::Invalid { .. }) => {
+            assert!(
+                e.to_string().contains("not after the side before it"),
+                "{e}"
+            )
+        }
+        other => panic!("sides out of order: {other:?}"),
     }
     // A surfel flagged as having a side that is not listed.
     let mut unlisted = asset.clone();

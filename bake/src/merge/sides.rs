@@ -11,9 +11,10 @@
 //! So each hit is tested against its cell's centre (a little off it, [`REFERENCE_SHIFT`], and
 //! moved onto the hit's plane), both lifted off the surface as the split's links are
 //! ([`LIFT_CELLS`] cells, so that the relief of a detailed surface does not split it): a hit
-//! the segment cannot reach is `across`, and the fold merges it only with hits across too. One ray per hit, traced with the probe that made
-//! it, in parallel. The surface lookup then tells a point which of the cell's two surfels lies
-//! on its side ([`sides_of`], `prt_format::surface::SurfaceSide`).
+//! the segment cannot reach is `across`, and the fold merges it only with hits across too. One
+//! ray per hit, traced with the probe that made it, in parallel. The surface lookup then tells
+//! a point which of the cell's two surfels lies on its side ([`sides_of`],
+//! `prt_format::surface::SurfaceSide`).
 
 use glam::Vec3;
 use prt_format::surface::{encode_normal, SurfaceSide, SurfaceTerms, CELL_WORDS, NO_SURFEL};
@@ -50,8 +51,8 @@ pub fn mark_across(hits: &mut [Hit], bvh: &SceneBvh, anchor: Vec3, cell_size: f3
     }
 }
 
-/// What [`sides_of`] pairs surfels with: the scene, the surfels (a key's run from the brick's
-/// first on), which of them a side may name, and the fold's normal agreement.
+/// What [`sides_of`] pairs surfels with: the scene, the surfels (asset indices, up to the end
+/// of the brick's key run), which of them a side may name, and the fold's normal agreement.
 pub struct Pairing<'a> {
     pub bvh: &'a SceneBvh,
     /// The scene's triangles, by the BVH's triangle index.
@@ -66,11 +67,12 @@ pub struct Pairing<'a> {
 }
 
 /// The sides of brick `b`'s cells (`table`, the cell table of `crate::surface_terms`): for
-/// each cell whose named surfel lies in it, the nearest other surfel of the cell that faces
-/// the same way (within the fold's normal agreement) and that a wall parts from it: the
-/// segment between the two, each lifted [`LIFT_CELLS`] along its normal as the bake's splits
-/// test ([`crate::merge::split`]), hits a triangle. The side's plane is that triangle's line
-/// in the named surfel's plane (the segment's direction where the wall lies in the plane),
+/// each cell whose named surfel lies in it, the other surfel of the cell nearest its centre
+/// that faces the same way (within the fold's normal agreement) and that a wall parts from
+/// it: the segment between the two, each lifted [`LIFT_CELLS`] along its normal as the bake's
+/// splits test ([`crate::merge::split`]), hits a triangle. The side's plane is that triangle's
+/// line in the named surfel's plane (the segment's direction where the wall lies within about
+/// 6 degrees of that plane),
 /// kept only where it parts the two surfels by more than [`SEPARATION`] cells; a point beyond
 /// it reads the other surfel ([`SurfaceTerms::side_of`]).
 pub fn sides_of(
@@ -84,12 +86,11 @@ pub fn sides_of(
     let corner = Vec3::from(terms.key_corner(key));
     let cell = terms.header.brick_size / 4.0;
     let first = b.first_surfel as usize;
-    let cell_corner =
-        |c: u32| corner + Vec3::new((c % 4) as f32, (c / 4 % 4) as f32, (c / 16) as f32) * cell;
-    let in_cell = |c: u32, s: &Surfel| {
-        let (lo, p) = (cell_corner(c), Vec3::from(s.position));
-        p.cmpge(lo).all() && p.cmplt(lo + cell).all()
+    let cell_centre = |c: u32| {
+        corner + (Vec3::new((c % 4) as f32, (c / 4 % 4) as f32, (c / 16) as f32) + 0.5) * cell
     };
+    // The lookup's cell of each surfel: every surfel in exactly one, so one side at most.
+    let in_cell = |c: u32, s: &Surfel| terms.cell_of(key, s.position) == c as usize;
     let mut sides = Vec::new();
     for c in 0..64u32 {
         let named = (table[c as usize / 4] >> (8 * (c % 4))) as u8;
@@ -97,7 +98,7 @@ pub fn sides_of(
             continue;
         }
         let s0 = first + usize::from(named);
-        let centre = cell_corner(c) + 0.5 * cell;
+        let centre = cell_centre(c);
         let n0 = Vec3::from(surfels[s0].normal);
         let mut others: Vec<usize> = (first..surfels.len())
             .filter(|&i| i != s0 && pairing.eligible[i] && in_cell(c, &surfels[i]))
@@ -117,7 +118,7 @@ pub fn sides_of(
 /// closer to either would decide its own surfel's points by rounding.
 pub const SEPARATION: f32 = 0.01;
 
-/// The side of surfel `s0` towards `s1` (module docs of [`sides_of`]), or `None` when nothing
+/// The side of surfel `s0` towards `s1` (docs of [`sides_of`]), or `None` when nothing
 /// stands between them or the wall's line does not part them.
 fn side_between(
     pairing: &Pairing,

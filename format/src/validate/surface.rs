@@ -223,7 +223,7 @@ fn surfels(asset: &Asset, runs: &[(u32, u32)]) -> Result<(), FormatError> {
             .map_or(st.group_surfels.len(), |&g| g as usize);
         let range = brick.first_surfel as usize..(brick.first_surfel + brick.surfel_count) as usize;
         for (i, t) in st.surfels[range.clone()].iter().enumerate() {
-            // Every code decodes to a finite value; the spare bits stay zero.
+            // Every code decodes to a finite value; the spare bit 30 stays zero (31 is SIDE_BIT).
             let ok = t.hits() <= h.rays
                 && (t.group() as usize) < next - first
                 && t.open_l2 >> 30 & 1 == 0
@@ -232,7 +232,7 @@ fn surfels(asset: &Asset, runs: &[(u32, u32)]) -> Result<(), FormatError> {
                 return bad(
                     range.start + i,
                     format!(
-                        "surfel terms {t:?}: centre code {} (at most {MAX_CENTRE_CODE}), hits {} of {} rays, group {} of {}, spare bits {:#x}",
+                        "surfel terms {t:?}: centre code {} (at most {MAX_CENTRE_CODE}), hits {} of {} rays, group {} of {}, spare bit 30 {}",
                         t.mask >> CENTRE_SHIFT,
                         t.hits(),
                         h.rays,
