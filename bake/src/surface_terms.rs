@@ -368,15 +368,12 @@ fn cells(
     nameable: &[bool],
 ) -> [u32; CELL_WORDS] {
     let mut words = [0u32; CELL_WORDS];
-    let h = &terms.header;
     let key = terms.key_of(b.centroid);
-    let origin = Vec3::from(h.anchor) + Vec3::from(key.map(|k| k as f32)) * h.brick_size;
-    let cell = h.brick_size / 4.0;
+    let cell = terms.header.brick_size / 4.0;
     let first = b.first_surfel as usize;
     let own = &surfels[first..surfels.len().min(first + 255)];
     for c in 0..64u32 {
-        let centre =
-            origin + (Vec3::new((c % 4) as f32, (c / 4 % 4) as f32, (c / 16) as f32) + 0.5) * cell;
+        let centre = Vec3::from(terms.cell_centre(key, c as usize));
         let lo = centre - Vec3::splat(0.5 * cell);
         let hi = centre + Vec3::splat(0.5 * cell);
         let nearest = own

@@ -280,6 +280,14 @@ impl SurfaceTerms {
         (c[0] + 4 * (c[1] + 4 * c[2])) as usize
     }
 
+    /// The centre of cell `c` ([`Self::cell_of`]'s numbering) of brick key `key`: where the
+    /// bake's cell table measures each surfel's distance from.
+    pub fn cell_centre(&self, key: [i32; 3], c: usize) -> [f32; 3] {
+        let (corner, cell) = (self.key_corner(key), self.header.brick_size / 4.0);
+        let at = [c % 4, c / 4 % 4, c / 16];
+        std::array::from_fn(|a| corner[a] + (at[a] as f32 + 0.5) * cell)
+    }
+
     /// Index in the brick of the surfel of `p`'s cell in brick `brick` of key `key`, if any.
     pub fn surfel_in(&self, brick: u32, key: [i32; 3], p: [f32; 3]) -> Option<u32> {
         let byte = self.cell_of(key, p);

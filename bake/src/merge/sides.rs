@@ -86,22 +86,23 @@ pub fn sides_of(
     let corner = Vec3::from(terms.key_corner(key));
     let cell = terms.header.brick_size / 4.0;
     let first = b.first_surfel as usize;
-    let cell_centre = |c: u32| {
-        corner + (Vec3::new((c % 4) as f32, (c / 4 % 4) as f32, (c / 16) as f32) + 0.5) * cell
-    };
-    // The lookup's cell of each surfel: every surfel in exactly one, so one side at most.
-    let in_cell = |c: u32, s: &Surfel| terms.cell_of(key, s.position) == c as usize;
+    // The lookup's cell of each surfel of the run, once: every surfel in exactly one, so one
+    // side at most.
+    let cell_of: Vec<usize> = (surfels[first..].iter())
+        .map(|s| terms.cell_of(key, s.position))
+        .collect();
+    let in_cell = |c: usize, i: usize| cell_of[i - first] == c;
     let mut sides = Vec::new();
-    for c in 0..64u32 {
-        let named = (table[c as usize / 4] >> (8 * (c % 4))) as u8;
-        if named == NO_SURFEL || !in_cell(c, &surfels[first + usize::from(named)]) {
+    for c in 0..64 {
+        let named = (table[c / 4] >> (8 * (c % 4))) as u8;
+        if named == NO_SURFEL || !in_cell(c, first + usize::from(named)) {
             continue;
         }
         let s0 = first + usize::from(named);
-        let centre = cell_centre(c);
+        let centre = Vec3::from(terms.cell_centre(key, c));
         let n0 = Vec3::from(surfels[s0].normal);
         let mut others: Vec<usize> = (first..surfels.len())
-            .filter(|&i| i != s0 && pairing.eligible[i] && in_cell(c, &surfels[i]))
+            .filter(|&i| i != s0 && pairing.eligible[i] && in_cell(c, i))
             .filter(|&i| Vec3::from(surfels[i].normal).dot(n0) >= pairing.merge_normal_cos)
             .collect();
         let d = |i: &usize| Vec3::from(surfels[*i].position).distance_squared(centre);
