@@ -348,7 +348,8 @@ impl ProbeTrace<'_> {
     fn trace(&self, index: usize) -> (Vec3, trace::ProbeRays, bool) {
         let (p, mut r, moved) = self.trace_offset(index);
         let (anchor, cell) = self.cells;
-        sides::mark_across(&mut r.hits, self.tracer.bvh, anchor, cell);
+        let scene = (self.tracer.bvh, &self.tracer.scene.triangles[..]);
+        sides::mark_across(&mut r.hits, scene, anchor, cell);
         (p, r, moved)
     }
 

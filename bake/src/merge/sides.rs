@@ -10,9 +10,11 @@
 //!
 //! So each hit is tested against its cell's centre (a little off it, [`REFERENCE_SHIFT`], and
 //! moved onto the hit's plane), both lifted off the surface as the split's links are
-//! ([`LIFT_CELLS`] cells, so that the relief of a detailed surface does not split it): a hit
-//! the segment cannot reach is `across`, and the fold merges it only with hits across too. One
-//! ray per hit, traced with the probe that made it, in parallel. The surface lookup then tells
+//! ([`LIFT_CELLS`] cells, so that the relief of a detailed surface does not split it), and
+//! where nothing stands in the way there, a tenth of a cell off it ([`LOW_LIFT_CELLS`]), where
+//! only a wall that leans over the surface counts: a hit a wall parts from the centre is
+//! `across`, and the fold merges it only with hits across too. One or two rays per hit, traced
+//! with the probe that made it, in parallel. The surface lookup then tells
 //! a point which of the cell's two surfels lies on its side ([`sides_of`],
 //! `prt_format::surface::SurfaceSide`).
 
@@ -31,14 +33,30 @@ use crate::trace::Hit;
 /// the wall and rounding would decide.
 const REFERENCE_SHIFT: [f32; 3] = [0.0123, 0.0234, 0.0345];
 
+/// Cells off the surface a second segment runs where the first ([`LIFT_CELLS`]) hits nothing:
+/// a wall that leans over the surface (an awning sloping down from a facade) lies lower than a
+/// cell a little way out, so the segment lifted a cell passes over it and the hits beneath it
+/// merged with those above. On stop 68's street_198 (a blind level) a facade point 9 cm under
+/// the line where an awning meets it read the sunlit surfel above, 11.5x its truth. What the low segment
+/// meets parts hits only where it reaches a cell or more off the surface ([`stands_off`]): a
+/// wall leaning over it, not relief on it (without that test Sponza's sides went from 5,043 to
+/// 11,771 at 1.5 m; docs/results/surface_stop68.md). Only a tenth was measured.
+pub const LOW_LIFT_CELLS: f32 = 0.1;
+
 /// Marks the hits of `hits` that a wall in their surfel cell (cells of `cell_size` from
 /// `anchor`) parts from the cell's centre. Back faces (bricks of their own) and hits at the
 /// centre are left unmarked; nothing is marked when merging is off (`cell_size` 0).
-pub fn mark_across(hits: &mut [Hit], bvh: &SceneBvh, anchor: Vec3, cell_size: f32) {
+pub fn mark_across(
+    hits: &mut [Hit],
+    scene: (&SceneBvh, &[[Vec3; 3]]),
+    anchor: Vec3,
+    cell_size: f32,
+) {
     if cell_size <= 0.0 {
         return;
     }
-    let lift = LIFT_CELLS * cell_size;
+    let (bvh, triangles) = scene;
+    let (lift, low) = (LIFT_CELLS * cell_size, LOW_LIFT_CELLS * cell_size);
     // Segments shorter than a thousandth of a cell cross no wall worth a surfel.
     let shortest = (1e-3 * cell_size).powi(2);
     let shift = Vec3::from(REFERENCE_SHIFT) * cell_size;
@@ -46,9 +64,21 @@ pub fn mark_across(hits: &mut [Hit], bvh: &SceneBvh, anchor: Vec3, cell_size: f3
         let reference = cell_centre(h.position, anchor, cell_size) + shift;
         let to = (reference - h.position).reject_from_normalized(h.normal);
         if to.length_squared() > shortest {
-            h.across = bvh.occluded(h.position + lift * h.normal, &[to], 1.0) & 1 != 0;
+            let (p, n) = (h.position, h.normal);
+            h.across = bvh.occluded(p + lift * n, &[to], 1.0) & 1 != 0
+                || bvh
+                    .closest_hit(p + low * n, to, 1.0)
+                    .is_some_and(|hit| stands_off(&triangles[hit.triangle as usize], p, n, lift));
         }
     }
+}
+
+/// Whether `triangle`, met by the low segment, reaches `lift` or more off the plane through
+/// `p` with normal `n`: a wall that leans over the surface, not relief on it. This depends on
+/// how the mesh is cut as well as on its shape: a shallow ramp or bevel of large triangles
+/// reaches a cell off the plane too, and parts the hits at its foot (docs/limits.md).
+fn stands_off(triangle: &[Vec3; 3], p: Vec3, n: Vec3, lift: f32) -> bool {
+    triangle.iter().any(|&v| n.dot(v - p) >= lift)
 }
 
 /// What [`sides_of`] pairs surfels with: the scene, the surfels (asset indices, up to the end
@@ -70,9 +100,10 @@ pub struct Pairing<'a> {
 /// each cell whose named surfel lies in it, the other surfel of the cell nearest its centre
 /// that faces the same way (within the fold's normal agreement) and that a wall parts from
 /// it: the segment between the two, each lifted [`LIFT_CELLS`] along its normal as the bake's
-/// splits test ([`crate::merge::split`]), hits a triangle. The side's plane is that triangle's
-/// line in the named surfel's plane (the segment's direction where the wall lies within about
-/// 6 degrees of that plane),
+/// splits test ([`crate::merge::split`]), hits a triangle, or where it does not, the segment
+/// lifted [`LOW_LIFT_CELLS`] hits a wall that leans over the surface ([`stands_off`], as
+/// [`mark_across`] tests). The side's plane is that triangle's line in the named surfel's
+/// plane (the segment's direction where the wall lies within about 6 degrees of that plane),
 /// kept only where it parts the two surfels by more than [`SEPARATION`] cells; a point beyond
 /// it reads the other surfel ([`SurfaceTerms::side_of`]).
 pub fn sides_of(
@@ -127,15 +158,26 @@ fn side_between(
     corner: Vec3,
     cell: f32,
 ) -> Option<SurfaceSide> {
-    let lift = LIFT_CELLS * cell;
     let at = |s: usize| {
         let s = &pairing.surfels[s];
         (Vec3::from(s.position), Vec3::from(s.normal))
     };
     let ((p0, n0), (p1, n1)) = (at(s0), at(s1));
-    let from = p0 + lift * n0;
-    let to = p1 + lift * n1 - from;
-    let hit = pairing.bvh.closest_hit(from, to, 1.0)?;
+    let segment = |lift: f32| {
+        let from = p0 + lift * n0;
+        (from, p1 + lift * n1 - from)
+    };
+    let lift = LIFT_CELLS * cell;
+    let (from, to) = segment(lift);
+    let (from, to, hit) = match pairing.bvh.closest_hit(from, to, 1.0) {
+        Some(hit) => (from, to, hit),
+        None => {
+            let (from, to) = segment(LOW_LIFT_CELLS * cell);
+            let hit = pairing.bvh.closest_hit(from, to, 1.0)?;
+            let triangle = &pairing.triangles[hit.triangle as usize];
+            stands_off(triangle, p0, n0, lift).then_some((from, to, hit))?
+        }
+    };
     let x = from + hit.t * to;
     let [a, b, c] = pairing.triangles[hit.triangle as usize];
     let wall = (b - a).cross(c - a).normalize_or_zero();
@@ -191,18 +233,70 @@ mod tests {
         let ceiling = square(|u, v| Vec3::new(u, 1.0, v));
         let partition = square(|u, v| Vec3::new(0.03, u, v));
         let hits = || [0.01, 0.02, 0.04, 0.09].map(|x| Hit::grey(0, Vec3::new(x, 1.0, 0.05), down));
-        let walled = SceneBvh::build(&[ceiling, partition].concat(), 1.0);
-        let mut h = hits();
-        mark_across(&mut h, &walled, Vec3::ZERO, 0.1);
-        assert_eq!(h.map(|h| h.across), [true, true, false, false]);
+        let across = |triangles: &[[Vec3; 3]]| {
+            let mut h = hits();
+            let bvh = SceneBvh::build(triangles, 1.0);
+            mark_across(&mut h, (&bvh, triangles), Vec3::ZERO, 0.1);
+            h.map(|h| h.across)
+        };
+        let walled = [ceiling, partition].concat();
+        assert_eq!(across(&walled), [true, true, false, false]);
         let through = partition.map(|t| t.map(|v| v + Vec3::X * 0.02));
-        let walled = SceneBvh::build(&[ceiling, through].concat(), 1.0);
-        let mut h = hits();
-        mark_across(&mut h, &walled, Vec3::ZERO, 0.1);
-        assert_eq!(h.map(|h| h.across), [true, true, true, false]);
-        let open = SceneBvh::build(&ceiling, 1.0);
-        let mut h = hits();
-        mark_across(&mut h, &open, Vec3::ZERO, 0.1);
-        assert!(h.iter().all(|h| !h.across));
+        assert_eq!(
+            across(&[ceiling, through].concat()),
+            [true, true, true, false]
+        );
+        assert_eq!(across(&ceiling), [false; 4]);
+    }
+
+    /// A facade at z = 0 with an awning that leaves it at y = 0.03 and slopes down outwards
+    /// (0.45 down per unit out), in the cell [0, 0.1]: a cell out, the awning is below every
+    /// hit, so only the low segment ([`LOW_LIFT_CELLS`]) parts the hits beneath it from the
+    /// cell's centre, and the two surfels get a side along the awning's line; relief shorter
+    /// than a cell parts nothing ([`stands_off`]).
+    #[test]
+    fn an_awning_over_the_cell_parts_the_hits_beneath_it() {
+        let out = Vec3::Z;
+        let facade = square(|u, v| Vec3::new(u, v, 0.0));
+        let awning = square(|u, v| {
+            let z = (v + 1.0) / 2.0;
+            Vec3::new(u, 0.03 - 0.45 * z, z)
+        });
+        let across = |triangles: &[[Vec3; 3]]| {
+            let mut h =
+                [0.01, 0.02, 0.04, 0.09].map(|y| Hit::grey(0, Vec3::new(0.05, y, 0.0), out));
+            let bvh = SceneBvh::build(triangles, 1.0);
+            mark_across(&mut h, (&bvh, triangles), Vec3::ZERO, 0.1);
+            h.map(|h| h.across)
+        };
+        assert_eq!(
+            across(&[facade, awning].concat()),
+            [true, true, false, false]
+        );
+        // Relief: a ridge lower than the low segment, and one above it but short of a cell.
+        for height in [0.005, 0.05] {
+            let ridge = square(|u, v| Vec3::new(u, 0.03, (v + 1.0) * height / 2.0));
+            assert_eq!(across(&[facade, ridge].concat()), [false; 4], "{height}");
+        }
+        // The surfels beneath and above the awning get a side along its line, y = 0.03.
+        let triangles = [facade, awning].concat();
+        let bvh = SceneBvh::build(&triangles, 1.0);
+        let surfel = |y: f32| Surfel {
+            position: [0.05, y, 0.0],
+            normal: out.to_array(),
+            ..Surfel::default()
+        };
+        let surfels = [surfel(0.06), surfel(0.015)];
+        let pairing = Pairing {
+            bvh: &bvh,
+            triangles: &triangles,
+            surfels: &surfels,
+            eligible: &[true, true],
+            merge_normal_cos: 0.9,
+        };
+        let side = side_between(&pairing, (0, 1), Vec3::ZERO, 0.1).expect("a side");
+        let n = Vec3::from(prt_format::surface::decode_normal(side.normal));
+        assert!(n.dot(Vec3::NEG_Y) > 0.999, "{n}");
+        assert!((side.offset + 0.03).abs() < 1e-3, "{}", side.offset);
     }
 }
