@@ -1,7 +1,7 @@
 // Stage 3 (multi-bounce only), one thread per surfel of a front-face brick: the irradiance of
 // the current volume at the surfel, through the engine's own lookup (`sample_irradiance`, bind
-// group 1: the same trilinear, validity- and depth-moment-weighted interpolation with the same
-// normal bias), turned into exitant radiance albedo / pi * damping * E. Stage 4 adds it to the
+// group 1: the same surface lookup at the same surface bias where the surfel has terms, the
+// volume's weights and normal bias elsewhere), turned into exitant radiance albedo / pi * damping * E. Stage 4 adds it to the
 // direct radiance, so each pass of the gather over the probes adds one bounce (twin of
 // CpuRelighter::relight_with, bounces > 1). Every front-face brick becomes dirty.
 

@@ -9,9 +9,11 @@
 // The textures hold SH premultiplied by each probe's validity (texture 0's alpha: 1 for a valid
 // or dilated probe and a grid point filled from a coarse level, 0 for an invalid one).
 //
-// Both functions sample at world_pos + normal * normal_bias (metres; RuntimeSettings::normal_bias
+// Both functions sample at world_pos + normal * normal_bias (metres; LookupSettings::normal_bias
 // in probe spacings): probes just behind a surface see its back faces, and moving the point off
-// the surface along its normal weights the probes in front more.
+// the surface along its normal weights the probes in front more. Where the point has a surfel's
+// terms, prt_sample_surface weights the probes at world_pos + normal * surface_bias instead
+// (LookupSettings::surface_bias): the surfel's probe mask already says which probes count.
 //
 // With depth moments (PrtVolumeInfo.flags, the default) the eight probes around the point are read
 // one by one and weighted, as DDGI does (Majercik et al., JCGT 2019), by
@@ -58,7 +60,8 @@ struct PrtVolumeInfo {
     sides_at: u32,
     // Pi times the sky's mean radiance: the irradiance a surfel's sky term of 1 adds.
     sky_irradiance: vec3<f32>,
-    _pad1: f32,
+    // Metres along the normal the surface lookup moves the point before weighting its probes.
+    surface_bias: f32,
 }
 
 // The interpolated probe SH at a point (validity-renormalised; zero where validity <= 1e-6) and
@@ -428,7 +431,7 @@ fn prt_sample_surface(world_pos: vec3<f32>, normal: vec3<f32>) -> PrtSurfaceSamp
     }
     let t = prt_volume.terms_at + PRT_TERMS_WORDS * found.x;
     let b = prt_volume.bricks_at + PRT_BRICK_WORDS * found.y;
-    let p = world_pos + normal * prt_volume.normal_bias;
+    let p = world_pos + normal * prt_volume.surface_bias;
     // The surfel's centre probe: its code's offset from its brick key's (prt_format::surfel_terms).
     let mask = prt_surface[t];
     let centre_code = max(mask >> PRT_TERMS_CENTRE_SHIFT, 1u) - 1u;

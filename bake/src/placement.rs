@@ -1,8 +1,8 @@
 //! Sparse placement: probes where surfaces need them, coarse levels in the open.
 //!
 //! A renderer samples the volume at surfaces. `sample_irradiance` moves the point along its
-//! normal by the normal bias (0.2 spacings by default) and reads the eight probes of the grid
-//! cell around it; the surface terms' lookup weights the same eight. A probe none of whose
+//! normal by the normal bias (0.2 spacings by default; the surface terms' lookup by its surface
+//! bias, 0.1) and reads the eight probes of the grid cell around it. A probe none of whose
 //! eight cells holds such a point is never read at a surface, yet on a uniform grid it costs as
 //! much as any other: in the air of an open level most probes are such probes (issue 32: a
 //! 200 x 200 x 40 m street at 1 m is 1.66 M probes, about 116 k of them beside surfaces).
@@ -29,9 +29,9 @@ use glam::Vec3;
 use prt_format::{tier, Grid, Probe, FILL_LEVEL_SHIFT, PROBE_FILLED};
 use rayon::prelude::*;
 
-/// Spacings beyond a grid point's cells within which a surface keeps it: covers the lookup's
-/// default normal bias (0.2 spacings, `prt_runtime::LookupSettings::normal_bias`) with room to
-/// spare. A surface point sampled with a larger bias can land in a cell whose far corners were
+/// Spacings beyond a grid point's cells within which a surface keeps it: covers the lookups'
+/// default biases (0.2 spacings, `prt_runtime::LookupSettings::normal_bias`, and 0.1,
+/// `surface_bias`) with room to spare. A surface point sampled with a larger bias can land in a cell whose far corners were
 /// not traced: they are filled from a coarse level (or, inside geometry, weigh 0).
 pub const REACH: f32 = 0.25;
 

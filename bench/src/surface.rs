@@ -82,7 +82,8 @@ pub struct SurfaceArgs {
     #[arg(long, default_value = ".")]
     root: PathBuf,
     /// Normal offset of every lookup in probe spacings [default: each lookup's own; the
-    /// runtime's is 0.2].
+    /// runtime's is 0.2]; the surface lookup (`default`, `surfels`) weighs its probes at
+    /// `LookupSettings::surface_bias` (0.1) instead, the bias the bake's sky terms take.
     #[arg(long)]
     normal_bias: Option<f32>,
     /// Near-field reach of the ray lookups that have one (rays, rays_light) in probe spacings

@@ -50,7 +50,8 @@ pub struct SurfelLookup<'a> {
 
 impl<'a> SurfelLookup<'a> {
     /// The surfel lookup of `asset` relit to `sh`, its bricks' relit radiance in `near`; the
-    /// trilinear weights and the fallback take `lookup`'s normal bias.
+    /// trilinear weights take `lookup`'s surface bias (as the runtime's surface lookup) and the
+    /// fallback its normal bias.
     pub fn new(
         asset: &'a Asset,
         sh: &'a [ShRgb],
@@ -59,6 +60,7 @@ impl<'a> SurfelLookup<'a> {
     ) -> Self {
         let trilinear = LookupSettings {
             depth_moments: false,
+            normal_bias: lookup.surface_bias,
             ..*lookup
         };
         let fallback = LookupSettings {

@@ -80,8 +80,10 @@ pub struct RenderArgs {
     /// back into the surfels once).
     #[arg(long, default_value_t = 1)]
     bounces: u32,
-    /// Move indirect lookups this many probe spacings along the surface normal [default: the
-    /// runtime's].
+    /// Move indirect lookups of the probe volume this many probe spacings along the surface
+    /// normal [default: the runtime's, 0.2; points with a surfel's terms take the surface
+    /// lookup's, `LookupSettings::surface_bias`, but for its fallback where the surfel sees none
+    /// of its probes].
     #[arg(long, allow_hyphen_values = true)]
     normal_bias: Option<f32>,
     /// Indirect light by plain trilinear interpolation, without the Chebyshev test against the
@@ -129,6 +131,7 @@ fn job_of(args: RenderArgs) -> Result<RenderJob> {
             depth_moments: !args.no_depth_moments,
             surface_terms: !args.no_surface_terms,
             sky_terms: !args.no_sky_terms,
+            ..prt_runtime::LookupSettings::default()
         },
         bounces: prt_runtime::gpu::Bounces::Fixed(args.bounces),
         ..RuntimeSettings::default()

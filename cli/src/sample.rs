@@ -28,8 +28,10 @@ pub struct SampleArgs {
     json: PathBuf,
     #[arg(long, value_enum, default_value = "cpu")]
     backend: Backend,
-    /// Move each point this many probe spacings along its normal before sampling [default: the
-    /// runtime's, 0.2].
+    /// Move each point this many probe spacings along its normal before sampling the probe
+    /// volume [default: the runtime's, 0.2]; a point with a surfel's terms weighs its probes at
+    /// the surface lookup's bias instead (`LookupSettings::surface_bias`, 0.1: the bake's), but
+    /// for its fallback where its surfel sees none of them.
     #[arg(long, allow_hyphen_values = true)]
     normal_bias: Option<f32>,
     /// Plain trilinear interpolation: no Chebyshev test against the probes' depth moments.
@@ -61,6 +63,7 @@ pub fn run(args: SampleArgs) -> Result<()> {
             depth_moments: !args.no_depth_moments,
             surface_terms: !args.no_surface_terms,
             sky_terms: !args.no_sky_terms,
+            ..LookupSettings::default()
         },
         ..RuntimeSettings::default()
     };

@@ -233,7 +233,7 @@ pub struct Params {
 const _: () = assert!(std::mem::size_of::<Params>() == 128);
 
 /// The uniform of the engine-side sampling snippet (`PrtVolumeInfo` in
-/// `shaders/sample_irradiance.wgsl`): the grid the volume covers and the sampling bias.
+/// `shaders/sample_irradiance.wgsl`): the grid the volume covers and the sampling biases.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 #[repr(C)]
 pub struct VolumeInfo {
@@ -271,7 +271,9 @@ pub struct VolumeInfo {
     /// surfel's sky term of 1 adds (`prt_format::surface::sky_term`); set by every update
     /// whose sky changed.
     pub sky_irradiance: [f32; 3],
-    pub _pad1: f32,
+    /// Metres along the normal the surface lookup moves a point before weighting its probes
+    /// (`LookupSettings::surface_bias`; `prt_sample_surface`).
+    pub surface_bias: f32,
 }
 const _: () = assert!(std::mem::size_of::<VolumeInfo>() == 112);
 
@@ -360,7 +362,7 @@ impl From<&prt_format::Grid> for VolumeInfo {
             sky_at: 0,
             sides_at: 0,
             sky_irradiance: [0.0; 3],
-            _pad1: 0.0,
+            surface_bias: 0.0,
         }
     }
 }

@@ -12,7 +12,8 @@
 //!    bake left to the coarse levels are filled from it ([`crate::fill`]).
 //! 5. **Bounces** (optional, `bounces > 1`): surfels also receive the irradiance of the probe
 //!    volume from the previous iteration, sampled at the surfel with its normal through the
-//!    engine's lookup (`sample_irradiance`: normal bias, validity and depth-moment weights), and
+//!    engine's lookup (`sample_irradiance`: the surface lookup at its surface bias where the
+//!    surfel has terms, else the normal bias, validity and depth-moment weights), and
 //!    steps 2-4 repeat. `bounces = 1` is the one-bounce contract of
 //!    docs/conventions.md section 5, exactly when the bake did not merge surfels and kept them
 //!    in f32 (the exact preset).

@@ -47,8 +47,9 @@ impl Bounces {
 /// volume up at a surface point.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LookupSettings {
-    /// How far the sampling snippet moves a point along its normal before sampling, in probe
-    /// spacings (relative to the scene, so one value suits every grid;
+    /// How far the probe volume's lookup (points without a surfel's terms, and the surface
+    /// lookup's fallback where a surfel sees none of its probes) moves a point along its
+    /// normal before sampling, in probe spacings (relative to the scene, so one value suits every grid;
     /// `PrtRuntime::volume_info` turns it into metres). Probes just behind a surface see its
     /// back faces: they are invalid or dark, and a point sampled on the surface still gives
     /// them trilinear weight (self-shadowing, and light leaking through thin walls from probes
@@ -61,6 +62,19 @@ pub struct LookupSettings {
     /// leaking at 0.2 against 16 at 0.1, mean error 16.3% against 19.4%; the Cornell room
     /// 4.05% against 3.7%).
     pub normal_bias: f32,
+    /// The normal bias of the surface lookup ([`crate::surface`]: points with a surfel's
+    /// terms), in probe spacings. There the surfel's mask of the probes it sees decides which
+    /// probes count, so the bias no longer has to carry a point past a wall and only moves
+    /// the point off the lighting it is sampled for. Default 0.1 (stop 69, `prt-bench surface
+    /// --lookup default`, against 0.2, the volume's): tuning seeds' median / worst level 5.55 /
+    /// 7.27% -> 5.31 / 7.19%, held-out 5.12 / 7.23% -> 4.83 / 7.01%, the bundled Cornell room,
+    /// two rooms and thick walls 2.81 / 3.90 / 2.57% -> 2.57 / 3.59 / 2.31%; Sponza under the
+    /// sun 14.47% -> 14.49% (11.43% -> 11.83% at half the spacing, 3 -> 5 of 284 leaking there),
+    /// with its 31 lights 10.44% -> 10.71% (docs/results/surface_stop69.md). The fallback
+    /// where a surfel sees none of its probes keeps `normal_bias`.
+    /// The bake interpolates the probes' sky at the same bias
+    /// (`prt_bake::sky_terms::SURFACE_BIAS`, which must equal this default).
+    pub surface_bias: f32,
     /// Weight each probe by DDGI's Chebyshev test against its depth moments (the mean and
     /// deviation of its hit distances per direction, `prt_format::depth`; see
     /// `shaders/sample_irradiance.wgsl`): no light through walls from probes on their far side,
@@ -85,6 +99,7 @@ impl Default for LookupSettings {
     fn default() -> Self {
         LookupSettings {
             normal_bias: 0.2,
+            surface_bias: 0.1,
             depth_moments: true,
             surface_terms: true,
             sky_terms: true,

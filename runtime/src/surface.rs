@@ -193,7 +193,7 @@ pub struct SurfaceSampler<'a> {
 impl<'a> SurfaceSampler<'a> {
     /// The lookup of `asset` relit to `sh` (per probe) and surfel radiance `radiance`
     /// (`crate::Relit::surfel_radiance`) under a sky of mean radiance `sky`
-    /// (`crate::Relit::sky`); the trilinear weights take `lookup`'s normal bias, and the
+    /// (`crate::Relit::sky`); the trilinear weights take `lookup`'s surface bias, and the
     /// fallback is `lookup` itself.
     pub fn new(
         asset: &'a Asset,
@@ -204,6 +204,7 @@ impl<'a> SurfaceSampler<'a> {
     ) -> Self {
         let trilinear = LookupSettings {
             depth_moments: false,
+            normal_bias: lookup.surface_bias,
             ..*lookup
         };
         SurfaceSampler {
@@ -281,7 +282,15 @@ impl<'a> SurfaceSampler<'a> {
             }
         });
         if !seen.get() {
-            out = self.fallback.sample(position, normal);
+            // The fallback weighs the corners of the point moved by the volume's normal bias,
+            // which may be others than the surface bias's: explain those.
+            if EXPLAIN {
+                probes.borrow_mut().clear();
+            }
+            out = self.fallback.sample_weighted(position, normal, |i, at| {
+                record(i, at, None);
+                1.0
+            });
         }
         let probes_irradiance = out.irradiance;
         let (open, all) = terms.open_and_cosine(st.header.rays);

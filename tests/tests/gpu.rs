@@ -728,7 +728,7 @@ fn sample_queries(asset: &Asset, count: usize) -> Vec<([f32; 3], [f32; 3])> {
     out
 }
 
-/// `sample_points` (the real snippet on the GPU, default normal bias) equals its CPU twin
+/// `sample_points` (the real snippet on the GPU, default biases and the two set apart) equals its CPU twin
 /// `SurfaceSampler` over the same probe SH at a few hundred points of the Cornell reference bake,
 /// including points between valid and invalid probes, and at a few hundred surfels (where the
 /// surface terms decide; near fields lit by the CPU relight; the sky terms under the rig's
@@ -758,6 +758,17 @@ fn sample_points_matches_the_cpu_sampler() {
         let mixed = compare_samplers(&device, &queue, &asset, &lighting, settings);
         assert!(mixed > 0, "no point beside a probe inside geometry");
     }
+    // The surface lookup weighs its probes at its own bias, the volume at the normal bias: set
+    // apart (and the other way round from the defaults), the GPU reads each where the CPU does.
+    let settings = RuntimeSettings {
+        lookup: LookupSettings {
+            normal_bias: 0.05,
+            surface_bias: 0.3,
+            ..LookupSettings::default()
+        },
+        ..RuntimeSettings::default()
+    };
+    compare_samplers(&device, &queue, &asset, &lighting, settings);
     // Sparse placement: depth moments in slot order, points beside grid points left out and
     // filled from a coarse level (no depth moments: the facing term alone).
     let sparse = BakeSettings {

@@ -547,13 +547,13 @@ fn the_sky_term_gives_a_surface_its_own_sky() {
     );
 }
 
-/// The bake interpolates the probes' sky where the lookup reads them: at the runtime's
-/// default normal bias (`prt_bake::sky_terms::NORMAL_BIAS`).
+/// The bake interpolates the probes' sky where the lookup reads them: at the surface lookup's
+/// default bias (`prt_bake::sky_terms::SURFACE_BIAS`).
 #[test]
 fn the_sky_terms_take_the_lookups_bias() {
     assert_eq!(
-        prt_bake::sky_terms::NORMAL_BIAS,
-        LookupSettings::default().normal_bias
+        prt_bake::sky_terms::SURFACE_BIAS,
+        LookupSettings::default().surface_bias
     );
 }
 

@@ -14,7 +14,7 @@
 //!
 //! - `T`: the probes' sky transfer (`Asset::sky_transfer`: what a sky of radiance 1 adds to a
 //!   probe's SH), interpolated at the surfel with the lookup's weights (trilinear at the
-//!   surfel moved [`NORMAL_BIAS`] spacings along its normal, a probe the surfel does not see
+//!   surfel moved [`SURFACE_BIAS`] spacings along its normal, a probe the surfel does not see
 //!   weighted `BLOCKED_WEIGHT`, a filled grid point its coarse level's as the runtime fills
 //!   it); `clamp(open . T, 0, A(n) . T)` is what the lookup's escaping near-field rays bring of
 //!   that sky (the same clamp);
@@ -141,10 +141,10 @@ pub const SHRINK: f32 = 1.0;
 /// under a small skylight). Module docs: what chose it.
 pub const SHRINK_DARKER: f32 = 0.5;
 
-/// The runtime lookup's default normal bias in spacings (`prt_runtime::LookupSettings`;
-/// `tests/tests/surface_terms.rs` checks that they agree): where the sky transfer is
-/// interpolated.
-pub const NORMAL_BIAS: f32 = 0.2;
+/// The surface lookup's default bias in spacings (`prt_runtime::LookupSettings::
+/// surface_bias`; `tests/tests/surface_terms.rs` checks that they agree): where the sky
+/// transfer is interpolated.
+pub const SURFACE_BIAS: f32 = 0.1;
 
 /// The asset's sky terms, two halves a word (empty when it has no surface terms): every traced
 /// surfel's view over [`SKY_RAYS`] rays, pooled; the surfels of groups whose term is then
@@ -283,10 +283,12 @@ impl View {
 }
 
 /// The probes' sky transfer interpolated at surfel `s` with the lookup's weights: trilinear at
-/// the surfel moved [`NORMAL_BIAS`] spacings along its normal, times each probe's sample
-/// weight, a probe the surfel does not see times `BLOCKED_WEIGHT`; plain trilinear when it
-/// sees none of them (the lookup's fallback, less its depth moments). Zero where no probe has
-/// weight.
+/// the surfel moved [`SURFACE_BIAS`] spacings along its normal, times each probe's sample
+/// weight, a probe the surfel does not see times `BLOCKED_WEIGHT`; plain trilinear at the
+/// same point when it sees none of them (the lookup falls back to the volume's lookup there,
+/// which adds depth moments and weighs the corners of the point moved by the volume's normal
+/// bias, 0.2 spacings: the two can read different corners for such a surfel). Zero where no
+/// probe has weight.
 fn interpolated_transfer(
     asset: &Asset,
     transfer: &[[f32; SH_COUNT]],
@@ -296,7 +298,7 @@ fn interpolated_transfer(
     let terms = &asset.surface.surfels[s];
     let grid = &asset.header.grid;
     let n = terms.normal();
-    let at = Vec3::from(asset.surfels[s].position) + Vec3::from(n) * NORMAL_BIAS * grid.spacing;
+    let at = Vec3::from(asset.surfels[s].position) + Vec3::from(n) * SURFACE_BIAS * grid.spacing;
     let mut seen = false;
     // Per corner: grid point, plain weight, masked weight.
     let mut corners: Vec<(usize, f32, f32)> = Vec::with_capacity(8);

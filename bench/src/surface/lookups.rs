@@ -10,7 +10,8 @@ use super::cases::Set;
 use crate::ray_lookup::RaySettings;
 
 /// What samples the volume: the runtime's lookup with `Lookup::settings`, or a reference of
-/// issue 31 that traces rays (its trilinear weights take `Lookup::settings`' normal bias).
+/// issue 31 that traces rays (its trilinear weights take `Lookup::settings`' normal bias; the
+/// masked weights of `surfels` its surface bias, as the runtime's surface lookup).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Kind {
     /// `prt_runtime::surface::SurfaceSampler` (the volume's `VolumeSampler` where the surface
@@ -151,14 +152,15 @@ impl Lookup {
             ),
             Kind::Runtime if s.surface_terms => format!(
                 "{}: the bake's surface terms where the point has a surfel (which probes it \
-                 sees, its near field, {}; prt_runtime::surface), {} elsewhere, normal bias \
-                 {bias} spacings",
+                 sees, its near field, {}; prt_runtime::surface; its probes weighed {} \
+                 spacings off the surface), {} elsewhere, normal bias {bias} spacings",
                 self.name,
                 if s.sky_terms {
                     "its sky term"
                 } else {
                     "no sky term"
                 },
+                s.surface_bias,
                 if s.depth_moments {
                     "depth moments"
                 } else {
@@ -207,8 +209,9 @@ impl Lookup {
             Kind::Surfels => format!(
                 "{}: rays_light's visibility and near field decided per surfel, as a bake would \
                  store them (the point's nearest surfel of its normal's nearest brick; none: the \
-                 default lookup), normal bias {bias} spacings (bench/src/surfel_lookup.rs)",
-                self.name
+                 default lookup), its probes weighed {} spacings off the surface, normal bias \
+                 {bias} spacings (bench/src/surfel_lookup.rs)",
+                self.name, s.surface_bias
             ),
         }
     }

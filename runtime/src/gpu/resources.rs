@@ -429,6 +429,7 @@ pub fn volume_info(asset: &Asset, settings: &RuntimeSettings) -> VolumeInfo {
     }) | if surface { VOLUME_SURFACE } else { 0 };
     VolumeInfo {
         normal_bias: settings.lookup.normal_bias * grid.spacing,
+        surface_bias: settings.lookup.surface_bias * grid.spacing,
         flags,
         surface_anchor: t.header.anchor,
         brick_size: t.header.brick_size,

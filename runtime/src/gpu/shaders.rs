@@ -350,6 +350,10 @@ pub(crate) mod tests {
                     ("spacing", offset_of!(contract::VolumeInfo, spacing)),
                     ("counts", offset_of!(contract::VolumeInfo, counts)),
                     ("normal_bias", offset_of!(contract::VolumeInfo, normal_bias)),
+                    (
+                        "surface_bias",
+                        offset_of!(contract::VolumeInfo, surface_bias),
+                    ),
                     ("step", offset_of!(contract::VolumeInfo, step)),
                     ("flags", offset_of!(contract::VolumeInfo, flags)),
                     (
