@@ -120,7 +120,9 @@ fn light(sh: &ShRgb, t: &[f32; SH_COUNT]) -> [f32; 3] {
 pub struct Explanation {
     /// The surfel, or `None`: the probe volume's lookup (depth moments) alone.
     pub surfel: Option<SurfelStep>,
-    /// The probes around the point with a positive trilinear and probe weight.
+    /// The probes around the point with a positive trilinear and probe weight (with a surfel,
+    /// around the point moved by the surface bias, even where the surfel sees none of them and
+    /// the volume's lookup reads the corners of its own bias).
     pub probes: Vec<ProbeStep>,
     /// The probes' weighted irradiance on the point's normal, before the near field and sky.
     pub probes_irradiance: [f32; 3],
@@ -282,15 +284,9 @@ impl<'a> SurfaceSampler<'a> {
             }
         });
         if !seen.get() {
-            // The fallback weighs the corners of the point moved by the volume's normal bias,
-            // which may be others than the surface bias's: explain those.
-            if EXPLAIN {
-                probes.borrow_mut().clear();
-            }
-            out = self.fallback.sample_weighted(position, normal, |i, at| {
-                record(i, at, None);
-                1.0
-            });
+            // The volume's lookup weighs the corners of the point moved by its own normal bias,
+            // which may be others than those listed (`Explanation::probes`).
+            out = self.fallback.sample(position, normal);
         }
         let probes_irradiance = out.irradiance;
         let (open, all) = terms.open_and_cosine(st.header.rays);
