@@ -62,6 +62,9 @@ struct PrtVolumeInfo {
     sky_irradiance: vec3<f32>,
     // Metres along the normal the surface lookup moves the point before weighting its probes.
     surface_bias: f32,
+    // The surface lookup's floor under L2's ringing: a share of the non-linear L1 model's
+    // irradiance (prt_irradiance_l1_nonlinear) times the share of near-field rays that escape.
+    ringing_floor: f32,
 }
 
 // The interpolated probe SH at a point (validity-renormalised; zero where validity <= 1e-6) and
@@ -267,6 +270,27 @@ fn prt_irradiance(c: array<vec3<f32>, 9>, n: vec3<f32>) -> vec3<f32> {
     return max(e, vec3<f32>(0.0));
 }
 
+// Irradiance on unit normal n from the L0 and L1 of c alone by Enlighten's non-linear model
+// (twin: prt_format::sh::irradiance_l1_nonlinear): E0 (a + (1 - a) (p + 1) q^p), E0 the mean
+// irradiance, r = |c1| / (sqrt(3) c0), q = (1 + cos) / 2 on the angle to c1, p = 1 + 2r,
+// a = (1 - r) / (1 + r). Never negative; 0 where c0 <= 0.
+fn prt_irradiance_l1_nonlinear(c: array<vec3<f32>, 9>, n: vec3<f32>) -> vec3<f32> {
+    // Per colour channel: L1 along x, y, z is c[3], c[1], c[2].
+    let c0 = c[0];
+    let len = sqrt(c[3] * c[3] + c[1] * c[1] + c[2] * c[2]);
+    let along = c[3] * n.x + c[1] * n.y + c[2] * n.z;
+    let positive = c0 > vec3<f32>(0.0);
+    let r = min(len / (sqrt(3.0) * select(vec3<f32>(1.0), c0, positive)), vec3<f32>(1.0));
+    let directed = len > vec3<f32>(0.0);
+    let cos_n = select(vec3<f32>(0.0), along / select(vec3<f32>(1.0), len, directed), directed);
+    // Not 0: pow(0, p) is exp2(p log2 0), which WGSL leaves undefined.
+    let q = clamp(0.5 * (1.0 + cos_n), vec3<f32>(1e-20), vec3<f32>(1.0));
+    let p = 1.0 + 2.0 * r;
+    let a = (1.0 - r) / (1.0 + r);
+    let e = PRT_A0 * PRT_SH_Y00 * c0 * (a + (1.0 - a) * (p + 1.0) * pow(q, p));
+    return select(vec3<f32>(0.0), e, positive);
+}
+
 
 // ---- The surface lookup (twin: prt_runtime::surface::SurfaceSampler) ----
 //
@@ -277,7 +301,9 @@ fn prt_irradiance(c: array<vec3<f32>, 9>, n: vec3<f32>) -> vec3<f32> {
 // irradiance by (clamp(open . L, 0, A(n_s) . L) + hits / rays * near) / (A(n_s) . L) per
 // channel: open the mean SH basis of its near-field rays that escape (held to what the whole
 // hemisphere brings: L2 ringing can exceed it), near its near group's relit radiance per hit, A
-// the clamped-cosine transfer of the surfel's normal; then add the surfel's sky term (the sky it
+// the clamped-cosine transfer of the surfel's normal; raise it to ringing_floor times the
+// escaping share of the non-linear L1 irradiance (L2 rings below 0 behind a bright lobe, a
+// dark room's probes looking through its door); then add the surfel's sky term (the sky it
 // sees less the sky its probes bring it) times pi times the sky's mean radiance, clamped at 0.
 // A point without one gets prt_sample_sh.
 
@@ -476,6 +502,11 @@ fn prt_sample_surface(world_pos: vec3<f32>, normal: vec3<f32>) -> PrtSurfaceSamp
     let escaping = min(max(lo, vec3<f32>(0.0)), max(all_l, vec3<f32>(0.0)));
     let ratio = max((escaping + share * near) / all_l, vec3<f32>(0.0));
     out.irradiance = select(out.irradiance, out.irradiance * ratio, all_l > vec3<f32>(0.0));
+    // The floor under L2's ringing (twin: prt_runtime::surface::floor_ringing).
+    let ringing = prt_volume.ringing_floor * escape_share;
+    if ringing > 0.0 {
+        out.irradiance = max(out.irradiance, ringing * prt_irradiance_l1_nonlinear(s.sh, normal));
+    }
     if any(prt_volume.sky_irradiance != vec3<f32>(0.0)) {
         let sky = unpack2x16float(prt_surface[prt_volume.sky_at + found.x / 2u])[found.x % 2u];
         out.irradiance = max(out.irradiance + sky * prt_volume.sky_irradiance, vec3<f32>(0.0));

@@ -5,8 +5,8 @@
 //! the point's own sky light is added back: `rays` cosine-distributed rays from the point, pi /
 //! `rays` times the sky's radiance along those that leave the scene (any sky, as the `path`
 //! lookup reads it). The subtraction goes through the lookup's clamps (the near field's
-//! `clamp(open . L, 0, A(n) . L)`, irradiance at least 0), so it is exact only where they do
-//! not bind.
+//! `clamp(open . L, 0, A(n) . L)`, irradiance at least 0, and since stop 70 the floor under
+//! L2's ringing), so it is exact only where they do not bind.
 //!
 //! What it is for: probes a spacing from a point see more or less of a bright sky than the
 //! point does (a wall under an overhang, a cave's skylight, a gallery's ceiling beside an open

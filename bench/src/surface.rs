@@ -95,6 +95,10 @@ pub struct SurfaceArgs {
     /// and `surfel_gather` [default: 512], and per point of `sky_point` [default: 4096].
     #[arg(long)]
     path_rays: Option<u32>,
+    /// The surface lookup's floor under L2's ringing, a share of the non-linear L1 model's
+    /// irradiance (`LookupSettings::ringing_floor`; 0: off) [default: the runtime's, 0.15].
+    #[arg(long)]
+    ringing_floor: Option<f32>,
     /// Bake at this spacing in metres instead of the default, and at half of it (unless
     /// `--no-half`) [default: the bake's default for each case].
     #[arg(long)]
@@ -186,6 +190,12 @@ pub fn run(args: SurfaceArgs) -> Result<()> {
             "--reach {reach}: expected a finite number of probe spacings > 0"
         );
     }
+    if let Some(floor) = args.ringing_floor {
+        anyhow::ensure!(
+            floor.is_finite() && floor >= 0.0,
+            "--ringing-floor {floor}: expected a finite share >= 0"
+        );
+    }
     anyhow::ensure!(
         args.path_rays != Some(0),
         "--path-rays 0: expected at least one ray per point"
@@ -194,6 +204,7 @@ pub fn run(args: SurfaceArgs) -> Result<()> {
         normal_bias: bias,
         reach: args.reach,
         path_rays: args.path_rays,
+        ringing_floor: args.ringing_floor,
     };
     let lookups = Lookups::parse(&args.lookups, overrides)?;
     let picked = cases::pick(&args.cases, cases::all(&args.root)?)?;

@@ -146,7 +146,7 @@ fn explanation_line(e: &Explanation) -> String {
             };
             format!(
                 "E {e_out:.4e}: surfel {} (normal agreement {:.2}), sees {seen} of {} probes \
-                 (their E {probes:.4e}{}), near field {}/{} hits keeps {:.0}%, sky term {:+.4}",
+                 (their E {probes:.4e}{}), near field {}/{} hits keeps {:.0}%{}, sky term {:+.4}",
                 s.index,
                 s.agreement,
                 e.probes.len(),
@@ -158,6 +158,12 @@ fn explanation_line(e: &Explanation) -> String {
                 s.near_hits,
                 s.near_rays,
                 100.0 * kept,
+                match (0..3).any(|c| s.ringing_floor[c] > 0.0
+                    && s.ringing_floor[c] >= s.near_field_irradiance[c])
+                {
+                    true => " (the ringing floor)",
+                    false => "",
+                },
                 s.sky_term
             )
         }
@@ -180,6 +186,7 @@ fn explanation_json(e: &Explanation) -> Value {
             "escaping": s.escaping,
             "hemisphere": s.hemisphere,
             "near": s.near,
+            "ringing_floor": s.ringing_floor,
             "near_field_irradiance": s.near_field_irradiance,
             "sky_term": s.sky_term,
         })

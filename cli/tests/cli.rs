@@ -486,6 +486,7 @@ fn sample_explains_each_point() {
         "near_hits",
         "escaping",
         "near",
+        "ringing_floor",
         "sky_term",
     ] {
         assert!(!floor["surfel"][key].is_null(), "{key}: {floor}");

@@ -132,6 +132,36 @@ pub fn hanning_window(c: &ShRgb, width: f32) -> ShRgb {
     out
 }
 
+/// Irradiance on a surface of unit normal `n` from the L0 and L1 coefficients of `c` alone,
+/// by the non-linear model of Enlighten (G. Hazel and C. Doran; G. Hazel, "Converting SH
+/// radiance to irradiance", 2017): `E0 (a + (1 - a) (p + 1) q^p)` with `E0 = pi Y00 c0` the
+/// mean irradiance, `r = |c1| / (sqrt(3) c0)` in [0, 1] how directional the light is (1: from
+/// one direction), `q = (1 + cos) / 2` on the angle to `c1`'s direction, `p = 1 + 2r` and
+/// `a = (1 - r) / (1 + r)`. It keeps the mean (`E0`) and, for small `r`, the linear term
+/// `2 r E0 cos` of L1, and is never negative where the radiance is not: what the surface
+/// lookup floors L2's ringing with (`prt_runtime::surface`). A channel with `c0 <= 0` gives 0.
+pub fn irradiance_l1_nonlinear(c: &ShRgb, n: [f32; 3]) -> [f32; 3] {
+    std::array::from_fn(|ch| {
+        let c0 = c[0][ch];
+        if c0.is_nan() || c0 <= 0.0 {
+            return 0.0;
+        }
+        // L1 along x, y, z (coefficients 3, 1, 2: docs/conventions.md section 2).
+        let v = [c[3][ch], c[1][ch], c[2][ch]];
+        let len = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        let r = (len / (3f32.sqrt() * c0)).min(1.0);
+        let cos = match len > 0.0 {
+            true => (v[0] * n[0] + v[1] * n[1] + v[2] * n[2]) / len,
+            false => 0.0,
+        };
+        // Not 0: pow(0, p) is exp2(p log2 0) on a GPU, which WGSL leaves undefined.
+        let q = (0.5 * (1.0 + cos)).clamp(1e-20, 1.0);
+        let p = 1.0 + 2.0 * r;
+        let a = (1.0 - r) / (1.0 + r);
+        PI * Y00 * c0 * (a + (1.0 - a) * (p + 1.0) * q.powf(p))
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -144,6 +174,38 @@ mod tests {
             accumulate(&mut acc, d, w, f(d));
         }
         acc
+    }
+
+    /// The non-linear L1 model: exact for uniform light, never negative, and for a light
+    /// from one direction 0 straight behind it where the linear L1 model gives `-E0`.
+    #[test]
+    fn nonlinear_l1_irradiance_is_non_negative_and_keeps_the_mean() {
+        let uniform = constant([0.2, 0.3, 0.5]);
+        let e = irradiance_l1_nonlinear(&uniform, [0.0, 0.0, 1.0]);
+        assert!((e[1] - PI * 0.3).abs() < 1e-5, "{e:?}");
+        let mut lobe = [[0.0; 3]; SH_COUNT];
+        let d = [0.6, 0.0, -0.8];
+        accumulate(&mut lobe, d, 1.0, [1.0, 1.0, 1.0]);
+        let behind = irradiance_l1_nonlinear(&lobe, [-0.6, 0.0, 0.8]);
+        assert!(behind[0].abs() < 1e-6, "{behind:?}");
+        let facing = irradiance_l1_nonlinear(&lobe, d)[0];
+        assert!(
+            (facing - 1.0).abs() < 1e-5,
+            "a unit light head on: {facing}"
+        );
+        // A lobe over an ambient floor: non-negative everywhere, its mean over the sphere E0.
+        let mut field = project(4096, |_| [0.05; 3]);
+        accumulate(&mut field, d, 1.0, [1.0; 3]);
+        let dirs = fibonacci_directions(4096);
+        let mean = dirs
+            .iter()
+            .map(|&n| irradiance_l1_nonlinear(&field, n)[0])
+            .inspect(|&e| assert!(e >= 0.0))
+            .sum::<f32>()
+            / dirs.len() as f32;
+        let e0 = PI * Y00 * field[0][0];
+        assert!((mean - e0).abs() < 1e-3 * e0, "mean {mean} against {e0}");
+        assert_eq!(irradiance_l1_nonlinear(&[[0.0; 3]; SH_COUNT], d), [0.0; 3]);
     }
 
     #[test]

@@ -237,6 +237,13 @@ impl SurfelTerms {
         self.normal_hits >> HITS_AT
     }
 
+    /// The share of its `rays` near-field rays that escape, `(rays - hits) / rays` (as
+    /// `prt_sample_surface` computes it; at least one ray).
+    pub fn escaping_share(&self, rays: u32) -> f32 {
+        let n = rays.max(1) as f32;
+        (n - self.hits() as f32) / n
+    }
+
     /// The near group, counted from its key's first brick's first group.
     pub fn group(&self) -> u32 {
         self.group_open & 0xff
@@ -252,9 +259,8 @@ impl SurfelTerms {
     /// docs): the escaping share `e`, the bound per unit of range `min(e, 1 - e) + 1 / rays`,
     /// and `A(n)` at the decoded normal.
     fn open_frame(&self, rays: u32) -> (f32, f32, [f32; SH_COUNT]) {
-        let n = rays.max(1) as f32;
-        let escaping = (n - self.hits() as f32) / n;
-        let bound = escaping.min(1.0 - escaping) + 1.0 / n;
+        let escaping = self.escaping_share(rays);
+        let bound = escaping.min(1.0 - escaping) + 1.0 / rays.max(1) as f32;
         (escaping, bound, cosine_transfer(self.normal()))
     }
 

@@ -274,8 +274,12 @@ pub struct VolumeInfo {
     /// Metres along the normal the surface lookup moves a point before weighting its probes
     /// (`LookupSettings::surface_bias`; `prt_sample_surface`).
     pub surface_bias: f32,
+    /// The surface lookup's floor under L2's ringing (`LookupSettings::ringing_floor`, a
+    /// share of the non-linear L1 model's irradiance; `prt_sample_surface`).
+    pub ringing_floor: f32,
+    pub _pad: [u32; 3],
 }
-const _: () = assert!(std::mem::size_of::<VolumeInfo>() == 112);
+const _: () = assert!(std::mem::size_of::<VolumeInfo>() == 128);
 
 /// `VolumeInfo::flags`: weight probes by their depth moments (`LookupSettings::depth_moments`).
 pub const VOLUME_DEPTH_MOMENTS: u32 = 1;
@@ -363,6 +367,8 @@ impl From<&prt_format::Grid> for VolumeInfo {
             sides_at: 0,
             sky_irradiance: [0.0; 3],
             surface_bias: 0.0,
+            ringing_floor: 0.0,
+            _pad: [0; 3],
         }
     }
 }

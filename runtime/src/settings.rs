@@ -75,6 +75,15 @@ pub struct LookupSettings {
     /// The bake interpolates the probes' sky at the same bias
     /// (`prt_bake::sky_terms::SURFACE_BIAS`, which must equal this default).
     pub surface_bias: f32,
+    /// The surface lookup's floor under L2's ringing ([`crate::surface::floor_ringing`]): a
+    /// point with a surfel reads, before its sky term, at least this share of the non-linear
+    /// L1 model's irradiance of its probes (`prt_format::sh::irradiance_l1_nonlinear`), times
+    /// the share of its
+    /// near-field rays that escape. A dark room's probes that see the lit room through its
+    /// door ring L2 below 0 behind that lobe, and points on the door's wall read 0 (stop 69's
+    /// blind interior_220). Default 0.15 (stop 70, `prt-bench surface --ringing-floor`,
+    /// docs/results/surface_stop70.md); 0: off.
+    pub ringing_floor: f32,
     /// Weight each probe by DDGI's Chebyshev test against its depth moments (the mean and
     /// deviation of its hit distances per direction, `prt_format::depth`; see
     /// `shaders/sample_irradiance.wgsl`): no light through walls from probes on their far side,
@@ -100,6 +109,7 @@ impl Default for LookupSettings {
         LookupSettings {
             normal_bias: 0.2,
             surface_bias: 0.1,
+            ringing_floor: 0.15,
             depth_moments: true,
             surface_terms: true,
             sky_terms: true,

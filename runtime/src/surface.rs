@@ -25,7 +25,11 @@
 //!    field blocks, a sunlit court behind a parapet, spreads a third of its peak to the
 //!    opposite side) can. It has no constant to tune; [`scale_by_near_field`] says what it
 //!    measured.
-//! 4. **Sky**: add `pi * sky * L_sky` (clamped at 0), `sky` the surfel's sky term
+//! 4. **Floor under L2's ringing**: at least [`LookupSettings::ringing_floor`] (0.15) times
+//!    the escaping share of the non-linear L1 model's irradiance
+//!    (`prt_format::sh::irradiance_l1_nonlinear`; [`floor_ringing`]): a bright lobe behind the
+//!    surface (a dark room's probes looking through the door) rings L2 below 0 over it.
+//! 5. **Sky**: add `pi * sky * L_sky` (clamped at 0), `sky` the surfel's sky term
 //!    (`prt_format::surface::sky_term`: the sky it sees less the sky its probes bring it,
 //!    `prt_bake::sky_terms`), `L_sky` the sky's mean radiance.
 //!
@@ -107,6 +111,27 @@ pub fn scale_by_near_field(
     }
 }
 
+/// Raises `sample`'s irradiance, per colour channel, to at least `floor` times what the
+/// non-linear L1 model of its SH gives on `normal` (`prt_format::sh::irradiance_l1_nonlinear`):
+/// the lookup's floor under L2's ringing, `LookupSettings::ringing_floor` times the share of
+/// the surfel's near-field rays that escape. A bright lobe behind the surface (a dark room's
+/// probes looking through its door at the lit room) rings L2 below 0 over the surface's
+/// hemisphere, which then reads 0 or a fraction of its truth; the L1 model keeps the light's
+/// mean and is never negative. Only the escaping rays read the probes' SH (the others bring
+/// their near group's relit radiance, which does not ring), hence their share; a surfel whose
+/// rays all hit gets no floor. It is a floor, not a blend: where L2 says more, L2 stands.
+/// Returns the floor per channel (0 where `floor` is not positive).
+pub fn floor_ringing(sample: &mut Sample, normal: [f32; 3], floor: f32) -> [f32; 3] {
+    if floor <= 0.0 {
+        return [0.0; 3];
+    }
+    let l1 = prt_format::sh::irradiance_l1_nonlinear(&sample.sh, normal).map(|l| floor * l);
+    for (e, l1) in sample.irradiance.iter_mut().zip(l1) {
+        *e = e.max(l1);
+    }
+    l1
+}
+
 /// `t . L` per colour channel: the light SH radiance `sh` brings through SH transfer `t`.
 fn light(sh: &ShRgb, t: &[f32; SH_COUNT]) -> [f32; 3] {
     std::array::from_fn(|ch| (0..SH_COUNT).map(|k| sh[k][ch] * t[k]).sum::<f32>())
@@ -159,7 +184,10 @@ pub struct SurfelStep {
     pub hemisphere: [f32; 3],
     /// What the near field's hits bring (hits / rays times its group's radiance per hit).
     pub near: [f32; 3],
-    /// The irradiance after the near field, before the sky term.
+    /// The floor under L2's ringing ([`floor_ringing`]): `LookupSettings::ringing_floor` times
+    /// the escaping share times the non-linear L1 model's irradiance.
+    pub ringing_floor: [f32; 3],
+    /// The irradiance after the near field and at least the ringing floor, before the sky term.
     pub near_field_irradiance: [f32; 3],
     /// Its sky term (`prt_format::surface::sky_term`); the lookup adds `pi * sky_term *` the
     /// sky's mean radiance where the sky terms are on.
@@ -190,6 +218,8 @@ pub struct SurfaceSampler<'a> {
     sky: [f32; 3],
     /// `LookupSettings::surface_terms`.
     enabled: bool,
+    /// `LookupSettings::ringing_floor` ([`floor_ringing`]).
+    ringing_floor: f32,
 }
 
 impl<'a> SurfaceSampler<'a> {
@@ -220,6 +250,7 @@ impl<'a> SurfaceSampler<'a> {
                 false => [0.0; 3],
             },
             enabled: lookup.surface_terms,
+            ringing_floor: lookup.ringing_floor,
         }
     }
 
@@ -294,13 +325,10 @@ impl<'a> SurfaceSampler<'a> {
         let group = st.groups[brick] + terms.group();
         let near = self.near[group as usize].map(|l| share * l);
         scale_by_near_field(&mut out, &open, &all, near);
+        let escaping = terms.escaping_share(st.header.rays);
+        let ringing_floor = floor_ringing(&mut out, normal, self.ringing_floor * escaping);
         let near_field_irradiance = out.irradiance;
-        if self.sky != [0.0; 3] {
-            let sky = sky_term(&self.asset.surface.sky, surfel);
-            for (e, l) in out.irradiance.iter_mut().zip(self.sky) {
-                *e = (*e + sky * l).max(0.0);
-            }
-        }
+        self.add_sky(&mut out, surfel);
         let step = EXPLAIN.then(|| {
             let stored = terms.normal();
             SurfelStep {
@@ -315,6 +343,7 @@ impl<'a> SurfaceSampler<'a> {
                 escaping: light(&out.sh, &open),
                 hemisphere: light(&out.sh, &all),
                 near,
+                ringing_floor,
                 near_field_irradiance,
                 sky_term: sky_term(&self.asset.surface.sky, surfel),
             }
@@ -324,6 +353,17 @@ impl<'a> SurfaceSampler<'a> {
             probes: probes.into_inner(),
             probes_irradiance,
             sample: out,
+        }
+    }
+
+    /// Adds the surfel's sky term times pi times the sky's mean radiance (clamped at 0; step
+    /// 5 of the module docs).
+    fn add_sky(&self, out: &mut Sample, surfel: usize) {
+        if self.sky != [0.0; 3] {
+            let sky = sky_term(&self.asset.surface.sky, surfel);
+            for (e, l) in out.irradiance.iter_mut().zip(self.sky) {
+                *e = (*e + sky * l).max(0.0);
+            }
         }
     }
 
@@ -393,6 +433,38 @@ mod tests {
             scaled(0.5, 1.0, -1.0),
             [1.0; 3],
             "no hemisphere to scale by"
+        );
+    }
+
+    /// A unit light 127 degrees from a surface's normal (over a faint ambient in one channel):
+    /// L2 rings below 0 there (the irradiance clamps to 0), the floor lifts it to its share of
+    /// the L1 model's, and it leaves a surface facing the light, which L2 lights more.
+    #[test]
+    fn the_floor_lifts_ringing_and_nothing_else() {
+        let mut sh = [[0.0f32; 3]; SH_COUNT];
+        let ambient = prt_format::sh::constant([0.005; 3]);
+        prt_format::sh::accumulate(&mut sh, [0.0, 0.0, -1.0], 1.0, [1.0, 1.0, 0.0]);
+        (0..SH_COUNT).for_each(|k| sh[k][0] += ambient[k][0]);
+        let sample = |n: [f32; 3], floor: f32| {
+            let mut s = Sample {
+                sh,
+                irradiance: prt_format::sh::irradiance(&sh, n),
+                validity: 1.0,
+            };
+            floor_ringing(&mut s, n, floor);
+            s.irradiance
+        };
+        let side = [0.0, 0.8, 0.6];
+        assert_eq!(sample(side, 0.0)[0], 0.0, "L2 rings below 0 here");
+        let l1 = prt_format::sh::irradiance_l1_nonlinear(&sh, side)[0];
+        assert!(l1 > 0.0);
+        assert_eq!(sample(side, 0.5)[0], 0.5 * l1);
+        assert_eq!(sample(side, 0.5)[2], 0.0, "a channel without light");
+        let facing = [0.0, 0.0, -1.0];
+        assert_eq!(
+            sample(facing, 0.5),
+            sample(facing, 0.0),
+            "L2 stands where brighter"
         );
     }
 }

@@ -819,6 +819,44 @@ fn sample_points_matches_the_cpu_sampler() {
     );
 }
 
+/// The floor under L2's ringing (`LookupSettings::ringing_floor`), raised to 1 so that it
+/// decides many points of the two rooms (the dark room's probes see the lit one through the
+/// door): the snippet floors where its CPU twin does.
+#[test]
+fn the_snippet_floors_ringing_as_the_cpu_does() {
+    let (device, queue) = gpu_device();
+    let rooms = bake(&fixture("two_rooms.gltf"), &BakeSettings::default());
+    let lighting = load_rig(&fixture("rigs/two_rooms.json")).unwrap();
+    let floored = LookupSettings {
+        ringing_floor: 1.0,
+        ..LookupSettings::default()
+    };
+    let relit = CpuRelighter::new(&rooms)
+        .unwrap()
+        .relight(&lighting, 1)
+        .unwrap();
+    let off = LookupSettings {
+        ringing_floor: 0.0,
+        ..floored
+    };
+    let (with, without) = (
+        SurfaceSampler::for_relit(&rooms, &relit, &floored),
+        SurfaceSampler::for_relit(&rooms, &relit, &off),
+    );
+    let mut points = sample_queries(&rooms, 384);
+    points.extend(rooms.surfels.iter().map(|s| (s.position, s.normal)));
+    let lifted = points
+        .iter()
+        .filter(|(p, n)| with.sample(*p, *n).irradiance != without.sample(*p, *n).irradiance)
+        .count();
+    assert!(lifted > 10, "the floor lifts {lifted} points");
+    let settings = RuntimeSettings {
+        lookup: floored,
+        ..RuntimeSettings::default()
+    };
+    compare_samplers(&device, &queue, &rooms, &lighting, settings);
+}
+
 /// The snippet's sky irradiance follows the sky (format 14): pi times its mean radiance after
 /// an update with the rig's constant sky, 0 under a black sky, and back again, and the snippet
 /// then samples what a runtime that only saw the rig's sky samples; always 0 with the sky

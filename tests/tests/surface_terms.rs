@@ -9,6 +9,7 @@
 //! terms are refused by name.
 
 use prt_bake::BakeSettings;
+use prt_format::sh::irradiance_l1_nonlinear;
 use prt_format::surface::{dominant_axis, SurfaceSide, SIDE_BIT};
 use prt_format::{decode, encode, Asset, FormatError, BRICK_AXIS_MASK, BRICK_BACKFACE};
 use prt_runtime::surface::SurfaceSampler;
@@ -184,13 +185,19 @@ fn explanations_add_up(
             "{p:?}"
         );
         assert!(step.agreement > 0.99, "{p:?}: {step:?}");
+        // The floor under L2's ringing, from the explanation's own SH and near-field counts.
+        let rays = step.near_rays.max(1) as f32;
+        let escaping = (rays - step.near_hits as f32) / rays;
+        let l1 = irradiance_l1_nonlinear(&e.sample.sh, n);
+        let floor = LookupSettings::default().ringing_floor * escaping;
+        assert_eq!(step.ringing_floor, l1.map(|l| floor * l), "{p:?}");
         for (ch, l) in sky.iter().enumerate() {
             let (open, all) = (step.escaping[ch], step.hemisphere[ch]);
             let scale = match all > 0.0 {
                 true => ((open.max(0.0).min(all) + step.near[ch]) / all).max(0.0),
                 false => 1.0,
             };
-            let near_field = e.probes_irradiance[ch] * scale;
+            let near_field = (e.probes_irradiance[ch] * scale).max(step.ringing_floor[ch]);
             assert_eq!(step.near_field_irradiance[ch], near_field, "{p:?} ch {ch}");
             let want = match sky == [0.0; 3] {
                 true => near_field,

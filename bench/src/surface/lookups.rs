@@ -152,9 +152,11 @@ impl Lookup {
             ),
             Kind::Runtime if s.surface_terms => format!(
                 "{}: the bake's surface terms where the point has a surfel (which probes it \
-                 sees, its near field, {}; prt_runtime::surface; its probes weighed {} \
-                 spacings off the surface), {} elsewhere, normal bias {bias} spacings",
+                 sees, its near field, a floor under L2's ringing of {} of the L1 model, {}; \
+                 prt_runtime::surface; its probes weighed {} spacings off the surface), {} \
+                 elsewhere, normal bias {bias} spacings",
                 self.name,
+                s.ringing_floor,
                 if s.sky_terms {
                     "its sky term"
                 } else {
@@ -242,6 +244,8 @@ pub struct Overrides {
     /// The path lookup's rays per point, the gather lookups' rays per gather, and
     /// `sky_point`'s rays per point.
     pub path_rays: Option<u32>,
+    /// The surface lookup's floor under L2's ringing (`LookupSettings::ringing_floor`).
+    pub ringing_floor: Option<f32>,
 }
 
 /// The lookups of a run: `--lookup`'s, or each case's defaults.
@@ -289,6 +293,9 @@ impl Lookups {
                 let o = self.overrides;
                 if let Some(bias) = o.normal_bias {
                     l.settings.normal_bias = bias;
+                }
+                if let Some(floor) = o.ringing_floor {
+                    l.settings.ringing_floor = floor;
                 }
                 match &mut l.kind {
                     Kind::Rays(r) if r.near_field.is_some() => {
@@ -360,11 +367,13 @@ mod tests {
             normal_bias: Some(0.1),
             reach: Some(2.0),
             path_rays: Some(64),
+            ringing_floor: Some(0.5),
         };
         let names = ["trilinear".into(), "rays".into(), "path".into()];
         let picked = Lookups::parse(&names, overrides).unwrap();
         let l = picked.for_set(Set::Tuning);
         assert_eq!((l[0].name, l[0].settings.normal_bias), ("trilinear", 0.1));
+        assert_eq!(l[0].settings.ringing_floor, 0.5);
         assert!(!l[0].settings.depth_moments);
         assert!(matches!(l[1].kind, Kind::Rays(r) if r.near_field == Some(2.0)));
         assert_eq!(l[2].kind, Kind::Path(64));

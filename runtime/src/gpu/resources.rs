@@ -430,6 +430,7 @@ pub fn volume_info(asset: &Asset, settings: &RuntimeSettings) -> VolumeInfo {
     VolumeInfo {
         normal_bias: settings.lookup.normal_bias * grid.spacing,
         surface_bias: settings.lookup.surface_bias * grid.spacing,
+        ringing_floor: settings.lookup.ringing_floor,
         flags,
         surface_anchor: t.header.anchor,
         brick_size: t.header.brick_size,

@@ -373,6 +373,10 @@ pub(crate) mod tests {
                         "sky_irradiance",
                         offset_of!(contract::VolumeInfo, sky_irradiance),
                     ),
+                    (
+                        "ringing_floor",
+                        offset_of!(contract::VolumeInfo, ringing_floor),
+                    ),
                 ],
             ),
             (
