@@ -301,10 +301,11 @@ fn prt_irradiance_l1_nonlinear(c: array<vec3<f32>, 9>, n: vec3<f32>) -> vec3<f32
 // irradiance by (clamp(open . L, 0, A(n_s) . L) + hits / rays * near) / (A(n_s) . L) per
 // channel: open the mean SH basis of its near-field rays that escape (held to what the whole
 // hemisphere brings: L2 ringing can exceed it), near its near group's relit radiance per hit, A
-// the clamped-cosine transfer of the surfel's normal; raise it to ringing_floor times the
-// escaping share of the non-linear L1 irradiance (L2 rings below 0 behind a bright lobe, a
-// dark room's probes looking through its door); then add the surfel's sky term (the sky it
-// sees less the sky its probes bring it) times pi times the sky's mean radiance, clamped at 0.
+// the clamped-cosine transfer of the surfel's normal; raise it, E, to F - E where that is
+// more, F being ringing_floor times the escaping share of the non-linear L1 irradiance (L2
+// rings below 0 behind a bright lobe, a dark room's probes looking through its door); then add
+// the surfel's sky term (the sky it sees less the sky its probes bring it) times pi times the
+// sky's mean radiance, clamped at 0.
 // A point without one gets prt_sample_sh.
 
 // What sample_irradiance computed: the SH it interpolated, its validity and the irradiance.
@@ -502,10 +503,12 @@ fn prt_sample_surface(world_pos: vec3<f32>, normal: vec3<f32>) -> PrtSurfaceSamp
     let escaping = min(max(lo, vec3<f32>(0.0)), max(all_l, vec3<f32>(0.0)));
     let ratio = max((escaping + share * near) / all_l, vec3<f32>(0.0));
     out.irradiance = select(out.irradiance, out.irradiance * ratio, all_l > vec3<f32>(0.0));
-    // The floor under L2's ringing (twin: prt_runtime::surface::floor_ringing).
+    // The floor under L2's ringing, fading as L2 rises: max(E, F - E), F the floor (twin:
+    // prt_runtime::surface::floor_ringing).
     let ringing = prt_volume.ringing_floor * escape_share;
     if ringing > 0.0 {
-        out.irradiance = max(out.irradiance, ringing * prt_irradiance_l1_nonlinear(s.sh, normal));
+        let lifted = ringing * prt_irradiance_l1_nonlinear(s.sh, normal) - out.irradiance;
+        out.irradiance = max(out.irradiance, lifted);
     }
     if any(prt_volume.sky_irradiance != vec3<f32>(0.0)) {
         let sky = unpack2x16float(prt_surface[prt_volume.sky_at + found.x / 2u])[found.x % 2u];

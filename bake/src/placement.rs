@@ -30,10 +30,12 @@ use prt_format::{tier, Grid, Probe, FILL_LEVEL_SHIFT, PROBE_FILLED};
 use rayon::prelude::*;
 
 /// Spacings beyond a grid point's cells within which a surface keeps it: covers the lookups'
-/// default biases (0.2 spacings, `prt_runtime::LookupSettings::normal_bias`, and 0.1,
-/// `surface_bias`) with room to spare. A surface point sampled with a larger bias can land in a cell whose far corners were
-/// not traced: they are filled from a coarse level (or, inside geometry, weigh 0).
+/// default biases (0.2 spacings, `prt_runtime::LookupSettings::normal_bias`, and
+/// `prt_format::surface::SURFACE_BIAS`, the surface lookup's) with room to spare. A surface
+/// point sampled with a larger bias can land in a cell whose far corners were not traced: they
+/// are filled from a coarse level (or, inside geometry, weigh 0).
 pub const REACH: f32 = 0.25;
+const _: () = assert!(REACH > prt_format::surface::SURFACE_BIAS);
 
 /// Spacings added to every box of the placement's tests, so that a triangle exactly on a box's
 /// face (walls at round coordinates and grids of round spacings put many there) is kept at

@@ -226,8 +226,9 @@ fn render(b: &RenderBench) -> Result<String> {
 }
 
 /// Shading cost of the indirect lookup: the indirect view with the default lookup (surface
-/// terms, depth moments elsewhere), with depth moments alone, with plain trilinear, and with an
-/// empty volume (the pass without any lookup work).
+/// terms, depth moments elsewhere), the same without its floor under L2's ringing
+/// (`LookupSettings::ringing_floor` 0: what the floor costs), with depth moments alone, with
+/// plain trilinear, and with an empty volume (the pass without any lookup work).
 fn sampling_cost(
     device: &wgpu::Device,
     queue: &wgpu::Queue,
@@ -235,7 +236,7 @@ fn sampling_cost(
     asset: &prt_format::Asset,
     camera: &Camera,
     b: &RenderBench,
-) -> Result<[f64; 4]> {
+) -> Result<[f64; 5]> {
     let settings = RenderSettings {
         width: b.size.0,
         height: b.size.1,
@@ -251,13 +252,20 @@ fn sampling_cost(
         },
         sky: prt_runtime::SkyModel::Constant([1.0; 3]),
     };
-    let mut out = [0.0; 4];
-    let lookups = [(true, true), (false, true), (false, false)];
-    for (k, (surface_terms, depth_moments)) in lookups.into_iter().enumerate() {
+    let mut out = [0.0; 5];
+    let floor = prt_runtime::LookupSettings::default().ringing_floor;
+    let lookups = [
+        (true, true, floor),
+        (true, true, 0.0),
+        (false, true, floor),
+        (false, false, floor),
+    ];
+    for (k, (surface_terms, depth_moments, ringing_floor)) in lookups.into_iter().enumerate() {
         let runtime = RuntimeSettings {
             lookup: prt_runtime::LookupSettings {
                 depth_moments,
                 surface_terms,
+                ringing_floor,
                 ..Default::default()
             },
             ..RuntimeSettings::default()
@@ -272,13 +280,13 @@ fn sampling_cost(
             submit_wait(device, queue, |e| r.record_shade(e, Some(&volume)))
         })?;
     }
-    out[3] = median(b.frames, || {
+    out[4] = median(b.frames, || {
         submit_wait(device, queue, |e| r.record_shade(e, None))
     })?;
     Ok(out)
 }
 
-fn report(b: &RenderBench, adapter: &str, rows: &[Row], sampling: [f64; 4]) -> Result<String> {
+fn report(b: &RenderBench, adapter: &str, rows: &[Row], sampling: [f64; 5]) -> Result<String> {
     let mut md = String::new();
     writeln!(
         md,
@@ -313,10 +321,10 @@ fn report(b: &RenderBench, adapter: &str, rows: &[Row], sampling: [f64; 4]) -> R
         "\nIndirect lookup, shading pass of the indirect view: {:.2} ms default (surface terms \
          where a pixel has a surfel: a hash search of one or two 4-word slots, a cell word, 4 \
          words of terms and 3 of its brick, 8 probes with 56 texel loads and one near value; depth moments \
-         elsewhere), {:.2} ms depth moments alone (8 \
+         elsewhere), {:.2} ms the same without its floor under L2's ringing, {:.2} ms depth moments alone (8 \
          probes, 56 texel loads, 8 visibility words per pixel), {:.2} ms plain trilinear (7 \
          filtered fetches), {:.2} ms with an empty volume (no lookup work).",
-        sampling[0], sampling[1], sampling[2], sampling[3]
+        sampling[0], sampling[1], sampling[2], sampling[3], sampling[4]
     )?;
     Ok(md)
 }

@@ -141,7 +141,7 @@ fn explanation_line(e: &Explanation) -> String {
         Some(s) => {
             let seen = e.probes.iter().filter(|p| p.seen == Some(true)).count();
             let kept = match probes > 0.0 {
-                true => mean(s.near_field_irradiance) / probes,
+                true => mean(s.before_floor) / probes,
                 false => 1.0,
             };
             format!(
@@ -158,9 +158,7 @@ fn explanation_line(e: &Explanation) -> String {
                 s.near_hits,
                 s.near_rays,
                 100.0 * kept,
-                match (0..3).any(|c| s.ringing_floor[c] > 0.0
-                    && s.ringing_floor[c] >= s.near_field_irradiance[c])
-                {
+                match (0..3).any(|c| s.near_field_irradiance[c] > s.before_floor[c]) {
                     true => " (the ringing floor)",
                     false => "",
                 },
@@ -187,6 +185,7 @@ fn explanation_json(e: &Explanation) -> Value {
             "hemisphere": s.hemisphere,
             "near": s.near,
             "ringing_floor": s.ringing_floor,
+            "before_floor": s.before_floor,
             "near_field_irradiance": s.near_field_irradiance,
             "sky_term": s.sky_term,
         })

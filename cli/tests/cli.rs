@@ -487,6 +487,7 @@ fn sample_explains_each_point() {
         "escaping",
         "near",
         "ringing_floor",
+        "before_floor",
         "sky_term",
     ] {
         assert!(!floor["surfel"][key].is_null(), "{key}: {floor}");

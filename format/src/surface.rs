@@ -67,6 +67,13 @@ pub struct SurfaceSide {
 }
 const _: () = assert!(std::mem::size_of::<SurfaceSide>() == 16);
 
+/// The surface lookup's default bias in probe spacings: how far along its normal a point with
+/// a surfel is moved before its probes are weighed (`prt_runtime::LookupSettings::
+/// surface_bias`), and where the bake interpolates the probes' sky for the sky terms
+/// (`prt_bake::sky_terms`), so that the two read the probes at the same place. Stop 69 chose
+/// 0.1 against the volume's 0.2 (docs/results/surface_stop69.md).
+pub const SURFACE_BIAS: f32 = 0.1;
+
 /// Weight a probe keeps when the surfel cannot see it: small enough that the visible probes
 /// decide. (A surfel that sees none of the point's probes leaves their weights to the default
 /// lookup.)

@@ -72,17 +72,18 @@ pub struct LookupSettings {
     /// sun 14.47% -> 14.49% (11.43% -> 11.83% at half the spacing, 3 -> 5 of 284 leaking there),
     /// with its 31 lights 10.44% -> 10.71% (docs/results/surface_stop69.md). The fallback
     /// where a surfel sees none of its probes keeps `normal_bias`.
-    /// The bake interpolates the probes' sky at the same bias
-    /// (`prt_bake::sky_terms::SURFACE_BIAS`, which must equal this default).
+    /// The default is `prt_format::surface::SURFACE_BIAS`, where the bake interpolates the
+    /// probes' sky for the sky terms.
     pub surface_bias: f32,
     /// The surface lookup's floor under L2's ringing ([`crate::surface::floor_ringing`]): a
-    /// point with a surfel reads, before its sky term, at least this share of the non-linear
-    /// L1 model's irradiance of its probes (`prt_format::sh::irradiance_l1_nonlinear`), times
-    /// the share of its
-    /// near-field rays that escape. A dark room's probes that see the lit room through its
-    /// door ring L2 below 0 behind that lobe, and points on the door's wall read 0 (stop 69's
-    /// blind interior_220). Default 0.15 (stop 70, `prt-bench surface --ringing-floor`,
-    /// docs/results/surface_stop70.md); 0: off.
+    /// point with a surfel whose irradiance `E` reads, before its sky term, under half of `F`
+    /// (this share of the non-linear L1 model's irradiance of its probes,
+    /// `prt_format::sh::irradiance_l1_nonlinear`, times the share of its near-field rays that
+    /// escape) reads `F - E` instead: `F` where L2 reads 0. A dark room's probes that see the
+    /// lit room through its door ring L2 below 0 behind that lobe, and points on the door's
+    /// wall read 0 (stop 69's blind interior_220). Default 0.15 (stop 70, `prt-bench surface
+    /// --ringing-floor`, docs/results/surface_stop70.md; the fade since stop 71,
+    /// docs/results/surface_stop71.md); 0: off.
     pub ringing_floor: f32,
     /// Weight each probe by DDGI's Chebyshev test against its depth moments (the mean and
     /// deviation of its hit distances per direction, `prt_format::depth`; see
@@ -108,7 +109,7 @@ impl Default for LookupSettings {
     fn default() -> Self {
         LookupSettings {
             normal_bias: 0.2,
-            surface_bias: 0.1,
+            surface_bias: prt_format::surface::SURFACE_BIAS,
             ringing_floor: 0.15,
             depth_moments: true,
             surface_terms: true,

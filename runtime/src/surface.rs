@@ -25,10 +25,11 @@
 //!    field blocks, a sunlit court behind a parapet, spreads a third of its peak to the
 //!    opposite side) can. It has no constant to tune; [`scale_by_near_field`] says what it
 //!    measured.
-//! 4. **Floor under L2's ringing**: at least [`LookupSettings::ringing_floor`] (0.15) times
-//!    the escaping share of the non-linear L1 model's irradiance
-//!    (`prt_format::sh::irradiance_l1_nonlinear`; [`floor_ringing`]): a bright lobe behind the
-//!    surface (a dark room's probes looking through the door) rings L2 below 0 over it.
+//! 4. **Floor under L2's ringing**: `F - E` where that is more than the irradiance `E`, `F`
+//!    being [`LookupSettings::ringing_floor`] (0.15) times the escaping share of the
+//!    non-linear L1 model's irradiance (`prt_format::sh::irradiance_l1_nonlinear`;
+//!    [`floor_ringing`]): a bright lobe behind the surface (a dark room's probes looking
+//!    through the door) rings L2 below 0 over it.
 //! 5. **Sky**: add `pi * sky * L_sky` (clamped at 0), `sky` the surfel's sky term
 //!    (`prt_format::surface::sky_term`: the sky it sees less the sky its probes bring it,
 //!    `prt_bake::sky_terms`), `L_sky` the sky's mean radiance.
@@ -111,23 +112,30 @@ pub fn scale_by_near_field(
     }
 }
 
-/// Raises `sample`'s irradiance, per colour channel, to at least `floor` times what the
-/// non-linear L1 model of its SH gives on `normal` (`prt_format::sh::irradiance_l1_nonlinear`):
-/// the lookup's floor under L2's ringing, `LookupSettings::ringing_floor` times the share of
-/// the surfel's near-field rays that escape. A bright lobe behind the surface (a dark room's
-/// probes looking through its door at the lit room) rings L2 below 0 over the surface's
-/// hemisphere, which then reads 0 or a fraction of its truth; the L1 model keeps the light's
-/// mean and is never negative. Only the escaping rays read the probes' SH (the others bring
-/// their near group's relit radiance, which does not ring), hence their share; a surfel whose
-/// rays all hit gets no floor. It is a floor, not a blend: where L2 says more, L2 stands.
-/// Returns the floor per channel (0 where `floor` is not positive).
+/// The lookup's floor under L2's ringing: raises `sample`'s irradiance `E`, per colour
+/// channel, to `F - E` where that is more, `F` being `floor` times what the non-linear L1
+/// model of its SH gives on `normal` (`prt_format::sh::irradiance_l1_nonlinear`; `floor` is
+/// `LookupSettings::ringing_floor` times the share of the surfel's near-field rays that
+/// escape). A bright lobe behind the surface (a dark room's probes looking through its door at
+/// the lit room) rings L2 below 0 over the surface's hemisphere, which then reads 0 or a
+/// fraction of its truth; the L1 model keeps the light's mean and is never negative. Only the
+/// escaping rays read the probes' SH (the others bring their near group's relit radiance,
+/// which does not ring), hence their share; a surfel whose rays all hit gets no floor.
+///
+/// The floor fades as L2 rises: `F` where L2 reads 0, nothing from `F / 2` up. L2 that reads
+/// above 0 is not ringing over the whole hemisphere, and the L1 model also gives the back of a
+/// real lobe (a hotspot on the surface's own plane) a share of its mean: stop 70's plain
+/// `max(E, F)` lifted the Cornell room's ceiling point over its light 3.3% -> 36.2% off its
+/// truth, and moved three of the tuning seeds' figures. This one lifts the same zeros of stop
+/// 69's blind interior_220 and leaves the tuning seeds and the Cornell room as without a floor
+/// (docs/results/surface_stop71.md). Returns `F` per channel (0 where `floor` is not positive).
 pub fn floor_ringing(sample: &mut Sample, normal: [f32; 3], floor: f32) -> [f32; 3] {
     if floor <= 0.0 {
         return [0.0; 3];
     }
     let l1 = prt_format::sh::irradiance_l1_nonlinear(&sample.sh, normal).map(|l| floor * l);
     for (e, l1) in sample.irradiance.iter_mut().zip(l1) {
-        *e = e.max(l1);
+        *e = e.max(l1 - *e);
     }
     l1
 }
@@ -184,10 +192,13 @@ pub struct SurfelStep {
     pub hemisphere: [f32; 3],
     /// What the near field's hits bring (hits / rays times its group's radiance per hit).
     pub near: [f32; 3],
-    /// The floor under L2's ringing ([`floor_ringing`]): `LookupSettings::ringing_floor` times
-    /// the escaping share times the non-linear L1 model's irradiance.
+    /// The floor under L2's ringing ([`floor_ringing`]) `F`: `LookupSettings::ringing_floor`
+    /// times the escaping share times the non-linear L1 model's irradiance.
     pub ringing_floor: [f32; 3],
-    /// The irradiance after the near field and at least the ringing floor, before the sky term.
+    /// The irradiance after the near field, before the ringing floor (`E`).
+    pub before_floor: [f32; 3],
+    /// The irradiance after the near field and the ringing floor (`max(E, F - E)`), before the
+    /// sky term.
     pub near_field_irradiance: [f32; 3],
     /// Its sky term (`prt_format::surface::sky_term`); the lookup adds `pi * sky_term *` the
     /// sky's mean radiance where the sky terms are on.
@@ -320,16 +331,11 @@ impl<'a> SurfaceSampler<'a> {
             out = self.fallback.sample(position, normal);
         }
         let probes_irradiance = out.irradiance;
-        let (open, all) = terms.open_and_cosine(st.header.rays);
-        let share = terms.hits() as f32 / st.header.rays as f32;
-        let group = st.groups[brick] + terms.group();
-        let near = self.near[group as usize].map(|l| share * l);
-        scale_by_near_field(&mut out, &open, &all, near);
-        let escaping = terms.escaping_share(st.header.rays);
-        let ringing_floor = floor_ringing(&mut out, normal, self.ringing_floor * escaping);
+        let (near, before_floor, ringing_floor) = self.near_field(&mut out, brick, surfel, normal);
         let near_field_irradiance = out.irradiance;
         self.add_sky(&mut out, surfel);
         let step = EXPLAIN.then(|| {
+            let (open, all) = terms.open_and_cosine(st.header.rays);
             let stored = terms.normal();
             SurfelStep {
                 index: surfel,
@@ -344,6 +350,7 @@ impl<'a> SurfaceSampler<'a> {
                 hemisphere: light(&out.sh, &all),
                 near,
                 ringing_floor,
+                before_floor,
                 near_field_irradiance,
                 sky_term: sky_term(&self.asset.surface.sky, surfel),
             }
@@ -354,6 +361,30 @@ impl<'a> SurfaceSampler<'a> {
             probes_irradiance,
             sample: out,
         }
+    }
+
+    /// Steps 3 and 4 of the module docs on `out`, `surfel`'s sample: scales it by the near
+    /// field, then floors it under L2's ringing. Returns what the near field's hits bring, the
+    /// irradiance before the floor and the floor ([`SurfelStep`]'s `near`, `before_floor` and
+    /// `ringing_floor`).
+    fn near_field(
+        &self,
+        out: &mut Sample,
+        brick: usize,
+        surfel: usize,
+        normal: [f32; 3],
+    ) -> ([f32; 3], [f32; 3], [f32; 3]) {
+        let st = &self.asset.surface;
+        let terms = &st.surfels[surfel];
+        let (open, all) = terms.open_and_cosine(st.header.rays);
+        let share = terms.hits() as f32 / st.header.rays as f32;
+        let group = st.groups[brick] + terms.group();
+        let near = self.near[group as usize].map(|l| share * l);
+        scale_by_near_field(out, &open, &all, near);
+        let escaping = terms.escaping_share(st.header.rays);
+        let before_floor = out.irradiance;
+        let floor = floor_ringing(out, normal, self.ringing_floor * escaping);
+        (near, before_floor, floor)
     }
 
     /// Adds the surfel's sky term times pi times the sky's mean radiance (clamped at 0; step
@@ -438,22 +469,25 @@ mod tests {
 
     /// A unit light 127 degrees from a surface's normal (over a faint ambient in one channel):
     /// L2 rings below 0 there (the irradiance clamps to 0), the floor lifts it to its share of
-    /// the L1 model's, and it leaves a surface facing the light, which L2 lights more.
+    /// the L1 model's, and it leaves a surface facing the light, which L2 lights more. On a
+    /// surface the light reaches at 37 degrees the floor fades: L2 stands over half the floor
+    /// and reads `F - E` under it.
     #[test]
     fn the_floor_lifts_ringing_and_nothing_else() {
         let mut sh = [[0.0f32; 3]; SH_COUNT];
         let ambient = prt_format::sh::constant([0.005; 3]);
         prt_format::sh::accumulate(&mut sh, [0.0, 0.0, -1.0], 1.0, [1.0, 1.0, 0.0]);
         (0..SH_COUNT).for_each(|k| sh[k][0] += ambient[k][0]);
-        let sample = |n: [f32; 3], floor: f32| {
+        let floored = |n: [f32; 3], floor: f32| {
             let mut s = Sample {
                 sh,
                 irradiance: prt_format::sh::irradiance(&sh, n),
                 validity: 1.0,
             };
-            floor_ringing(&mut s, n, floor);
-            s.irradiance
+            let f = floor_ringing(&mut s, n, floor);
+            (s.irradiance, f)
         };
+        let sample = |n: [f32; 3], floor: f32| floored(n, floor).0;
         let side = [0.0, 0.8, 0.6];
         assert_eq!(sample(side, 0.0)[0], 0.0, "L2 rings below 0 here");
         let l1 = prt_format::sh::irradiance_l1_nonlinear(&sh, side)[0];
@@ -466,5 +500,15 @@ mod tests {
             sample(facing, 0.0),
             "L2 stands where brighter"
         );
+        // Where L2 reads more than half the floor it stands, though the floor is higher: the
+        // back of a real lobe, not ringing (stop 70's max(E, F) lifted it to F).
+        let slant = [0.0, 0.6, -0.8];
+        let e = sample(slant, 0.0)[0];
+        let l1 = prt_format::sh::irradiance_l1_nonlinear(&sh, slant)[0];
+        assert!(e > 0.0 && l1 > 0.0, "{e} {l1}");
+        assert_eq!(sample(slant, 1.5 * e / l1)[0], e, "faded out");
+        let (low, f) = floored(slant, 4.0 * e / l1);
+        assert!(f[0] > 2.0 * e, "{f:?} {e}");
+        assert_eq!(low[0], f[0] - e, "F - E under half the floor");
     }
 }

@@ -197,7 +197,9 @@ fn explanations_add_up(
                 true => ((open.max(0.0).min(all) + step.near[ch]) / all).max(0.0),
                 false => 1.0,
             };
-            let near_field = (e.probes_irradiance[ch] * scale).max(step.ringing_floor[ch]);
+            let before = e.probes_irradiance[ch] * scale;
+            assert_eq!(step.before_floor[ch], before, "{p:?} ch {ch}");
+            let near_field = before.max(step.ringing_floor[ch] - before);
             assert_eq!(step.near_field_irradiance[ch], near_field, "{p:?} ch {ch}");
             let want = match sky == [0.0; 3] {
                 true => near_field,
@@ -551,16 +553,6 @@ fn the_sky_term_gives_a_surface_its_own_sky() {
     assert!(
         err_with < 0.6 * err_without,
         "{err_with} against {err_without}"
-    );
-}
-
-/// The bake interpolates the probes' sky where the lookup reads them: at the surface lookup's
-/// default bias (`prt_bake::sky_terms::SURFACE_BIAS`).
-#[test]
-fn the_sky_terms_take_the_lookups_bias() {
-    assert_eq!(
-        prt_bake::sky_terms::SURFACE_BIAS,
-        LookupSettings::default().surface_bias
     );
 }
 

@@ -98,7 +98,7 @@
 
 use glam::Vec3;
 use prt_format::sh::SH_COUNT;
-use prt_format::surface::{cosine_transfer, BLOCKED_WEIGHT};
+use prt_format::surface::{cosine_transfer, BLOCKED_WEIGHT, SURFACE_BIAS};
 use prt_format::{f32_to_f16, tier, Asset};
 use rayon::prelude::*;
 
@@ -140,11 +140,6 @@ pub const SHRINK: f32 = 1.0;
 /// one shrunk too little darkens a point that sees a little sky under its noise (a cave's floor
 /// under a small skylight). Module docs: what chose it.
 pub const SHRINK_DARKER: f32 = 0.5;
-
-/// The surface lookup's default bias in spacings (`prt_runtime::LookupSettings::
-/// surface_bias`; `tests/tests/surface_terms.rs` checks that they agree): where the sky
-/// transfer is interpolated.
-pub const SURFACE_BIAS: f32 = 0.1;
 
 /// The asset's sky terms, two halves a word (empty when it has no surface terms): every traced
 /// surfel's view over [`SKY_RAYS`] rays, pooled; the surfels of groups whose term is then
