@@ -122,9 +122,11 @@ pub fn scale_by_near_field(
 /// escaping rays read the probes' SH (the others bring their near group's relit radiance,
 /// which does not ring), hence their share; a surfel whose rays all hit gets no floor.
 ///
-/// The floor fades as L2 rises: `F` where L2 reads 0, nothing from `F / 2` up. L2 that reads
-/// above 0 is not ringing over the whole hemisphere, and the L1 model also gives the back of a
-/// real lobe (a hotspot on the surface's own plane) a share of its mean: stop 70's plain
+/// The floor fades as L2 rises: `F` where L2 reads 0, nothing from `F / 2` up (in between
+/// `F - E`, which falls to `F / 2`: beside a hotspot, a ring darker than either side,
+/// docs/limits.md). L2 that reads above 0 is not ringing over the whole hemisphere, and the
+/// L1 model also gives the back of a real lobe (a hotspot on the surface's own plane) a share
+/// of its mean: stop 70's plain
 /// `max(E, F)` lifted the Cornell room's ceiling point over its light 3.3% -> 36.2% off its
 /// truth, and moved three of the tuning seeds' figures. This one lifts the same zeros of stop
 /// 69's blind interior_220 and leaves the tuning seeds and the Cornell room as without a floor
