@@ -126,9 +126,8 @@ pub fn scale_by_near_field(
 /// `F - E`, which falls to `F / 2`: beside a hotspot, a ring darker than either side,
 /// docs/limits.md). L2 that reads above 0 is not ringing over the whole hemisphere, and the
 /// L1 model also gives the back of a real lobe (a hotspot on the surface's own plane) a share
-/// of its mean: stop 70's plain
-/// `max(E, F)` lifted the Cornell room's ceiling point over its light 3.3% -> 36.2% off its
-/// truth, and moved three of the tuning seeds' figures. This one lifts the same zeros of stop
+/// of its mean: stop 70's plain `max(E, F)` lifted the Cornell room's ceiling point over its
+/// light 3.3% -> 36.2% off its truth, and moved three of the tuning seeds' figures. This one lifts the same zeros of stop
 /// 69's blind interior_220 and leaves the tuning seeds and the Cornell room as without a floor
 /// (docs/results/surface_stop71.md). Returns `F` per channel (0 where `floor` is not positive).
 pub fn floor_ringing(sample: &mut Sample, normal: [f32; 3], floor: f32) -> [f32; 3] {
@@ -140,6 +139,17 @@ pub fn floor_ringing(sample: &mut Sample, normal: [f32; 3], floor: f32) -> [f32;
         *e = e.max(l1 - *e);
     }
     l1
+}
+
+/// What [`SurfaceSampler`]'s near-field and floor steps used and gave, for [`SurfelStep`]:
+/// the surfel's escaping-ray and cosine transfers, what its near field's hits bring, the
+/// irradiance before the floor and the floor.
+struct NearFieldStep {
+    open: [f32; SH_COUNT],
+    all: [f32; SH_COUNT],
+    near: [f32; 3],
+    before_floor: [f32; 3],
+    ringing_floor: [f32; 3],
 }
 
 /// `t . L` per colour channel: the light SH radiance `sh` brings through SH transfer `t`.
@@ -333,11 +343,10 @@ impl<'a> SurfaceSampler<'a> {
             out = self.fallback.sample(position, normal);
         }
         let probes_irradiance = out.irradiance;
-        let (near, before_floor, ringing_floor) = self.near_field(&mut out, brick, surfel, normal);
+        let field = self.near_field(&mut out, brick, surfel, normal);
         let near_field_irradiance = out.irradiance;
         self.add_sky(&mut out, surfel);
         let step = EXPLAIN.then(|| {
-            let (open, all) = terms.open_and_cosine(st.header.rays);
             let stored = terms.normal();
             SurfelStep {
                 index: surfel,
@@ -348,11 +357,11 @@ impl<'a> SurfaceSampler<'a> {
                 sees_a_probe: seen.get(),
                 near_hits: terms.hits(),
                 near_rays: st.header.rays,
-                escaping: light(&out.sh, &open),
-                hemisphere: light(&out.sh, &all),
-                near,
-                ringing_floor,
-                before_floor,
+                escaping: light(&out.sh, &field.open),
+                hemisphere: light(&out.sh, &field.all),
+                near: field.near,
+                ringing_floor: field.ringing_floor,
+                before_floor: field.before_floor,
                 near_field_irradiance,
                 sky_term: sky_term(&self.asset.surface.sky, surfel),
             }
@@ -366,16 +375,14 @@ impl<'a> SurfaceSampler<'a> {
     }
 
     /// Steps 3 and 4 of the module docs on `out`, `surfel`'s sample: scales it by the near
-    /// field, then floors it under L2's ringing. Returns what the near field's hits bring, the
-    /// irradiance before the floor and the floor ([`SurfelStep`]'s `near`, `before_floor` and
-    /// `ringing_floor`).
+    /// field, then floors it under L2's ringing. Returns what the explanation reports of them.
     fn near_field(
         &self,
         out: &mut Sample,
         brick: usize,
         surfel: usize,
         normal: [f32; 3],
-    ) -> ([f32; 3], [f32; 3], [f32; 3]) {
+    ) -> NearFieldStep {
         let st = &self.asset.surface;
         let terms = &st.surfels[surfel];
         let (open, all) = terms.open_and_cosine(st.header.rays);
@@ -385,8 +392,14 @@ impl<'a> SurfaceSampler<'a> {
         scale_by_near_field(out, &open, &all, near);
         let escaping = terms.escaping_share(st.header.rays);
         let before_floor = out.irradiance;
-        let floor = floor_ringing(out, normal, self.ringing_floor * escaping);
-        (near, before_floor, floor)
+        let ringing_floor = floor_ringing(out, normal, self.ringing_floor * escaping);
+        NearFieldStep {
+            open,
+            all,
+            near,
+            before_floor,
+            ringing_floor,
+        }
     }
 
     /// Adds the surfel's sky term times pi times the sky's mean radiance (clamped at 0; step
